@@ -1,0 +1,8 @@
+# The README's two commands. Both set up .venv first.
+.PHONY: run test schemas
+run:
+	scripts/run.sh --sim
+test:
+	scripts/test.sh
+schemas:
+	.venv/bin/buddybot schemas

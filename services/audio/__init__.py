@@ -1,0 +1,1 @@
+"""Audio: the play_sound action and the audio player."""

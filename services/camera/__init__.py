@@ -1,0 +1,1 @@
+"""Camera: frame capture and the BlazeFace face detector."""

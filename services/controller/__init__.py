@@ -1,0 +1,1 @@
+"""Controller: the robot's social behaviour."""

@@ -1,0 +1,289 @@
+"""The key catalogue: every key expression of DESIGN.md section 2, once.
+
+Each entry binds a key pattern (relative to `buddybot/<robot>/`) to its
+message type, wire codec, QoS preset and whether it is latched. The node
+runtime, the CLI, the schema generator and the tests all read this
+table, so a key string is typed exactly here and nowhere else.
+
+This module is pure: QoS is described as data and translated to Zenoh
+settings by `node.py`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from functools import cache
+from typing import Any, Literal
+
+import msgspec
+from buddybot.core import messages as m
+
+PREFIX_ROOT = "buddybot"
+DEFAULT_ROBOT = "buddy"
+_ROBOT_ID = re.compile(r"^[A-Za-z0-9_-]+$")
+_PARAM = re.compile(r"\{(\w+)\}")
+
+
+def valid_robot_id(robot: str) -> bool:
+    """A robot id is one key chunk without wildcards or separators."""
+    return bool(_ROBOT_ID.match(robot))
+
+
+def prefix(robot: str) -> str:
+    """`buddybot/<robot>`: the root of every key of one robot."""
+    if not valid_robot_id(robot):
+        raise ValueError(f"invalid robot id {robot!r}: use letters, digits, '-' or '_'")
+    return f"{PREFIX_ROOT}/{robot}"
+
+
+def absolute(robot: str, key: str) -> str:
+    """Prefix a relative key; a key already starting with `buddybot/` is kept."""
+    key = key.strip("/")
+    if key == PREFIX_ROOT or key.startswith(PREFIX_ROOT + "/"):
+        return key
+    return f"{prefix(robot)}/{key}"
+
+
+def split_absolute(key: str) -> tuple[str, str] | None:
+    """`buddybot/<robot>/<rest>` -> (robot, rest); None for a foreign key."""
+    parts = str(key).split("/", 2)
+    if len(parts) < 3 or parts[0] != PREFIX_ROOT:
+        return None
+    return parts[1], parts[2]
+
+
+# --- codecs ------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Codec:
+    """How a message type is put on the wire, and the Zenoh encoding naming it."""
+
+    name: Literal["json", "msgpack"]
+    mime: str
+
+    def encoding(self, msg_type: type) -> str:
+        """Zenoh encoding string, e.g. `application/json;buddybot/EyeControl`."""
+        return f"{self.mime};{PREFIX_ROOT}/{msg_type.__name__}"
+
+    def encode(self, msg: Any) -> bytes:
+        return _encoder(self.name).encode(msg)
+
+    def decode(self, data: bytes | bytearray | memoryview, msg_type: type[Any]) -> Any:
+        """Decode and validate; raises msgspec.DecodeError/ValidationError."""
+        return _decoder(self.name, msg_type).decode(data)
+
+
+@cache
+def _encoder(name: str) -> msgspec.json.Encoder | msgspec.msgpack.Encoder:
+    return msgspec.json.Encoder() if name == "json" else msgspec.msgpack.Encoder()
+
+
+@cache
+def _decoder(name: str, msg_type: type) -> msgspec.json.Decoder | msgspec.msgpack.Decoder:
+    if name == "json":
+        return msgspec.json.Decoder(msg_type)
+    return msgspec.msgpack.Decoder(msg_type)
+
+
+JSON = Codec("json", "application/json")
+MSGPACK = Codec("msgpack", "application/msgpack")
+
+
+def codec_for_encoding(encoding: str) -> Codec | None:
+    """The codec named by a sample's encoding string, if it is one of ours."""
+    mime = str(encoding).split(";", 1)[0]
+    for codec in (JSON, MSGPACK):
+        if codec.mime == mime:
+            return codec
+    return None
+
+
+# --- QoS presets -------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class QoS:
+    """Delivery policy as data.
+
+    `congestion` "drop" = latest wins (streams: a slow reader never stalls
+    the writer); "block" = never drop (small state changes and requests;
+    a stalled reader can block `put` for up to 5 s, so only tiny messages).
+    """
+
+    congestion: Literal["drop", "block"]
+    priority: Literal["real_time", "interactive_high", "data", "background"]
+    express: bool = False
+
+
+STREAM = QoS("drop", "data")
+"""Sensor streams: every sample matters little once a newer one exists."""
+IMAGES = QoS("drop", "data")
+"""Camera images: large, dropped under congestion."""
+STATE = QoS("block", "interactive_high", express=True)
+"""State changes and commands: small, never dropped, sent at once."""
+BACKGROUND = QoS("drop", "background")
+"""Diagnostics and debug output."""
+
+
+# --- catalogue entries -------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _Entry:
+    pattern: str
+    doc: str
+
+    @property
+    def params(self) -> tuple[str, ...]:
+        return tuple(_PARAM.findall(self.pattern))
+
+    def key(self, **params: str) -> str:
+        """The relative key with its `{params}` filled in."""
+        missing = set(self.params) - params.keys()
+        if missing:
+            raise ValueError(f"{self.pattern}: missing {sorted(missing)}")
+        for name, value in params.items():
+            if not valid_robot_id(str(value)):
+                raise ValueError(f"{self.pattern}: invalid {name} {value!r}")
+        return self.pattern.format(**params)
+
+    def wildcard(self) -> str:
+        """The pattern with every parameter as `*` (to subscribe to all)."""
+        return _PARAM.sub("*", self.pattern)
+
+    def match(self, relative_key: str) -> dict[str, str] | None:
+        """Parameters if `relative_key` is an instance of this pattern."""
+        found = _pattern_regex(self.pattern).fullmatch(relative_key)
+        return None if found is None else found.groupdict()
+
+
+@cache
+def _pattern_regex(pattern: str) -> re.Pattern[str]:
+    parts = _PARAM.split(pattern)
+    out = []
+    for i, part in enumerate(parts):
+        out.append(f"(?P<{part}>[^/]+)" if i % 2 else re.escape(part))
+    return re.compile("".join(out))
+
+
+@dataclass(frozen=True)
+class Topic(_Entry):
+    """A published key: message type, codec, QoS, latched or not."""
+
+    type: type[m.Message] = m.Message
+    codec: Codec = JSON
+    qos: QoS = STATE
+    latched: bool = False
+
+    @property
+    def encoding(self) -> str:
+        return self.codec.encoding(self.type)
+
+
+@dataclass(frozen=True)
+class Service(_Entry):
+    """A queryable key: request type -> reply type (JSON both ways)."""
+
+    request: type[m.Message] = m.Trigger
+    reply: type[m.Message] = m.TriggerReply
+    codec: Codec = field(default=JSON)
+
+
+RADAR_FRAMES = Topic(
+    "radar/{device}/frames", "every LD2410 report frame of one radar bridge",
+    type=m.LD2410TargetDataFrameArray, qos=STREAM,
+)
+PRESENCE = Topic(
+    "radar/presence", "someone in range or not, on change",
+    type=m.PresenceDetection, qos=STATE, latched=True,
+)
+CAMERA_IMAGE = Topic(
+    "camera/{camera}/image", "camera frames with capture time",
+    type=m.Image, codec=MSGPACK, qos=IMAGES,
+)
+FACE = Topic(
+    "camera/{camera}/face", "tracked face centre, metres, ROS axes",
+    type=m.FacePosition, qos=STREAM,
+)
+DEBUG_IMAGE = Topic(
+    "camera/{camera}/debug_image", "JPEG with detections drawn, only while watched",
+    type=m.Image, codec=MSGPACK, qos=IMAGES,
+)
+EXPRESSION = Topic(
+    "eyes/expression", "the eyes' expression", type=m.ScreenExpression, qos=STATE, latched=True,
+)
+EYE_CONTROL = Topic(
+    "eyes/control", "gaze target, radians and cm", type=m.EyeControl, qos=STREAM,
+)
+EYES_DIRECTION = Topic(
+    "eyes/direction", "gaze for the renderer, degrees", type=m.EyesDirection, qos=STREAM,
+)
+PUPIL = Topic(
+    "eyes/pupil", "pupil dilation percentage", type=m.PupilControl, qos=STREAM,
+)
+LIDS = Topic(
+    "eyes/lids", "lid positions per eye", type=m.EyeLidControl, qos=STATE, latched=True,
+)
+PLAY_SOUND = Service(
+    "audio/play_sound", "action goal: play a named sound",
+    request=m.PlaySound, reply=m.PlaySoundReply,
+)
+PLAY_SOUND_STATUS = Topic(
+    "audio/play_sound/status", "action progress and result",
+    type=m.PlaySoundStatus, qos=STATE, latched=True,
+)
+PLAY_SOUND_CANCEL = Service(
+    "audio/play_sound/cancel", "cancel an action goal",
+    request=m.CancelGoal, reply=m.TriggerReply,
+)
+PLAY_FILE = Service(
+    "audio/play_file", "player: play a file or configured sound",
+    request=m.PlayAudioFile, reply=m.TriggerReply,
+)
+AUDIO_STOP = Service("audio/stop", "player: stop playback")
+AUDIO_PAUSE = Service("audio/pause", "player: pause playback")
+AUDIO_RESUME = Service("audio/resume", "player: resume playback")
+DEVICE_FREE = Topic(
+    "audio/device_free", "true when the player is idle", type=m.Bool, qos=STATE, latched=True,
+)
+NODES = _Entry("nodes/{node}", "liveliness token of each running service")
+DIAGNOSTICS = Topic(
+    "diagnostics/{node}", "health of each node", type=m.DiagnosticStatus, qos=BACKGROUND,
+)
+
+TOPICS: tuple[Topic, ...] = (
+    RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
+    EYES_DIRECTION, PUPIL, LIDS, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+)
+SERVICES: tuple[Service, ...] = (
+    PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME,
+)
+
+
+def lookup(relative_key: str) -> Topic | Service | None:
+    """The catalogue entry a concrete relative key belongs to."""
+    relative_key = relative_key.strip("/")
+    for entry in (*TOPICS, *SERVICES):
+        if entry.match(relative_key) is not None:
+            return entry
+    return None
+
+
+def key_table() -> list[dict[str, Any]]:
+    """The catalogue as plain data (for `schemas/keys.json` and the README)."""
+    rows: list[dict[str, Any]] = []
+    for t in TOPICS:
+        rows.append({
+            "key": t.pattern, "kind": "topic", "type": t.type.__name__,
+            "encoding": t.encoding, "latched": t.latched,
+            "congestion": t.qos.congestion, "priority": t.qos.priority, "doc": t.doc,
+        })
+    for s in SERVICES:
+        rows.append({
+            "key": s.pattern, "kind": "service", "request": s.request.__name__,
+            "reply": s.reply.__name__, "encoding": s.codec.mime, "doc": s.doc,
+        })
+    rows.append({"key": NODES.pattern, "kind": "liveliness", "doc": NODES.doc})
+    return rows

@@ -1,0 +1,288 @@
+"""The message contract of DESIGN.md section 2, as msgspec types.
+
+These structs are the single source of truth: the key catalogue
+(`keys.py`) binds them to key expressions, `schemas/` is generated from
+them, and the CLI validates user input against them. Field names and
+units are the contract; ranges are declared with `msgspec.Meta` so a
+value out of range is rejected when a message is *decoded*, wherever it
+came from.
+
+`stamp_ns` is the time (ns since the Unix epoch) of the *sensor data* a
+message derives from, so latency can be traced end to end; a message
+that is not derived from sensor data (a request, a status) uses its own
+creation time.
+"""
+
+from __future__ import annotations
+
+import enum
+import time
+from typing import Annotated, Literal
+
+import msgspec
+
+# --- reusable constrained scalar types -------------------------------------
+
+StampNs = Annotated[int, msgspec.Meta(ge=0, description="ns since the Unix epoch")]
+Centimetres = Annotated[int, msgspec.Meta(ge=0, le=65535, description="cm, 16-bit")]
+Energy = Annotated[int, msgspec.Meta(ge=0, le=100, description="LD2410 energy 0..100")]
+Percent = Annotated[float, msgspec.Meta(ge=0.0, le=100.0)]
+Unit = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
+NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+Gate = Annotated[int, msgspec.Meta(ge=0, le=8)]
+Byte = Annotated[int, msgspec.Meta(ge=0, le=255)]
+
+
+def now_ns() -> int:
+    """Wall-clock time in ns since the epoch, the unit of every `stamp_ns`."""
+    return time.time_ns()
+
+
+class Message(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """Base of every message: unknown fields are refused so a typo such as
+    the seed's `rader_id` is an error, never a silently missing value."""
+
+
+# --- radar -----------------------------------------------------------------
+
+
+class TargetState(enum.IntEnum):
+    """LD2410 target state byte: bit 0 moving, bit 1 stationary."""
+
+    NO_TARGET = 0
+    MOVING = 1
+    STATIONARY = 2
+    MOVING_AND_STATIONARY = 3
+
+
+class LD2410TargetDataFrame(Message):
+    """One LD2410 report frame, as the sensor sent it (distances in cm)."""
+
+    radar_id: Annotated[int, msgspec.Meta(ge=0)]
+    target_state: TargetState
+    movement_distance: Centimetres
+    movement_energy: Energy
+    stationary_distance: Centimetres
+    stationary_energy: Energy
+    detection_distance: Centimetres
+    # Engineering mode only (None in basic mode).
+    max_moving_gate: Gate | None = None
+    max_stationary_gate: Gate | None = None
+    moving_gate_energy: list[Energy] | None = None
+    stationary_gate_energy: list[Energy] | None = None
+    light_level: Byte | None = None
+    out_pin: Byte | None = None
+
+
+class LD2410TargetDataFrameArray(Message):
+    """Frames of one radar bridge (`device_id`), one entry per sensor."""
+
+    stamp_ns: StampNs
+    device_id: Annotated[int, msgspec.Meta(ge=0)]
+    sensors: list[LD2410TargetDataFrame]
+
+
+class PresenceTarget(enum.IntEnum):
+    MOVING = 0
+    STANDING = 1
+
+
+class PresenceState(enum.IntEnum):
+    OUT_OF_RANGE = 0
+    IN_RANGE = 1
+
+
+class PresenceDetection(Message):
+    """Radar presence verdict, published on change and latched."""
+
+    stamp_ns: StampNs
+    target_state: PresenceTarget
+    presence_state: PresenceState
+    distance_m: NonNegative
+
+
+# --- camera ----------------------------------------------------------------
+
+
+class Image(Message):
+    """A camera frame. `bgr8`: raw rows of BGR bytes; `jpeg`: a JPEG file.
+    Always MessagePack on the wire (JSON would cost 40x more)."""
+
+    stamp_ns: StampNs
+    frame_id: str
+    width: Annotated[int, msgspec.Meta(gt=0, le=16384)]
+    height: Annotated[int, msgspec.Meta(gt=0, le=16384)]
+    encoding: Literal["bgr8", "jpeg"]
+    data: bytes
+
+
+class Point(Message):
+    """A 3-D point in metres (ROS axes: x forward, y left, z up)."""
+
+    x: float
+    y: float
+    z: float
+
+
+class FacePosition(Message):
+    """The tracked face centre relative to the camera, in metres."""
+
+    stamp_ns: StampNs
+    frame_id: str
+    point: Point
+    confidence: Unit
+
+
+# --- eyes ------------------------------------------------------------------
+
+
+class ExpressionAction(enum.IntEnum):
+    EYE_AWAKE = 0
+    EYE_SLEEP = 1
+    EYE_SLEEPY = 2
+    EYE_GRIN = 3
+    EYE_SAD = 4
+    EYE_LOOK_RANDOM = 5
+    ANIMATE_LOVE = 6
+    ANIMATE_STAR = 7
+
+
+class ScreenExpression(Message):
+    stamp_ns: StampNs
+    action: ExpressionAction
+
+
+class EyeControl(Message):
+    """Gaze target in the eyes-centre frame: radians (+yaw left, +pitch up)."""
+
+    stamp_ns: StampNs
+    yaw: Annotated[float, msgspec.Meta(ge=-3.15, le=3.15)]
+    pitch: Annotated[float, msgspec.Meta(ge=-1.58, le=1.58)]
+    target_distance_cm: NonNegative
+
+
+class EyesDirection(Message):
+    """Gaze for the renderer, degrees (+yaw left, +pitch up)."""
+
+    stamp_ns: StampNs
+    yaw: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+    pitch: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+
+
+class PupilControl(Message):
+    stamp_ns: StampNs
+    dilation_percentage: Percent
+
+
+class EyeId(enum.IntEnum):
+    LEFT = 0
+    RIGHT = 1
+    BOTH = 2
+
+
+class EyeLidControl(Message):
+    """Lid positions: 0/0 fully open, 50/50 closed (the lids meet)."""
+
+    stamp_ns: StampNs
+    eye_id: EyeId
+    top_lid_position: Percent
+    bottom_lid_position: Percent
+
+
+# --- audio -----------------------------------------------------------------
+
+
+GoalState = Literal["ACCEPTED", "PLAYING", "SUCCEEDED", "CANCELED", "ABORTED"]
+TERMINAL_GOAL_STATES: frozenset[str] = frozenset({"SUCCEEDED", "CANCELED", "ABORTED"})
+
+
+class PlaySound(Message):
+    """Goal of the `audio/play_sound` action: a sound name from [audio.sounds]."""
+
+    sound: Annotated[str, msgspec.Meta(min_length=1)]
+
+
+class PlaySoundReply(Message):
+    goal_id: str
+    accepted: bool
+    message: str = ""
+
+
+class PlaySoundStatus(Message):
+    goal_id: str
+    state: GoalState
+    progress: Unit = 0.0
+    message: str = ""
+    stamp_ns: StampNs = 0
+
+
+class CancelGoal(Message):
+    goal_id: str
+
+
+class PlayAudioFile(Message):
+    """Request to the player: a file path or a configured sound name."""
+
+    path: Annotated[str, msgspec.Meta(min_length=1)]
+
+
+class Trigger(Message):
+    """Empty request (std_srvs/Trigger)."""
+
+
+class TriggerReply(Message):
+    success: bool
+    message: str = ""
+
+
+class Bool(Message):
+    stamp_ns: StampNs
+    data: bool
+
+
+# --- system ----------------------------------------------------------------
+
+
+DiagnosticLevel = Literal["OK", "WARN", "ERROR"]
+DiagnosticValue = str | int | float | bool
+
+
+class DiagnosticStatus(Message):
+    """Health of one node: published periodically and on every change."""
+
+    stamp_ns: StampNs
+    node: str
+    level: DiagnosticLevel
+    message: str
+    values: dict[str, DiagnosticValue] = msgspec.field(default_factory=dict)
+
+
+class ErrorReply(Message):
+    """Body of a query's error reply: what was wrong with the request."""
+
+    error: str
+
+
+ALL_MESSAGES: tuple[type[Message], ...] = (
+    LD2410TargetDataFrame,
+    LD2410TargetDataFrameArray,
+    PresenceDetection,
+    Image,
+    Point,
+    FacePosition,
+    ScreenExpression,
+    EyeControl,
+    EyesDirection,
+    PupilControl,
+    EyeLidControl,
+    PlaySound,
+    PlaySoundReply,
+    PlaySoundStatus,
+    CancelGoal,
+    PlayAudioFile,
+    Trigger,
+    TriggerReply,
+    Bool,
+    DiagnosticStatus,
+    ErrorReply,
+)

@@ -1,0 +1,563 @@
+"""The node runtime: one Zenoh session per process, typed pub/sub, queryables.
+
+Everything a service needs from Zenoh lives here, written once:
+
+* the session is a *client* of the router endpoints, with multicast
+  scouting off, and it waits for a router that is not up yet (services
+  start in any order) while staying interruptible by Ctrl-C;
+* every key is the catalogue's pattern under `buddybot/<robot>/`;
+* a liveliness token `nodes/<name>` says the node is alive, and
+  `diagnostics/<name>` says how it is doing;
+* latched topics use zenoh.ext advanced publishers (a one-sample cache)
+  and advanced subscribers (history of late publishers), so a process
+  that starts late or restarts gets the current value at once;
+* typed subscribers decode and validate every sample; a malformed one is
+  dropped, counted and logged at most once per burst, never fatal;
+* slow handlers run on a worker fed by a latest-value slot or a bounded
+  queue, never in Zenoh's callback thread (a stuck callback starves every
+  other key of the session, DESIGN.md section 6).
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import logging
+import signal
+import threading
+import time
+import uuid
+from collections.abc import Callable
+from typing import Any, Generic, Literal, TypeVar
+
+import msgspec
+import zenoh
+import zenoh.ext
+from buddybot.core import keys
+from buddybot.core import messages as m
+
+log = logging.getLogger("buddybot.node")
+
+T = TypeVar("T", bound=m.Message)
+Delivery = Literal["inline", "latest", "queue"]
+
+_CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
+_PRIORITY = {
+    "real_time": zenoh.Priority.REAL_TIME,
+    "interactive_high": zenoh.Priority.INTERACTIVE_HIGH,
+    "data": zenoh.Priority.DATA,
+    "background": zenoh.Priority.BACKGROUND,
+}
+
+
+# --- session configuration ------------------------------------------------------
+
+
+def zenoh_config(
+    *,
+    mode: Literal["client", "peer", "router"] = "client",
+    connect: list[str] | tuple[str, ...] = (),
+    listen: list[str] | tuple[str, ...] = (),
+    base_file: str | None = None,
+) -> zenoh.Config:
+    """A Zenoh config with BuddyBot's rules: explicit endpoints, no multicast
+    scouting, clients that wait for their router and reconnect quickly."""
+    config = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    if connect:
+        config.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen:
+        config.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if mode != "router":
+        # Wait for the router forever (services start in any order) and retry
+        # fast, so a router restart costs ~0.2 s instead of ~4 s.
+        config.insert_json5("connect/timeout_ms", "-1")
+        config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 500}')
+    return config
+
+
+def open_session(
+    config: zenoh.Config, stop: threading.Event, what: str = "router"
+) -> zenoh.Session | None:
+    """Open a session in a helper thread so the caller stays responsive to a
+    stop request while Zenoh waits for the router. None when stopped first."""
+    result: dict[str, Any] = {}
+    done = threading.Event()
+
+    def opener() -> None:
+        try:
+            result["session"] = zenoh.open(config)
+        except Exception as exc:  # zenoh raises ZError
+            result["error"] = exc
+        done.set()
+
+    threading.Thread(target=opener, name="zenoh-open", daemon=True).start()
+    waited = 0.0
+    while not done.wait(0.1):
+        if stop.is_set():
+            return None
+        waited += 0.1
+        if abs(waited - 2.0) < 0.05 or (waited > 2 and int(waited * 10) % 100 == 0):
+            log.warning("waiting for the Zenoh %s (%.0f s so far)...", what, waited)
+    if "error" in result:
+        raise ConnectionError(f"cannot open Zenoh session: {result['error']}")
+    return result["session"]
+
+
+# --- diagnostics and rate-limited warnings -----------------------------------------
+
+
+class RateLimitedLog:
+    """Logs the first event of a burst, then at most one summary per period."""
+
+    def __init__(self, logger: logging.Logger, period_s: float = 5.0) -> None:
+        self._logger = logger
+        self._period = period_s
+        self._last: dict[str, float] = {}
+        self._suppressed: collections.Counter[str] = collections.Counter()
+        self._lock = threading.Lock()
+
+    def warning(self, topic: str, text: str, *args: Any) -> None:
+        now = time.monotonic()
+        with self._lock:
+            last = self._last.get(topic)
+            if last is not None and now - last < self._period:
+                self._suppressed[topic] += 1
+                return
+            suppressed = self._suppressed.pop(topic, 0)
+            self._last[topic] = now
+        suffix = f" (+{suppressed} more since last report)" if suppressed else ""
+        self._logger.warning(text + suffix, *args)
+
+
+class Diagnostics:
+    """The node's health, published on `diagnostics/<node>` periodically and on change.
+
+    Services set `level`/`message` with `set()` and keep counters in
+    `values` (plain numbers and strings), e.g. frames, reconnects.
+    """
+
+    def __init__(self, node: Node, period_s: float) -> None:
+        self._node = node
+        self._period = period_s
+        self._lock = threading.Lock()
+        self.level: m.DiagnosticLevel = "OK"
+        self.message = "running"
+        self.values: dict[str, m.DiagnosticValue] = {}
+        self._pub = node.publisher(keys.DIAGNOSTICS, node=node.name)
+
+    def set(self, level: m.DiagnosticLevel, message: str) -> None:
+        """Change the status; publishes at once when it differs."""
+        with self._lock:
+            changed = (level, message) != (self.level, self.message)
+            self.level, self.message = level, message
+        if changed:
+            (log.info if level == "OK" else log.warning)("status %s: %s", level, message)
+            self.publish()
+
+    def increment(self, name: str, by: int = 1) -> None:
+        with self._lock:
+            self.values[name] = int(self.values.get(name, 0)) + by
+
+    def publish(self) -> None:
+        with self._lock:
+            status = m.DiagnosticStatus(
+                stamp_ns=m.now_ns(), node=self._node.name, level=self.level,
+                message=self.message, values=dict(self.values),
+            )
+        self._pub.put(status)
+
+    def run(self, stop: threading.Event) -> None:
+        while not stop.wait(self._period):
+            try:
+                self.publish()
+            except Exception as exc:  # a closed session during shutdown
+                log.debug("diagnostics publish failed: %s", exc)
+
+
+# --- typed publishers ----------------------------------------------------------------
+
+
+class Publisher(Generic[T]):
+    """Puts messages of one catalogue topic on one concrete key."""
+
+    def __init__(self, node: Node, topic: keys.Topic, key: str) -> None:
+        self.topic = topic
+        self.key = key
+        self._encoding = zenoh.Encoding(topic.encoding)
+        qos = topic.qos
+        options: dict[str, Any] = {
+            "encoding": self._encoding,
+            "congestion_control": _CONGESTION[qos.congestion],
+            "priority": _PRIORITY[qos.priority],
+            "express": qos.express,
+        }
+        self._plain: zenoh.Publisher | None = None
+        if topic.latched:
+            self._z: Any = zenoh.ext.declare_advanced_publisher(
+                node.session, key,
+                cache=zenoh.ext.CacheConfig(max_samples=1),
+                publisher_detection=True,
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=None, sporadic_heartbeat=1.0
+                ),
+                **options,
+            )
+        else:
+            self._plain = node.session.declare_publisher(key, **options)
+            self._z = self._plain
+        node._declared.append(self._z)
+
+    def put(self, msg: T) -> None:
+        self._z.put(self.topic.codec.encode(msg), encoding=self._encoding)
+
+    def put_bytes(self, payload: bytes) -> None:
+        """Put an already encoded payload (for tools and tests)."""
+        self._z.put(payload, encoding=self._encoding)
+
+    def has_subscribers(self) -> bool:
+        """Whether anyone listens (a latched publisher always answers True)."""
+        if self._plain is None:
+            return True
+        return bool(self._plain.matching_status.matching)
+
+
+# --- delivery workers ----------------------------------------------------------------
+
+
+class _Worker:
+    """Runs a handler on its own thread, fed by a latest slot or a bounded FIFO."""
+
+    def __init__(self, name: str, handler: Callable[..., None], latest: bool, maxlen: int,
+                 on_error: Callable[[BaseException], None]) -> None:
+        self._handler = handler
+        self._on_error = on_error
+        self._items: collections.deque[tuple[Any, ...]] = collections.deque(
+            maxlen=1 if latest else maxlen
+        )
+        self._cond = threading.Condition()
+        self._closed = False
+        self.dropped = 0
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def submit(self, *item: Any) -> None:
+        with self._cond:
+            if len(self._items) == self._items.maxlen:
+                self.dropped += 1
+            self._items.append(item)
+            self._cond.notify()
+
+    def _run(self) -> None:
+        while True:
+            with self._cond:
+                while not self._items and not self._closed:
+                    self._cond.wait()
+                if self._closed and not self._items:
+                    return
+                item = self._items.popleft()
+            try:
+                self._handler(*item)
+            except Exception as exc:
+                self._on_error(exc)
+
+    def close(self, timeout: float = 2.0) -> None:
+        with self._cond:
+            self._closed = True
+            self._cond.notify()
+        if threading.current_thread() is not self._thread:
+            self._thread.join(timeout)
+
+
+# --- the node ----------------------------------------------------------------------
+
+
+class Node:
+    """One service process's connection to the robot.
+
+    Use as a context manager, or call `close()`; `spin()` blocks until
+    SIGINT/SIGTERM (or `stop()`).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        *,
+        robot: str = keys.DEFAULT_ROBOT,
+        connect: list[str] | tuple[str, ...] = ("tcp/127.0.0.1:7447",),
+        zenoh_config_file: str | None = None,
+        diagnostics_period_s: float = 2.0,
+        stop_event: threading.Event | None = None,
+        session: zenoh.Session | None = None,
+    ) -> None:
+        self.name = name
+        self.robot = robot
+        self.prefix = keys.prefix(robot)
+        self.log = logging.getLogger(f"buddybot.{name}")
+        self.stop_event = stop_event or threading.Event()
+        self._declared: list[Any] = []
+        self._workers: list[_Worker] = []
+        self._threads: list[threading.Thread] = []
+        self._closed = False
+        self._warn = RateLimitedLog(self.log)
+        if session is None:
+            config = zenoh_config(connect=connect, base_file=zenoh_config_file)
+            opened = open_session(config, self.stop_event, "router at " + ", ".join(connect))
+            if opened is None:
+                raise KeyboardInterrupt("stopped while waiting for the router")
+            self._owns_session = True
+            session = opened
+        else:
+            self._owns_session = False
+        self.session: zenoh.Session = session
+        self._token = self.session.liveliness().declare_token(self.key(keys.NODES, node=name))
+        self.diagnostics = Diagnostics(self, diagnostics_period_s)
+        self.every(diagnostics_period_s, self.diagnostics.publish, name="diagnostics")
+        self.log.info("node %s up (robot %s)", name, robot)
+
+    # -- keys --
+
+    def key(self, entry: keys._Entry, **params: str) -> str:
+        """Absolute key of a catalogue entry; a missing parameter means `*`."""
+        filled = {p: params.get(p, "*") for p in entry.params}
+        rel = entry.pattern.format(**filled)
+        for name, value in params.items():
+            if value != "*" and not keys.valid_robot_id(str(value)):
+                raise ValueError(f"{entry.pattern}: invalid {name} {value!r}")
+        return f"{self.prefix}/{rel}"
+
+    def relative(self, key: str) -> str:
+        key = str(key)
+        return key[len(self.prefix) + 1:] if key.startswith(self.prefix + "/") else key
+
+    # -- publish / subscribe --
+
+    def publisher(self, topic: keys.Topic, **params: str) -> Publisher[Any]:
+        key = self.key(topic, **params)
+        if "*" in key:
+            raise ValueError(f"cannot publish on a wildcard key {key}")
+        return Publisher(self, topic, key)
+
+    def subscribe(
+        self,
+        topic: keys.Topic,
+        callback: Callable[[Any, str], None],
+        *,
+        delivery: Delivery = "inline",
+        queue_size: int = 64,
+        history: bool | None = None,
+        **params: str,
+    ) -> None:
+        """Call `callback(message, relative_key)` for each valid sample.
+
+        `delivery`: "inline" runs the callback in Zenoh's thread (only for
+        fast handlers), "latest" on a worker that only ever sees the newest
+        sample, "queue" on a worker with a bounded FIFO (oldest dropped).
+        `history` (default: the topic is latched) fetches latched values.
+        """
+        key = self.key(topic, **params)
+        decode = topic.codec.decode
+        msg_type = topic.type
+        rel = self.relative
+
+        def on_error(exc: BaseException) -> None:
+            self.diagnostics.increment("callback_errors")
+            self._warn.warning(
+                f"cb:{key}", "handler for %s failed: %r", key, exc, )
+
+        sink: Callable[..., None]
+        if delivery == "inline":
+            def sink(msg: Any, k: str) -> None:
+                try:
+                    callback(msg, k)
+                except Exception as exc:
+                    on_error(exc)
+        else:
+            worker = _Worker(f"{self.name}:{topic.pattern}", callback, delivery == "latest",
+                             queue_size, on_error)
+            self._workers.append(worker)
+            sink = worker.submit
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if sample.kind != zenoh.SampleKind.PUT:
+                return
+            try:
+                msg = decode(sample.payload.to_bytes(), msg_type)
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                self.diagnostics.increment("malformed")
+                self._warn.warning(
+                    f"bad:{key}", "dropped malformed %s on %s: %s",
+                    msg_type.__name__, sample.key_expr, exc,
+                )
+                return
+            sink(msg, rel(str(sample.key_expr)))
+
+        use_history = topic.latched if history is None else history
+        if use_history:
+            sub: Any = zenoh.ext.declare_advanced_subscriber(
+                self.session, key, on_sample,
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                recovery=zenoh.ext.RecoveryConfig(periodic_queries=None, heartbeat=True),
+                subscriber_detection=True,
+            )
+        else:
+            sub = self.session.declare_subscriber(key, on_sample)
+        self._declared.append(sub)
+
+    # -- services --
+
+    def serve(
+        self,
+        service: keys.Service,
+        handler: Callable[[Any], m.Message],
+        *,
+        queue_size: int = 16,
+        **params: str,
+    ) -> None:
+        """Answer queries on a catalogue service with `handler(request) -> reply`.
+
+        Handlers run on a worker thread (they may do I/O); a malformed request
+        or a failing handler gets an error reply naming the problem.
+        """
+        key = self.key(service, **params)
+        codec = service.codec
+        reply_encoding = zenoh.Encoding(codec.encoding(service.reply))
+
+        def answer(query: zenoh.Query) -> None:
+            payload = query.payload
+            raw = payload.to_bytes() if payload is not None else b"{}"
+            try:
+                request = codec.decode(raw or b"{}", service.request)
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                self.diagnostics.increment("malformed")
+                self._warn.warning(f"bad:{key}", "refused malformed request on %s: %s", key, exc)
+                query.reply_err(_error_payload(f"bad {service.request.__name__}: {exc}"))
+                return
+            try:
+                reply = handler(request)
+            except Exception as exc:
+                self.log.exception("handler for %s failed", key)
+                query.reply_err(_error_payload(f"{type(exc).__name__}: {exc}"))
+                return
+            query.reply(key, codec.encode(reply), encoding=reply_encoding)
+
+        def on_error(exc: BaseException) -> None:
+            self.log.error("query handling on %s failed: %r", key, exc)
+
+        worker = _Worker(f"{self.name}:{service.pattern}", answer, False, queue_size, on_error)
+        self._workers.append(worker)
+
+        def on_query(query: zenoh.Query) -> None:
+            worker.submit(query)
+
+        self._declared.append(self.session.declare_queryable(key, on_query))
+
+    def call(
+        self, service: keys.Service, request: m.Message, *, timeout: float = 5.0, **params: str
+    ) -> Any:
+        """Query a service; returns the decoded reply or raises ServiceError."""
+        return call_service(self.session, self.key(service, **params), service, request, timeout)
+
+    # -- timers, lifetime --
+
+    def every(self, period_s: float, fn: Callable[[], None], name: str = "timer") -> None:
+        """Run `fn` every `period_s` seconds on its own thread until stop."""
+
+        def loop() -> None:
+            while not self.stop_event.wait(period_s):
+                try:
+                    fn()
+                except Exception as exc:
+                    self._warn.warning(f"timer:{name}", "%s failed: %r", name, exc)
+
+        thread = threading.Thread(target=loop, name=f"{self.name}:{name}", daemon=True)
+        thread.start()
+        self._threads.append(thread)
+
+    def stop(self) -> None:
+        self.stop_event.set()
+
+    def spin(self) -> None:
+        """Block until stopped (signals call `stop()` via `install_signal_handlers`)."""
+        while not self.stop_event.wait(0.5):
+            pass
+
+    def close(self) -> None:
+        """Undeclare everything (advanced subscribers first: zenoh-python #624), close."""
+        if self._closed:
+            return
+        self._closed = True
+        self.stop_event.set()
+        for worker in self._workers:
+            worker.close()
+        for entity in reversed(self._declared):
+            try:
+                entity.undeclare()
+            except Exception as exc:
+                log.debug("undeclare failed: %s", exc)
+        try:
+            self._token.undeclare()
+        except Exception as exc:
+            log.debug("token undeclare failed: %s", exc)
+        if self._owns_session:
+            self.session.close()
+        self.log.info("node %s stopped", self.name)
+
+    def __enter__(self) -> Node:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class ServiceError(Exception):
+    """A service call that failed: no answer, an error reply, or a bad reply."""
+
+
+def _error_payload(text: str) -> bytes:
+    return msgspec.json.encode(m.ErrorReply(error=text))
+
+
+def error_text(payload: bytes) -> str:
+    """The text of an error reply (ours are ErrorReply JSON; others raw text)."""
+    try:
+        return msgspec.json.decode(payload, type=m.ErrorReply).error
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return payload.decode("utf-8", "replace")
+
+
+def call_service(
+    session: zenoh.Session, key: str, service: keys.Service, request: m.Message, timeout: float
+) -> Any:
+    """Send one query and decode the first reply with the service's reply type."""
+    codec = service.codec
+    replies = session.get(
+        key,
+        payload=codec.encode(request),
+        encoding=zenoh.Encoding(codec.encoding(service.request)),
+        timeout=timeout,
+    )
+    for reply in replies:
+        if reply.ok is not None:
+            try:
+                return codec.decode(reply.ok.payload.to_bytes(), service.reply)
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                raise ServiceError(f"{key}: malformed reply: {exc}") from None
+        raise ServiceError(f"{key}: {error_text(reply.err.payload.to_bytes())}")
+    raise ServiceError(f"{key}: no reply within {timeout:g} s (is the service running?)")
+
+
+def install_signal_handlers(stop: threading.Event) -> None:
+    """SIGINT/SIGTERM set `stop`, so the main loop can shut down cleanly."""
+
+    def handler(signum: int, _frame: object) -> None:
+        log.info("received %s, stopping", signal.Signals(signum).name)
+        stop.set()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)
+
+
+def new_goal_id() -> str:
+    return uuid.uuid4().hex[:12]

@@ -1,0 +1,26 @@
+"""A Zenoh router in this process: the hub every service connects to."""
+
+from __future__ import annotations
+
+import logging
+import threading
+
+import zenoh
+from buddybot.core.node import zenoh_config
+
+log = logging.getLogger("buddybot.router")
+
+
+def run_router(
+    listen: list[str], stop: threading.Event, base_file: str | None = None
+) -> None:
+    """Serve as a router on `listen` until `stop` is set."""
+    config = zenoh_config(mode="router", listen=listen, base_file=base_file)
+    session = zenoh.open(config)
+    try:
+        log.info("router listening on %s (zid %s)", ", ".join(listen), session.info.zid())
+        while not stop.wait(0.5):
+            pass
+    finally:
+        session.close()
+        log.info("router stopped")

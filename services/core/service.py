@@ -1,0 +1,90 @@
+"""What `buddybot run SERVICE` hands a service: its options, config and a node.
+
+Common options (`--connect`, `--robot`, `--config`, `--log-level`) are the
+same for every service and tool; the effective values combine the command
+line (wins), the config file and the defaults.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import threading
+from dataclasses import dataclass, field
+
+from buddybot.core.config import Config, ConfigError, load_config
+from buddybot.core.node import Node, install_signal_handlers
+
+
+def add_common_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("common options")
+    group.add_argument(
+        "--connect", action="append", metavar="ENDPOINT",
+        help="Zenoh router endpoint (repeatable; default from config, else tcp/127.0.0.1:7447)",
+    )
+    group.add_argument("--robot", metavar="ID", help="robot id: keys are buddybot/<ID>/... "
+                       "(default from config, else 'buddy')")
+    group.add_argument("--config", metavar="FILE",
+                       help="TOML config file (default: $BUDDYBOT_CONFIG)")
+    group.add_argument("--log-level", default="INFO",
+                       choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log verbosity")
+
+
+def setup_logging(level: str) -> None:
+    logging.basicConfig(
+        level=getattr(logging, level),
+        format="%(asctime)s.%(msecs)03d %(levelname)-7s %(name)s: %(message)s",
+        datefmt="%H:%M:%S",
+        stream=sys.stderr,
+    )
+
+
+@dataclass
+class ServiceContext:
+    """Everything a service's `run(ctx)` needs, resolved once."""
+
+    name: str
+    args: argparse.Namespace
+    config: Config
+    robot: str
+    connect: list[str]
+    stop: threading.Event = field(default_factory=threading.Event)
+
+    def node(self, name: str | None = None, **kwargs: object) -> Node:
+        """Open this service's node (waits for the router; Ctrl-C aborts)."""
+        return Node(
+            name or self.name, robot=self.robot, connect=self.connect,
+            zenoh_config_file=self.config.zenoh.config_file, stop_event=self.stop,
+            **kwargs,  # type: ignore[arg-type]
+        )
+
+
+def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
+    """Load config (ConfigError on bad input) and merge the common options."""
+    config = load_config(getattr(args, "config", None))
+    robot = getattr(args, "robot", None) or config.robot.id
+    connect = getattr(args, "connect", None) or list(config.zenoh.connect)
+    from buddybot.core.keys import valid_robot_id
+
+    if not valid_robot_id(robot):
+        raise ConfigError(f"--robot: {robot!r} is not a valid id (letters, digits, '-', '_')")
+    return ServiceContext(name=name, args=args, config=config, robot=robot, connect=connect)
+
+
+def run_main(name: str, args: argparse.Namespace, main: object) -> int:
+    """Run a service's `run(ctx)` with logging, signals and config errors handled."""
+    setup_logging(getattr(args, "log_level", "INFO"))
+    try:
+        ctx = resolve(args, name)
+    except ConfigError as exc:
+        print(f"buddybot: config error: {exc}", file=sys.stderr)
+        return 2
+    install_signal_handlers(ctx.stop)
+    try:
+        return int(main(ctx) or 0)  # type: ignore[operator]
+    except ConfigError as exc:
+        print(f"buddybot: config error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 0

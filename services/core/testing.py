@@ -1,0 +1,194 @@
+"""Helpers for tests and benchmarks: a real router, real service processes.
+
+Shipped inside the package (as dimos does) so benchmarks and other
+projects' integration tests can use them too. Nothing here mocks Zenoh:
+the router is `buddybot router` on a free loopback port, services are
+`buddybot run ...` processes, and probes are real sessions.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, Generic, TypeVar
+
+import zenoh
+from buddybot.core import keys
+from buddybot.core.node import Node, zenoh_config
+
+T = TypeVar("T")
+LOOPBACK = "127.0.0.1"
+
+
+def free_port() -> int:
+    """A TCP port on loopback that nothing listens on right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind((LOOPBACK, 0))
+        return int(sock.getsockname()[1])
+
+
+def retry_until(
+    check: Callable[[], T], timeout: float = 10.0, interval: float = 0.05, what: str = "condition"
+) -> T:
+    """Call `check` until it returns something truthy; raise TimeoutError after `timeout`.
+
+    For discovery races: the event is waited for, never slept for.
+    """
+    end = time.monotonic() + timeout
+    last_exc: Exception | None = None
+    while True:
+        try:
+            value = check()
+            if value:
+                return value
+        except Exception as exc:  # the check may raise until ready
+            last_exc = exc
+        if time.monotonic() > end:
+            raise TimeoutError(f"{what} not met within {timeout} s (last error: {last_exc!r})")
+        time.sleep(interval)
+
+
+def wait_port(port: int, timeout: float = 15.0) -> None:
+    def accepting() -> bool:
+        with socket.create_connection((LOOPBACK, port), timeout=0.5):
+            return True
+
+    retry_until(accepting, timeout, what=f"port {port} accepting")
+
+
+class Process:
+    """A child process whose output goes to a log file; stopped on `stop()`."""
+
+    def __init__(self, argv: Sequence[str], name: str, log_dir: Path | None = None,
+                 env: dict[str, str] | None = None) -> None:
+        self.name = name
+        self.argv = list(argv)
+        folder = log_dir or Path(tempfile.mkdtemp(prefix="buddybot-test-"))
+        folder.mkdir(parents=True, exist_ok=True)
+        self.log_path = folder / f"{name}.log"
+        self._log = self.log_path.open("wb")
+        self.proc = subprocess.Popen(
+            self.argv, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
+            start_new_session=True,
+        )
+
+    @property
+    def pid(self) -> int:
+        return self.proc.pid
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def output(self) -> str:
+        self._log.flush()
+        return self.log_path.read_text(errors="replace")
+
+    def kill(self, signum: int = signal.SIGKILL) -> None:
+        if self.alive():
+            os.killpg(self.proc.pid, signum)
+            self.proc.wait(10)
+
+    def stop(self, timeout: float = 10.0) -> int | None:
+        """SIGTERM, then SIGKILL after `timeout`; returns the exit status."""
+        if self.alive():
+            try:
+                os.killpg(self.proc.pid, signal.SIGTERM)
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+                self.proc.wait(10)
+            except ProcessLookupError:
+                pass
+        self._log.close()
+        return self.proc.returncode
+
+    def wait_for_output(self, text: str, timeout: float = 15.0) -> str:
+        return retry_until(lambda: text in self.output() and self.output(), timeout,
+                           what=f"{self.name} printing {text!r}")
+
+
+def buddybot_argv(*args: str) -> list[str]:
+    return [sys.executable, "-m", "buddybot", *args]
+
+
+class Router(Process):
+    """`buddybot router` on a free loopback port."""
+
+    def __init__(self, port: int | None = None, log_dir: Path | None = None,
+                 extra: Sequence[str] = ()) -> None:
+        self.port = port or free_port()
+        self.endpoint = f"tcp/{LOOPBACK}:{self.port}"
+        super().__init__(buddybot_argv("router", "--listen", self.endpoint, *extra),
+                         f"router-{self.port}", log_dir)
+        wait_port(self.port)
+
+
+def run_service(service: str, endpoint: str, *args: str, robot: str = "buddy",
+                log_dir: Path | None = None, env: dict[str, str] | None = None) -> Process:
+    """Start `buddybot run SERVICE --connect ENDPOINT ...` as a child process."""
+    argv = buddybot_argv("run", service, "--connect", endpoint, "--robot", robot, *args)
+    return Process(argv, f"{service}-{time.monotonic_ns()}", log_dir, env)
+
+
+def probe_session(endpoint: str) -> zenoh.Session:
+    """A plain client session for tests (scouting off, loopback only)."""
+    config = zenoh_config(connect=[endpoint])
+    config.insert_json5("connect/timeout_ms", "10000")
+    return zenoh.open(config)
+
+
+class Collector(Generic[T]):
+    """Collects the messages a node receives on a topic, with waits on them."""
+
+    def __init__(self, node: Node, topic: keys.Topic, **params: str) -> None:
+        self.items: list[tuple[Any, str]] = []
+        self._cond = threading.Condition()
+        node.subscribe(topic, self._on, **params)
+
+    def _on(self, msg: Any, key: str) -> None:
+        with self._cond:
+            self.items.append((msg, key))
+            self._cond.notify_all()
+
+    @property
+    def messages(self) -> list[Any]:
+        with self._cond:
+            return [msg for msg, _ in self.items]
+
+    def wait_for(self, predicate: Callable[[Any], bool] = lambda _m: True,
+                 timeout: float = 10.0, what: str = "message") -> Any:
+        """The first message (oldest first) matching `predicate`, waiting for it."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while True:
+                for msg, _ in self.items:
+                    if predicate(msg):
+                        return msg
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"no {what} within {timeout} s; got {len(self.items)}: "
+                                       f"{[m for m, _ in self.items[-5:]]}")
+                self._cond.wait(left)
+
+    def wait_count(self, n: int, timeout: float = 10.0) -> list[Any]:
+        end = time.monotonic() + timeout
+        with self._cond:
+            while len(self.items) < n:
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f"got {len(self.items)} of {n} messages in {timeout} s")
+                self._cond.wait(left)
+            return [msg for msg, _ in self.items]
+
+    def clear(self) -> None:
+        with self._cond:
+            self.items.clear()

@@ -1,0 +1,1 @@
+"""Eyes: the eyes driver (gaze, pupils, lids) and the web eye renderer."""
