@@ -1,8 +1,22 @@
-"""Config table `[controller]` (pure msgspec structs)."""
+"""Config table `[controller]` (pure msgspec structs).
+
+Every timing of the social behaviour lives here with a default chosen for
+the whole-robot demo (a visitor who comes, stays 20-30 s and leaves, a
+face visible the whole time): greet once per visit after a short dwell,
+say goodbye when they go. Setting every timing to 0 and `look_around`
+to false gives the seed's behaviour exactly (eyes follow presence at
+once, greeting as soon as radar and face agree). Negative timings are
+refused when the file is read (the `ge=0` constraints).
+"""
 
 from __future__ import annotations
 
+from typing import Annotated
+
 import msgspec
+
+Seconds = Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)]
+PositiveSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)]
 
 
 class CameraToEyes(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -13,5 +27,53 @@ class CameraToEyes(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
 
 class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[controller]`: which camera to follow, where it sits, and the behaviour's timings.
+
+    Timings, all in seconds (why each default):
+
+    * `absence_hold_s` 1.0: radar OUT_OF_RANGE must last this long before the
+      visitor counts as gone; a one-frame dropout never closes the eyes or
+      triggers a farewell (the radar presence service has its own hold, so
+      this stays short to keep the goodbye within earshot).
+    * `face_timeout_s` 0.5: a face older than this is "not seen" (a few
+      frames at any usable camera rate).
+    * `gaze_hold_s` 1.0: after the last face the eyes keep looking where it
+      was (a blink, a turned head), then return to centre.
+    * `look_around_after_s` 2.0: someone is in range but no face for this
+      long -> EYE_LOOK_RANDOM (searching); `look_around = false` disables it.
+    * `greet_dwell_s` 1.0: in range with a face for this long before the
+      greeting, so a passer-by is not greeted.
+    * `regreet_cooldown_s` 15.0: coming back within this time after leaving
+      is the same visit (no second greeting, no second farewell), and two
+      greetings are never closer than this.
+    * `sleepy_s` 2.0: EYE_SLEEPY shown this long (and while the farewell
+      plays) before EYE_SLEEP.
+    * `farewell_max_delay_s` 5.0: a farewell that could not start within
+      this time after the departure (device busy, cancel unconfirmed) is
+      dropped: a goodbye to an empty room helps nobody.
+    * `sound_timeout_s` 30.0: a goal with no final status after this long is
+      taken as lost, so a dead audio service cannot block the robot forever.
+    * `recover_s` 0.5: after start-up, listen this long to the latched topics
+      (presence, expression, sound status, device free) before deciding, so
+      a restart neither repeats an expression nor re-greets.
+    * `tick_s` 0.05: the decision loop's period for timers.
+    """
+
     camera: str = "front"
     camera_to_eyes: CameraToEyes = msgspec.field(default_factory=CameraToEyes)
+    greeting_sound: Annotated[str, msgspec.Meta(min_length=1)] = "greeting"
+    farewell_sound: Annotated[str, msgspec.Meta(min_length=1)] = "farewell"
+    centre_distance_cm: Annotated[float, msgspec.Meta(ge=0.0)] = 100.0
+    look_around: bool = True
+    absence_hold_s: Seconds = 1.0
+    face_timeout_s: Seconds = 0.5
+    gaze_hold_s: Seconds = 1.0
+    look_around_after_s: Seconds = 2.0
+    greet_dwell_s: Seconds = 1.0
+    regreet_cooldown_s: Seconds = 15.0
+    sleepy_s: Seconds = 2.0
+    farewell_max_delay_s: Seconds = 5.0
+    sound_timeout_s: PositiveSeconds = 30.0
+    recover_s: Seconds = 0.5
+    tick_s: Annotated[float, msgspec.Meta(ge=0.005, le=1.0)] = 0.05
+    call_timeout_s: PositiveSeconds = 3.0

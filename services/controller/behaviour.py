@@ -1,0 +1,425 @@
+"""The controller's social behaviour as a pure state machine: events in, commands out.
+
+Nothing here knows Zenoh or threads. Every method takes the current time
+`now` (seconds on any monotonic clock; tests pass a fake one) and returns
+the commands to carry out: `SetExpression`, `Look`, `PlaySound`,
+`CancelSound`. The service feeds it presence, faces, audio status,
+device-free flags and service replies, and calls `tick()` periodically so
+timers fire.
+
+Engagement phases (derived each step from the inputs and timers):
+
+    phase     | when                                          | eyes
+    ----------+-----------------------------------------------+-----------------------------
+    IDLE      | nobody (and drowsy time over)                 | EYE_SLEEP
+    NOTICED   | radar IN_RANGE, no face within face_timeout_s | EYE_AWAKE, then
+              |                                               | EYE_LOOK_RANDOM after
+              |                                               | look_around_after_s
+    ENGAGED   | radar IN_RANGE and a face seen                | EYE_AWAKE (EYE_GRIN while the
+              |                                               | greeting plays)
+    LEAVING   | radar OUT_OF_RANGE for < absence_hold_s       | unchanged (flicker absorbed)
+    DROWSY    | gone for < sleepy_s, or farewell in progress  | EYE_SLEEPY
+
+    transitions
+    IDLE/DROWSY --IN_RANGE--> NOTICED --face--> ENGAGED --no face--> NOTICED
+    NOTICED/ENGAGED --OUT_OF_RANGE--> LEAVING --IN_RANGE--> NOTICED/ENGAGED (same visit)
+    LEAVING --absence_hold_s elapsed--> DROWSY (departure: farewell if greeted)
+    DROWSY --sleepy_s elapsed and no farewell pending/playing--> IDLE
+
+Visits: a visit starts when someone is noticed and ends at the departure.
+Someone noticed again within `regreet_cooldown_s` of the departure
+continues the previous visit (no second greeting, no second farewell).
+
+Greeting: ENGAGED for `greet_dwell_s` (measured from the later of the
+notice and the face appearing), not yet greeted in this visit, no
+greeting within `regreet_cooldown_s`, and no sound busy (our own goal not
+finished, or `audio/device_free` false) -> PlaySound(greeting).
+Farewell: at the departure, if the visit was greeted -> cancel a greeting
+still playing first, wait for it to end and the device to be free, then
+PlaySound(farewell); dropped after `farewell_max_delay_s`, or if the
+visitor comes back before it started.
+
+Gaze: every face gives a `Look` at once (the seed's behaviour); when no
+face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
+
+Expressions are emitted only on change, never the same action twice in a
+row. After a start, `recover_s` is spent listening to latched values: the
+expression already shown is adopted (not repeated), a sound still playing
+blocks new sounds, and a sound that ended less than the cooldown ago
+counts as this visit's greeting, so a restarted controller does not greet
+twice.
+
+Setting every timing to 0 and `look_around` to false is the seed's
+controller exactly.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+from buddybot.controller.settings import ControllerSettings
+from buddybot.controller.transform import Gaze
+from buddybot.core.messages import TERMINAL_GOAL_STATES, ExpressionAction
+
+# --- commands ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SetExpression:
+    """Publish `eyes/expression` (latched)."""
+
+    action: ExpressionAction
+
+
+@dataclass(frozen=True)
+class Look:
+    """Publish `eyes/control`; `gaze` None = back to centre. `stamp_ns` of the face."""
+
+    gaze: Gaze | None
+    stamp_ns: int | None = None
+
+
+@dataclass(frozen=True)
+class PlaySound:
+    """Send an `audio/play_sound` goal; answer with `sound_reply(request, ...)`."""
+
+    sound: str
+    request: int
+
+
+@dataclass(frozen=True)
+class CancelSound:
+    """Cancel a goal via `audio/play_sound/cancel`; answer with `cancel_reply`."""
+
+    goal_id: str
+
+
+Command = SetExpression | Look | PlaySound | CancelSound
+
+
+class Phase(enum.Enum):
+    IDLE = "idle"
+    NOTICED = "noticed"
+    ENGAGED = "engaged"
+    LEAVING = "leaving"
+    DROWSY = "drowsy"
+
+
+class SoundKind(enum.Enum):
+    GREETING = "greeting"
+    FAREWELL = "farewell"
+    UNKNOWN = "unknown"  # found playing after a restart
+
+
+@dataclass
+class _Goal:
+    kind: SoundKind
+    since: float
+    request: int | None = None
+    goal_id: str | None = None
+    cancel_sent: bool = False
+
+
+@dataclass
+class _Visit:
+    greeted: bool = False
+    farewell_done: bool = False
+
+
+@dataclass
+class Snapshot:
+    """What the machine believes, for diagnostics and tests."""
+
+    phase: Phase
+    expression: ExpressionAction | None
+    greeted: bool
+    sound: str | None
+    farewell_pending: bool
+    recovering: bool
+    counters: dict[str, int] = field(default_factory=dict)
+
+
+# --- the machine -----------------------------------------------------------------------
+
+
+class Behaviour:
+    """The interaction controller's decisions; single-threaded, clock injected."""
+
+    def __init__(self, settings: ControllerSettings, now: float) -> None:
+        self.s = settings
+        self._recover_until = now + settings.recover_s
+        # inputs
+        self._in_range: bool | None = None
+        self._out_since: float | None = None
+        self._device_free: bool | None = None
+        self._last_face: float | None = None
+        self._face_since: float | None = None
+        # derived state
+        self._present = False
+        self._noticed_at = now
+        self._departed_at: float | None = None
+        self._visit = _Visit()
+        self._expression: ExpressionAction | None = None
+        self._gaze_centred = True
+        # sounds
+        self._goal: _Goal | None = None
+        self._last_greet: float | None = None
+        self._farewell_since: float | None = None
+        self._next_request = 1
+        self._orphan_status: dict[str, str] = {}
+        self._recovered_sound_age: float | None = None
+        self.counters: dict[str, int] = {
+            "greetings": 0, "farewells": 0, "cancels": 0, "farewells_dropped": 0,
+            "sounds_lost": 0, "sounds_refused": 0,
+        }
+
+    # -- queries --
+
+    @property
+    def recovering(self) -> bool:
+        return self._recover_until is not None
+
+    def phase(self, now: float) -> Phase:
+        if self._present:
+            if self._in_range:
+                return Phase.ENGAGED if self._face_visible(now) else Phase.NOTICED
+            return Phase.LEAVING
+        if self._drowsy(now):
+            return Phase.DROWSY
+        return Phase.IDLE
+
+    def snapshot(self, now: float) -> Snapshot:
+        return Snapshot(
+            phase=self.phase(now), expression=self._expression, greeted=self._visit.greeted,
+            sound=None if self._goal is None else self._goal.kind.value,
+            farewell_pending=self._farewell_since is not None,
+            recovering=self.recovering, counters=dict(self.counters),
+        )
+
+    def sound_busy(self) -> bool:
+        """True while a sound of ours is unfinished or the player says it is busy."""
+        return self._goal is not None or self._device_free is False
+
+    # -- events --
+
+    def presence(self, now: float, in_range: bool) -> list[Command]:
+        """Radar presence (latched, on change): IN_RANGE or OUT_OF_RANGE."""
+        if in_range != self._in_range:
+            self._out_since = None if in_range else now
+        self._in_range = in_range
+        return self._step(now)
+
+    def face(self, now: float, gaze: Gaze, stamp_ns: int | None = None) -> list[Command]:
+        """A face (already as a gaze in the eyes frame): look at it at once."""
+        if not self._face_visible(now):
+            self._face_since = now
+        self._last_face = now
+        self._gaze_centred = False
+        return [Look(gaze, stamp_ns), *self._step(now)]
+
+    def device_free(self, now: float, free: bool) -> list[Command]:
+        self._device_free = free
+        return self._step(now)
+
+    def sound_status(
+        self, now: float, goal_id: str, state: str, age_s: float | None = None
+    ) -> list[Command]:
+        """`audio/play_sound/status`. `age_s`: how old the status is (latched replay)."""
+        goal = self._goal
+        if goal is not None and goal.goal_id == goal_id:
+            if state in TERMINAL_GOAL_STATES:
+                self._goal = None
+        elif self.recovering and goal is None:
+            self._recover_status(now, goal_id, state, age_s)
+        else:
+            # Possibly the status of a goal whose reply has not arrived yet.
+            self._orphan_status[goal_id] = state
+            while len(self._orphan_status) > 16:
+                self._orphan_status.pop(next(iter(self._orphan_status)))
+        return self._step(now)
+
+    def sound_reply(
+        self, now: float, request: int, accepted: bool, goal_id: str = ""
+    ) -> list[Command]:
+        """Reply to a PlaySound (accepted False also for a failed call)."""
+        goal = self._goal
+        if goal is None or goal.request != request:
+            return self._step(now)  # a late reply for a goal already given up
+        if not accepted or not goal_id:
+            self.counters["sounds_refused"] += 1
+            self._goal = None
+            if goal.kind is SoundKind.GREETING:
+                self._visit.greeted = False  # nobody was greeted: no farewell either
+        else:
+            goal.goal_id = goal_id
+            if self._orphan_status.pop(goal_id, None) in TERMINAL_GOAL_STATES:
+                self._goal = None
+        return self._step(now)
+
+    def cancel_reply(self, now: float, goal_id: str, success: bool) -> list[Command]:
+        """Reply to a CancelSound; the goal ends when its final status arrives."""
+        goal = self._goal
+        if not success and goal is not None and goal.goal_id == goal_id:
+            goal.cancel_sent = True  # do not retry; the watchdog ends it if need be
+        return self._step(now)
+
+    def expression_seen(self, now: float, action: ExpressionAction) -> list[Command]:
+        """The latched `eyes/expression` (our previous life's last output).
+
+        Adopted only while recovering and before we published anything:
+        afterwards the echo of our own publications would be stale.
+        """
+        if self.recovering and self._expression is None:
+            self._expression = action
+        return self._step(now)
+
+    def tick(self, now: float) -> list[Command]:
+        return self._step(now)
+
+    # -- internals --
+
+    def _face_visible(self, now: float) -> bool:
+        return self._last_face is not None and now - self._last_face <= self.s.face_timeout_s
+
+    def _drowsy(self, now: float) -> bool:
+        if self.s.sleepy_s <= 0 or self._departed_at is None:
+            return False
+        if now - self._departed_at < self.s.sleepy_s:
+            return True
+        farewell = self._goal is not None and self._goal.kind is SoundKind.FAREWELL
+        return farewell or self._farewell_since is not None
+
+    def _recover_status(self, now: float, goal_id: str, state: str, age_s: float | None) -> None:
+        if state not in TERMINAL_GOAL_STATES:
+            self._goal = _Goal(SoundKind.UNKNOWN, now, goal_id=goal_id)
+            age_s = 0.0 if age_s is None else age_s
+        if age_s is not None and age_s < self.s.regreet_cooldown_s:
+            self._recovered_sound_age = max(0.0, age_s)
+
+    def _finish_recovery(self, now: float) -> None:
+        self._recover_until = None
+        age = self._recovered_sound_age
+        if age is not None:
+            # A sound less than a cooldown ago: assume it was this visit's greeting.
+            self._last_greet = now - age
+            if self._present:
+                self._visit.greeted = True
+
+    def _step(self, now: float) -> list[Command]:
+        out: list[Command] = []
+        if self._recover_until is not None:
+            if now < self._recover_until:
+                self._update_presence(now, out)
+                return out
+            self._update_presence(now, out)
+            self._finish_recovery(now)
+        else:
+            self._update_presence(now, out)
+        self._watchdog(now)
+        self._farewell(now, out)
+        self._greeting(now, out)
+        self._gaze(now, out)
+        self._express(now, out)
+        return out
+
+    def _update_presence(self, now: float, out: list[Command]) -> None:
+        if self._in_range and not self._present:
+            self._present = True
+            self._noticed_at = now
+            same_visit = (
+                self._departed_at is not None
+                and now - self._departed_at < self.s.regreet_cooldown_s
+            )
+            if not same_visit:
+                self._visit = _Visit()
+            if self._farewell_since is not None:
+                # Back before the goodbye could start: the visit goes on.
+                self._farewell_since = None
+                self._visit.farewell_done = False
+        elif self._present and not self._in_range:
+            since = self._out_since if self._out_since is not None else now
+            if now - since >= self.s.absence_hold_s:
+                self._present = False
+                self._departed_at = now
+                if self._visit.greeted and not self._visit.farewell_done:
+                    self._visit.farewell_done = True
+                    self._farewell_since = now
+
+    def _watchdog(self, now: float) -> None:
+        goal = self._goal
+        if goal is not None and now - goal.since > self.s.sound_timeout_s:
+            self.counters["sounds_lost"] += 1
+            self._goal = None
+
+    def _play(self, now: float, kind: SoundKind, sound: str, out: list[Command]) -> None:
+        request = self._next_request
+        self._next_request += 1
+        self._goal = _Goal(kind, now, request=request)
+        out.append(PlaySound(sound, request))
+
+    def _farewell(self, now: float, out: list[Command]) -> None:
+        if self._farewell_since is None:
+            return
+        if now - self._farewell_since > self.s.farewell_max_delay_s:
+            self._farewell_since = None
+            self.counters["farewells_dropped"] += 1
+            return
+        goal = self._goal
+        if goal is not None:
+            if goal.kind is SoundKind.GREETING and goal.goal_id and not goal.cancel_sent:
+                goal.cancel_sent = True
+                self.counters["cancels"] += 1
+                out.append(CancelSound(goal.goal_id))
+            return
+        if self._device_free is False:
+            return
+        self._farewell_since = None
+        self.counters["farewells"] += 1
+        self._play(now, SoundKind.FAREWELL, self.s.farewell_sound, out)
+
+    def _greeting(self, now: float, out: list[Command]) -> None:
+        if self._visit.greeted or self.sound_busy() or self._farewell_since is not None:
+            return
+        if self.phase(now) is not Phase.ENGAGED:
+            return
+        face_since = self._face_since if self._face_since is not None else now
+        if now - max(self._noticed_at, face_since) < self.s.greet_dwell_s:
+            return
+        if self._last_greet is not None and now - self._last_greet < self.s.regreet_cooldown_s:
+            return
+        self._visit.greeted = True
+        self._last_greet = now
+        self.counters["greetings"] += 1
+        self._play(now, SoundKind.GREETING, self.s.greeting_sound, out)
+
+    def _gaze(self, now: float, out: list[Command]) -> None:
+        if self._gaze_centred or self._last_face is None:
+            return
+        if now - self._last_face >= self.s.gaze_hold_s:
+            self._gaze_centred = True
+            out.append(Look(None))
+
+    def _desired_expression(self, now: float) -> ExpressionAction | None:
+        phase = self.phase(now)
+        if phase is Phase.IDLE:
+            return ExpressionAction.EYE_SLEEP
+        if phase is Phase.DROWSY:
+            return ExpressionAction.EYE_SLEEPY
+        if phase is Phase.LEAVING:
+            return None  # keep whatever is shown: flicker must not flap the eyes
+        goal = self._goal
+        if goal is not None and goal.kind is SoundKind.GREETING and not goal.cancel_sent:
+            return ExpressionAction.EYE_GRIN
+        if phase is Phase.ENGAGED or not self.s.look_around:
+            return ExpressionAction.EYE_AWAKE
+        last_seen = max(self._noticed_at, self._last_face or self._noticed_at)
+        if now - last_seen >= self.s.look_around_after_s:
+            return ExpressionAction.EYE_LOOK_RANDOM
+        return ExpressionAction.EYE_AWAKE
+
+    def _express(self, now: float, out: list[Command]) -> None:
+        wanted = self._desired_expression(now)
+        if wanted is not None and wanted != self._expression:
+            self._expression = wanted
+            out.append(SetExpression(wanted))

@@ -1,0 +1,269 @@
+"""`buddybot run controller`: the thin adapter between Zenoh and `behaviour.Behaviour`.
+
+Threads, and why:
+
+* Zenoh callbacks only decode (done by the node) and append an event to
+  the loop's inbox; faces go to a latest-value slot so a fast camera can
+  never grow the inbox.
+* One decision thread owns the `Behaviour` (single-threaded, no locks in
+  the pure code): it drains the inbox, runs `tick()` every `tick_s`, and
+  publishes expressions and eye control itself (non-blocking puts).
+* One sound thread makes the blocking `audio/play_sound` and cancel
+  calls (DESIGN.md section 6: never block in a callback) and posts their
+  replies back to the inbox, so gaze keeps flowing while a call waits.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import logging
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+from buddybot.controller.behaviour import (
+    Behaviour,
+    CancelSound,
+    Command,
+    Look,
+    PlaySound,
+    SetExpression,
+)
+from buddybot.controller.settings import ControllerSettings
+from buddybot.controller.transform import RigidTransform, face_gaze
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
+from buddybot.core.node import Node, RateLimitedLog, ServiceError
+from buddybot.core.service import ServiceContext
+
+log = logging.getLogger("buddybot.controller")
+
+Event = tuple[str, tuple[Any, ...]]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--camera", metavar="NAME",
+                        help="camera whose faces to follow (default: [controller] camera, 'front')")
+
+
+def camera_transform(settings: ControllerSettings) -> RigidTransform:
+    """The configured camera->eyes transform, or ConfigError naming the problem."""
+    if not keys.valid_robot_id(settings.camera):
+        raise ConfigError(f"[controller] camera: invalid camera name {settings.camera!r}")
+    try:
+        return RigidTransform.from_rpy(
+            settings.camera_to_eyes.translation_m, settings.camera_to_eyes.rpy_rad)
+    except ValueError as exc:
+        raise ConfigError(f"[controller.camera_to_eyes]: {exc}") from None
+
+
+class Controller:
+    """Wires one Node to one Behaviour; `start()` declares everything, `close()` stops."""
+
+    def __init__(self, node: Node, settings: ControllerSettings,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.transform = camera_transform(settings)
+        self.node = node
+        self.settings = settings
+        self.clock = clock
+        self.behaviour = Behaviour(settings, clock())
+        self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
+        self._face: tuple[m.FacePosition, float] | None = None
+        self._cond = threading.Condition()
+        self._sounds: queue.Queue[Command | None] = queue.Queue()
+        self._warn = RateLimitedLog(log)
+        self._expression_pub = node.publisher(keys.EXPRESSION)
+        self._control_pub = node.publisher(keys.EYE_CONTROL)
+        self._threads: list[threading.Thread] = []
+        self._last_diag = 0.0
+
+    # -- lifetime --
+
+    def start(self) -> None:
+        node = self.node
+        node.subscribe(keys.EXPRESSION, self._on_expression, history=True)
+        node.subscribe(keys.PRESENCE, self._on_presence)
+        node.subscribe(keys.DEVICE_FREE, self._on_device_free)
+        node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
+        node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
+        for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
+            thread = threading.Thread(target=target, name=f"controller:{name}", daemon=True)
+            thread.start()
+            self._threads.append(thread)
+
+    def close(self) -> None:
+        self.node.stop()
+        self._sounds.put(None)
+        with self._cond:
+            self._cond.notify_all()
+        for thread in self._threads:
+            thread.join(5.0)
+
+    # -- Zenoh callbacks: enqueue only --
+
+    def _post(self, kind: str, *args: Any) -> None:
+        with self._cond:
+            self._inbox.append((kind, args))
+            self._cond.notify()
+
+    def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
+        self._post("presence", msg.presence_state == m.PresenceState.IN_RANGE)
+
+    def _on_device_free(self, msg: m.Bool, _key: str) -> None:
+        self._post("device_free", msg.data)
+
+    def _on_status(self, msg: m.PlaySoundStatus, _key: str) -> None:
+        age = (m.now_ns() - msg.stamp_ns) / 1e9 if msg.stamp_ns > 0 else None
+        self._post("status", msg.goal_id, msg.state, age)
+
+    def _on_expression(self, msg: m.ScreenExpression, _key: str) -> None:
+        self._post("expression", msg.action)
+
+    def _on_face(self, msg: m.FacePosition, _key: str) -> None:
+        with self._cond:
+            self._face = (msg, self.clock())
+            self._cond.notify()
+
+    # -- decision thread --
+
+    def _decide(self) -> None:
+        stop = self.node.stop_event
+        tick = self.settings.tick_s
+        next_tick = self.clock() + tick
+        while not stop.is_set():
+            with self._cond:
+                while not self._inbox and self._face is None and not stop.is_set():
+                    left = next_tick - self.clock()
+                    if left <= 0:
+                        break
+                    self._cond.wait(left)
+                events = list(self._inbox)
+                self._inbox.clear()
+                face, self._face = self._face, None
+            try:
+                self._handle(events, face)
+                now = self.clock()
+                if now >= next_tick:
+                    next_tick = now + tick
+                    self._execute(self.behaviour.tick(now))
+                    self._publish_diagnostics(now)
+            except Exception as exc:  # a bug must not stop the robot's behaviour
+                self.node.diagnostics.increment("decision_errors")
+                self._warn.warning("decide", "decision step failed: %r", exc)
+
+    def _handle(self, events: list[Event], face: tuple[m.FacePosition, float] | None) -> None:
+        b = self.behaviour
+        for kind, args in events:
+            now = self.clock()
+            if kind == "presence":
+                self._execute(b.presence(now, *args))
+            elif kind == "device_free":
+                self._execute(b.device_free(now, *args))
+            elif kind == "status":
+                self._execute(b.sound_status(now, *args))
+            elif kind == "expression":
+                self._execute(b.expression_seen(now, *args))
+            elif kind == "reply":
+                self._execute(b.sound_reply(now, *args))
+            elif kind == "cancel_reply":
+                self._execute(b.cancel_reply(now, *args))
+        if face is not None:
+            msg, arrived = face
+            p = msg.point
+            try:
+                gaze = face_gaze(self.transform, (p.x, p.y, p.z))
+            except ValueError as exc:
+                self.node.diagnostics.increment("bad_faces")
+                self._warn.warning("face", "ignored face: %s", exc)
+                return
+            self._execute(b.face(arrived, gaze, msg.stamp_ns))
+
+    def _execute(self, commands: list[Command]) -> None:
+        for cmd in commands:
+            if isinstance(cmd, Look):
+                self._control_pub.put(self._eye_control(cmd))
+            elif isinstance(cmd, SetExpression):
+                log.info("expression -> %s", cmd.action.name)
+                self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(), action=cmd.action))
+            else:
+                self._sounds.put(cmd)
+
+    def _eye_control(self, cmd: Look) -> m.EyeControl:
+        stamp = cmd.stamp_ns if cmd.stamp_ns is not None else m.now_ns()
+        if cmd.gaze is None:
+            return m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0,
+                                target_distance_cm=self.settings.centre_distance_cm)
+        g = cmd.gaze
+        return m.EyeControl(stamp_ns=stamp, yaw=_clamp(g.yaw, math.pi),
+                            pitch=_clamp(g.pitch, math.pi / 2), target_distance_cm=g.distance_cm)
+
+    def _publish_diagnostics(self, now: float) -> None:
+        if now - self._last_diag < 1.0:
+            return
+        self._last_diag = now
+        snap = self.behaviour.snapshot(now)
+        values = self.node.diagnostics.values
+        values["phase"] = snap.phase.value
+        values["expression"] = snap.expression.name if snap.expression is not None else "-"
+        values["greeted"] = snap.greeted
+        values["sound"] = snap.sound or "-"
+        values.update(snap.counters)
+
+    # -- sound thread --
+
+    def _sound_worker(self) -> None:
+        timeout = self.settings.call_timeout_s
+        while True:
+            cmd = self._sounds.get()
+            if cmd is None or self.node.stop_event.is_set():
+                return
+            if isinstance(cmd, PlaySound):
+                log.info("play_sound %r", cmd.sound)
+                try:
+                    reply = self.node.call(keys.PLAY_SOUND, m.PlaySound(sound=cmd.sound),
+                                           timeout=timeout)
+                    if not reply.accepted:
+                        log.warning("play_sound %r refused: %s", cmd.sound, reply.message)
+                    self._post("reply", cmd.request, reply.accepted, reply.goal_id)
+                except ServiceError as exc:
+                    self.node.diagnostics.increment("sound_call_failures")
+                    log.warning("play_sound %r failed: %s", cmd.sound, exc)
+                    self._post("reply", cmd.request, False, "")
+            elif isinstance(cmd, CancelSound):
+                log.info("cancel goal %s", cmd.goal_id)
+                try:
+                    answer = self.node.call(keys.PLAY_SOUND_CANCEL,
+                                            m.CancelGoal(goal_id=cmd.goal_id), timeout=timeout)
+                    self._post("cancel_reply", cmd.goal_id, answer.success)
+                except ServiceError as exc:
+                    log.warning("cancel of %s failed: %s", cmd.goal_id, exc)
+                    self._post("cancel_reply", cmd.goal_id, False)
+
+
+def _clamp(value: float, limit: float) -> float:
+    return max(-limit, min(limit, value))
+
+
+def run(ctx: ServiceContext) -> int:
+    settings = ctx.config.controller
+    if ctx.args.camera:
+        import msgspec
+
+        settings = msgspec.structs.replace(settings, camera=ctx.args.camera)
+    camera_transform(settings)  # refuse a bad config before connecting
+    node = ctx.node()
+    controller: Controller | None = None
+    try:
+        controller = Controller(node, settings)
+        controller.start()
+        node.spin()
+    finally:
+        if controller is not None:
+            controller.close()
+        node.close()
+    return 0
