@@ -89,7 +89,8 @@ class Process:
         return self.proc.poll() is None
 
     def output(self) -> str:
-        self._log.flush()
+        if not self._log.closed:  # still readable after stop() (the spawn fixture prints it)
+            self._log.flush()
         return self.log_path.read_text(errors="replace")
 
     def kill(self, signum: int = signal.SIGKILL) -> None:
@@ -149,7 +150,7 @@ def probe_session(endpoint: str) -> zenoh.Session:
 class Collector(Generic[T]):
     """Collects the messages a node receives on a topic, with waits on them."""
 
-    def __init__(self, node: Node, topic: keys.Topic, **params: str) -> None:
+    def __init__(self, node: Node, topic: keys.Topic, /, **params: str) -> None:
         self.items: list[tuple[Any, str]] = []
         self._cond = threading.Condition()
         node.subscribe(topic, self._on, **params)
