@@ -1,8 +1,13 @@
-"""Config tables `[audio]` and `[audio_player]` (pure msgspec structs)."""
+"""Config tables `[audio]` and `[audio_player]` (pure msgspec structs).
+
+Every field has a default that works on a headless box, so an empty
+config file runs the robot; an unknown key or a wrong type is reported
+at start-up by `buddybot.core.config`.
+"""
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -11,11 +16,54 @@ def _default_sounds() -> dict[str, str]:
     return {"greeting": "sounds/greeting.wav", "farewell": "sounds/farewell.wav"}
 
 
+BusyPolicy = Literal["preempt", "refuse"]
+Backend = Literal["auto", "null", "alsa", "pulseaudio"]
+
+
 class AudioSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[audio]`: the play_sound action server.
+
+    `sounds` maps a sound name to a file (relative to the config file, else
+    to the package's own `sounds/`), or to text to speak when the value
+    starts with `say:` (needs espeak-ng on the player's host).
+    `busy_policy`: what a goal does while another one plays. "preempt"
+    (default) cancels the running goal and plays the new one at once, so a
+    farewell never waits for (or is refused by) a greeting still playing;
+    "refuse" answers accepted=false while busy.
+    """
+
     sounds: dict[str, str] = msgspec.field(default_factory=_default_sounds)
+    busy_policy: BusyPolicy = "preempt"
+    player: str = "audio-player"
+    """Node name of the player whose liveliness says it is running."""
+    player_timeout_s: Annotated[float, msgspec.Meta(gt=0)] = 3.0
+    """How long a call to the player may take before the goal is aborted."""
+    progress_period_s: Annotated[float, msgspec.Meta(gt=0)] = 0.1
+    """How often PLAYING status with progress is published."""
 
 
 class AudioPlayerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    backend: Literal["auto", "null"] = "auto"
+    """`[audio_player]`: the player process (miniaudio).
+
+    `backend` "auto" tries PulseAudio, ALSA and JACK and falls back to the
+    null device (plays in real time, no sound) with a warning, so a
+    headless CI box or `up --sim` still works; "null" forces it; "alsa" /
+    "pulseaudio" insist on that backend (no device: every play request is
+    refused with a message). `device` is a substring of a playback device
+    name (None: the system default). `volume` is a linear gain 0..2 applied
+    to the samples. The device runs at `sample_rate`/`channels`; files are
+    converted by miniaudio's decoder. `period_ms` is the device callback
+    period: it bounds the start latency and the audio still buffered after
+    a stop (about `period_ms` x 3).
+    """
+
+    backend: Backend = "auto"
     device: str | None = None
-    volume: float = 1.0
+    volume: Annotated[float, msgspec.Meta(ge=0.0, le=2.0)] = 1.0
+    sample_rate: Annotated[int, msgspec.Meta(ge=8000, le=192000)] = 48000
+    channels: Annotated[int, msgspec.Meta(ge=1, le=8)] = 2
+    period_ms: Annotated[int, msgspec.Meta(ge=1, le=200)] = 10
+    max_duration_s: Annotated[float, msgspec.Meta(gt=0)] = 600.0
+    """Longer files are refused (a file is decoded whole before it plays)."""
+    cache_size: Annotated[int, msgspec.Meta(ge=0)] = 16
+    """Decoded files kept in memory (configured sounds are decoded at start)."""

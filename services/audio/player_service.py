@@ -1,0 +1,138 @@
+"""`buddybot run audio-player`: the seed's audio_lld as a Zenoh service.
+
+Thin adapter around `Player`: queryables `audio/play_file`, `audio/stop`,
+`audio/pause`, `audio/resume` answer `{success, message}`; the latched
+`audio/device_free` is false while a sound plays (or is paused) and true
+when it ended, was stopped or failed to start. A bad file or a missing
+device is an unsuccessful reply naming the file and the reason, never an
+exit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+from pathlib import Path
+from typing import Any
+
+import msgspec
+from buddybot.audio import protocol
+from buddybot.audio.player import AudioError, Player
+from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
+from buddybot.audio.sounds import effective_sounds
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import Config, ConfigError
+from buddybot.core.service import ServiceContext
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--backend", choices=["auto", "null", "alsa", "pulseaudio"],
+                        help="audio backend (default from config, else auto: hardware, "
+                        "falling back to the silent null device)")
+    parser.add_argument("--device", metavar="NAME", help="playback device name (substring)")
+    parser.add_argument("--volume", type=float, metavar="GAIN", help="linear gain 0..2")
+    parser.add_argument("--sample-rate", type=int, metavar="HZ", help="device sample rate")
+    parser.add_argument("--tap", metavar="FILE",
+                        help="also write every sample handed to the device to FILE "
+                        "(raw interleaved int16 little-endian, for tests)")
+
+
+def player_settings(ctx: ServiceContext) -> AudioPlayerSettings:
+    """Config table with the command line on top, validated like the config file."""
+    data: dict[str, Any] = msgspec.to_builtins(ctx.config.audio_player)
+    overrides = {"backend": ctx.args.backend, "device": ctx.args.device,
+                 "volume": ctx.args.volume, "sample_rate": ctx.args.sample_rate}
+    data.update({k: v for k, v in overrides.items() if v is not None})
+    try:
+        return msgspec.convert(data, AudioPlayerSettings)
+    except msgspec.ValidationError as exc:
+        raise ConfigError(f"audio-player options: {exc}") from None
+
+
+def config_dir(config: Config) -> Path | None:
+    """The folder relative sound paths start from (None without a config file)."""
+    if config.source is None or config.source.startswith("<"):
+        return None
+    return Path(config.source).resolve().parent
+
+
+def run(ctx: ServiceContext) -> int:
+    settings = player_settings(ctx)
+    sounds = effective_sounds(ctx.config.audio.sounds, AudioSettings().sounds)
+    tap_file = open(ctx.args.tap, "wb", buffering=0) if ctx.args.tap else None  # noqa: SIM115
+    node = ctx.node()
+    free = node.publisher(keys.DEVICE_FREE)
+    diag = node.diagnostics
+
+    def on_busy(busy: bool) -> None:
+        free.put(m.Bool(stamp_ns=m.now_ns(), data=not busy))
+
+    def on_started() -> None:
+        stats = player.stats
+        diag.values.update({
+            "plays": stats.plays, "finished": stats.finished, "stops": stats.stops,
+            "failures": stats.failures, "last_request_ns": stats.last_request_ns,
+            "last_first_sample_ns": stats.last_first_sample_ns,
+            "last_start_latency_ms": round(
+                (stats.last_first_sample_ns - stats.last_request_ns) / 1e6, 3),
+            "last_decode_ms": round(stats.last_decode_ms, 3),
+        })
+        diag.publish()
+
+    player = Player(settings, sounds, config_dir(ctx.config), on_busy=on_busy,
+                    on_started=on_started, tap=tap_file.write if tap_file else None)
+    try:
+        opened = player.open()
+        if opened is None:
+            diag.set("ERROR", f"no audio device: {player.device_error}")
+        elif opened.warning:
+            diag.set("WARN", opened.warning)
+        diag.values["backend"] = player.backend or "none"
+        for problem in player.preload():
+            node.log.warning("configured sound unusable: %s", problem)
+            if opened is not None and not opened.warning:
+                diag.set("WARN", problem)
+        free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
+        _serve(node, player)
+        node.log.info("audio player ready (backend %s, %d Hz, %d channels)",
+                      player.backend, settings.sample_rate, settings.channels)
+        node.spin()
+    finally:
+        player.close()
+        node.close()
+        if tap_file is not None:
+            with contextlib.suppress(OSError):
+                tap_file.close()
+    return 0
+
+
+def _serve(node: Any, player: Player) -> None:
+    def play(req: m.PlayAudioFile) -> m.TriggerReply:
+        try:
+            track = player.play(req.path)
+        except AudioError as exc:
+            node.diagnostics.increment("failures")
+            node.log.warning("cannot play: %s", exc)
+            return m.TriggerReply(success=False, message=str(exc))
+        return m.TriggerReply(success=True,
+                              message=protocol.playing_message(track.name, track.duration_s))
+
+    def stop(_req: m.Trigger) -> m.TriggerReply:
+        was = player.stop()
+        return m.TriggerReply(success=True, message="stopped" if was else "nothing was playing")
+
+    def pause(_req: m.Trigger) -> m.TriggerReply:
+        if player.pause():
+            return m.TriggerReply(success=True, message="paused")
+        return m.TriggerReply(success=False, message="nothing is playing")
+
+    def resume(_req: m.Trigger) -> m.TriggerReply:
+        if player.resume():
+            return m.TriggerReply(success=True, message="resumed")
+        return m.TriggerReply(success=False, message="nothing is paused")
+
+    node.serve(keys.PLAY_FILE, play)
+    node.serve(keys.AUDIO_STOP, stop)
+    node.serve(keys.AUDIO_PAUSE, pause)
+    node.serve(keys.AUDIO_RESUME, resume)

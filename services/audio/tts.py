@@ -1,0 +1,49 @@
+"""Text-to-speech with espeak-ng, rendered once to a cached WAV file.
+
+Optional: only used when a sound is configured as `say:<text>`. The file
+name is a hash of the text, so a restart reuses the rendering and the
+first play of a spoken sound costs no synthesis time.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+
+class TtsError(Exception):
+    """Speech could not be rendered; the message says why."""
+
+
+def cache_dir() -> Path:
+    return Path(tempfile.gettempdir()) / "buddybot-tts"
+
+
+def render(text: str, *, voice: str = "en-us", folder: Path | None = None,
+           timeout_s: float = 20.0) -> Path:
+    """The WAV file speaking `text` (rendered on first use)."""
+    exe = shutil.which("espeak-ng")
+    if exe is None:
+        raise TtsError("text-to-speech needs espeak-ng, which is not installed")
+    folder = folder or cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    digest = hashlib.sha256(f"{voice}\0{text}".encode()).hexdigest()[:20]
+    out = folder / f"{digest}.wav"
+    if out.exists() and out.stat().st_size > 44:
+        return out
+    partial = out.with_suffix(".part.wav")
+    try:
+        done = subprocess.run(
+            [exe, "-v", voice, "-w", str(partial), "--", text],
+            capture_output=True, timeout=timeout_s, check=False,
+        )
+    except (OSError, subprocess.TimeoutExpired) as exc:
+        raise TtsError(f"espeak-ng failed: {exc}") from None
+    if done.returncode != 0:
+        err = done.stderr.decode(errors="replace").strip()
+        raise TtsError(f"espeak-ng failed (exit {done.returncode}): {err}")
+    partial.replace(out)
+    return out
