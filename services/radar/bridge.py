@@ -1,0 +1,252 @@
+"""`buddybot run radar-bridge`: 1..N LD2410 sensors on pyserial URLs -> `radar/<device>/frames`.
+
+The seed's radar_lld, as a thin adapter: one reader thread per sensor
+opens its URL (`/dev/ttyUSB0`, `socket://esp32.local:8881`,
+`rfc2217://...`), feeds the bytes to the pure parser and publishes every
+report frame at once, stamped with its arrival time. A sensor that
+disappears is retried with exponential backoff while the others go on;
+frames, bad frames, clamped energies and reconnects are counted in
+`diagnostics/radar-bridge`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import serial
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
+from buddybot.core.node import Node
+from buddybot.core.service import ServiceContext
+from buddybot.radar.convert import report_to_frame
+from buddybot.radar.ld2410 import Parser, Report
+from buddybot.radar.scenarios import SCENARIOS
+
+
+@dataclass
+class SensorStatus:
+    url: str
+    radar_id: int
+    connected: bool = False
+    frames: int = 0
+    bad_frames: int = 0
+    skipped_bytes: int = 0
+    clamped: int = 0
+    reconnects: int = 0
+    last_error: str = ""
+    ever_connected: bool = False
+    last_frame: float = field(default=0.0)
+
+
+class SensorReader:
+    """Reads one sensor forever: open, parse, publish; on failure back off and reopen."""
+
+    def __init__(self, url: str, radar_id: int, baudrate: int,
+                 publish: Callable[[int, Report, int], None], on_change: Callable[[], None],
+                 stop: threading.Event, backoff: tuple[float, float], silence_s: float,
+                 log: Any) -> None:
+        self.status = SensorStatus(url, radar_id)
+        self._baud = baudrate
+        self._publish = publish
+        self._on_change = on_change
+        self._stop = stop
+        self._backoff = backoff
+        self._silence_s = silence_s
+        self._log = log
+        self._parser = Parser()
+        self.thread = threading.Thread(target=self._run, name=f"radar-{radar_id}", daemon=True)
+
+    def _run(self) -> None:
+        delay = self._backoff[0]
+        while not self._stop.is_set():
+            try:
+                port = serial.serial_for_url(self.status.url, baudrate=self._baud, timeout=0.2)
+            except (serial.SerialException, OSError, ValueError) as exc:
+                self._failed(f"cannot open: {exc}")
+                self._stop.wait(delay)
+                delay = min(delay * 2, self._backoff[1])
+                continue
+            try:
+                self._connected()
+                self._read(port)
+                delay = self._backoff[0]
+            except (serial.SerialException, OSError) as exc:
+                delay = self._backoff[0] if self.status.frames else delay
+                self._failed(f"lost: {exc}")
+            finally:
+                try:
+                    port.close()
+                except Exception as exc:  # closing a dead port may fail too
+                    self._log.debug("close %s: %s", self.status.url, exc)
+            self._stop.wait(delay)
+
+    def _connected(self) -> None:
+        st = self.status
+        if st.ever_connected:
+            st.reconnects += 1
+        st.ever_connected = True
+        st.connected = True
+        st.last_error = ""
+        self._parser.reset()
+        self._log.info("radar %d connected: %s", st.radar_id, st.url)
+        self._on_change()
+
+    def _failed(self, why: str) -> None:
+        st = self.status
+        changed = st.connected or st.last_error != why
+        st.connected = False
+        st.last_error = why
+        if changed:
+            self._log.warning("radar %d (%s) %s; retrying", st.radar_id, st.url, why)
+            self._on_change()
+
+    def _read(self, port: Any) -> None:
+        # Bytes buffered while nobody read (or before an unplug) are stale.
+        with contextlib.suppress(AttributeError, NotImplementedError):
+            port.reset_input_buffer()
+        st = self.status
+        st.last_frame = time.monotonic()
+        parser = self._parser
+        while not self._stop.is_set():
+            data = port.read(port.in_waiting or 1)
+            now = time.monotonic()
+            if not data:
+                if now - st.last_frame > self._silence_s:
+                    raise serial.SerialException(f"no valid frame for {self._silence_s:g} s")
+                continue
+            stamp = time.time_ns()
+            for frame in parser.feed(data):
+                if isinstance(frame, Report):
+                    st.last_frame = now
+                    st.frames += 1
+                    self._publish(st.radar_id, frame, stamp)
+            st.bad_frames = parser.stats.bad_frames
+            st.skipped_bytes = parser.stats.skipped_bytes
+
+
+class Bridge:
+    """The service body: readers + publisher + diagnostics."""
+
+    def __init__(self, node: Node, urls: list[str], device_id: int, baudrate: int,
+                 backoff: tuple[float, float], silence_s: float) -> None:
+        self.node = node
+        self.device_id = device_id
+        self._pub = node.publisher(keys.RADAR_FRAMES, device=str(device_id))
+        self._lock = threading.Lock()
+        self.readers = [
+            SensorReader(url, i, baudrate, self._publish, self._report, node.stop_event,
+                         backoff, silence_s, node.log)
+            for i, url in enumerate(urls)
+        ]
+
+    def _publish(self, radar_id: int, report: Report, stamp_ns: int) -> None:
+        frame, clamped = report_to_frame(report, radar_id)
+        if clamped:
+            self.readers[radar_id].status.clamped += clamped
+        msg = m.LD2410TargetDataFrameArray(stamp_ns=stamp_ns, device_id=self.device_id,
+                                           sensors=[frame])
+        with self._lock:  # one publisher, several reader threads
+            self._pub.put(msg)
+
+    def _report(self) -> None:
+        """Diagnostics: level from the sensors' connection state, counters per sensor."""
+        diag = self.node.diagnostics
+        down = [r.status for r in self.readers if not r.status.connected]
+        values: dict[str, m.DiagnosticValue] = {"sensors": len(self.readers),
+                                                "connected": len(self.readers) - len(down)}
+        totals = {"frames": 0, "bad_frames": 0, "reconnects": 0, "clamped_energies": 0}
+        for r in self.readers:
+            st = r.status
+            values[f"radar{st.radar_id}.url"] = st.url
+            values[f"radar{st.radar_id}.connected"] = st.connected
+            values[f"radar{st.radar_id}.frames"] = st.frames
+            values[f"radar{st.radar_id}.bad_frames"] = st.bad_frames
+            values[f"radar{st.radar_id}.skipped_bytes"] = st.skipped_bytes
+            values[f"radar{st.radar_id}.reconnects"] = st.reconnects
+            values[f"radar{st.radar_id}.clamped_energies"] = st.clamped
+            totals["frames"] += st.frames
+            totals["bad_frames"] += st.bad_frames
+            totals["reconnects"] += st.reconnects
+            totals["clamped_energies"] += st.clamped
+            if st.last_error:
+                values[f"radar{st.radar_id}.error"] = st.last_error
+        values.update(totals)
+        diag.values = values  # one reference swap: the publisher copies it
+        if not down:
+            diag.set("OK", f"{len(self.readers)} sensor(s) connected")
+        else:
+            text = "; ".join(f"radar {s.radar_id} ({s.url}) down: {s.last_error}" for s in down)
+            diag.set("ERROR" if len(down) == len(self.readers) else "WARN", text)
+        diag.publish()
+
+    def start(self) -> None:
+        self._report()
+        for r in self.readers:
+            r.thread.start()
+        self.node.every(1.0, self._report, name="radar-diagnostics")
+
+    def join(self) -> None:
+        for r in self.readers:
+            r.thread.join(2)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--sensor", action="append", metavar="URL",
+                        help="pyserial URL of a sensor, repeatable; radar_id = order "
+                             "(e.g. /dev/ttyUSB0, socket://esp32.local:8881, rfc2217://h:p)")
+    parser.add_argument("--device-id", type=int, help="device id in the key (default 0)")
+    parser.add_argument("--baudrate", type=int, help="serial speed (default 256000)")
+    parser.add_argument("--sim", action="store_true",
+                        help="add a built-in simulated LD2410 on a pseudo-terminal")
+    parser.add_argument("--sim-scenario", choices=sorted(SCENARIOS),
+                        help="what the simulated sensor sees (default: visit, a loop)")
+    parser.add_argument("--sim-speed", type=float, help="scenario time scale (default 1.0)")
+
+
+def run(ctx: ServiceContext) -> int:
+    from buddybot.radar.sim import PtySensor
+
+    cfg = ctx.config.radar_bridge
+    args = ctx.args
+    urls = list(args.sensor or cfg.sensors)
+    device_id = args.device_id if args.device_id is not None else cfg.device_id
+    if device_id < 0:
+        raise ConfigError("--device-id must be >= 0")
+    baud = args.baudrate or cfg.baudrate
+    sims: list[PtySensor] = []
+    if args.sim or cfg.sim:
+        scenario = args.sim_scenario or cfg.sim_scenario
+        if scenario not in SCENARIOS:
+            raise ConfigError(f"radar_bridge.sim_scenario: unknown {scenario!r}; "
+                              f"one of {sorted(SCENARIOS)}")
+        speed = args.sim_speed or cfg.sim_speed
+        if speed <= 0:
+            raise ConfigError("--sim-speed must be > 0")
+        folder = Path(tempfile.mkdtemp(prefix="buddybot-ld2410-"))
+        sims.append(PtySensor(scenario, link=folder / "ld2410-sim", speed=speed).start())
+        urls.append(sims[-1].path)
+    if not urls:
+        print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim")
+        return 2
+    node = ctx.node()
+    bridge = Bridge(node, urls, device_id, baud, (cfg.reconnect_initial_s, cfg.reconnect_max_s),
+                    cfg.silence_timeout_s)
+    try:
+        bridge.start()
+        node.spin()
+    finally:
+        node.stop()
+        bridge.join()
+        node.close()
+        for sim in sims:
+            sim.stop()
+    return 0

@@ -1,0 +1,111 @@
+"""Configuration commands over an open port: send, wait for the matching ACK, check status.
+
+Works with any object that has `read(n)`, `write(data)` and `in_waiting`
+(a pyserial port, whatever its URL), so it imports nothing from serial.
+Every operation is wrapped in enable configuration ... end configuration,
+as the protocol requires; report frames that keep arriving meanwhile are
+skipped by the parser.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Protocol
+
+from buddybot.radar import ld2410 as p
+
+
+class Port(Protocol):
+    in_waiting: int
+
+    def read(self, size: int = 1) -> bytes: ...
+
+    def write(self, data: bytes) -> int | None: ...
+
+
+class RadarError(Exception):
+    """The sensor did not ACK a command, or ACKed it with a failure status."""
+
+
+class LD2410Client:
+    """Talks to one sensor: `with client.configuring(): client.read_firmware()`."""
+
+    def __init__(self, port: Port, timeout_s: float = 1.0, attempts: int = 2,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.port = port
+        self.timeout_s = timeout_s
+        self.attempts = attempts
+        self._clock = clock
+        self._parser = p.Parser()
+        self.enable_info: p.EnableInfo | None = None
+
+    def command(self, frame: bytes, word: int) -> p.Ack:
+        """Send `frame` and return the ACK for `word`; RadarError if none or failed."""
+        name = p.COMMAND_NAMES.get(word, f"0x{word:04X}")
+        for _ in range(self.attempts):
+            self.port.write(frame)
+            ack = self._wait_ack(word)
+            if ack is None:
+                continue
+            if not ack.ok:
+                raise RadarError(f"sensor refused '{name}' (status {ack.status})")
+            return ack
+        raise RadarError(
+            f"no ACK for '{name}' within {self.timeout_s:g} s x{self.attempts} "
+            "(wrong port or baud rate, sensor busy, or another program reading the port?)"
+        )
+
+    def _wait_ack(self, word: int) -> p.Ack | None:
+        end = self._clock() + self.timeout_s
+        while self._clock() < end:
+            data = self.port.read(self.port.in_waiting or 1)
+            for frame in self._parser.feed(data):
+                if isinstance(frame, p.Ack) and frame.command == word:
+                    return frame
+        return None
+
+    @contextmanager
+    def configuring(self) -> Iterator[p.EnableInfo]:
+        """Enable configuration; end it afterwards even when a command failed."""
+        ack = self.command(p.enable_config(), p.CMD_ENABLE_CONFIG)
+        self.enable_info = p.decode_enable(ack.data)
+        try:
+            yield self.enable_info
+        finally:
+            self.command(p.end_config(), p.CMD_END_CONFIG)
+
+    # -- the operations (call inside `configuring()`) --
+
+    def read_firmware(self) -> str:
+        return p.decode_firmware(self.command(p.read_firmware(), p.CMD_READ_FIRMWARE).data)
+
+    def read_parameters(self) -> p.Parameters:
+        return p.decode_parameters(self.command(p.read_parameters(), p.CMD_READ_PARAMETERS).data)
+
+    def read_resolution(self) -> float:
+        ack = self.command(p.read_resolution(), p.CMD_READ_RESOLUTION)
+        return p.decode_resolution(ack.data)
+
+    def read_mac(self) -> str:
+        return p.decode_mac(self.command(p.read_mac(), p.CMD_READ_MAC).data)
+
+    def set_engineering(self, on: bool) -> None:
+        word = p.CMD_ENGINEERING_ON if on else p.CMD_ENGINEERING_OFF
+        self.command(p.engineering_mode(on), word)
+
+    def set_max_gates(self, moving: int, still: int, no_one_duration_s: int) -> None:
+        self.command(p.set_max_gates(moving, still, no_one_duration_s), p.CMD_SET_MAX_GATES)
+
+    def set_sensitivity(self, gate: int | None, moving: int, still: int) -> None:
+        self.command(p.set_gate_sensitivity(gate, moving, still), p.CMD_SET_SENSITIVITY)
+
+    def set_resolution(self, metres_per_gate: float) -> None:
+        self.command(p.set_resolution(metres_per_gate), p.CMD_SET_RESOLUTION)
+
+    def restart(self) -> None:
+        self.command(p.restart(), p.CMD_RESTART)
+
+    def factory_reset(self) -> None:
+        self.command(p.factory_reset(), p.CMD_FACTORY_RESET)

@@ -1,0 +1,487 @@
+"""The HiLink LD2410 serial protocol, as pure functions and an incremental parser.
+
+No I/O here: bytes in, typed frames out (and the reverse for commands), so
+every rule of the protocol is unit-tested without a serial port. Offsets
+and words follow the HLK-LD2410 serial protocol document (DESIGN.md
+section 7). All multi-byte fields are little-endian.
+
+Why our own parser: the Arduino library the seed used reads distances as
+one byte, drops frames containing `0x0A` and swaps moving/still fields.
+Here every distance is 16-bit, bytes are bytes (nothing is line-based),
+and each field is read from its documented offset.
+
+The parser never trusts a frame: head, declared length, data type, the
+`0xAA` head and `0x55 0x00` end markers and the tail are all checked; a
+bad frame is dropped and counted, and scanning restarts one byte after
+the rejected header, so a stray `F4 F3 F2 F1` inside data (or a partial
+frame after a reconnect) costs at most that frame, never the stream.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass, field
+
+REPORT_HEAD = b"\xf4\xf3\xf2\xf1"
+REPORT_TAIL = b"\xf8\xf7\xf6\xf5"
+COMMAND_HEAD = b"\xfd\xfc\xfb\xfa"
+COMMAND_TAIL = b"\x04\x03\x02\x01"
+
+TYPE_ENGINEERING = 0x01
+TYPE_BASIC = 0x02
+DATA_HEAD = 0xAA
+DATA_END = b"\x55\x00"
+BASIC_LENGTH = 0x000D
+ENGINEERING_LENGTH = 0x0023
+MAX_GATE = 8
+ACK_FLAG = 0x0100
+
+# Longest payloads we accept; anything longer is a false header (the real
+# longest report is 35 bytes, the longest ACK, read parameters, 28 bytes).
+MAX_REPORT_LENGTH = 13 + 2 * (MAX_GATE + 1) + 2 + 2
+MAX_COMMAND_LENGTH = 64
+
+# Command words (DESIGN.md section 7).
+CMD_SET_MAX_GATES = 0x0060
+CMD_READ_PARAMETERS = 0x0061
+CMD_ENGINEERING_ON = 0x0062
+CMD_ENGINEERING_OFF = 0x0063
+CMD_SET_SENSITIVITY = 0x0064
+CMD_READ_FIRMWARE = 0x00A0
+CMD_SET_BAUD_RATE = 0x00A1
+CMD_FACTORY_RESET = 0x00A2
+CMD_RESTART = 0x00A3
+CMD_BLUETOOTH = 0x00A4
+CMD_READ_MAC = 0x00A5
+CMD_SET_RESOLUTION = 0x00AA
+CMD_READ_RESOLUTION = 0x00AB
+CMD_SET_LIGHT_CONTROL = 0x00AD
+CMD_READ_LIGHT_CONTROL = 0x00AE
+CMD_END_CONFIG = 0x00FE
+CMD_ENABLE_CONFIG = 0x00FF
+
+COMMAND_NAMES: dict[int, str] = {
+    CMD_SET_MAX_GATES: "set max gates / no-one duration",
+    CMD_READ_PARAMETERS: "read parameters",
+    CMD_ENGINEERING_ON: "engineering mode on",
+    CMD_ENGINEERING_OFF: "engineering mode off",
+    CMD_SET_SENSITIVITY: "set gate sensitivity",
+    CMD_READ_FIRMWARE: "read firmware version",
+    CMD_SET_BAUD_RATE: "set baud rate",
+    CMD_FACTORY_RESET: "factory reset",
+    CMD_RESTART: "restart",
+    CMD_BLUETOOTH: "bluetooth on/off",
+    CMD_READ_MAC: "read MAC address",
+    CMD_SET_RESOLUTION: "set distance resolution",
+    CMD_READ_RESOLUTION: "read distance resolution",
+    CMD_SET_LIGHT_CONTROL: "set light / OUT control",
+    CMD_READ_LIGHT_CONTROL: "read light / OUT control",
+    CMD_END_CONFIG: "end configuration",
+    CMD_ENABLE_CONFIG: "enable configuration",
+}
+
+BAUD_RATES: dict[int, int] = {
+    9600: 1, 19200: 2, 38400: 3, 57600: 4, 115200: 5, 230400: 6, 256000: 7, 460800: 8,
+}
+"""Baud rate -> the index the sensor wants (0x00A1)."""
+
+RESOLUTIONS: dict[int, float] = {0: 0.75, 1: 0.20}
+"""Distance-resolution index (0x00AA/0x00AB) -> metres per gate."""
+
+
+class ProtocolError(ValueError):
+    """Bytes that do not form what the protocol says they must."""
+
+
+# --- frames ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Report:
+    """One report frame. Distances in cm (16-bit), energies as sent (0..255)."""
+
+    target_state: int
+    moving_distance: int
+    moving_energy: int
+    still_distance: int
+    still_energy: int
+    detection_distance: int
+    engineering: bool = False
+    max_moving_gate: int | None = None
+    max_still_gate: int | None = None
+    moving_gate_energy: tuple[int, ...] | None = None
+    still_gate_energy: tuple[int, ...] | None = None
+    light_level: int | None = None
+    out_pin: int | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Ack:
+    """A command ACK: the command word it answers, status (0 = success), data."""
+
+    command: int
+    status: int
+    data: bytes = b""
+
+    @property
+    def ok(self) -> bool:
+        return self.status == 0
+
+
+@dataclass(frozen=True, slots=True)
+class Command:
+    """A command frame as the sensor receives it (used by the simulator)."""
+
+    command: int
+    value: bytes = b""
+
+
+Frame = Report | Ack | Command
+
+
+# --- encoders ----------------------------------------------------------------------
+
+
+def encode_report(report: Report) -> bytes:
+    """The report frame's bytes (basic or engineering), exactly as a sensor sends it."""
+    target = struct.pack(
+        "<BHBHBH", report.target_state, report.moving_distance, report.moving_energy,
+        report.still_distance, report.still_energy, report.detection_distance,
+    )
+    if not report.engineering:
+        payload = bytes((TYPE_BASIC, DATA_HEAD)) + target + DATA_END
+    else:
+        moving = report.moving_gate_energy or ()
+        still = report.still_gate_energy or ()
+        n_moving = report.max_moving_gate if report.max_moving_gate is not None else MAX_GATE
+        n_still = report.max_still_gate if report.max_still_gate is not None else MAX_GATE
+        if len(moving) != n_moving + 1 or len(still) != n_still + 1:
+            raise ProtocolError("engineering report needs N+1 energies per gate table")
+        extra = b""
+        if report.light_level is not None or report.out_pin is not None:
+            extra = bytes((report.light_level or 0, report.out_pin or 0))
+        payload = (bytes((TYPE_ENGINEERING, DATA_HEAD)) + target + bytes((n_moving, n_still))
+                   + bytes(moving) + bytes(still) + extra + DATA_END)
+    return REPORT_HEAD + struct.pack("<H", len(payload)) + payload + REPORT_TAIL
+
+
+def encode_command(command: int, value: bytes = b"") -> bytes:
+    """A host->sensor command frame: head, length, word, value, tail."""
+    body = struct.pack("<H", command) + value
+    return COMMAND_HEAD + struct.pack("<H", len(body)) + body + COMMAND_TAIL
+
+
+def encode_ack(command: int, status: int = 0, data: bytes = b"") -> bytes:
+    """A sensor->host ACK frame for `command` (the simulator's answer)."""
+    body = struct.pack("<HH", command | ACK_FLAG, status) + data
+    return COMMAND_HEAD + struct.pack("<H", len(body)) + body + COMMAND_TAIL
+
+
+def enable_config() -> bytes:
+    return encode_command(CMD_ENABLE_CONFIG, struct.pack("<H", 1))
+
+
+def end_config() -> bytes:
+    return encode_command(CMD_END_CONFIG)
+
+
+def set_max_gates(moving_gate: int, still_gate: int, no_one_duration_s: int) -> bytes:
+    """0x0060: farthest moving/still gate (2..8) and the no-one duration (0..65535 s)."""
+    if not (2 <= moving_gate <= MAX_GATE and 2 <= still_gate <= MAX_GATE):
+        raise ProtocolError(f"max gates must be 2..{MAX_GATE}, got {moving_gate}/{still_gate}")
+    if not 0 <= no_one_duration_s <= 0xFFFF:
+        raise ProtocolError(f"no-one duration must be 0..65535 s, got {no_one_duration_s}")
+    value = struct.pack("<HIHIHI", 0, moving_gate, 1, still_gate, 2, no_one_duration_s)
+    return encode_command(CMD_SET_MAX_GATES, value)
+
+
+def read_parameters() -> bytes:
+    return encode_command(CMD_READ_PARAMETERS)
+
+
+def engineering_mode(on: bool) -> bytes:
+    return encode_command(CMD_ENGINEERING_ON if on else CMD_ENGINEERING_OFF)
+
+
+def set_gate_sensitivity(gate: int | None, moving: int, still: int) -> bytes:
+    """0x0064: sensitivity 0..100 of one gate (0..8) or of all gates (gate None)."""
+    if gate is not None and not 0 <= gate <= MAX_GATE:
+        raise ProtocolError(f"gate must be 0..{MAX_GATE}, got {gate}")
+    if not (0 <= moving <= 100 and 0 <= still <= 100):
+        raise ProtocolError(f"sensitivities must be 0..100, got {moving}/{still}")
+    gate_value = 0xFFFF if gate is None else gate
+    value = struct.pack("<HIHIHI", 0, gate_value, 1, moving, 2, still)
+    return encode_command(CMD_SET_SENSITIVITY, value)
+
+
+def read_firmware() -> bytes:
+    return encode_command(CMD_READ_FIRMWARE)
+
+
+def set_baud_rate(baud: int) -> bytes:
+    if baud not in BAUD_RATES:
+        raise ProtocolError(f"unsupported baud rate {baud}; one of {sorted(BAUD_RATES)}")
+    return encode_command(CMD_SET_BAUD_RATE, struct.pack("<H", BAUD_RATES[baud]))
+
+
+def factory_reset() -> bytes:
+    return encode_command(CMD_FACTORY_RESET)
+
+
+def restart() -> bytes:
+    return encode_command(CMD_RESTART)
+
+
+def bluetooth(on: bool) -> bytes:
+    return encode_command(CMD_BLUETOOTH, struct.pack("<H", 1 if on else 0))
+
+
+def read_mac() -> bytes:
+    return encode_command(CMD_READ_MAC, struct.pack("<H", 1))
+
+
+def resolution_index(metres_per_gate: float) -> int:
+    for index, metres in RESOLUTIONS.items():
+        if abs(metres - metres_per_gate) < 1e-6:
+            return index
+    raise ProtocolError(f"resolution must be 0.75 or 0.2 m per gate, got {metres_per_gate}")
+
+
+def set_resolution(metres_per_gate: float) -> bytes:
+    return encode_command(CMD_SET_RESOLUTION, struct.pack("<H", resolution_index(metres_per_gate)))
+
+
+def read_resolution() -> bytes:
+    return encode_command(CMD_READ_RESOLUTION)
+
+
+def set_light_control(function: int, threshold: int, out_level: int) -> bytes:
+    """0x00AD: light function (0 off, 1 below, 2 above threshold), threshold, OUT level."""
+    if function not in (0, 1, 2) or not 0 <= threshold <= 255 or out_level not in (0, 1):
+        raise ProtocolError("light control: function 0..2, threshold 0..255, OUT level 0/1")
+    return encode_command(CMD_SET_LIGHT_CONTROL, bytes((function, threshold, out_level, 0)))
+
+
+def read_light_control() -> bytes:
+    return encode_command(CMD_READ_LIGHT_CONTROL)
+
+
+# --- ACK data decoders -------------------------------------------------------------
+
+
+@dataclass(frozen=True, slots=True)
+class Parameters:
+    """What 0x0061 returns: gates, per-gate sensitivities, no-one duration."""
+
+    max_gate: int
+    max_moving_gate: int
+    max_still_gate: int
+    moving_sensitivity: tuple[int, ...]
+    still_sensitivity: tuple[int, ...]
+    no_one_duration_s: int
+
+
+@dataclass(frozen=True, slots=True)
+class EnableInfo:
+    protocol_version: int
+    buffer_size: int
+
+
+def _need(data: bytes, n: int, what: str) -> None:
+    if len(data) < n:
+        raise ProtocolError(f"{what}: ACK data has {len(data)} bytes, need {n}")
+
+
+def decode_enable(data: bytes) -> EnableInfo:
+    _need(data, 4, "enable configuration")
+    version, size = struct.unpack_from("<HH", data)
+    return EnableInfo(version, size)
+
+
+def encode_parameters(p: Parameters) -> bytes:
+    """ACK data of 0x0061 (for the simulator)."""
+    return (bytes((DATA_HEAD, p.max_gate, p.max_moving_gate, p.max_still_gate))
+            + bytes(p.moving_sensitivity) + bytes(p.still_sensitivity)
+            + struct.pack("<H", p.no_one_duration_s))
+
+
+def decode_parameters(data: bytes) -> Parameters:
+    _need(data, 4, "read parameters")
+    if data[0] != DATA_HEAD:
+        raise ProtocolError(f"read parameters: expected head 0xAA, got 0x{data[0]:02X}")
+    n = data[1]
+    if n > MAX_GATE:
+        raise ProtocolError(f"read parameters: max gate {n} > {MAX_GATE}")
+    _need(data, 4 + 2 * (n + 1) + 2, "read parameters")
+    moving = tuple(data[4:5 + n])
+    still = tuple(data[5 + n:6 + 2 * n])
+    (duration,) = struct.unpack_from("<H", data, 6 + 2 * n)
+    return Parameters(n, data[2], data[3], moving, still, duration)
+
+
+def encode_firmware(firmware_type: int, major: int, minor: int) -> bytes:
+    return struct.pack("<HHI", firmware_type, major, minor)
+
+
+def decode_firmware(data: bytes) -> str:
+    """`V1.07.22091615`: major word 0x0107 -> 1.07, minor dword printed in hex."""
+    _need(data, 8, "read firmware version")
+    _type, major, minor = struct.unpack_from("<HHI", data)
+    return f"V{major >> 8}.{major & 0xFF:02x}.{minor:08x}"
+
+
+def decode_resolution(data: bytes) -> float:
+    _need(data, 2, "read distance resolution")
+    (index,) = struct.unpack_from("<H", data)
+    if index not in RESOLUTIONS:
+        raise ProtocolError(f"read distance resolution: unknown index {index}")
+    return RESOLUTIONS[index]
+
+
+def decode_mac(data: bytes) -> str:
+    _need(data, 6, "read MAC address")
+    return ":".join(f"{b:02x}" for b in data[:6])
+
+
+# --- the incremental parser --------------------------------------------------------
+
+
+@dataclass
+class ParserStats:
+    """Counters a driver reports in diagnostics."""
+
+    reports: int = 0
+    acks: int = 0
+    commands: int = 0
+    bad_frames: int = 0
+    skipped_bytes: int = 0
+    last_error: str = ""
+    errors: dict[str, int] = field(default_factory=dict)
+
+
+def _decode_report(payload: bytes) -> Report:
+    """A report frame's payload (between length and tail) -> Report, or ProtocolError."""
+    length = len(payload)
+    if length < BASIC_LENGTH:
+        raise ProtocolError("short report")
+    kind, head = payload[0], payload[1]
+    if head != DATA_HEAD:
+        raise ProtocolError("bad 0xAA head")
+    if payload[-2:] != DATA_END:
+        raise ProtocolError("bad 0x55 0x00 end")
+    state, mdist, menergy, sdist, senergy, ddist = struct.unpack_from("<BHBHBH", payload, 2)
+    if state > 3:
+        raise ProtocolError("bad target state")
+    if kind == TYPE_BASIC:
+        if length != BASIC_LENGTH:
+            raise ProtocolError("bad basic length")
+        return Report(state, mdist, menergy, sdist, senergy, ddist)
+    if kind != TYPE_ENGINEERING:
+        raise ProtocolError("bad data type")
+    n_moving, n_still = payload[11], payload[12]
+    if n_moving > MAX_GATE or n_still > MAX_GATE:
+        raise ProtocolError("bad gate count")
+    start_still = 13 + n_moving + 1
+    end_still = start_still + n_still + 1
+    extra = length - 2 - end_still
+    if extra not in (0, 2):
+        raise ProtocolError("bad engineering length")
+    light = out = None
+    if extra == 2:
+        light, out = payload[end_still], payload[end_still + 1]
+    return Report(
+        state, mdist, menergy, sdist, senergy, ddist, engineering=True,
+        max_moving_gate=n_moving, max_still_gate=n_still,
+        moving_gate_energy=tuple(payload[13:start_still]),
+        still_gate_energy=tuple(payload[start_still:end_still]),
+        light_level=light, out_pin=out,
+    )
+
+
+def _decode_command(payload: bytes) -> Ack | Command:
+    if len(payload) < 2:
+        raise ProtocolError("short command")
+    (word,) = struct.unpack_from("<H", payload)
+    if word & ACK_FLAG:
+        if len(payload) < 4:
+            raise ProtocolError("short ACK")
+        (status,) = struct.unpack_from("<H", payload, 2)
+        return Ack(word & ~ACK_FLAG, status, bytes(payload[4:]))
+    return Command(word, bytes(payload[2:]))
+
+
+class Parser:
+    """Feed arbitrary chunks with `feed()`; get every complete valid frame back.
+
+    The buffer never grows past one maximal frame plus a chunk: bytes that
+    cannot start a frame are discarded (counted in `skipped_bytes`).
+    """
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.stats = ParserStats()
+
+    def reset(self) -> None:
+        """Forget a partial frame (after a reconnect the stream restarts)."""
+        self._buf.clear()
+
+    def _bad(self, why: str) -> None:
+        self.stats.bad_frames += 1
+        self.stats.last_error = why
+        self.stats.errors[why] = self.stats.errors.get(why, 0) + 1
+
+    def feed(self, chunk: bytes | bytearray | memoryview) -> list[Frame]:
+        buf = self._buf
+        buf += chunk
+        out: list[Frame] = []
+        pos = 0
+        end = len(buf)
+        while True:
+            # The earliest header of either kind; both start with a distinctive byte.
+            r = buf.find(REPORT_HEAD, pos)
+            c = buf.find(COMMAND_HEAD, pos)
+            if r < 0 and c < 0:
+                # Keep a possible partial header (up to 3 bytes) for the next chunk.
+                keep = max(pos, end - 3)
+                while keep < end and buf[keep] not in (0xF4, 0xFD):
+                    keep += 1
+                self.stats.skipped_bytes += keep - pos
+                pos = keep
+                break
+            start = r if c < 0 or (0 <= r < c) else c
+            self.stats.skipped_bytes += start - pos
+            pos = start
+            if end - start < 6:
+                break
+            (length,) = struct.unpack_from("<H", buf, start + 4)
+            is_report = start == r
+            limit = MAX_REPORT_LENGTH if is_report else MAX_COMMAND_LENGTH
+            if length > limit:
+                self._bad("length too large")
+                pos = start + 1
+                continue
+            frame_end = start + 6 + length + 4
+            if frame_end > end:
+                break
+            tail = REPORT_TAIL if is_report else COMMAND_TAIL
+            if buf[frame_end - 4:frame_end] != tail:
+                self._bad("bad tail")
+                pos = start + 1
+                continue
+            payload = bytes(buf[start + 6:frame_end - 4])
+            try:
+                frame: Frame = _decode_report(payload) if is_report else _decode_command(payload)
+            except ProtocolError as exc:
+                self._bad(str(exc))
+                pos = start + 1
+                continue
+            if isinstance(frame, Report):
+                self.stats.reports += 1
+            elif isinstance(frame, Ack):
+                self.stats.acks += 1
+            else:
+                self.stats.commands += 1
+            out.append(frame)
+            pos = frame_end
+        del buf[:pos]
+        return out
