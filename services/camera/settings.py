@@ -1,4 +1,8 @@
-"""Config tables `[camera]` and `[face_detector]` (pure msgspec structs)."""
+"""Config tables `[camera]` and `[face_detector]` (pure msgspec structs).
+
+Every field has a default, so an empty config runs the simulated robot;
+command-line options override these values. See docs/camera.md.
+"""
 
 from __future__ import annotations
 
@@ -9,21 +13,48 @@ import msgspec
 
 class CameraSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     name: str = "front"
+    """Key parameter: frames go to camera/<name>/image."""
     source: str = ""
+    """Device index, video file, URL or image-sequence pattern; empty = simulation under `up`."""
     sim: bool = False
     fps: float | None = None
+    """Pacing of files, sequences and the simulation (default: the file's own fps, else 30)."""
     width: int | None = None
+    """Requested resolution (devices) / resize target (other sources); sim default 640x480."""
     height: int | None = None
     encoding: Literal["bgr8", "jpeg"] = "bgr8"
+    """bgr8 for same-host consumers (no codec cost); jpeg for remote hosts (~20x smaller)."""
+    jpeg_quality: int = 85
+    loop: bool = False
+    """Restart a file or sequence at its end instead of ending the service."""
+    frame_id: str = ""
+    """Coordinate frame name in messages; empty = camera_<name>."""
+    reopen_initial_s: float = 0.5
+    """First retry delay after the camera failed; doubles up to reopen_max_s."""
+    reopen_max_s: float = 10.0
 
 
 class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     camera: str = "front"
     face_width_m: float = 0.15
+    """Real width of the BlazeFace box on an average adult (seed: face width)."""
     fx: float | None = 600.0
     fy: float | None = 600.0
     cx: float | None = None
     cy: float | None = None
     hfov_deg: float | None = None
+    """Horizontal field of view; when set it defines fx (and fy unless given)."""
     model: Literal["full", "short"] = "full"
     model_path: str | None = None
+    min_score: float | None = None
+    """Detection threshold; default the model's MediaPipe value (full 0.6, short 0.5)."""
+    eye_distance_m: float = 0.063
+    """Adult mean inter-pupillary distance: second distance cue; 0 disables it."""
+    smoothing: bool = True
+    min_cutoff_hz: float = 1.0
+    """One-Euro filter: cut-off for a still face (lower = steadier, more lag)."""
+    beta: float = 2.0
+    """One-Euro filter: how fast the cut-off rises with speed (per m/s)."""
+    switch_after_s: float = 0.5
+    """How long the followed face must be gone before another face is taken."""
+    debug_jpeg_quality: int = 80

@@ -1,0 +1,217 @@
+"""`buddybot run camera`: capture frames and publish them (the seed's camera_lld).
+
+A thin adapter: the source (`sources.py`) gives frames, this loop stamps
+them with the capture time and puts them on `camera/<name>/image` as raw
+BGR (same host) or JPEG (remote hosts). The image topic uses congestion
+control DROP, so a slow subscriber never stalls capture. A source that
+fails to open or stops delivering is reopened with exponential backoff
+and reported in diagnostics; the end of a file ends the service cleanly
+(exit 0) or starts it over with `--loop`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import cv2
+import numpy as np
+from buddybot.camera.backoff import Backoff
+from buddybot.camera.settings import CameraSettings
+from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
+from buddybot.core.node import Node, Publisher
+from buddybot.core.service import ServiceContext
+
+DEFAULT_FPS = 30.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--source", help="device index, video file, URL or image-sequence "
+                        "pattern such as frames/%%04d.png")
+    parser.add_argument("--sim", action="store_true", default=None,
+                        help="simulated camera: a face photo moving over a background")
+    parser.add_argument("--camera", help="camera name in keys (default 'front')")
+    parser.add_argument("--fps", type=float, help="pace files, sequences and the simulation")
+    parser.add_argument("--width", type=int, help="frame width (pixels)")
+    parser.add_argument("--height", type=int, help="frame height (pixels)")
+    parser.add_argument("--encoding", choices=["bgr8", "jpeg"], help="wire encoding")
+    parser.add_argument("--jpeg-quality", type=int, help="JPEG quality 1..100")
+    parser.add_argument("--loop", action="store_true", default=None,
+                        help="start a file or sequence over at its end")
+
+
+def effective_settings(ctx: ServiceContext) -> CameraSettings:
+    """Config values overridden by the command line, validated."""
+    s = ctx.config.camera
+    a = ctx.args
+    merged = CameraSettings(
+        name=a.camera or s.name,
+        source=a.source if a.source is not None else s.source,
+        sim=bool(a.sim) if a.sim is not None else s.sim,
+        fps=a.fps if a.fps is not None else s.fps,
+        width=a.width if a.width is not None else s.width,
+        height=a.height if a.height is not None else s.height,
+        encoding=a.encoding or s.encoding,
+        jpeg_quality=a.jpeg_quality if a.jpeg_quality is not None else s.jpeg_quality,
+        loop=bool(a.loop) if a.loop is not None else s.loop,
+        frame_id=s.frame_id, reopen_initial_s=s.reopen_initial_s, reopen_max_s=s.reopen_max_s,
+    )
+    if not keys.valid_robot_id(merged.name):
+        raise ConfigError(f"camera name {merged.name!r}: use letters, digits, '-' or '_'")
+    if merged.fps is not None and not 0 < merged.fps <= 1000:
+        raise ConfigError(f"camera fps must be in (0, 1000], got {merged.fps}")
+    for label, value in (("width", merged.width), ("height", merged.height)):
+        if value is not None and not 0 < value <= 16384:
+            raise ConfigError(f"camera {label} must be in 1..16384, got {value}")
+    if not 1 <= merged.jpeg_quality <= 100:
+        raise ConfigError(f"camera jpeg_quality must be in 1..100, got {merged.jpeg_quality}")
+    return merged
+
+
+class Capture:
+    """The capture loop: open, read, stamp, encode, publish; reopen on failure."""
+
+    def __init__(self, node: Node, settings: CameraSettings, spec: SourceSpec,
+                 source: FrameSource) -> None:
+        self.node = node
+        self.s = settings
+        self.spec = spec
+        self.source = source
+        self.frame_id = settings.frame_id or f"camera_{settings.name}"
+        self.pub: Publisher[m.Image] = node.publisher(keys.CAMERA_IMAGE, camera=settings.name)
+        self.backoff = Backoff(settings.reopen_initial_s, settings.reopen_max_s)
+        self.diag = node.diagnostics
+        self.diag.values.update({"source": spec.kind, "frames": 0, "reopens": 0, "fps": 0.0})
+        self._frames_window: list[float] = []
+
+    def _size(self, frame: np.ndarray) -> np.ndarray:
+        w, h = self.s.width, self.s.height
+        fh, fw = frame.shape[:2]
+        if self.spec.kind == "sim" or (w is None and h is None):
+            return frame
+        tw = w or round(fw * (h or fh) / fh)
+        th = h or round(fh * tw / fw)
+        if (tw, th) == (fw, fh):
+            return frame
+        return cv2.resize(frame, (tw, th), interpolation=cv2.INTER_AREA)
+
+    def _message(self, frame: np.ndarray, stamp_ns: int) -> m.Image | None:
+        h, w = frame.shape[:2]
+        if self.s.encoding == "jpeg":
+            ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, self.s.jpeg_quality])
+            if not ok:
+                return None
+            data = buf.tobytes()
+        else:
+            data = np.ascontiguousarray(frame).tobytes()
+        return m.Image(stamp_ns=stamp_ns, frame_id=self.frame_id, width=w, height=h,
+                       encoding=self.s.encoding, data=data)
+
+    def _open(self) -> bool:
+        """Open the source, retrying with backoff until it works or we are stopped."""
+        stop = self.node.stop_event
+        while not stop.is_set():
+            if self.source.open():
+                return True
+            delay = self.backoff.next()
+            self.diag.increment("open_failures")
+            self.diag.set("ERROR", f"cannot open {self.spec.kind} {self.spec.target!r}; "
+                          f"retrying in {delay:.1f} s")
+            stop.wait(delay)
+        return False
+
+    def _period(self) -> float:
+        if self.spec.kind == "sim":
+            return 1.0 / (self.s.fps or DEFAULT_FPS)
+        if self.spec.finite:
+            return 1.0 / (self.s.fps or self.source.native_fps() or DEFAULT_FPS)
+        return 1.0 / self.s.fps if self.s.fps else 0.0
+
+    def run(self) -> int:
+        """Capture until stopped, or until a file ends (exit status 0)."""
+        stop = self.node.stop_event
+        while not stop.is_set():
+            if not self._open():
+                break
+            period = self._period()
+            frames_this_open = 0
+            next_t = time.monotonic()
+            while not stop.is_set():
+                frame = self.source.read()
+                stamp_ns = m.now_ns()
+                if frame is None:
+                    break
+                frames_this_open += 1
+                if frames_this_open == 1:
+                    self.backoff.reset()
+                    self.diag.set("OK", f"capturing from {self.spec.kind} {self.spec.target!r}"
+                                  if self.spec.target else f"capturing from {self.spec.kind}")
+                msg = self._message(self._size(frame), stamp_ns)
+                if msg is not None:
+                    self.pub.put(msg)
+                    self.diag.increment("frames")
+                    self._rate()
+                if period > 0:
+                    next_t += period
+                    delay = next_t - time.monotonic()
+                    if delay > 0:
+                        stop.wait(delay)
+                    else:
+                        next_t = time.monotonic()  # fell behind: do not burst to catch up
+            self.source.release()
+            if stop.is_set():
+                break
+            if self.spec.finite and frames_this_open > 0:
+                if not self.s.loop:
+                    self.node.log.info("end of %s %r after %s frames", self.spec.kind,
+                                       self.spec.target, self.diag.values.get("frames"))
+                    self.diag.set("OK", "end of input")
+                    return 0
+                continue
+            # A live camera stopped delivering (unplugged, stream dropped), or a
+            # file yielded nothing: report and reopen with backoff.
+            self.diag.increment("reopens")
+            delay = self.backoff.next()
+            self.diag.set("ERROR", f"{self.spec.kind} {self.spec.target!r} stopped delivering "
+                          f"frames; reopening in {delay:.1f} s")
+            stop.wait(delay)
+        return 0
+
+    def _rate(self) -> None:
+        now = time.monotonic()
+        window = self._frames_window
+        window.append(now)
+        while window and now - window[0] > 2.0:
+            window.pop(0)
+        if len(window) > 1:
+            self.diag.values["fps"] = round((len(window) - 1) / (window[-1] - window[0]), 1)
+
+
+def run(ctx: ServiceContext) -> int:
+    settings = effective_settings(ctx)
+    try:
+        spec = parse_source(settings.source, settings.sim)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    if spec.kind in ("file", "sequence") and not spec.target.startswith("/"):
+        spec = SourceSpec(spec.kind, str(_resolve(ctx, spec.target)))
+    cv2.setNumThreads(1)
+    source = make_source(spec, settings.width, settings.height)
+    node = ctx.node()
+    try:
+        return Capture(node, settings, spec, source).run()
+    finally:
+        node.close()
+
+
+def _resolve(ctx: ServiceContext, value: str) -> str:
+    """A relative path given on the command line is relative to the working
+    directory; one from the config file is relative to that file."""
+    from buddybot.core.config import resolve_path
+
+    if ctx.args.source is not None:
+        return value
+    return str(resolve_path(ctx.config, value))

@@ -1,0 +1,161 @@
+"""`buddybot run face-detector`: camera frames -> face position (the seed's camera_hld).
+
+Thin adapter around `pipeline.FacePipeline`. Frames arrive through a
+latest-value slot (`delivery="latest"`): inference always runs on the
+newest frame and stale ones are dropped, never queued. The face message
+keeps the image's `stamp_ns` and `frame_id`. The debug image is rendered
+and JPEG-encoded only while someone subscribes to it (Zenoh matching
+status), so it costs nothing otherwise.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from buddybot.camera import blazeface as bf
+from buddybot.camera import draw, models
+from buddybot.camera.facenet import FaceNet, ModelLoadError
+from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.settings import FaceDetectorSettings
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import ConfigError, resolve_path
+from buddybot.core.node import RateLimitedLog
+from buddybot.core.service import ServiceContext
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--camera", help="camera name (default 'front')")
+    parser.add_argument("--model", choices=["full", "short"],
+                        help="BlazeFace full range (to ~4 m, default) or short range (to ~2 m)")
+    parser.add_argument("--model-path", help="explicit .tflite file")
+    parser.add_argument("--fx", type=float, help="focal length x (pixels)")
+    parser.add_argument("--fy", type=float, help="focal length y (pixels)")
+    parser.add_argument("--cx", type=float, help="principal point x (default image centre)")
+    parser.add_argument("--cy", type=float, help="principal point y (default image centre)")
+    parser.add_argument("--hfov-deg", type=float, help="horizontal field of view (sets fx)")
+    parser.add_argument("--face-width-m", type=float, help="real face width (m)")
+    parser.add_argument("--min-score", type=float, help="detection threshold 0..1")
+    parser.add_argument("--no-smoothing", action="store_true", help="publish raw positions")
+
+
+def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
+    s = ctx.config.face_detector
+    a = ctx.args
+    pick = lambda cli, cfg: cfg if cli is None else cli  # noqa: E731
+    merged = FaceDetectorSettings(
+        camera=a.camera or s.camera, face_width_m=pick(a.face_width_m, s.face_width_m),
+        fx=pick(a.fx, s.fx), fy=pick(a.fy, s.fy), cx=pick(a.cx, s.cx), cy=pick(a.cy, s.cy),
+        hfov_deg=pick(a.hfov_deg, s.hfov_deg), model=a.model or s.model,
+        model_path=pick(a.model_path, s.model_path), min_score=pick(a.min_score, s.min_score),
+        eye_distance_m=s.eye_distance_m, smoothing=s.smoothing and not a.no_smoothing,
+        min_cutoff_hz=s.min_cutoff_hz, beta=s.beta, switch_after_s=s.switch_after_s,
+        debug_jpeg_quality=s.debug_jpeg_quality,
+    )
+    problems = []
+    if not keys.valid_robot_id(merged.camera):
+        problems.append(f"camera {merged.camera!r} is not a valid name")
+    if merged.face_width_m <= 0:
+        problems.append("face_width_m must be positive")
+    if merged.hfov_deg is None and (merged.fx is None or merged.fx <= 0):
+        problems.append("fx must be positive (or set hfov_deg)")
+    if merged.min_score is not None and not 0 < merged.min_score < 1:
+        problems.append("min_score must be in (0, 1)")
+    if merged.eye_distance_m < 0:
+        problems.append("eye_distance_m must be >= 0")
+    if merged.min_cutoff_hz <= 0 or merged.beta < 0:
+        problems.append("min_cutoff_hz must be > 0 and beta >= 0")
+    if not 1 <= merged.debug_jpeg_quality <= 100:
+        problems.append("debug_jpeg_quality must be in 1..100")
+    if problems:
+        raise ConfigError("face_detector: " + "; ".join(problems))
+    return merged
+
+
+def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
+    explicit = None
+    if s.model_path:
+        explicit = (resolve_path(ctx.config, s.model_path) if ctx.args.model_path is None
+                    else Path(s.model_path))
+    try:
+        path = models.locate(s.model, explicit)
+        return FaceNet(path, bf.SPECS[s.model], s.min_score)
+    except (models.ModelNotFound, ModelLoadError) as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def image_to_bgr(img: m.Image) -> np.ndarray | None:
+    """The frame as an HxWx3 array, or None when the payload does not match its header."""
+    if img.encoding == "bgr8":
+        if len(img.data) != img.width * img.height * 3:
+            return None
+        return np.frombuffer(img.data, np.uint8).reshape(img.height, img.width, 3)
+    buf = np.frombuffer(img.data, np.uint8)
+    if buf.size == 0:
+        return None
+    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    if bgr is None or bgr.shape[1] != img.width or bgr.shape[0] != img.height:
+        return None
+    return bgr
+
+
+def run(ctx: ServiceContext) -> int:
+    settings = effective_settings(ctx)
+    cv2.setNumThreads(1)
+    net = load_net(ctx, settings)
+    pipeline = FacePipeline(net, settings)
+    node = ctx.node()
+    log = node.log
+    warn = RateLimitedLog(log)
+    diag = node.diagnostics
+    diag.values.update({"model": settings.model, "frames": 0, "faces": 0, "bad_frames": 0,
+                        "infer_ms": 0.0, "latency_ms": 0.0})
+    face_pub = node.publisher(keys.FACE, camera=settings.camera)
+    debug_pub = node.publisher(keys.DEBUG_IMAGE, camera=settings.camera)
+    log.info("face detector: %s-range model %s", settings.model, net.path)
+
+    def on_image(img: m.Image, _key: str) -> None:
+        bgr = image_to_bgr(img)
+        if bgr is None:
+            diag.increment("bad_frames")
+            warn.warning("bad-frame", "dropped image %dx%d %s with %d bytes: payload does "
+                               "not match the header", img.width, img.height, img.encoding,
+                               len(img.data))
+            return
+        t0 = time.perf_counter()
+        result = pipeline.process(bgr, img.stamp_ns)
+        diag.increment("frames")
+        if diag.level != "OK" or diag.message.startswith("waiting"):
+            diag.set("OK", "detecting")
+        diag.values["infer_ms"] = round((time.perf_counter() - t0) * 1000, 1)
+        if result.point is not None and result.target is not None:
+            x, y, z = result.point
+            face_pub.put(m.FacePosition(
+                stamp_ns=img.stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
+                confidence=min(max(result.target.score, 0.0), 1.0),
+            ))
+            diag.increment("faces")
+        diag.values["latency_ms"] = round((m.now_ns() - img.stamp_ns) / 1e6, 1)
+        diag.values["target_changes"] = pipeline.tracker.target_changes
+        if debug_pub.has_subscribers():
+            jpeg = draw.encode_jpeg(
+                draw.render(bgr, result.faces, result.target, result.estimate),
+                settings.debug_jpeg_quality,
+            )
+            if jpeg is not None:
+                debug_pub.put(m.Image(stamp_ns=img.stamp_ns, frame_id=img.frame_id,
+                                      width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
+                                      data=jpeg))
+                diag.increment("debug_images")
+
+    try:
+        node.subscribe(keys.CAMERA_IMAGE, on_image, delivery="latest", camera=settings.camera)
+        diag.set("OK", f"waiting for camera/{settings.camera}/image")
+        node.spin()
+    finally:
+        node.close()
+    return 0

@@ -1,0 +1,137 @@
+"""Frame sources behind one small interface: OpenCV capture, or the simulation.
+
+`--source` is parsed the way users write it: a number is a device index
+(`0` = /dev/video0), something with `://` is a URL (RTSP, HTTP MJPEG),
+something with a printf pattern (`frames/%04d.png`) is an image sequence,
+anything else a video file. Files and sequences are *finite* (they end,
+and are paced at an fps); devices, URLs and the simulation are *live*.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from dataclasses import dataclass
+from typing import Literal, Protocol
+
+import cv2
+import numpy as np
+from buddybot.camera.sim import SimCamera
+
+Kind = Literal["device", "url", "sequence", "file", "sim"]
+_PATTERN = re.compile(r"%0?\d*d")
+
+
+@dataclass(frozen=True)
+class SourceSpec:
+    kind: Kind
+    target: str
+
+    @property
+    def finite(self) -> bool:
+        return self.kind in ("sequence", "file")
+
+
+def parse_source(text: str, sim: bool = False) -> SourceSpec:
+    """What `--source TEXT` means (pure)."""
+    if sim:
+        return SourceSpec("sim", "")
+    text = text.strip()
+    if not text:
+        raise ValueError("no camera source: give --source (device index, file, URL, "
+                         "pattern) or --sim")
+    if text.isdigit():
+        return SourceSpec("device", text)
+    if "://" in text:
+        return SourceSpec("url", text)
+    if _PATTERN.search(text):
+        return SourceSpec("sequence", text)
+    return SourceSpec("file", text)
+
+
+class FrameSource(Protocol):
+    def open(self) -> bool: ...
+    def read(self) -> np.ndarray | None: ...
+    def release(self) -> None: ...
+    def native_fps(self) -> float | None: ...
+
+
+class CvSource:
+    """An OpenCV VideoCapture; `read()` None means failed / ended."""
+
+    def __init__(self, spec: SourceSpec, width: int | None = None,
+                 height: int | None = None) -> None:
+        self.spec = spec
+        self.width, self.height = width, height
+        self._cap: cv2.VideoCapture | None = None
+
+    def open(self) -> bool:
+        self.release()
+        if self.spec.kind == "device":
+            cap = cv2.VideoCapture(int(self.spec.target))
+            if self.width:
+                cap.set(cv2.CAP_PROP_FRAME_WIDTH, self.width)
+            if self.height:
+                cap.set(cv2.CAP_PROP_FRAME_HEIGHT, self.height)
+        elif self.spec.kind == "sequence":
+            cap = cv2.VideoCapture(self.spec.target, cv2.CAP_IMAGES)
+        else:
+            cap = cv2.VideoCapture(self.spec.target)
+        if not cap.isOpened():
+            cap.release()
+            return False
+        self._cap = cap
+        return True
+
+    def read(self) -> np.ndarray | None:
+        if self._cap is None:
+            return None
+        try:
+            ok, frame = self._cap.read()
+        except cv2.error:
+            return None
+        if not ok or frame is None or frame.size == 0:
+            return None
+        if frame.ndim == 2:
+            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+        elif frame.shape[2] == 4:
+            frame = cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
+        return frame
+
+    def native_fps(self) -> float | None:
+        if self._cap is None:
+            return None
+        fps = float(self._cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        return fps if 1.0 <= fps <= 240.0 else None
+
+    def release(self) -> None:
+        if self._cap is not None:
+            self._cap.release()
+            self._cap = None
+
+
+class SimSource:
+    """The simulated scene as a live source; time is the wall clock since open."""
+
+    def __init__(self, width: int | None = None, height: int | None = None) -> None:
+        self._cam = SimCamera(width or 640, height or 480)
+        self._t0 = time.monotonic()
+
+    def open(self) -> bool:
+        self._t0 = time.monotonic()
+        return True
+
+    def read(self) -> np.ndarray | None:
+        return self._cam.frame(time.monotonic() - self._t0)
+
+    def native_fps(self) -> float | None:
+        return None
+
+    def release(self) -> None:
+        pass
+
+
+def make_source(spec: SourceSpec, width: int | None, height: int | None) -> FrameSource:
+    if spec.kind == "sim":
+        return SimSource(width, height)
+    return CvSource(spec, width, height)
