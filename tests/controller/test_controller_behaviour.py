@@ -1,0 +1,447 @@
+"""Unit tests of the pure behaviour: every transition, driven by a fake clock."""
+
+from __future__ import annotations
+
+import msgspec
+import pytest
+from buddybot.controller.behaviour import (
+    Behaviour,
+    CancelSound,
+    Command,
+    Look,
+    Phase,
+    PlaySound,
+    SetExpression,
+)
+from buddybot.controller.settings import ControllerSettings
+from buddybot.controller.transform import Gaze
+from buddybot.core.messages import ExpressionAction as X
+
+GAZE = Gaze(0.1, -0.05, 120.0)
+
+
+class Rig:
+    """A behaviour, a fake clock and the commands it gave, for readable tests."""
+
+    def __init__(self, **overrides: object) -> None:
+        params: dict[str, object] = {"recover_s": 0.0}
+        params.update(overrides)
+        self.s = msgspec.convert(params, ControllerSettings)
+        self.t = 1000.0
+        self.b = Behaviour(self.s, self.t)
+        self.log: list[tuple[float, Command]] = []
+        self.goal = 0
+
+    def _rec(self, cmds: list[Command]) -> list[Command]:
+        self.log.extend((self.t, c) for c in cmds)
+        return cmds
+
+    def at(self, dt: float) -> list[Command]:
+        """Advance the clock by `dt` in ticks of 50 ms; returns what came out."""
+        out: list[Command] = []
+        end = self.t + dt
+        while self.t < end - 1e-9:
+            self.t = min(end, self.t + 0.05)
+            out += self._rec(self.b.tick(self.t))
+        return out
+
+    def presence(self, in_range: bool) -> list[Command]:
+        return self._rec(self.b.presence(self.t, in_range))
+
+    def face(self) -> list[Command]:
+        return self._rec(self.b.face(self.t, GAZE, 42))
+
+    def faces(self, seconds: float, period: float = 0.1) -> list[Command]:
+        out: list[Command] = []
+        end = self.t + seconds
+        while self.t < end - 1e-9:
+            out += self.face()
+            out += self.at(period)
+        return out
+
+    def device_free(self, free: bool) -> list[Command]:
+        return self._rec(self.b.device_free(self.t, free))
+
+    def accept(self, cmd: PlaySound) -> str:
+        self.goal += 1
+        gid = f"g{self.goal}"
+        self._rec(self.b.sound_reply(self.t, cmd.request, True, gid))
+        return gid
+
+    def status(self, gid: str, state: str, age: float | None = None) -> list[Command]:
+        return self._rec(self.b.sound_status(self.t, gid, state, age))
+
+    def sounds(self) -> list[str]:
+        return [c.sound for _, c in self.log if isinstance(c, PlaySound)]
+
+    def expressions(self) -> list[X]:
+        return [c.action for _, c in self.log if isinstance(c, SetExpression)]
+
+    def last(self, kind: type) -> Command:
+        return [c for _, c in self.log if isinstance(c, kind)][-1]
+
+
+def plays(cmds: list[Command]) -> list[PlaySound]:
+    return [c for c in cmds if isinstance(c, PlaySound)]
+
+
+def test_idle_at_start_publishes_sleep_once() -> None:
+    r = Rig()
+    r.at(1.0)
+    assert r.expressions() == [X.EYE_SLEEP]
+    assert r.b.phase(r.t) is Phase.IDLE
+
+
+def test_in_range_opens_eyes_at_once() -> None:
+    r = Rig()
+    r.at(0.1)
+    out = r.presence(True)
+    assert SetExpression(X.EYE_AWAKE) in out
+    assert r.b.phase(r.t) is Phase.NOTICED
+
+
+def test_same_presence_again_does_not_repeat_expression() -> None:
+    r = Rig()
+    r.presence(True)
+    r.presence(True)
+    r.at(0.5)
+    assert r.expressions() == [X.EYE_AWAKE]
+
+
+def test_face_is_looked_at_immediately_with_its_stamp() -> None:
+    r = Rig()
+    out = r.face()
+    assert out[0] == Look(GAZE, 42)
+
+
+def test_face_makes_engaged_and_greets_after_dwell() -> None:
+    r = Rig(greet_dwell_s=1.0)
+    r.presence(True)
+    r.faces(0.9)
+    assert r.sounds() == []
+    assert r.b.phase(r.t) is Phase.ENGAGED
+    r.faces(0.3)
+    assert r.sounds() == ["greeting"]
+    assert r.expressions()[-1] == X.EYE_GRIN
+
+
+def test_passer_by_is_not_greeted() -> None:
+    r = Rig(greet_dwell_s=1.5, absence_hold_s=0.5)
+    r.presence(True)
+    r.faces(0.8)
+    r.presence(False)
+    r.at(5.0)
+    assert r.sounds() == []
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+
+
+def test_face_without_radar_is_not_greeted() -> None:
+    r = Rig()
+    r.faces(5.0)
+    assert r.sounds() == []
+
+
+def test_grin_while_greeting_then_awake() -> None:
+    r = Rig(greet_dwell_s=0.0)
+    r.presence(True)
+    out = r.face()
+    (cmd,) = plays(out)
+    gid = r.accept(cmd)
+    r.status(gid, "PLAYING")
+    r.faces(0.3)
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_GRIN]
+    r.status(gid, "SUCCEEDED")
+    r.faces(0.2)
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE]
+
+
+def test_leave_after_greeting_plays_farewell_then_sleepy_then_sleep() -> None:
+    r = Rig(greet_dwell_s=0.5, absence_hold_s=1.0, sleepy_s=2.0)
+    r.presence(True)
+    r.faces(1.0)
+    gid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.status(gid, "SUCCEEDED")
+    r.faces(1.0)
+    r.presence(False)
+    r.at(0.9)
+    assert r.sounds() == ["greeting"]  # absence hold not over yet
+    assert r.b.phase(r.t) is Phase.LEAVING
+    r.at(0.2)
+    assert r.sounds() == ["greeting", "farewell"]
+    assert r.b.phase(r.t) is Phase.DROWSY
+    fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.at(3.0)
+    assert r.expressions()[-1] == X.EYE_SLEEPY  # still saying goodbye
+    r.status(fid, "SUCCEEDED")
+    r.at(0.1)
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+
+
+def test_no_farewell_without_greeting() -> None:
+    r = Rig(greet_dwell_s=10.0)
+    r.presence(True)
+    r.faces(2.0)
+    r.presence(False)
+    r.at(10.0)
+    assert r.sounds() == []
+
+
+def test_radar_flicker_is_absorbed() -> None:
+    r = Rig(greet_dwell_s=0.5, absence_hold_s=1.0)
+    r.presence(True)
+    r.faces(1.0)
+    gid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.status(gid, "SUCCEEDED")
+    for _ in range(10):
+        r.presence(False)
+        r.faces(0.3)
+        r.presence(True)
+        r.faces(0.3)
+    assert r.sounds() == ["greeting"]
+    assert X.EYE_SLEEPY not in r.expressions()
+    assert X.EYE_SLEEP not in r.expressions()
+
+
+def test_quick_walk_away_cancels_greeting_then_farewell() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.5)
+    r.presence(True)
+    cmd = plays(r.face())[0]
+    gid = r.accept(cmd)
+    r.status(gid, "PLAYING")
+    r.device_free(False)
+    r.presence(False)
+    out = r.at(0.6)
+    assert CancelSound(gid) in out
+    assert plays(out) == []  # not before the greeting has stopped
+    r.at(0.5)
+    assert r.sounds() == ["greeting"]
+    r.status(gid, "CANCELED")
+    assert r.sounds() == ["greeting"]  # device still busy
+    out = r.device_free(True)
+    assert [p.sound for p in plays(out)] == ["farewell"]
+
+
+def test_cancel_waits_for_goal_id_when_reply_is_late() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0)
+    r.presence(True)
+    cmd = plays(r.face())[0]
+    r.presence(False)
+    assert not any(isinstance(c, CancelSound) for _, c in r.log)
+    r._rec(r.b.sound_reply(r.t, cmd.request, True, "late"))
+    assert isinstance(r.log[-1][1], CancelSound)
+
+
+def test_status_before_reply_is_not_lost() -> None:
+    r = Rig(greet_dwell_s=0.0)
+    r.presence(True)
+    cmd = plays(r.face())[0]
+    r.status("g1", "SUCCEEDED")  # the audio server was faster than its reply
+    r.accept(cmd)
+    assert not r.b.sound_busy()
+
+
+def test_refused_greeting_means_no_farewell_and_no_retry_within_cooldown() -> None:
+    r = Rig(greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r.presence(True)
+    cmd = plays(r.face())[0]
+    r._rec(r.b.sound_reply(r.t, cmd.request, False))
+    r.faces(5.0)
+    assert r.sounds() == ["greeting"]
+    r.presence(False)
+    r.at(6.0)
+    assert r.sounds() == ["greeting"]
+
+
+def test_busy_device_delays_greeting() -> None:
+    r = Rig(greet_dwell_s=0.0)
+    r.device_free(False)
+    r.presence(True)
+    r.faces(2.0)
+    assert r.sounds() == []
+    r.device_free(True)
+    r.faces(0.2)
+    assert r.sounds() == ["greeting"]
+
+
+def test_farewell_dropped_if_device_stays_busy() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, farewell_max_delay_s=2.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "SUCCEEDED")
+    r.device_free(False)  # someone else plays something
+    r.presence(False)
+    r.at(3.0)
+    r.device_free(True)
+    r.at(1.0)
+    assert r.sounds() == ["greeting"]
+    assert r.b.counters["farewells_dropped"] == 1
+
+
+def test_back_within_cooldown_is_same_visit() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=10.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "SUCCEEDED")
+    r.presence(False)
+    fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.status(fid, "SUCCEEDED")
+    r.at(3.0)
+    r.presence(True)
+    r.faces(3.0)
+    r.presence(False)
+    r.at(3.0)
+    assert r.sounds() == ["greeting", "farewell"]
+
+
+def test_back_after_cooldown_is_a_new_visit() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=5.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "SUCCEEDED")
+    r.presence(False)
+    fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.status(fid, "SUCCEEDED")
+    r.at(6.0)
+    r.presence(True)
+    r.faces(0.5)
+    assert r.sounds() == ["greeting", "farewell", "greeting"]
+
+
+def test_coming_back_before_the_farewell_started_cancels_it() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "PLAYING")
+    r.presence(False)  # cancel sent, farewell waits
+    r.presence(True)
+    r.status(gid, "CANCELED")
+    r.faces(1.0)
+    assert r.sounds() == ["greeting"]
+    r.presence(False)  # the visit goes on: the farewell is owed once
+    r.at(0.1)
+    assert r.sounds() == ["greeting", "farewell"]
+
+
+def test_face_lost_holds_gaze_then_centres_once() -> None:
+    r = Rig(gaze_hold_s=1.0)
+    r.face()
+    out = r.at(0.9)
+    assert not any(isinstance(c, Look) for c in out)
+    out = r.at(0.2)
+    assert [c for c in out if isinstance(c, Look)] == [Look(None)]
+    assert not any(isinstance(c, Look) for c in r.at(3.0))
+
+
+def test_present_without_face_looks_around_then_awake_on_face() -> None:
+    r = Rig(look_around_after_s=2.0)
+    r.presence(True)
+    r.at(1.9)
+    assert r.expressions() == [X.EYE_AWAKE]
+    r.at(0.2)
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_LOOK_RANDOM]
+    r.face()
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_LOOK_RANDOM, X.EYE_AWAKE]
+
+
+def test_face_occlusion_short_keeps_awake_long_looks_around() -> None:
+    r = Rig(greet_dwell_s=0.0, look_around_after_s=2.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "SUCCEEDED")
+    r.faces(1.0)
+    r.at(1.0)  # short occlusion
+    r.faces(1.0)
+    assert r.expressions() == [X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE]
+    r.at(3.0)
+    assert r.expressions()[-1] == X.EYE_LOOK_RANDOM
+    r.faces(1.0)
+    assert r.sounds() == ["greeting"]
+
+
+def test_look_around_can_be_disabled() -> None:
+    r = Rig(look_around=False)
+    r.presence(True)
+    r.at(10.0)
+    assert r.expressions() == [X.EYE_AWAKE]
+
+
+def test_lost_sound_is_forgotten_after_timeout() -> None:
+    r = Rig(greet_dwell_s=0.0, sound_timeout_s=5.0)
+    r.presence(True)
+    r.accept(plays(r.face())[0])
+    r.faces(5.5)
+    assert not r.b.sound_busy()
+    assert r.b.counters["sounds_lost"] == 1
+
+
+def test_seed_mode_all_timings_zero() -> None:
+    zero = {k: 0.0 for k in ("absence_hold_s", "face_timeout_s", "gaze_hold_s",
+                             "look_around_after_s", "greet_dwell_s", "regreet_cooldown_s",
+                             "sleepy_s")}
+    r = Rig(look_around=False, **zero)
+    r.presence(True)
+    assert r.expressions() == [X.EYE_AWAKE]
+    cmd = plays(r.face())
+    assert [c.sound for c in cmd] == ["greeting"]
+    gid = r.accept(cmd[0])
+    r.status(gid, "SUCCEEDED")
+    out = r.presence(False)
+    assert SetExpression(X.EYE_SLEEP) in out
+    assert [c.sound for c in plays(out)] == ["farewell"]
+
+
+# --- restart recovery ----------------------------------------------------------------
+
+
+def test_recovery_adopts_latched_expression_and_does_not_repeat_it() -> None:
+    r = Rig(recover_s=0.5)
+    r._rec(r.b.expression_seen(r.t, X.EYE_AWAKE))
+    r.presence(True)
+    r.at(0.2)
+    assert r.expressions() == []
+    r.at(0.5)
+    assert r.expressions() == []  # EYE_AWAKE already shown
+
+
+def test_recovery_publishes_the_right_state_when_it_differs() -> None:
+    r = Rig(recover_s=0.5)
+    r._rec(r.b.expression_seen(r.t, X.EYE_AWAKE))
+    r.presence(False)
+    r.at(1.0)
+    assert r.expressions() == [X.EYE_SLEEP]
+
+
+def test_recovery_recent_sound_means_already_greeted() -> None:
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r.presence(True)
+    r.status("old", "SUCCEEDED", age=2.0)
+    r.faces(3.0)
+    assert r.sounds() == []
+    r.presence(False)  # the greeting happened before the restart: goodbye is owed
+    r.at(0.1)
+    assert r.sounds() == ["farewell"]
+
+
+def test_recovery_old_sound_allows_greeting() -> None:
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0)
+    r.presence(True)
+    r.status("old", "SUCCEEDED", age=60.0)
+    r.faces(1.0)
+    assert r.sounds() == ["greeting"]
+
+
+def test_recovery_playing_sound_blocks_until_it_ends() -> None:
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0)
+    r.presence(True)
+    r.status("old", "PLAYING", age=None)
+    r.faces(1.0)
+    assert r.b.sound_busy()
+    r.status("old", "SUCCEEDED")
+    r.faces(1.0)
+    assert r.sounds() == []  # treated as this visit's greeting
+
+
+@pytest.mark.parametrize("field", ["absence_hold_s", "greet_dwell_s", "sleepy_s"])
+def test_negative_timings_are_refused(field: str) -> None:
+    with pytest.raises(msgspec.ValidationError):
+        msgspec.convert({field: -1.0}, ControllerSettings)
