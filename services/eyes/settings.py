@@ -1,15 +1,55 @@
-"""Config tables `[eyes]` and `[eye_renderer]` (pure msgspec structs)."""
+"""Config tables `[eyes]` and `[eye_renderer]` (pure msgspec structs).
+
+Defaults are chosen so `buddybot up` works with no config at all; the
+reasons are next to each field and in docs/eyes.md.
+"""
 
 from __future__ import annotations
+
+from typing import Annotated, Literal
 
 import msgspec
 
 
+def _default_curve() -> list[list[float]]:
+    # Same values as buddybot.eyes.driver.DEFAULT_PUPIL_CURVE (kept import-free here).
+    return [[30.0, 90.0], [100.0, 60.0], [300.0, 25.0]]
+
+
 class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    pass
+    """`[eyes]`: the eyes driver."""
+
+    # (distance_cm, dilation %) points of the pupil curve, distances increasing,
+    # dilation never increasing: near -> large pupils, far -> small; linear in
+    # between, flat beyond the ends, always clamped to 0..100.
+    pupil_curve: list[list[float]] = msgspec.field(default_factory=_default_curve)
+    # Dilation when eye control carries no distance (target_distance_cm = 0).
+    unknown_distance_percent: Annotated[float, msgspec.Meta(ge=0.0, le=100.0)] = 50.0
+    # Lid overrides per expression name: [top, bottom] for both eyes, or
+    # [left_top, left_bottom, right_top, right_bottom]; 0/0 open, 50/50 closed.
+    lids: dict[str, list[float]] = msgspec.field(default_factory=dict)
+
+
+EyeName = Literal["left", "right"]
 
 
 class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[eye_renderer]`: the web eye renderer and its kiosk windows."""
+
+    # Loopback by default: a tablet or phone as an eye needs host = "0.0.0.0".
     host: str = "127.0.0.1"
-    port: int = 8080
+    port: Annotated[int, msgspec.Meta(ge=0, le=65535)] = 8080
+    # Open kiosk Chromium windows (false = only serve the pages).
     browser: bool = True
+    # Chromium executable; empty = first of chromium, chromium-browser, google-chrome.
+    browser_path: str = ""
+    # Placement (seed 5.4.3); empty/0 = not configured, defaults apply:
+    # left eye on display 1, right eye on display 2, one display -> both on it.
+    eyes: list[EyeName] = msgspec.field(default_factory=list)
+    left_display: Annotated[int, msgspec.Meta(ge=0, le=64)] = 0
+    right_display: Annotated[int, msgspec.Meta(ge=0, le=64)] = 0
+    # Looks, sent to every page: iris colour and the gaze angle that puts the
+    # iris at the edge of the eye (larger = calmer eyes).
+    iris_color: Annotated[str, msgspec.Meta(pattern=r"^#[0-9a-fA-F]{6}$")] = "#2f7fd0"
+    max_yaw_deg: Annotated[float, msgspec.Meta(gt=0.0, le=90.0)] = 40.0
+    max_pitch_deg: Annotated[float, msgspec.Meta(gt=0.0, le=90.0)] = 30.0

@@ -1,0 +1,74 @@
+"""`buddybot run eyes`: the eyes driver service (seed eye_display_hld).
+
+A thin adapter around `buddybot.eyes.driver`: `eyes/control` ->
+`eyes/direction` + `eyes/pupil`, `eyes/expression` -> `eyes/lids`
+(latched, so a renderer that starts later gets the current lids).
+The mapping is microseconds of arithmetic, so handlers run inline in
+Zenoh's callback thread; malformed samples are dropped and counted by
+the node runtime, never fatal.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
+from buddybot.core.service import ServiceContext
+from buddybot.eyes import driver
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--unknown-distance-percent", type=float, metavar="PCT",
+        help="pupil dilation when eye control carries no distance (default from config, 50)",
+    )
+
+
+def build(ctx: ServiceContext) -> tuple[driver.PupilCurve, float, dict]:
+    """Validate `[eyes]` into the driver's pure objects (ConfigError naming the key)."""
+    settings = ctx.config.eyes
+    try:
+        curve = driver.PupilCurve.from_points(settings.pupil_curve)
+    except ValueError as exc:
+        raise ConfigError(f"key 'eyes.pupil_curve': {exc}") from None
+    try:
+        table = driver.lid_table(settings.lids)
+    except ValueError as exc:
+        raise ConfigError(f"key 'eyes.lids': {exc}") from None
+    unknown = ctx.args.unknown_distance_percent
+    if unknown is None:
+        unknown = settings.unknown_distance_percent
+    if not 0.0 <= unknown <= 100.0:
+        raise ConfigError(f"--unknown-distance-percent: {unknown} is not within 0..100")
+    return curve, unknown, table
+
+
+def run(ctx: ServiceContext) -> int:
+    curve, unknown, table = build(ctx)
+    node = ctx.node()
+    try:
+        direction_pub = node.publisher(keys.EYES_DIRECTION)
+        pupil_pub = node.publisher(keys.PUPIL)
+        lids_pub = node.publisher(keys.LIDS)
+        diag = node.diagnostics
+
+        def on_control(control: m.EyeControl, _key: str) -> None:
+            direction_pub.put(driver.direction_from_control(control))
+            pupil_pub.put(driver.pupil_from_control(control, curve, unknown))
+            diag.increment("controls")
+
+        def on_expression(expression: m.ScreenExpression, _key: str) -> None:
+            for lids in driver.lids_for_expression(expression, table):
+                lids_pub.put(lids)
+            diag.increment("expressions")
+            diag.values["expression"] = expression.action.name
+
+        node.subscribe(keys.EYE_CONTROL, on_control, delivery="inline")
+        node.subscribe(keys.EXPRESSION, on_expression, delivery="inline")
+        node.log.info("eyes driver ready")
+        node.spin()
+    finally:
+        node.close()
+    return 0

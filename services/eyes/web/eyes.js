@@ -1,0 +1,385 @@
+// BuddyBot eyes: draws one or both eyes on a canvas, fed over a WebSocket.
+//
+// Page: /eyes?eye=left|right|both   (debug/test switches: blink=0, saccade=0)
+// The server pushes {"topic": T, "msg": M} where M has the contract's field
+// names (DESIGN.md section 2): direction {yaw, pitch} degrees (+yaw = robot's
+// left), pupil {dilation_percentage}, lids {eye_id 0 L/1 R/2 both,
+// top_lid_position, bottom_lid_position}, expression {action}, plus
+// hello {iris_color, max_yaw_deg, max_pitch_deg}.
+//
+// Every value eases toward its target once per animation frame (exponential
+// approach, frame-rate independent), so a new target never makes a jump.
+// The page blinks and makes small saccades by itself, and reconnects by
+// itself when the server goes away.
+"use strict";
+
+(() => {
+  const params = new URLSearchParams(location.search);
+  const which = ["left", "right", "both"].includes(params.get("eye")) ? params.get("eye") : "both";
+  const autoBlink = params.get("blink") !== "0";
+  const autoSaccade = params.get("saccade") !== "0";
+
+  const EXPR = { AWAKE: 0, SLEEP: 1, SLEEPY: 2, GRIN: 3, SAD: 4, LOOK_RANDOM: 5, LOVE: 6, STAR: 7 };
+  const BG = "#101522";          // background and lid colour: the eyes are cut-outs
+  const SCLERA = "#f2f4f8";
+  const PUPIL = "#000000";
+
+  const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30 };
+
+  // Time constants (s) of the exponential approach toward targets.
+  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15 };
+  const BLINK_CLOSE_MS = 60;     // closing: fast, like a real blink (~50-70 ms)
+  const BLINK_OPEN_MS = 160;     // reopening: slower
+  const now = () => performance.now();
+  const epochMs = () => performance.timeOrigin + performance.now();
+
+  const target = {
+    yaw: 0, pitch: 0, dilation: 50, expression: EXPR.AWAKE,
+    lids: { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } },
+  };
+  const cur = {
+    yaw: 0, pitch: 0, dilation: 50,
+    lids: { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } },
+    sad: 0, grin: 0, love: 0, star: 0,
+  };
+
+  // Debug/benchmark surface (read by the tests and benchmarks/eyes.py).
+  const eyes = {
+    which, target, cur, connected: false,
+    stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0, lastBlinkCloseMs: 0 },
+    frameIntervals: [],          // last 1200 requestAnimationFrame intervals, ms
+    latency: [],                 // {stamp_ns, recv_ms, frame_ms} per direction message
+    blinkNow: () => startBlink(now()),
+  };
+  window.eyes = eyes;
+
+  // --- messages --------------------------------------------------------------------
+  let lastGazeMsg = -1e9;
+  let pendingLatency = null;
+
+  function setLids(eyeId, top, bottom) {
+    const lids = { top: clamp(top, 0, 100), bottom: clamp(bottom, 0, 100) };
+    if (eyeId === 0 || eyeId === 2) target.lids.left = { ...lids };
+    if (eyeId === 1 || eyeId === 2) target.lids.right = { ...lids };
+  }
+
+  function apply(topic, msg) {
+    switch (topic) {
+      case "direction":
+        if (!isNum(msg.yaw) || !isNum(msg.pitch)) return false;
+        target.yaw = msg.yaw;
+        target.pitch = msg.pitch;
+        lastGazeMsg = now();
+        pendingLatency = { stamp_ns: msg.stamp_ns, recv_ms: epochMs(), frame_ms: 0 };
+        return true;
+      case "pupil":
+        if (!isNum(msg.dilation_percentage)) return false;
+        target.dilation = clamp(msg.dilation_percentage, 0, 100);
+        return true;
+      case "lids":
+        if (![0, 1, 2].includes(msg.eye_id)) return false;
+        if (!isNum(msg.top_lid_position) || !isNum(msg.bottom_lid_position)) return false;
+        setLids(msg.eye_id, msg.top_lid_position, msg.bottom_lid_position);
+        return true;
+      case "expression":
+        if (!Number.isInteger(msg.action) || msg.action < 0 || msg.action > 7) return false;
+        target.expression = msg.action;
+        return true;
+      case "hello":
+        if (typeof msg.iris_color === "string") cfg.iris = msg.iris_color;
+        if (isNum(msg.max_yaw_deg) && msg.max_yaw_deg > 0) cfg.maxYaw = msg.max_yaw_deg;
+        if (isNum(msg.max_pitch_deg) && msg.max_pitch_deg > 0) cfg.maxPitch = msg.max_pitch_deg;
+        return true;
+      default:
+        return false;
+    }
+  }
+
+  function onMessage(text) {
+    let data;
+    try {
+      data = JSON.parse(text);
+    } catch (err) {
+      eyes.stats.badMessages++;
+      return;
+    }
+    if (!data || typeof data !== "object" || !data.msg || typeof data.msg !== "object"
+        || !apply(data.topic, data.msg)) {
+      eyes.stats.badMessages++;
+      return;
+    }
+    eyes.stats.messages++;
+  }
+
+  // --- connection: reconnect forever with a short backoff ----------------------------
+  const statusDot = document.getElementById("status");
+  let retryMs = 200;
+
+  function connect() {
+    const proto = location.protocol === "https:" ? "wss:" : "ws:";
+    const ws = new WebSocket(`${proto}//${location.host}/ws?eye=${which}`);
+    ws.onopen = () => {
+      eyes.connected = true;
+      eyes.stats.connects++;
+      retryMs = 200;
+      statusDot.classList.remove("offline");
+    };
+    ws.onmessage = (ev) => onMessage(ev.data);
+    ws.onclose = () => {
+      eyes.connected = false;
+      statusDot.classList.add("offline");
+      setTimeout(connect, retryMs);
+      retryMs = Math.min(retryMs * 2, 2000);
+    };
+    ws.onerror = () => ws.close();
+  }
+
+  // --- autonomous behaviour: blinks and saccades --------------------------------------
+  let blinkStart = -1;
+  let blinkClosed = false;
+  let nextBlink = now() + rand(1500, 4500);
+  let saccade = { yaw: 0, pitch: 0 };
+  let nextSaccade = now() + rand(600, 2000);
+
+  function startBlink(t) {
+    if (blinkStart < 0) blinkStart = t;
+  }
+
+  function blinkAmount(t) {
+    if (autoBlink && blinkStart < 0 && t >= nextBlink) {
+      if (target.expression !== EXPR.SLEEP) startBlink(t);
+      nextBlink = t + rand(2500, 6500);   // natural: every few seconds
+    }
+    if (blinkStart < 0) return 0;
+    const e = t - blinkStart;
+    if (e < BLINK_CLOSE_MS) return easeIn(e / BLINK_CLOSE_MS);
+    if (e < BLINK_CLOSE_MS + BLINK_OPEN_MS) {
+      if (!blinkClosed) {        // first frame past full closure: how long closing took
+        blinkClosed = true;
+        eyes.stats.lastBlinkCloseMs = e;
+      }
+      return 1 - easeOut((e - BLINK_CLOSE_MS) / BLINK_OPEN_MS);
+    }
+    blinkStart = -1;
+    blinkClosed = false;
+    eyes.stats.blinks++;
+    return 0;
+  }
+
+  function updateSaccade(t) {
+    const lookRandom = target.expression === EXPR.LOOK_RANDOM;
+    const idle = t - lastGazeMsg > 1500;
+    if (!(autoSaccade && (idle || lookRandom))) {
+      saccade = { yaw: 0, pitch: 0 };
+      return;
+    }
+    if (t < nextSaccade) return;
+    if (lookRandom) {          // look around the room
+      saccade = { yaw: rand(-0.7, 0.7) * cfg.maxYaw, pitch: rand(-0.5, 0.5) * cfg.maxPitch };
+      nextSaccade = t + rand(700, 1800);
+    } else {                   // small fixational saccades
+      saccade = { yaw: rand(-3, 3), pitch: rand(-2, 2) };
+      nextSaccade = t + rand(600, 2200);
+    }
+  }
+
+  // --- animation ---------------------------------------------------------------------
+  const canvas = document.getElementById("eyes");
+  const ctx = canvas.getContext("2d", { alpha: false });
+  let lastFrame = 0;
+
+  function resize() {
+    const dpr = window.devicePixelRatio || 1;
+    const w = Math.max(1, Math.round(window.innerWidth * dpr));
+    const h = Math.max(1, Math.round(window.innerHeight * dpr));
+    if (canvas.width !== w || canvas.height !== h) {
+      canvas.width = w;
+      canvas.height = h;
+    }
+  }
+
+  function approach(value, goal, tau, dt) {
+    return value + (goal - value) * (1 - Math.exp(-dt / tau));
+  }
+
+  function step(t) {
+    const dt = lastFrame ? Math.min((t - lastFrame) / 1000, 0.1) : 0;
+    if (lastFrame) {
+      const iv = eyes.frameIntervals;
+      iv.push(t - lastFrame);
+      if (iv.length > 1200) iv.shift();
+    }
+    lastFrame = t;
+    updateSaccade(t);
+    const yawGoal = target.yaw + saccade.yaw;
+    const pitchGoal = target.pitch + saccade.pitch;
+    cur.yaw = approach(cur.yaw, yawGoal, TAU.gaze, dt);
+    cur.pitch = approach(cur.pitch, pitchGoal, TAU.gaze, dt);
+    cur.dilation = approach(cur.dilation, target.dilation, TAU.pupil, dt);
+    for (const side of ["left", "right"]) {
+      cur.lids[side].top = approach(cur.lids[side].top, target.lids[side].top, TAU.lids, dt);
+      cur.lids[side].bottom = approach(cur.lids[side].bottom, target.lids[side].bottom,
+        TAU.lids, dt);
+    }
+    const ex = target.expression;
+    cur.sad = approach(cur.sad, ex === EXPR.SAD ? 1 : 0, TAU.shape, dt);
+    cur.grin = approach(cur.grin, ex === EXPR.GRIN ? 1 : 0, TAU.shape, dt);
+    cur.love = approach(cur.love, ex === EXPR.LOVE ? 1 : 0, TAU.shape, dt);
+    cur.star = approach(cur.star, ex === EXPR.STAR ? 1 : 0, TAU.shape, dt);
+    const blink = blinkAmount(t);
+    draw(t, blink);
+    eyes.stats.frames++;
+    if (pendingLatency) {        // first frame drawn with the new gaze target
+      pendingLatency.frame_ms = epochMs();
+      eyes.latency.push(pendingLatency);
+      if (eyes.latency.length > 1000) eyes.latency.shift();
+      pendingLatency = null;
+    }
+    requestAnimationFrame(step);
+  }
+
+  // --- drawing -----------------------------------------------------------------------
+  function draw(t, blink) {
+    resize();
+    const W = canvas.width;
+    const H = canvas.height;
+    ctx.fillStyle = BG;
+    ctx.fillRect(0, 0, W, H);
+    if (which === "both") {
+      // Facing the viewer: the robot's right eye is on the viewer's left.
+      drawEye("right", 0, 0, W / 2, H, t, blink);
+      drawEye("left", W / 2, 0, W / 2, H, t, blink);
+    } else {
+      drawEye(which, 0, 0, W, H, t, blink);
+    }
+  }
+
+  function drawEye(side, x, y, w, h, t, blink) {
+    const R = Math.min(w, h) * 0.4;
+    const cx = x + w / 2;
+    const cy = y + h / 2;
+    // Gaze: +yaw (robot's left) -> viewer's right (+x); +pitch (up) -> up (-y).
+    const reach = R * 0.5;
+    const gx = cx + clamp(cur.yaw / cfg.maxYaw, -1, 1) * reach;
+    const gy = cy - clamp(cur.pitch / cfg.maxPitch, -1, 1) * reach;
+    const irisR = R * 0.46;
+
+    ctx.save();
+    ctx.beginPath();
+    ctx.arc(cx, cy, R, 0, 2 * Math.PI);
+    ctx.fillStyle = SCLERA;
+    ctx.fill();
+    ctx.clip();
+
+    const plain = 1 - Math.max(cur.love, cur.star);
+    if (plain > 0.01) {
+      ctx.globalAlpha = plain;
+      ctx.beginPath();
+      ctx.arc(gx, gy, irisR, 0, 2 * Math.PI);
+      ctx.fillStyle = cfg.iris;
+      ctx.fill();
+      ctx.lineWidth = irisR * 0.08;
+      ctx.strokeStyle = "rgba(0,0,0,0.25)";
+      ctx.stroke();
+      const pupilR = irisR * (0.22 + 0.58 * cur.dilation / 100);
+      ctx.beginPath();
+      ctx.arc(gx, gy, pupilR, 0, 2 * Math.PI);
+      ctx.fillStyle = PUPIL;
+      ctx.fill();
+      ctx.globalAlpha = 1;
+    }
+    if (cur.love > 0.01) {
+      ctx.globalAlpha = cur.love;
+      const beat = 1 + 0.08 * Math.sin(t / 1000 * 2 * Math.PI * 1.3);
+      heart(gx, gy, irisR * 1.15 * beat, "#e0245e");
+      ctx.globalAlpha = 1;
+    }
+    if (cur.star > 0.01) {
+      ctx.globalAlpha = cur.star;
+      star(gx, gy, irisR * 1.15, irisR * 0.5, t / 1000 * 0.8, "#f5b400");
+      ctx.globalAlpha = 1;
+    }
+    // Catch-light: makes the eye look wet and alive.
+    ctx.beginPath();
+    ctx.arc(gx - irisR * 0.35, gy - irisR * 0.38, irisR * 0.16, 0, 2 * Math.PI);
+    ctx.fillStyle = "rgba(255,255,255,0.85)";
+    ctx.fill();
+    ctx.restore();
+
+    drawLids(side, cx, cy, R, blink);
+  }
+
+  function drawLids(side, cx, cy, R, blink) {
+    const lids = cur.lids[side];
+    const top = lids.top + (50 - lids.top) * blink;
+    const bottom = lids.bottom + (50 - lids.bottom) * blink;
+    const span = R * 1.04;
+    const yT = cy - span + (top / 50) * span;      // middle of the top lid's edge
+    const yB = cy + span - (bottom / 50) * span;   // middle of the bottom lid's edge
+    const openness = clamp(1 - (top + bottom) / 100, 0, 1);
+    const c = R * 0.22 * openness;                 // lid curvature, flat when closed
+    const ext = R * 1.3;
+    // Sad: outer corners droop. The robot's left eye is on the viewer's right,
+    // so its outer corner is at +x; the right eye's outer corner is at -x.
+    const outer = side === "left" ? 1 : -1;
+    const slant = R * 0.45 * cur.sad * openness;
+    // Lid edges bulge toward the eye's middle (the lid is a cap over a ball):
+    // the top edge's ends sit higher than its middle, the bottom edge's lower.
+    const yLeftEnd = yT - c + (outer < 0 ? slant : -slant * 0.5);
+    const yRightEnd = yT - c + (outer > 0 ? slant : -slant * 0.5);
+    ctx.fillStyle = BG;
+    ctx.beginPath();
+    ctx.moveTo(cx - ext, cy - ext);
+    ctx.lineTo(cx + ext, cy - ext);
+    ctx.lineTo(cx + ext, yRightEnd);
+    ctx.quadraticCurveTo(cx, yT + c, cx - ext, yLeftEnd);
+    ctx.closePath();
+    ctx.fill();
+    // Grin: the bottom lid bulges up into a happy crescent.
+    const lift = R * 0.4 * cur.grin * openness;
+    ctx.beginPath();
+    ctx.moveTo(cx - ext, cy + ext);
+    ctx.lineTo(cx + ext, cy + ext);
+    ctx.lineTo(cx + ext, yB + c);
+    ctx.quadraticCurveTo(cx, yB - c - 2 * lift, cx - ext, yB + c);
+    ctx.closePath();
+    ctx.fill();
+  }
+
+  function heart(x, y, s, color) {
+    ctx.beginPath();
+    ctx.moveTo(x, y + s * 0.75);
+    ctx.bezierCurveTo(x - s * 1.2, y - s * 0.05, x - s * 0.55, y - s * 0.95, x, y - s * 0.35);
+    ctx.bezierCurveTo(x + s * 0.55, y - s * 0.95, x + s * 1.2, y - s * 0.05, x, y + s * 0.75);
+    ctx.closePath();
+    ctx.fillStyle = color;
+    ctx.fill();
+  }
+
+  function star(x, y, outerR, innerR, angle, color) {
+    ctx.beginPath();
+    for (let i = 0; i < 10; i++) {
+      const r = i % 2 === 0 ? outerR : innerR;
+      const a = angle - Math.PI / 2 + (i * Math.PI) / 5;
+      const px = x + r * Math.cos(a);
+      const py = y + r * Math.sin(a);
+      if (i === 0) ctx.moveTo(px, py);
+      else ctx.lineTo(px, py);
+    }
+    ctx.closePath();
+    ctx.fillStyle = color;
+    ctx.fill();
+  }
+
+  // --- helpers -----------------------------------------------------------------------
+  function clamp(v, lo, hi) { return Math.min(hi, Math.max(lo, v)); }
+  function isNum(v) { return typeof v === "number" && Number.isFinite(v); }
+  function rand(lo, hi) { return lo + Math.random() * (hi - lo); }
+  function easeIn(p) { return p * p; }
+  function easeOut(p) { return 1 - (1 - p) * (1 - p); }
+
+  window.addEventListener("resize", resize);
+  statusDot.classList.add("offline");
+  connect();
+  requestAnimationFrame(step);
+})();
