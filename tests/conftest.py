@@ -7,6 +7,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+
 from buddybot.core.node import Node
 from buddybot.core.testing import Process, Router, run_service
 

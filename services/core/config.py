@@ -14,6 +14,7 @@ import re
 from pathlib import Path
 
 import msgspec
+
 from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.camera.settings import CameraSettings, FaceDetectorSettings
 from buddybot.controller.settings import ControllerSettings

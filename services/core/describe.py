@@ -8,6 +8,7 @@ robot wants to see bad traffic too.
 from __future__ import annotations
 
 import msgspec
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 

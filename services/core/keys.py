@@ -17,6 +17,7 @@ from functools import cache
 from typing import Any, Literal
 
 import msgspec
+
 from buddybot.core import messages as m
 
 PREFIX_ROOT = "buddybot"

@@ -33,6 +33,7 @@ from typing import Any, Generic, Literal, TypeVar
 import msgspec
 import zenoh
 import zenoh.ext
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 
@@ -318,7 +319,7 @@ class Node:
 
     # -- keys --
 
-    def key(self, entry: keys._Entry, **params: str) -> str:
+    def key(self, entry: keys._Entry, /, **params: str) -> str:
         """Absolute key of a catalogue entry; a missing parameter means `*`."""
         filled = {p: params.get(p, "*") for p in entry.params}
         rel = entry.pattern.format(**filled)
@@ -333,7 +334,7 @@ class Node:
 
     # -- publish / subscribe --
 
-    def publisher(self, topic: keys.Topic, **params: str) -> Publisher[Any]:
+    def publisher(self, topic: keys.Topic, /, **params: str) -> Publisher[Any]:
         key = self.key(topic, **params)
         if "*" in key:
             raise ValueError(f"cannot publish on a wildcard key {key}")
@@ -425,6 +426,12 @@ class Node:
         reply_encoding = zenoh.Encoding(codec.encoding(service.reply))
 
         def answer(query: zenoh.Query) -> None:
+            # Replies leave only when the query is finalized: drop it explicitly
+            # (zenoh-python #459), also on the error paths.
+            with query:
+                _answer(query)
+
+        def _answer(query: zenoh.Query) -> None:
             payload = query.payload
             raw = payload.to_bytes() if payload is not None else b"{}"
             try:

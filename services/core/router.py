@@ -6,6 +6,7 @@ import logging
 import threading
 
 import zenoh
+
 from buddybot.core.node import zenoh_config
 
 log = logging.getLogger("buddybot.router")

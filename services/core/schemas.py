@@ -11,6 +11,7 @@ import json
 from pathlib import Path
 
 import msgspec
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 import zenoh
+
 from buddybot.core import keys
 from buddybot.core.node import Node, zenoh_config
 

@@ -18,6 +18,7 @@ from typing import Any
 import msgspec
 import zenoh
 import zenoh.ext
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.describe import describe

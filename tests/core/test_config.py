@@ -1,0 +1,102 @@
+"""Config: typed TOML, errors naming key and file, exit status 2."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from buddybot.core.config import ConfigError, load_config, parse_config, resolve_path
+
+DESIGN_EXAMPLE = """
+[robot]
+id = "buddy"
+[zenoh]
+connect = ["tcp/127.0.0.1:7447"]
+[radar_presence]
+range_m = 2.0
+[face_detector]
+face_width_m = 0.15
+fx = 600.0
+fy = 600.0
+[controller.camera_to_eyes]
+translation_m = [0.0, 0.0, 0.0]
+rpy_rad = [0.0, 0.0, 0.0]
+[audio.sounds]
+greeting = "sounds/greeting.wav"
+farewell = "sounds/farewell.wav"
+"""
+
+
+def test_design_example_parses() -> None:
+    config = parse_config(DESIGN_EXAMPLE, "example.toml")
+    assert config.robot.id == "buddy"
+    assert config.radar_presence.range_m == 2.0
+    assert config.face_detector.fx == 600.0
+    assert tuple(config.controller.camera_to_eyes.rpy_rad) == (0.0, 0.0, 0.0)
+    assert config.audio.sounds["greeting"] == "sounds/greeting.wav"
+
+
+def test_defaults_without_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.delenv("BUDDYBOT_CONFIG", raising=False)
+    config = load_config(None)
+    assert config.zenoh.connect == ["tcp/127.0.0.1:7447"]
+    assert config.robot.id == "buddy"
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("[radar_presence]\nrang_m = 2.0\n", "rang_m"),
+        ("[radar_presence]\nrange_m = 'far'\n", "radar_presence.range_m"),
+        ("[nonsense]\nx = 1\n", "nonsense"),
+        ("[robot]\nid = 'a/b'\n", "robot.id"),
+        ("[robot\nid = 1", "config.toml"),
+        ("source = 'x'\n", "source"),
+    ],
+)
+def test_bad_config_names_key_and_file(text: str, needle: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config(text, "config.toml")
+    assert needle in str(info.value)
+    assert "config.toml" in str(info.value)
+
+
+def test_env_variable_and_relative_paths(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    path = tmp_path / "robot.toml"
+    path.write_text("[robot]\nid = 'r7'\n")
+    monkeypatch.setenv("BUDDYBOT_CONFIG", str(path))
+    config = load_config(None)
+    assert config.robot.id == "r7"
+    assert resolve_path(config, "sounds/a.wav") == tmp_path / "sounds/a.wav"
+    assert resolve_path(config, "/abs/a.wav") == Path("/abs/a.wav")
+
+
+def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
+    with pytest.raises(ConfigError, match="cannot read"):
+        load_config(str(tmp_path / "absent.toml"))
+
+
+def test_cli_exits_2_naming_key_and_file(tmp_path: Path) -> None:
+    path = tmp_path / "bad.toml"
+    path.write_text("[radar_presence]\nrange_m = 'x'\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "buddybot", "config", "--config", str(path)],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 2
+    assert "radar_presence.range_m" in result.stderr and str(path) in result.stderr
+
+
+def test_cli_config_prints_effective_config(tmp_path: Path) -> None:
+    path = tmp_path / "ok.toml"
+    path.write_text("[radar_presence]\nrange_m = 3.5\n")
+    result = subprocess.run(
+        [sys.executable, "-m", "buddybot", "config", "--config", str(path), "--robot", "zz"],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 0, result.stderr
+    assert "range_m = 3.5" in result.stdout
+    assert 'id = "zz"' in result.stdout

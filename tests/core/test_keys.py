@@ -1,0 +1,56 @@
+"""The key catalogue: one pattern per key, prefixes, matching, QoS as data."""
+
+from __future__ import annotations
+
+import pytest
+
+from buddybot.core import keys
+
+
+def test_patterns_are_unique() -> None:
+    patterns = [e.pattern for e in (*keys.TOPICS, *keys.SERVICES)]
+    assert len(patterns) == len(set(patterns))
+
+
+def test_prefix_and_absolute() -> None:
+    assert keys.prefix("buddy") == "buddybot/buddy"
+    assert keys.absolute("r2", "radar/presence") == "buddybot/r2/radar/presence"
+    assert keys.absolute("r2", "/eyes/lids/") == "buddybot/r2/eyes/lids"
+    assert keys.absolute("r2", "buddybot/other/eyes/lids") == "buddybot/other/eyes/lids"
+    assert keys.split_absolute("buddybot/r2/camera/front/image") == ("r2", "camera/front/image")
+    assert keys.split_absolute("other/thing") is None
+
+
+@pytest.mark.parametrize("bad", ["", "a/b", "*", "**", "a b", "x$"])
+def test_bad_robot_ids_are_refused(bad: str) -> None:
+    with pytest.raises(ValueError, match="robot id"):
+        keys.prefix(bad)
+
+
+def test_lookup_and_params() -> None:
+    assert keys.lookup("camera/front/image") is keys.CAMERA_IMAGE
+    assert keys.lookup("camera/front/debug_image") is keys.DEBUG_IMAGE
+    assert keys.lookup("radar/3/frames") is keys.RADAR_FRAMES
+    assert keys.lookup("audio/play_sound") is keys.PLAY_SOUND
+    assert keys.lookup("audio/play_sound/status") is keys.PLAY_SOUND_STATUS
+    assert keys.lookup("eyes/unknown") is None
+    assert keys.CAMERA_IMAGE.match("camera/side/image") == {"camera": "side"}
+    assert keys.CAMERA_IMAGE.key(camera="front") == "camera/front/image"
+    assert keys.CAMERA_IMAGE.wildcard() == "camera/*/image"
+    with pytest.raises(ValueError, match="missing"):
+        keys.CAMERA_IMAGE.key()
+    with pytest.raises(ValueError, match="invalid"):
+        keys.CAMERA_IMAGE.key(camera="a/b")
+
+
+def test_qos_presets() -> None:
+    assert keys.CAMERA_IMAGE.qos.congestion == "drop"
+    assert keys.DEBUG_IMAGE.qos.congestion == "drop"
+    for topic in (keys.PRESENCE, keys.EXPRESSION, keys.LIDS, keys.DEVICE_FREE):
+        assert topic.latched and topic.qos.congestion == "block"
+
+
+def test_codec_for_encoding() -> None:
+    assert keys.codec_for_encoding(keys.CAMERA_IMAGE.encoding) is keys.MSGPACK
+    assert keys.codec_for_encoding("application/json;x") is keys.JSON
+    assert keys.codec_for_encoding("text/plain") is None

@@ -1,0 +1,100 @@
+"""The message contract: field names, ranges, codecs."""
+
+from __future__ import annotations
+
+import msgspec
+import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+
+
+def sample_messages() -> list[m.Message]:
+    """One valid instance of every message type."""
+    frame = m.LD2410TargetDataFrame(
+        radar_id=0, target_state=m.TargetState.MOVING_AND_STATIONARY, movement_distance=266,
+        movement_energy=50, stationary_distance=300, stationary_energy=100,
+        detection_distance=256, moving_gate_energy=[0] * 9, light_level=255,
+    )
+    return [
+        frame,
+        m.LD2410TargetDataFrameArray(stamp_ns=1, device_id=0, sensors=[frame]),
+        m.PresenceDetection(stamp_ns=1, target_state=m.PresenceTarget.STANDING,
+                            presence_state=m.PresenceState.IN_RANGE, distance_m=1.25),
+        m.Image(stamp_ns=1, frame_id="cam", width=2, height=1, encoding="bgr8", data=b"\x00" * 6),
+        m.Point(x=1.0, y=-0.5, z=0.25),
+        m.FacePosition(stamp_ns=1, frame_id="cam", point=m.Point(x=1, y=0, z=0), confidence=0.9),
+        m.ScreenExpression(stamp_ns=1, action=m.ExpressionAction.ANIMATE_STAR),
+        m.EyeControl(stamp_ns=1, yaw=0.3, pitch=-0.1, target_distance_cm=120.0),
+        m.EyesDirection(stamp_ns=1, yaw=17.0, pitch=-5.0),
+        m.PupilControl(stamp_ns=1, dilation_percentage=42.0),
+        m.EyeLidControl(stamp_ns=1, eye_id=m.EyeId.BOTH, top_lid_position=50,
+                        bottom_lid_position=50),
+        m.PlaySound(sound="greeting"),
+        m.PlaySoundReply(goal_id="abc", accepted=True),
+        m.PlaySoundStatus(goal_id="abc", state="PLAYING", progress=0.5),
+        m.CancelGoal(goal_id="abc"),
+        m.PlayAudioFile(path="/tmp/x.wav"),
+        m.Trigger(),
+        m.TriggerReply(success=True, message="ok"),
+        m.Bool(stamp_ns=1, data=True),
+        m.DiagnosticStatus(stamp_ns=1, node="n", level="WARN", message="x", values={"a": 1}),
+        m.ErrorReply(error="bad"),
+    ]
+
+
+def test_every_message_type_has_a_sample() -> None:
+    assert {type(x) for x in sample_messages()} == set(m.ALL_MESSAGES)
+
+
+@pytest.mark.parametrize("msg", sample_messages(), ids=lambda x: type(x).__name__)
+@pytest.mark.parametrize("codec", [keys.JSON, keys.MSGPACK], ids=["json", "msgpack"])
+def test_round_trip(msg: m.Message, codec: keys.Codec) -> None:
+    assert codec.decode(codec.encode(msg), type(msg)) == msg
+
+
+@pytest.mark.parametrize(
+    ("msg_type", "payload", "field"),
+    [
+        (m.PupilControl, {"stamp_ns": 1, "dilation_percentage": 101}, "dilation_percentage"),
+        (m.PupilControl, {"stamp_ns": -1, "dilation_percentage": 1}, "stamp_ns"),
+        (m.EyeLidControl, {"stamp_ns": 1, "eye_id": 3, "top_lid_position": 0,
+                           "bottom_lid_position": 0}, "eye_id"),
+        (m.PresenceDetection, {"stamp_ns": 1, "target_state": 0, "presence_state": 2,
+                               "distance_m": 1}, "presence_state"),
+        (m.PresenceDetection, {"stamp_ns": 1, "target_state": 0, "presence_state": 1,
+                               "distance_m": -1}, "distance_m"),
+        (m.ScreenExpression, {"stamp_ns": 1, "action": 8}, "action"),
+        (m.Image, {"stamp_ns": 1, "frame_id": "f", "width": 1, "height": 1,
+                   "encoding": "rgb8", "data": ""}, "encoding"),
+        (m.FacePosition, {"stamp_ns": 1, "frame_id": "f", "point": {"x": 0, "y": 0, "z": 0},
+                          "confidence": 1.5}, "confidence"),
+        (m.PlaySoundStatus, {"goal_id": "g", "state": "DONE"}, "state"),
+        (m.LD2410TargetDataFrame, {"rader_id": 0}, "rader_id"),
+    ],
+)
+def test_out_of_range_is_rejected_naming_the_field(msg_type: type, payload: dict,
+                                                   field: str) -> None:
+    with pytest.raises(msgspec.ValidationError, match=field):
+        keys.JSON.decode(msgspec.json.encode(payload), msg_type)
+
+
+def test_contract_field_names() -> None:
+    """The DESIGN.md names (the seed's typos fixed) are exactly these."""
+    assert m.LD2410TargetDataFrame.__struct_fields__[:7] == (
+        "radar_id", "target_state", "movement_distance", "movement_energy",
+        "stationary_distance", "stationary_energy", "detection_distance",
+    )
+    assert m.EyeControl.__struct_fields__ == ("stamp_ns", "yaw", "pitch", "target_distance_cm")
+    assert m.PupilControl.__struct_fields__ == ("stamp_ns", "dilation_percentage")
+    assert m.EyeLidControl.__struct_fields__ == (
+        "stamp_ns", "eye_id", "top_lid_position", "bottom_lid_position")
+    assert [e.value for e in m.ExpressionAction] == list(range(8))
+    assert m.ExpressionAction(6).name == "ANIMATE_LOVE"
+
+
+def test_images_are_msgpack_and_control_is_json() -> None:
+    for topic in keys.TOPICS:
+        expected = keys.MSGPACK if topic.type is m.Image else keys.JSON
+        assert topic.codec is expected, topic.pattern
+        assert topic.encoding.endswith("buddybot/" + topic.type.__name__)
