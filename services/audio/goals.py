@@ -1,0 +1,194 @@
+"""The play_sound action's goal state machine (pure: no Zenoh, no clock of its own).
+
+A goal is ACCEPTED when its reply says so, PLAYING once the player
+confirmed it started (progress = elapsed / the duration the player
+announced), and ends SUCCEEDED (the device became free after the sound's
+length), CANCELED (cancel request, preempted by a newer goal, or stopped
+from outside before its end) or ABORTED (the player refused or did not
+answer). One goal is active at a time; `policy` decides what a new goal
+does meanwhile: "preempt" ends the active one as CANCELED, "refuse"
+answers accepted=false.
+
+Every method returns the status messages to publish, in order, so the
+service adapter only publishes them.
+"""
+
+from __future__ import annotations
+
+import collections
+from collections.abc import Collection
+from dataclasses import dataclass, field
+
+from buddybot.core import messages as m
+from buddybot.core.messages import TERMINAL_GOAL_STATES, GoalState
+
+END_TOLERANCE_S = 0.25
+"""A device that becomes free this much before the announced end still means
+the sound played through (the last period is handed over early)."""
+LATE_GRACE_S = 1.0
+"""How long past its end a goal may wait for the device-free sample."""
+
+
+@dataclass
+class Goal:
+    goal_id: str
+    sound: str
+    state: GoalState = "ACCEPTED"
+    message: str = ""
+    duration_s: float | None = None
+    started_at: float | None = None
+    progress: float = 0.0
+
+    @property
+    def terminal(self) -> bool:
+        return self.state in TERMINAL_GOAL_STATES
+
+    def status(self) -> m.PlaySoundStatus:
+        return m.PlaySoundStatus(goal_id=self.goal_id, state=self.state,
+                                 progress=self.progress, message=self.message,
+                                 stamp_ns=m.now_ns())
+
+
+@dataclass
+class Decision:
+    """The answer to a goal request and the statuses it causes."""
+
+    reply: m.PlaySoundReply
+    statuses: list[m.PlaySoundStatus] = field(default_factory=list)
+
+    @property
+    def accepted(self) -> bool:
+        return self.reply.accepted
+
+
+@dataclass
+class CancelResult:
+    reply: m.TriggerReply
+    statuses: list[m.PlaySoundStatus] = field(default_factory=list)
+    stop_player: bool = False
+
+
+class GoalBook:
+    """All goals of one action server: the active one and recent finished ones."""
+
+    def __init__(self, sounds: Collection[str], policy: str = "preempt",
+                 history: int = 64) -> None:
+        if policy not in ("preempt", "refuse"):
+            raise ValueError(f"unknown busy policy {policy!r}")
+        self.sounds = set(sounds)
+        self.policy = policy
+        self.active: Goal | None = None
+        self._recent: collections.OrderedDict[str, Goal] = collections.OrderedDict()
+        self._history = history
+
+    def get(self, goal_id: str) -> Goal | None:
+        if self.active is not None and self.active.goal_id == goal_id:
+            return self.active
+        return self._recent.get(goal_id)
+
+    def _end(self, goal: Goal, state: GoalState, message: str) -> m.PlaySoundStatus:
+        goal.state, goal.message = state, message
+        if state == "SUCCEEDED":
+            goal.progress = 1.0
+        if self.active is goal:
+            self.active = None
+        self._recent[goal.goal_id] = goal
+        while len(self._recent) > self._history:
+            self._recent.popitem(last=False)
+        return goal.status()
+
+    # -- requests --
+
+    def request(self, goal_id: str, sound: str, *, player_present: bool,
+                player_busy: bool = False) -> Decision:
+        """Accept or refuse a goal; an accepted goal is then to be played."""
+        def refuse(why: str) -> Decision:
+            return Decision(m.PlaySoundReply(goal_id=goal_id, accepted=False, message=why))
+
+        if sound not in self.sounds:
+            known = ", ".join(sorted(self.sounds)) or "none"
+            return refuse(f"unknown sound {sound!r} (configured: {known})")
+        if not player_present:
+            return refuse("the audio player is not running")
+        statuses = []
+        busy = self.active is not None or player_busy
+        if busy and self.policy == "refuse":
+            what = f"goal {self.active.goal_id} ({self.active.sound})" if self.active else (
+                "another sound")
+            return refuse(f"busy: {what} is playing (busy_policy = refuse)")
+        if self.active is not None:
+            statuses.append(self._end(self.active, "CANCELED", f"preempted by goal {goal_id}"))
+        goal = Goal(goal_id=goal_id, sound=sound)
+        self.active = goal
+        statuses.append(goal.status())
+        return Decision(m.PlaySoundReply(goal_id=goal_id, accepted=True,
+                                         message=f"playing {sound}"), statuses)
+
+    def should_play(self, goal_id: str) -> bool:
+        """Whether an accepted goal is still waiting to be handed to the player."""
+        return self.active is not None and self.active.goal_id == goal_id and (
+            self.active.state == "ACCEPTED")
+
+    def started(self, goal_id: str, duration_s: float | None, now: float
+                ) -> list[m.PlaySoundStatus]:
+        """The player confirmed playback: ACCEPTED -> PLAYING."""
+        goal = self.active
+        if goal is None or goal.goal_id != goal_id or goal.state != "ACCEPTED":
+            return []
+        goal.state, goal.duration_s, goal.started_at = "PLAYING", duration_s, now
+        goal.message = "" if duration_s is None else f"{duration_s:.3f} s"
+        return [goal.status()]
+
+    def failed(self, goal_id: str, message: str) -> list[m.PlaySoundStatus]:
+        """The player refused or did not answer: ABORTED with its reason."""
+        goal = self.active
+        if goal is None or goal.goal_id != goal_id:
+            return []
+        return [self._end(goal, "ABORTED", message)]
+
+    def device_free(self, now: float) -> list[m.PlaySoundStatus]:
+        """The player's device became free: the playing goal ended."""
+        goal = self.active
+        if goal is None or goal.state != "PLAYING":
+            return []
+        elapsed = now - (goal.started_at or now)
+        if goal.duration_s is not None and elapsed < goal.duration_s - END_TOLERANCE_S:
+            return [self._end(goal, "CANCELED",
+                              f"playback stopped outside the action after {elapsed:.2f} s")]
+        return [self._end(goal, "SUCCEEDED", "")]
+
+    def cancel(self, goal_id: str) -> CancelResult:
+        """Cancel the active goal (the player must then be stopped)."""
+        goal = self.active
+        if goal is not None and goal.goal_id == goal_id:
+            status = self._end(goal, "CANCELED", "canceled on request")
+            return CancelResult(m.TriggerReply(success=True, message="canceled"), [status],
+                                stop_player=True)
+        old = self._recent.get(goal_id)
+        if old is not None:
+            return CancelResult(m.TriggerReply(
+                success=False, message=f"goal {goal_id} already ended ({old.state})"))
+        return CancelResult(m.TriggerReply(success=False, message=f"unknown goal {goal_id!r}"))
+
+    def player_lost(self) -> list[m.PlaySoundStatus]:
+        """The player process went away: the active goal cannot finish."""
+        if self.active is None:
+            return []
+        return [self._end(self.active, "ABORTED", "the audio player stopped running")]
+
+    def tick(self, now: float, device_free: bool | None = None) -> list[m.PlaySoundStatus]:
+        """Progress of the playing goal (capped below 1 until the device is free).
+
+        A device already free well after the announced end means the "free"
+        sample raced ahead of the player's reply: the goal succeeded.
+        """
+        goal = self.active
+        if goal is None or goal.state != "PLAYING" or goal.started_at is None:
+            return []
+        elapsed = now - goal.started_at
+        if (device_free and goal.duration_s is not None
+                and elapsed > goal.duration_s + LATE_GRACE_S):
+            return [self._end(goal, "SUCCEEDED", "")]
+        if goal.duration_s:
+            goal.progress = max(0.0, min(0.99, elapsed / goal.duration_s))
+        return [goal.status()]
