@@ -1,0 +1,102 @@
+"""`buddybot run eyes` as a real process behind a real router."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, Process, buddybot_argv, retry_until
+
+pytestmark = pytest.mark.integration
+
+A = m.ExpressionAction
+
+
+def test_control_becomes_direction_and_pupil(spawn: Callable[..., Process], probe: Node) -> None:
+    spawn("eyes")
+    directions = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
+    pupils = Collector[m.PupilControl](probe, keys.PUPIL)
+    pub = probe.publisher(keys.EYE_CONTROL)
+    near = m.EyeControl(stamp_ns=1_000_000_001, yaw=math.radians(20), pitch=math.radians(-10),
+                        target_distance_cm=40)
+    retry_until(lambda: pub.put(near) or directions.messages, 20, 0.2, "driver answering")
+    d = directions.wait_for(lambda x: x.stamp_ns == near.stamp_ns)
+    assert d.yaw == pytest.approx(20.0) and d.pitch == pytest.approx(-10.0)
+    p_near = pupils.wait_for(lambda x: x.stamp_ns == near.stamp_ns)
+
+    far = m.EyeControl(stamp_ns=1_000_000_002, yaw=math.radians(-35), pitch=0.0,
+                       target_distance_cm=280)
+    pub.put(far)
+    d = directions.wait_for(lambda x: x.stamp_ns == far.stamp_ns)
+    assert d.yaw == pytest.approx(-35.0)
+    p_far = pupils.wait_for(lambda x: x.stamp_ns == far.stamp_ns)
+    assert p_near.dilation_percentage > p_far.dilation_percentage
+
+
+def test_every_expression_becomes_latched_lids(
+    spawn: Callable[..., Process], node_factory: Callable[..., Node]
+) -> None:
+    spawn("eyes")
+    probe = node_factory("probe")
+    lids = Collector[m.EyeLidControl](probe, keys.LIDS)
+    pub = probe.publisher(keys.EXPRESSION)
+    expected = {A.EYE_AWAKE: (0, 0), A.EYE_SLEEP: (50, 50)}
+    for stamp, action in enumerate(A, start=100):
+        pub.put(m.ScreenExpression(stamp_ns=stamp, action=action))
+        got = lids.wait_for(lambda x, s=stamp: x.stamp_ns == s, 20, f"lids for {action.name}")
+        assert got.eye_id == m.EyeId.BOTH
+        if action in expected:
+            assert (got.top_lid_position, got.bottom_lid_position) == expected[action]
+    # Latched: a renderer starting now still gets the current lids (the last: STAR).
+    late = Collector[m.EyeLidControl](node_factory("late"), keys.LIDS)
+    got = late.wait_for(timeout=20, what="latched lids")
+    assert got.stamp_ns == 100 + len(A) - 1
+
+
+def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node) -> None:
+    proc = spawn("eyes")
+    directions = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
+    diags = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="eyes")
+    control = probe.publisher(keys.EYE_CONTROL)
+    expression = probe.publisher(keys.EXPRESSION)
+    good = m.EyeControl(stamp_ns=7, yaw=0.1, pitch=0.0, target_distance_cm=100)
+    retry_until(lambda: control.put(good) or directions.messages, 20, 0.2, "driver answering")
+    for bad in (b"", b"not json", b"{}", b'{"stamp_ns": 1, "yaw": 9, "pitch": 0, '
+                b'"target_distance_cm": 1}', b'{"stamp_ns": -1, "yaw": 0, "pitch": 0, '
+                b'"target_distance_cm": 1}', b'[1, 2]', b'{"stamp_ns": 1, "yaw": "left", '
+                b'"pitch": 0, "target_distance_cm": 1}', b"\xff\xfe" * 100):
+        control.put_bytes(bad)
+    for bad in (b'{"stamp_ns": 1, "action": 8}', b'{"stamp_ns": 1}', b"\x00"):
+        expression.put_bytes(bad)
+    after = m.EyeControl(stamp_ns=8, yaw=-0.1, pitch=0.0, target_distance_cm=100)
+    control.put(after)
+    directions.wait_for(lambda x: x.stamp_ns == 8, 20, "direction after malformed input")
+    status = diags.wait_for(lambda x: int(x.values.get("malformed", 0)) >= 11, 20,
+                            "malformed count in diagnostics")
+    assert status.level == "OK"
+    assert proc.alive()
+    assert "dropped malformed" in proc.output()
+
+
+@pytest.mark.parametrize(("toml", "message"), [
+    ("[eyes]\npupil_curve = [[100, 20], [50, 40]]\n", "eyes.pupil_curve"),
+    ("[eyes]\nlids = { EYE_WINK = [0, 0] }\n", "eyes.lids"),
+    ("[eyes]\nunknown_distance_percent = 150\n", "unknown_distance_percent"),
+    ("[eyes]\npupil = 3\n", "pupil"),
+])
+def test_bad_config_exits_with_the_key_named(tmp_path: Path, toml: str, message: str) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(toml)
+    proc = Process(buddybot_argv("run", "eyes", "--config", str(cfg),
+                                 "--connect", "tcp/127.0.0.1:9"), "eyes-bad", tmp_path)
+    try:
+        assert proc.proc.wait(30) == 2
+        assert message in proc.output()
+    finally:
+        proc.stop()
