@@ -1,0 +1,68 @@
+"""Sound name resolution, the reply convention and the shipped sounds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import miniaudio
+import pytest
+from buddybot.audio import protocol, sounds
+from buddybot.audio.settings import AudioSettings
+from buddybot.core.config import ConfigError, parse_config
+
+
+def test_shipped_sounds_exist_are_short_and_decode() -> None:
+    for name, value in AudioSettings().sounds.items():
+        path = sounds.resolve_file(value, None)
+        assert path.is_file(), name
+        assert path.stat().st_size < 200_000
+        info = miniaudio.wav_get_file_info(str(path))
+        assert 1.0 < info.duration < 4.0
+
+
+def test_relative_paths_prefer_the_config_folder_then_the_package(tmp_path: Path) -> None:
+    assert sounds.resolve_file("sounds/greeting.wav", tmp_path) == (
+        sounds.PACKAGE_DIR / "sounds/greeting.wav")
+    (tmp_path / "sounds").mkdir()
+    mine = tmp_path / "sounds/greeting.wav"
+    mine.write_bytes(b"x")
+    assert sounds.resolve_file("sounds/greeting.wav", tmp_path) == mine
+    assert sounds.resolve_file("/abs/x.wav", tmp_path) == Path("/abs/x.wav")
+    assert sounds.resolve_file("nowhere.wav", tmp_path) == tmp_path / "nowhere.wav"
+
+
+def test_say_prefix_and_lookup() -> None:
+    table = {"hi": "say: Hello there ", "beep": "beep.wav"}
+    assert sounds.lookup("hi", table, None) == sounds.SpokenSound("Hello there")
+    assert sounds.lookup("/tmp/a.ogg", table, None) == sounds.FileSound(Path("/tmp/a.ogg"))
+    with pytest.raises(ValueError, match="empty text"):
+        sounds.parse_sound("say:  ", None)
+    with pytest.raises(ValueError, match="empty file"):
+        sounds.parse_sound(" ", None)
+
+
+def test_configured_sounds_extend_the_defaults() -> None:
+    config = parse_config('[audio.sounds]\ngreeting = "mine.wav"\nhi = "say:Hi"\n')
+    table = sounds.effective_sounds(config.audio.sounds, AudioSettings().sounds)
+    assert table == {"greeting": "mine.wav", "farewell": "sounds/farewell.wav", "hi": "say:Hi"}
+
+
+def test_bad_audio_config_is_an_error_naming_the_key() -> None:
+    with pytest.raises(ConfigError, match="audio_player.volume"):
+        parse_config("[audio_player]\nvolume = 7.0\n")
+    with pytest.raises(ConfigError, match="busy_policy"):
+        parse_config('[audio]\nbusy_policy = "queue"\n')
+    with pytest.raises(ConfigError, match="unknown key"):
+        parse_config("[audio_player]\nloudness = 1\n")
+
+
+def test_format_hint_names_the_problem() -> None:
+    assert "unsupported format '.aiff'" in sounds.format_hint(Path("x.aiff"))
+    assert "corrupt" in sounds.format_hint(Path("x.wav"))
+
+
+def test_duration_round_trips_through_the_reply_message() -> None:
+    text = protocol.playing_message("greeting", 2.7545)
+    assert text == "playing greeting (2.755 s)"
+    assert protocol.parse_duration(text) == pytest.approx(2.755)
+    assert protocol.parse_duration("stopped") is None
