@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from aiohttp import WSMsgType, web
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node

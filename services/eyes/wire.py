@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 import msgspec
+
 from buddybot.core import messages as m
 
 TOPIC_NAMES: dict[type[m.Message], str] = {

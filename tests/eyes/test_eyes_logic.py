@@ -19,7 +19,9 @@ A = m.ExpressionAction
 CURVE = driver.PupilCurve.from_points(driver.DEFAULT_PUPIL_CURVE)
 
 
-def control(yaw: float = 0.0, pitch: float = 0.0, cm: float = 100.0, stamp: int = 123) -> m.EyeControl:
+def control(
+    yaw: float = 0.0, pitch: float = 0.0, cm: float = 100.0, stamp: int = 123
+) -> m.EyeControl:
     return m.EyeControl(stamp_ns=stamp, yaw=yaw, pitch=pitch, target_distance_cm=cm)
 
 
@@ -157,8 +159,8 @@ D2 = Display(800, 0, 800, 480, "HDMI-2")
 D3 = Display(1600, 0, 1024, 600, "DP-1")
 
 
-def windows(displays: list[Display], request: Request = Request()) -> list[tuple[str, int]]:
-    return [(w.eye, w.display_number) for w in plan(displays, request)]
+def windows(displays: list[Display], request: Request | None = None) -> list[tuple[str, int]]:
+    return [(w.eye, w.display_number) for w in plan(displays, request or Request())]
 
 
 def test_default_two_displays_left_on_1_right_on_2() -> None:
@@ -174,14 +176,14 @@ def test_one_display_no_option_both_eyes_on_it() -> None:
 
 
 def test_no_display_is_an_error() -> None:
-    with pytest.raises(PlacementError, match="no display found.*--no-browser"):
+    with pytest.raises(PlacementError, match=r"no display found.*--no-browser"):
         plan([])
     with pytest.raises(PlacementError, match="no display"):
         plan([], Request(eyes=("left",)))
 
 
 def test_more_eyes_configured_than_displays_is_an_error() -> None:
-    with pytest.raises(PlacementError, match="2 eyes configured .* only 1 display"):
+    with pytest.raises(PlacementError, match=r"2 eyes configured .* only 1 display"):
         plan([D1], Request(eyes=("left", "right")))
     with pytest.raises(PlacementError, match="2 eyes configured"):
         plan([D1], Request(left_display=1))
