@@ -19,6 +19,7 @@ from typing import Any
 
 import msgspec
 import zenoh
+
 from buddybot.audio import protocol
 from buddybot.audio.goals import GoalBook
 from buddybot.audio.settings import AudioSettings

@@ -26,6 +26,7 @@ from typing import Any
 
 import miniaudio
 import numpy as np
+
 from buddybot.audio import sounds as snd
 from buddybot.audio import tts
 from buddybot.audio.pcm import Chunk, Cursor, Track, apply_volume

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
+
 from buddybot.audio import protocol
 from buddybot.audio.player import AudioError, Player
 from buddybot.audio.settings import AudioPlayerSettings, AudioSettings

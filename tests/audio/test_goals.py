@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+
 from buddybot.audio.goals import END_TOLERANCE_S, LATE_GRACE_S, GoalBook
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from buddybot.audio.pcm import Cursor, Track, apply_volume
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from buddybot.audio.player import AudioError, Player, decode_file
 from buddybot.audio.settings import AudioPlayerSettings
 from buddybot.core.testing import retry_until

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import miniaudio
 import pytest
+
 from buddybot.audio import protocol, sounds
 from buddybot.audio.settings import AudioSettings
 from buddybot.core.config import ConfigError, parse_config
@@ -48,7 +49,7 @@ def test_configured_sounds_extend_the_defaults() -> None:
 
 
 def test_bad_audio_config_is_an_error_naming_the_key() -> None:
-    with pytest.raises(ConfigError, match="audio_player.volume"):
+    with pytest.raises(ConfigError, match=r"audio_player\.volume"):
         parse_config("[audio_player]\nvolume = 7.0\n")
     with pytest.raises(ConfigError, match="busy_policy"):
         parse_config('[audio]\nbusy_policy = "queue"\n')
