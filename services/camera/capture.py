@@ -16,6 +16,7 @@ import time
 
 import cv2
 import numpy as np
+
 from buddybot.camera.backoff import Backoff
 from buddybot.camera.settings import CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source

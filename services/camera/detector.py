@@ -16,6 +16,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, models
 from buddybot.camera.facenet import FaceNet, ModelLoadError
@@ -41,6 +42,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--face-width-m", type=float, help="real face width (m)")
     parser.add_argument("--min-score", type=float, help="detection threshold 0..1")
     parser.add_argument("--no-smoothing", action="store_true", help="publish raw positions")
+    parser.add_argument("--no-refine", action="store_true",
+                        help="measure the face on the whole-frame detection only")
 
 
 def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
@@ -53,7 +56,8 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
         hfov_deg=pick(a.hfov_deg, s.hfov_deg), model=a.model or s.model,
         model_path=pick(a.model_path, s.model_path), min_score=pick(a.min_score, s.min_score),
         eye_distance_m=s.eye_distance_m, smoothing=s.smoothing and not a.no_smoothing,
-        min_cutoff_hz=s.min_cutoff_hz, beta=s.beta, switch_after_s=s.switch_after_s,
+        refine=s.refine and not a.no_refine, min_cutoff_hz=s.min_cutoff_hz, beta=s.beta,
+        switch_after_s=s.switch_after_s,
         debug_jpeg_quality=s.debug_jpeg_quality,
     )
     problems = []
@@ -74,6 +78,19 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
     if problems:
         raise ConfigError("face_detector: " + "; ".join(problems))
     return merged
+
+
+def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, FaceNet | None]:
+    """The detector model, and the short-range refiner (None when refine is off)."""
+    net = load_net(ctx, s)
+    if not s.refine:
+        return net, None
+    if s.model == "short":
+        return net, net
+    try:
+        return net, FaceNet(models.locate("short"), bf.SHORT_RANGE)
+    except (models.ModelNotFound, ModelLoadError) as exc:
+        raise ConfigError(f"refine needs the short-range model: {exc}") from None
 
 
 def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
@@ -106,8 +123,8 @@ def image_to_bgr(img: m.Image) -> np.ndarray | None:
 def run(ctx: ServiceContext) -> int:
     settings = effective_settings(ctx)
     cv2.setNumThreads(1)
-    net = load_net(ctx, settings)
-    pipeline = FacePipeline(net, settings)
+    net, refiner = load_nets(ctx, settings)
+    pipeline = FacePipeline(net, settings, refiner)
     node = ctx.node()
     log = node.log
     warn = RateLimitedLog(log)
@@ -143,7 +160,7 @@ def run(ctx: ServiceContext) -> int:
         diag.values["target_changes"] = pipeline.tracker.target_changes
         if debug_pub.has_subscribers():
             jpeg = draw.encode_jpeg(
-                draw.render(bgr, result.faces, result.target, result.estimate),
+                draw.render(bgr, result.faces, result.target, result.estimate, result.measured),
                 settings.debug_jpeg_quality,
             )
             if jpeg is not None:

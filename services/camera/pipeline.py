@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
 from buddybot.camera import blazeface as bf
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.geometry import DistanceEstimate, Intrinsics, back_project, estimate_distance
@@ -25,11 +26,19 @@ class FaceResult:
     estimate: DistanceEstimate | None
     point: tuple[float, float, float] | None
     raw_point: tuple[float, float, float] | None
+    measured: bf.Detection | None
+    """The followed face as measured (refined when a refiner is set)."""
 
 
 class FacePipeline:
-    def __init__(self, net: FaceNet, settings: FaceDetectorSettings) -> None:
+    """Detector `net` on the whole frame; optional `refiner` (the short-range
+    model) re-detects the followed face in a crop for a precise size and eyes."""
+
+    def __init__(self, net: FaceNet, settings: FaceDetectorSettings,
+                 refiner: FaceNet | None = None) -> None:
         self.net = net
+        self.refiner = refiner
+        self.refined = 0
         self.s = settings
         self.tracker = TargetTracker(switch_after_s=settings.switch_after_s)
         self.smoother = PointSmoother(settings.min_cutoff_hz, settings.beta)
@@ -48,14 +57,20 @@ class FacePipeline:
         t = stamp_ns * 1e-9
         target, new_person = self.tracker.select(faces, t)
         if target is None:
-            return FaceResult(faces, None, None, None, None)
+            return FaceResult(faces, None, None, None, None, None)
         k = self.intrinsics(bgr.shape[1], bgr.shape[0])
         eye_m = self.s.eye_distance_m if self.s.eye_distance_m > 0 else None
-        est = estimate_distance(target, k.fx, self.s.face_width_m, eye_m)
-        u, v = target.centre
+        measured = target
+        if self.refiner is not None:
+            better = self.refiner.refine(bgr, target)
+            if better is not None:
+                measured = better
+                self.refined += 1
+        est = estimate_distance(measured, k.fx, self.s.face_width_m, eye_m)
+        u, v = measured.centre
         raw = back_project(u, v, est.z_m, k)
         if not self.s.smoothing:
-            return FaceResult(faces, target, est, raw, raw)
+            return FaceResult(faces, target, est, raw, raw, measured)
         if new_person:
             self.smoother.reset()
-        return FaceResult(faces, target, est, self.smoother(raw, t), raw)
+        return FaceResult(faces, target, est, self.smoother(raw, t), raw, measured)

@@ -16,6 +16,7 @@ from typing import Literal, Protocol
 
 import cv2
 import numpy as np
+
 from buddybot.camera.sim import SimCamera
 
 Kind = Literal["device", "url", "sequence", "file", "sim"]
