@@ -209,13 +209,16 @@ class Publisher(Generic[T]):
             self._plain = node.session.declare_publisher(key, **options)
             self._z = self._plain
         node._declared.append(self._z)
+        self._encode = topic.codec.encode
+        self._put = self._z.put
 
     def put(self, msg: T) -> None:
-        self._z.put(self.topic.codec.encode(msg), encoding=self._encoding)
+        """Encode and put (the encoding was set once, at declaration)."""
+        self._put(self._encode(msg))
 
     def put_bytes(self, payload: bytes) -> None:
         """Put an already encoded payload (for tools and tests)."""
-        self._z.put(payload, encoding=self._encoding)
+        self._put(payload)
 
     def has_subscribers(self) -> bool:
         """Whether anyone listens (a latched publisher always answers True)."""
@@ -360,39 +363,45 @@ class Node:
         key = self.key(topic, **params)
         decode = topic.codec.decode
         msg_type = topic.type
-        rel = self.relative
+        relative_keys: dict[str, str] = {}  # key text -> relative key, computed once
+
+        def rel(key_expr: zenoh.KeyExpr) -> str:
+            text = str(key_expr)
+            found = relative_keys.get(text)
+            if found is None:
+                found = relative_keys[text] = self.relative(text)
+            return found
 
         def on_error(exc: BaseException) -> None:
             self.diagnostics.increment("callback_errors")
-            self._warn.warning(
-                f"cb:{key}", "handler for %s failed: %r", key, exc, )
+            self._warn.warning(f"cb:{key}", "handler for %s failed: %r", key, exc)
 
-        sink: Callable[..., None]
-        if delivery == "inline":
-            def sink(msg: Any, k: str) -> None:
-                try:
-                    callback(msg, k)
-                except Exception as exc:
-                    on_error(exc)
-        else:
+        inline = delivery == "inline"
+        sink: Callable[..., None] = callback
+        if not inline:
             worker = _Worker(f"{self.name}:{topic.pattern}", callback, delivery == "latest",
                              queue_size, on_error)
             self._workers.append(worker)
             sink = worker.submit
+        put_kind = zenoh.SampleKind.PUT
+        bad = (msgspec.DecodeError, msgspec.ValidationError)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            if sample.kind != zenoh.SampleKind.PUT:
+            if sample.kind != put_kind:
                 return
             try:
                 msg = decode(sample.payload.to_bytes(), msg_type)
-            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            except bad as exc:
                 self.diagnostics.increment("malformed")
                 self._warn.warning(
                     f"bad:{key}", "dropped malformed %s on %s: %s",
                     msg_type.__name__, sample.key_expr, exc,
                 )
                 return
-            sink(msg, rel(str(sample.key_expr)))
+            try:
+                sink(msg, rel(sample.key_expr))
+            except Exception as exc:  # only inline handlers raise here
+                on_error(exc)
 
         use_history = topic.latched if history is None else history
         if use_history:
