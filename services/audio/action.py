@@ -49,6 +49,9 @@ class ActionServer:
         self.lock = threading.Lock()
         self.status = node.publisher(keys.PLAY_SOUND_STATUS)
         self.player_alive = False
+        """The player's liveliness token is there and it published device_free since
+        (its token comes before its queryables; device_free comes after them)."""
+        self._token = False
         self.device_free: bool | None = None
         self._goals: queue.SimpleQueue[tuple[str, str] | None] = queue.SimpleQueue()
         """Work for the goal thread: (goal id, sound) to play, ("", "") = player lost."""
@@ -83,13 +86,16 @@ class ActionServer:
         """Liveliness of the player (Zenoh's thread: only set a flag and hand over)."""
         alive = sample.kind == zenoh.SampleKind.PUT
         with self.lock:
-            self.player_alive = alive
+            self._token = alive
+            if not alive:
+                self.player_alive = False
         if not alive:
             self._goals.put(("", ""))
 
     def _on_device_free(self, msg: m.Bool, _key: str) -> None:
         with self.lock:
             self.device_free = msg.data
+            self.player_alive = self._token
             if msg.data:
                 self._publish(self.book.device_free(time.monotonic()))
 

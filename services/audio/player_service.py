@@ -94,8 +94,9 @@ def run(ctx: ServiceContext) -> int:
             node.log.warning("configured sound unusable: %s", problem)
             if opened is not None and not opened.warning:
                 diag.set("WARN", problem)
-        free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
         _serve(node, player)
+        # Last: the action server takes this first sample as "the player answers now".
+        free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
         node.log.info("audio player ready (backend %s, %d Hz, %d channels)",
                       player.backend, settings.sample_rate, settings.channels)
         node.spin()
