@@ -1,0 +1,85 @@
+"""Target choice and One-Euro smoothing (pure, time passed in)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from buddybot.camera import blazeface as bf
+from buddybot.camera.tracking import OneEuro, PointSmoother, TargetTracker
+
+
+def face(cx: float, cy: float, size: float, score: float = 0.9) -> bf.Detection:
+    h = size / 2
+    return bf.Detection((cx - h, cy - h, cx + h, cy + h), score, np.zeros((6, 2), np.float32))
+
+
+def test_one_euro_removes_jitter_of_a_still_value() -> None:
+    rng = np.random.default_rng(1)
+    f = OneEuro(min_cutoff=1.0, beta=0.5)
+    raw = 1.0 + rng.normal(0, 0.02, 300)
+    out = np.array([f(float(x), i / 30) for i, x in enumerate(raw)])
+    assert np.std(out[30:]) < np.std(raw[30:]) / 3
+
+
+def test_one_euro_follows_a_moving_value_with_little_lag() -> None:
+    f = OneEuro(min_cutoff=1.0, beta=2.0)
+    t = np.arange(90) / 30
+    out = [f(float(0.5 * ti), float(ti)) for ti in t]  # 0.5 m/s ramp
+    assert out[-1] == pytest.approx(0.5 * t[-1], abs=0.05)
+
+
+def test_one_euro_ignores_a_repeated_stamp() -> None:
+    f = OneEuro()
+    assert f(1.0, 1.0) == 1.0
+    assert f(5.0, 1.0) == 1.0
+
+
+def test_point_smoother_restarts_after_a_gap() -> None:
+    s = PointSmoother(reset_after_s=0.5)
+    s((1.0, 0.0, 0.0), 0.0)
+    s((1.0, 0.0, 0.0), 0.033)
+    assert s((3.0, 1.0, 1.0), 2.0) == (3.0, 1.0, 1.0)
+
+
+def test_first_choice_is_the_largest_face() -> None:
+    tr = TargetTracker()
+    chosen, new = tr.select([face(100, 100, 60), face(400, 100, 120)], 0.0)
+    assert chosen is not None and chosen.centre[0] == 400 and new
+
+
+def test_stays_with_the_same_person_when_another_gets_bigger() -> None:
+    tr = TargetTracker()
+    tr.select([face(100, 100, 100), face(400, 100, 80)], 0.0)
+    for i in range(1, 60):
+        t = i / 30
+        # person B walks closer and becomes much larger; A moves a little
+        chosen, new = tr.select([face(400, 100, 80 + 3 * i), face(100 + i, 100, 100)], t)
+        assert chosen is not None and chosen.centre[0] == 100 + i and not new
+    assert tr.target_changes == 1
+
+
+def test_a_missed_frame_does_not_make_the_target_jump() -> None:
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(100, 100, 100), face(400, 100, 80)], 0.0)
+    chosen, _ = tr.select([face(400, 100, 80)], 0.033)  # A missed for one frame
+    assert chosen is None
+    chosen, new = tr.select([face(102, 100, 100), face(400, 100, 80)], 0.066)
+    assert chosen is not None and chosen.centre[0] == 102 and not new
+
+
+def test_switches_when_the_target_has_really_gone() -> None:
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(100, 100, 100), face(400, 100, 80)], 0.0)
+    chosen = None
+    for i in range(1, 30):
+        chosen, new = tr.select([face(400, 100, 80)], i / 30)
+        if chosen is not None:
+            assert new and i / 30 >= 0.5
+            break
+    assert chosen is not None and chosen.centre[0] == 400
+    assert tr.target_changes == 2
+
+
+def test_no_faces_no_target() -> None:
+    assert TargetTracker().select([], 0.0) == (None, False)
