@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 import serial
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
@@ -42,7 +43,7 @@ class SensorStatus:
     skipped_bytes: int = 0
     clamped: int = 0
     reconnects: int = 0
-    last_error: str = ""
+    last_error: str = "connecting"
     ever_connected: bool = False
     last_frame: float = field(default=0.0)
 

@@ -40,6 +40,7 @@ class LD2410Client:
         self._clock = clock
         self._parser = p.Parser()
         self.enable_info: p.EnableInfo | None = None
+        self._configuring = False
 
     def command(self, frame: bytes, word: int) -> p.Ack:
         """Send `frame` and return the ACK for `word`; RadarError if none or failed."""
@@ -71,10 +72,13 @@ class LD2410Client:
         """Enable configuration; end it afterwards even when a command failed."""
         ack = self.command(p.enable_config(), p.CMD_ENABLE_CONFIG)
         self.enable_info = p.decode_enable(ack.data)
+        self._configuring = True
         try:
             yield self.enable_info
         finally:
-            self.command(p.end_config(), p.CMD_END_CONFIG)
+            if self._configuring:  # a restart already left configuration mode
+                self._configuring = False
+                self.command(p.end_config(), p.CMD_END_CONFIG)
 
     # -- the operations (call inside `configuring()`) --
 
@@ -105,7 +109,9 @@ class LD2410Client:
         self.command(p.set_resolution(metres_per_gate), p.CMD_SET_RESOLUTION)
 
     def restart(self) -> None:
+        """Restart the module; it reboots out of configuration mode, so no end command."""
         self.command(p.restart(), p.CMD_RESTART)
+        self._configuring = False
 
     def factory_reset(self) -> None:
         self.command(p.factory_reset(), p.CMD_FACTORY_RESET)

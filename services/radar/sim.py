@@ -30,7 +30,7 @@ log = logging.getLogger("buddybot.radar.sim")
 FRAME_PERIOD_S = 0.1  # the module reports about 10 times per second
 DEFAULT_MOVING_SENSITIVITY = (50, 50, 40, 30, 20, 15, 15, 15, 15)
 DEFAULT_STILL_SENSITIVITY = (0, 0, 40, 40, 30, 30, 20, 20, 20)
-FIRMWARE = (0x0001, 0x0107, 0x22091615)  # type, major (1.07), minor
+FIRMWARE = (0x0100, 0x0107, 0x22091615)  # type, major (1.07), minor
 
 
 def default_parameters() -> p.Parameters:

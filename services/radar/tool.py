@@ -1,11 +1,11 @@
 """`buddybot radar ...`: configure an LD2410 on a port (any pyserial URL).
 
-    buddybot radar --port /dev/ttyUSB0 info
-    buddybot radar --port socket://esp32.local:8881 engineering on
-    buddybot radar --port URL set-gates --moving 6 --still 6 --duration 10
-    buddybot radar --port URL set-sensitivity --gate all --moving 40 --still 30
-    buddybot radar --port URL set-resolution 0.2
-    buddybot radar --port URL restart | factory-reset
+    buddybot radar info --port /dev/ttyUSB0
+    buddybot radar engineering on --port socket://esp32.local:8881
+    buddybot radar set-gates --moving 6 --still 6 --duration 10 --port URL
+    buddybot radar set-sensitivity --gate all --moving 40 --still 30 --port URL
+    buddybot radar set-resolution 0.2 --port URL
+    buddybot radar restart --port URL      (or factory-reset)
 
 Every verb runs inside enable configuration ... end configuration. The
 port must not be read by a running radar bridge at the same time. Exit
@@ -19,6 +19,7 @@ import json
 import sys
 
 import serial
+
 from buddybot.core.service import ServiceContext
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
@@ -27,28 +28,37 @@ from buddybot.radar.ld2410 import Parameters, ProtocolError
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.formatter_class = argparse.RawDescriptionHelpFormatter
     parser.description = __doc__
-    parser.add_argument("--port", metavar="URL",
+    # The action comes first (`buddybot radar info --port URL`): the CLI hands
+    # a tool everything after its verb, and options go to every action.
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--port", metavar="URL",
                         help="pyserial URL of the sensor (default: first [radar_bridge] sensor)")
-    parser.add_argument("--baudrate", type=int, help="serial speed (default 256000)")
-    parser.add_argument("--timeout", type=float, default=1.0,
+    common.add_argument("--baudrate", type=int, help="serial speed (default 256000)")
+    common.add_argument("--timeout", type=float, default=1.0,
                         help="seconds to wait for each ACK (default 1.0)")
-    parser.add_argument("--json", action="store_true", help="print results as JSON")
+    common.add_argument("--json", action="store_true", help="print results as JSON")
+    common.add_argument("--config", metavar="FILE", default=argparse.SUPPRESS,
+                        help="TOML config file (default: $BUDDYBOT_CONFIG)")
     verbs = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    verbs.add_parser("info", help="firmware version, parameters, distance resolution")
-    p = verbs.add_parser("engineering", help="engineering mode (per-gate energies) on or off")
+
+    def action(name: str, help_text: str) -> argparse.ArgumentParser:
+        return verbs.add_parser(name, help=help_text, description=help_text, parents=[common])
+
+    action("info", "firmware version, parameters, distance resolution")
+    p = action("engineering", "engineering mode (per-gate energies) on or off")
     p.add_argument("state", choices=["on", "off"])
-    p = verbs.add_parser("set-gates", help="farthest moving/still gate and no-one duration")
+    p = action("set-gates", "farthest moving/still gate and no-one duration")
     p.add_argument("--moving", type=int, help="max moving gate 2..8 (default: keep)")
     p.add_argument("--still", type=int, help="max still gate 2..8 (default: keep)")
     p.add_argument("--duration", type=int, help="no-one duration, s (default: keep)")
-    p = verbs.add_parser("set-sensitivity", help="moving/still sensitivity of a gate or all")
+    p = action("set-sensitivity", "moving/still sensitivity of a gate or all")
     p.add_argument("--gate", required=True, help="gate 0..8 or 'all'")
     p.add_argument("--moving", type=int, required=True, help="0..100")
     p.add_argument("--still", type=int, required=True, help="0..100")
-    p = verbs.add_parser("set-resolution", help="metres per gate: 0.75 (default) or 0.2")
+    p = action("set-resolution", "metres per gate: 0.75 (default) or 0.2")
     p.add_argument("metres", type=float, choices=[0.75, 0.2])
-    verbs.add_parser("restart", help="restart the module")
-    verbs.add_parser("factory-reset", help="restore factory settings (effective after restart)")
+    action("restart", "restart the module")
+    action("factory-reset", "restore factory settings (effective after restart)")
 
 
 def _params_dict(params: Parameters) -> dict[str, object]:

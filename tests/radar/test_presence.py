@@ -1,0 +1,214 @@
+"""The presence rule (pure): seed rule, hysteresis, holds, stale sensors."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from buddybot.core.messages import PresenceState, PresenceTarget
+from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
+from buddybot.radar.scenarios import SCENARIOS
+
+IN, OUT = PresenceState.IN_RANGE, PresenceState.OUT_OF_RANGE
+MOVING, STANDING = PresenceTarget.MOVING, PresenceTarget.STANDING
+
+
+def at(cm: int, state: int = 1) -> Reading:
+    return Reading(state, cm, cm, cm)
+
+
+NOBODY = Reading(0, 0)
+
+
+class Clock:
+    """Feeds readings at 10 Hz and collects verdicts."""
+
+    def __init__(self, rules: PresenceRules | None = None) -> None:
+        self.tracker = PresenceTracker(rules or PresenceRules())
+        self.t = 0.0
+        self.verdicts: list[Verdict] = []
+
+    def feed(self, reading: Reading, seconds: float = 0.1, sensor: str = "0/0") -> None:
+        steps = max(1, round(seconds / 0.1))
+        for _ in range(steps):
+            v = self.tracker.update(sensor, reading, self.t, round(self.t * 1e9))
+            if v:
+                self.verdicts.append(v)
+            self.t += 0.1
+
+    def idle(self, seconds: float) -> None:
+        for _ in range(round(seconds / 0.05)):
+            v = self.tracker.tick(self.t)
+            if v:
+                self.verdicts.append(v)
+            self.t += 0.05
+
+    @property
+    def states(self) -> list[tuple[PresenceState, PresenceTarget]]:
+        return [(v.presence, v.target) for v in self.verdicts]
+
+
+def test_seed_rule_nearest_valid_sensor_wins() -> None:
+    tracker = PresenceTracker(PresenceRules(range_m=2.0))
+    assert tracker.update("0/0", at(300), 0.0, 1) is None
+    # Sensor 1 has no target at a smaller distance: ignored (NO_TARGET).
+    assert tracker.update("0/1", Reading(0, 50), 0.0, 2) is None
+    v = tracker.update("0/2", at(150, 2), 0.0, 3)
+    assert v == Verdict(IN, STANDING, 1.5, 3)
+
+
+def test_entering_needs_no_hold_and_is_stamped_with_the_frame() -> None:
+    c = Clock()
+    c.feed(at(350), 1.0)
+    c.feed(at(199))
+    assert c.states == [(IN, MOVING)]
+    assert c.verdicts[0].stamp_ns == 1_000_000_000
+    assert c.verdicts[0].distance_m == 1.99
+
+
+def test_exactly_on_the_range_is_in_range() -> None:
+    c = Clock()
+    c.feed(at(200))
+    assert c.states == [(IN, MOVING)]
+
+
+@pytest.mark.parametrize(("state", "target"), [(1, MOVING), (2, STANDING), (3, MOVING)])
+def test_standing_only_for_stationary_only(state: int, target: PresenceTarget) -> None:
+    c = Clock()
+    c.feed(at(100, state))
+    assert c.states == [(IN, target)]
+
+
+def test_hysteresis_jitter_around_the_border_does_not_flap() -> None:
+    c = Clock(PresenceRules(range_m=2.0, exit_margin_m=0.3, absence_hold_s=0.0))
+    for cm in [195, 205, 215, 190, 225, 229, 210, 199] * 5:
+        c.feed(at(cm))
+    assert c.states == [(IN, MOVING)]
+    c.feed(at(231))
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+    c.feed(at(210))  # re-entering needs the range itself
+    assert len(c.verdicts) == 2
+    c.feed(at(200))
+    assert c.states[-1] == (IN, MOVING)
+
+
+def test_absence_hold_bridges_no_target_blips() -> None:
+    c = Clock(PresenceRules(absence_hold_s=3.0))
+    c.feed(at(100))
+    for _ in range(10):
+        c.feed(NOBODY, 1.0)
+        c.feed(at(100), 0.2)
+    assert c.states == [(IN, MOVING)]
+    c.feed(NOBODY, 2.9)
+    assert len(c.verdicts) == 1
+    c.feed(NOBODY, 0.3)
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+    assert c.verdicts[-1].distance_m == 0.0
+
+
+def test_absence_hold_expires_on_ticks_without_frames_from_the_person() -> None:
+    c = Clock(PresenceRules(absence_hold_s=1.0, stale_after_s=5.0))
+    c.feed(at(100))
+    c.feed(at(400), 0.1)  # walked out of range, sensor then quiet
+    c.idle(1.2)
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+    assert c.verdicts[-1].distance_m == 4.0
+
+
+def test_target_kind_change_needs_to_last() -> None:
+    c = Clock(PresenceRules(target_hold_s=1.0))
+    c.feed(at(100, 2))
+    for _ in range(20):  # fidgeting: STATIONARY/BOTH flicker
+        c.feed(at(100, 3), 0.3)
+        c.feed(at(100, 2), 0.3)
+    assert c.states == [(IN, STANDING)]
+    c.feed(at(100, 1), 1.2)
+    assert c.states == [(IN, STANDING), (IN, MOVING)]
+
+
+def test_stale_sensor_is_excluded_not_taken_for_nobody() -> None:
+    rules = PresenceRules(absence_hold_s=1.0, stale_after_s=1.5)
+    c = Clock(rules)
+    c.feed(at(100), sensor="0/0")
+    assert c.states == [(IN, MOVING)]
+    # Sensor 0/0 falls silent; there is no other sensor: the verdict is kept.
+    c.idle(10.0)
+    assert c.tracker.stale_sensors(c.t) == ["0/0"]
+    assert c.states == [(IN, MOVING)]
+    # Another sensor appears and sees nobody: the silent one's "person" is not
+    # counted, so after the hold the robot believes the fresh sensor.
+    c.feed(NOBODY, 1.2, sensor="0/1")
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+
+
+def test_stale_sensors_last_person_does_not_keep_presence() -> None:
+    c = Clock(PresenceRules(absence_hold_s=0.5, stale_after_s=1.0))
+    c.feed(at(100), sensor="0/0")
+    c.feed(NOBODY, sensor="0/1")
+    for _ in range(30):  # only 0/1 keeps talking
+        c.feed(NOBODY, sensor="0/1")
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+
+
+def test_sensor_coming_back_is_used_again() -> None:
+    c = Clock(PresenceRules(absence_hold_s=0.5, stale_after_s=1.0))
+    c.feed(NOBODY, 0.5, sensor="0/0")
+    c.idle(2.0)
+    assert c.tracker.stale_sensors(c.t) == ["0/0"]
+    c.feed(at(100), sensor="0/0")
+    assert c.tracker.stale_sensors(c.t) == []
+    assert c.states == [(IN, MOVING)]
+
+
+def test_zero_detection_distance_falls_back_to_the_reported_kind() -> None:
+    assert Reading(2, 0, 50, 180).distance_m == 1.8
+    assert Reading(1, 0, 50, 180).distance_m == 0.5
+
+
+@pytest.mark.parametrize("bad", [
+    {"range_m": 0}, {"exit_margin_m": -1}, {"absence_hold_s": -0.1}, {"stale_after_s": 0},
+])
+def test_rules_refuse_nonsense(bad: dict[str, float]) -> None:
+    with pytest.raises(ValueError):
+        PresenceRules(**bad)
+
+
+def _run_scenario(name: str, seconds: float, rules: PresenceRules | None = None) -> Clock:
+    scenario = SCENARIOS[name]
+    rng = random.Random(3)
+    c = Clock(rules)
+    t = 0.0
+    while t < seconds:
+        target = scenario(t, rng)
+        c.feed(Reading(target.state, target.detection_cm, target.moving_cm, target.still_cm))
+        t += 0.1
+    return c
+
+
+def test_walk_in_scenario_gives_one_visit() -> None:
+    c = _run_scenario("walk-in", 20.0)
+    presence = [v.presence for v in c.verdicts]
+    assert presence[0] == IN and presence[-1] == OUT
+    assert presence.count(OUT) == 1
+    assert [p for i, p in enumerate(presence) if i == 0 or presence[i - 1] != p] == [IN, OUT]
+
+
+def test_visit_loop_is_20_to_30_s_in_range_then_away() -> None:
+    c = _run_scenario("visit", 38.0 * 2)
+    edges = [(v.presence, v.stamp_ns / 1e9) for v in c.verdicts
+             if v.presence == OUT or (v.target == MOVING and v.presence == IN)]
+    ins = [t for p, t in edges if p == IN]
+    outs = [t for p, t in edges if p == OUT]
+    assert len(outs) == 2
+    assert 20.0 <= outs[0] - ins[0] <= 30.0
+
+
+def test_passer_by_never_in_range() -> None:
+    assert _run_scenario("passer-by", 30.0).verdicts == []
+
+
+def test_noisy_sensor_does_not_flap() -> None:
+    c = _run_scenario("noisy", 60.0)
+    assert [v.presence for v in c.verdicts].count(OUT) == 0
+    assert c.verdicts[0].presence == IN
