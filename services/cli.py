@@ -109,6 +109,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"where the router listens (default {DEFAULT_ENDPOINT})")
     p.add_argument("--only", action="append", metavar="SERVICE",
                    help="start only these services (repeatable)")
+    p.add_argument("--status-period", type=float, default=5.0, metavar="S",
+                   help="print a status line every S seconds (0: never)")
 
     p = verb("router", _router, "run a Zenoh router")
     p.add_argument("--listen", action="append", metavar="ENDPOINT",

@@ -21,7 +21,9 @@ from dataclasses import dataclass, field
 from typing import IO
 
 from buddybot.core import registry
+from buddybot.core.node import open_session, zenoh_config
 from buddybot.core.service import ServiceContext
+from buddybot.core.status import StatusMonitor
 
 log = logging.getLogger("buddybot.up")
 
@@ -147,17 +149,47 @@ def up(ctx: ServiceContext) -> int:
         if any(e.name == "eye-renderer" for e in entries):
             port = ctx.config.eye_renderer.port
             log.info("eyes: http://127.0.0.1:%d/eyes?eye=both", port)
-        _supervise([router, *children], ctx.stop, out, lock)
+        monitor = _monitor(ctx, connect, [e.name for e in entries])
+        try:
+            _supervise([router, *children], ctx.stop, out, lock, monitor, args.status_period)
+        finally:
+            if monitor is not None:
+                monitor.close()
+                monitor.session_close()
     finally:
         _stop_all(children)  # services first, so they leave while the router is up
         _stop_all([router])
     return 0
 
 
+class _Monitor(StatusMonitor):
+    def session_close(self) -> None:
+        self._session.close()
+
+
+def _monitor(ctx: ServiceContext, connect: str, expected: list[str]) -> _Monitor | None:
+    """A status session on our own router; None if it cannot be had (status is optional)."""
+    if ctx.args.status_period <= 0:
+        return None
+    try:
+        session = open_session(zenoh_config(connect=[connect]), ctx.stop)
+    except ConnectionError as exc:
+        log.warning("no status line: %s", exc)
+        return None
+    return None if session is None else _Monitor(session, ctx.robot, expected)
+
+
 def _supervise(children: list[Child], stop: threading.Event, out: IO[str],
-               lock: threading.Lock) -> None:
+               lock: threading.Lock, monitor: _Monitor | None, period: float) -> None:
+    next_status = time.monotonic() + period
     while not stop.wait(0.2):
         now = time.monotonic()
+        if monitor is not None and now >= next_status:
+            next_status = now + period
+            line = monitor.line(sum(c.restarts for c in children))
+            with lock:
+                out.write(f"[{'status':<14}] {line}\n")
+                out.flush()
         for child in children:
             if child.alive() or child.proc is None:
                 if child.alive() and now - child.started > STABLE_S:

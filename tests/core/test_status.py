@@ -1,0 +1,35 @@
+"""The `up` status line, formatted from a RobotStatus without a robot."""
+
+from __future__ import annotations
+
+from collections import deque
+
+from buddybot.core import messages as m
+from buddybot.core.status import RobotStatus, format_status, rate_hz
+
+
+def test_rate_counts_only_the_window() -> None:
+    arrivals = deque([0.0, 7.1, 7.5, 8.0, 9.0, 9.9])
+    assert rate_hz(arrivals, now=10.0, window_s=3.0) == 5 / 3.0
+
+
+def test_status_line_reports_what_an_operator_needs() -> None:
+    status = RobotStatus(expected=["camera", "controller", "eyes"], up=["camera", "eyes"])
+    status.radar_arrivals.extend([9.1, 9.2, 9.3])
+    status.presence = m.PresenceDetection(
+        stamp_ns=1, target_state=m.PresenceTarget.MOVING,
+        presence_state=m.PresenceState.IN_RANGE, distance_m=1.234)
+    status.face_distance_m, status.face_seen_at = 0.8, 9.5
+    status.expression = m.ExpressionAction.EYE_AWAKE
+    status.camera_fps = 29.96
+    status.restarts = 2
+    line = format_status(status, now=10.0)
+    assert line == ("nodes 2/3 (down: controller) | radar 1.0 Hz | camera 30.0 fps | "
+                    "presence IN_RANGE 1.23 m | face 0.80 m | eyes EYE_AWAKE | restarts 2")
+
+
+def test_stale_face_and_unknown_state() -> None:
+    status = RobotStatus(expected=["a"], up=["a"])
+    status.face_distance_m, status.face_seen_at = 0.8, 1.0
+    line = format_status(status, now=10.0)
+    assert line == "nodes 1/1 | radar 0.0 Hz | presence ? | face - | eyes ?"
