@@ -15,11 +15,13 @@ the file).
 from __future__ import annotations
 
 import collections
+import contextlib
 import logging
+import os
 import queue
 import threading
 import time
-from collections.abc import Callable, Generator
+from collections.abc import Callable, Generator, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -115,12 +117,32 @@ def _open(backends: list[miniaudio.Backend], device: str | None, settings: Audio
     )
 
 
+@contextlib.contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """Silence the C libraries while probing: libasound prints ~30 lines of
+    "cannot find card" on a box without sound, and the fallback warning
+    already says what happened."""
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "wb") as null:
+            os.dup2(null.fileno(), 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+
+
 def open_device(settings: AudioPlayerSettings) -> OpenedDevice:
     """Open the configured backend; "auto" falls back to the null device with a warning."""
     if settings.backend == "auto":
         hardware = [b for b in _HARDWARE_BACKENDS if miniaudio.is_backend_enabled(b)]
         try:
-            dev = _open(hardware, settings.device, settings)
+            with _quiet_stderr():
+                dev = _open(hardware, settings.device, settings)
             return OpenedDevice(dev, dev.backend)
         except (miniaudio.MiniaudioError, AudioError) as exc:
             reason = f"no audio hardware ({_why(exc)}); playing on the null device (silent)"
