@@ -410,6 +410,17 @@ def _decode_command(payload: bytes) -> Ack | Command:
     return Command(word, bytes(payload[2:]))
 
 
+def _early_report_check(length: int, kind: int, head: int) -> str:
+    """What can be judged from a report's first 8 bytes ("" = plausible so far)."""
+    if kind == TYPE_BASIC:
+        return "" if length == BASIC_LENGTH and head == DATA_HEAD else "bad basic frame start"
+    if kind == TYPE_ENGINEERING:
+        # 13 fixed + 2..18 gate energies + 0 or 2 extra + 2 end bytes.
+        ok = 17 <= length <= MAX_REPORT_LENGTH and head == DATA_HEAD
+        return "" if ok else "bad engineering frame start"
+    return "bad data type"
+
+
 class Parser:
     """Feed arbitrary chunks with `feed()`; get every complete valid frame back.
 
@@ -460,6 +471,14 @@ class Parser:
                 self._bad("length too large")
                 pos = start + 1
                 continue
+            if is_report and end - start >= 8:
+                # Reject a false header as soon as its first bytes disagree, instead
+                # of holding real frames back until its claimed length has arrived.
+                why = _early_report_check(length, buf[start + 6], buf[start + 7])
+                if why:
+                    self._bad(why)
+                    pos = start + 1
+                    continue
             frame_end = start + 6 + length + 4
             if frame_end > end:
                 break
