@@ -1,0 +1,228 @@
+"""The eye page in a real Chromium: follows gaze, closes lids, blinks, reconnects.
+
+Data path in these tests is the real one: probe -> router -> eyes driver
+process -> router -> eye-renderer process -> WebSocket -> page. Positions
+are measured in screenshots (pixels), not read back from the page's
+variables; the page's `window.eyes` is only used to wait for the
+animation to settle. Screenshots of every expression are saved to
+test-artifacts/eyes/ for a person to look at.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+import numpy as np
+import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Process, free_port, retry_until, wait_port
+
+from ..conftest import ARTIFACTS
+
+pytestmark = [pytest.mark.integration, pytest.mark.browser]
+
+A = m.ExpressionAction
+W, H = 640, 320
+SHOTS = ARTIFACTS / "eyes"
+
+
+def start_renderer(spawn: Callable[..., Process], port: int | None = None) -> tuple[Process, int]:
+    port = port or free_port()
+    proc = spawn("eye-renderer", "--port", str(port), "--no-browser")
+    wait_port(port, 30)
+    return proc, port
+
+
+def open_page(browser: Any, port: int, eye: str = "left", extra: str = "&blink=0&saccade=0",
+              width: int = W, height: int = H) -> Any:
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.goto(f"http://127.0.0.1:{port}/eyes?eye={eye}{extra}")
+    page.wait_for_function("window.eyes && window.eyes.connected", timeout=20_000)
+    return page
+
+
+def settled(page: Any, timeout_ms: int = 15_000) -> None:
+    """Wait until every animated value is at its target (within a hair)."""
+    page.wait_for_function(
+        """() => {
+          const e = window.eyes, c = e.cur, t = e.target, x = t.expression;
+          const near = (a, b, tol) => Math.abs(a - b) < tol;
+          return near(c.yaw, t.yaw, 0.05) && near(c.pitch, t.pitch, 0.05)
+            && near(c.dilation, t.dilation, 0.2)
+            && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top, 0.1)
+                                        && near(c.lids[s].bottom, t.lids[s].bottom, 0.1))
+            && near(c.sad, x === 4 ? 1 : 0, 0.01) && near(c.grin, x === 3 ? 1 : 0, 0.01)
+            && near(c.love, x === 6 ? 1 : 0, 0.01) && near(c.star, x === 7 ? 1 : 0, 0.01);
+        }""", timeout=timeout_ms)
+
+
+def shot(page: Any, name: str | None = None) -> np.ndarray:
+    png = page.screenshot()
+    if name:
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        (SHOTS / f"{name}.png").write_bytes(png)
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None
+    return img
+
+
+def pupil_centre(img: np.ndarray) -> tuple[float, float]:
+    """Centroid of the pure-black pupil pixels (background and lids are navy)."""
+    mask = img.max(axis=2) < 12
+    ys, xs = np.nonzero(mask)
+    assert len(xs) > 50, "no pupil visible"
+    return float(xs.mean()), float(ys.mean())
+
+
+def sclera_pixels(img: np.ndarray) -> int:
+    return int((img.min(axis=2) > 225).sum())
+
+
+def colour_pixels(img: np.ndarray, bgr: tuple[int, int, int], tol: int = 30) -> int:
+    return int((np.abs(img.astype(int) - np.array(bgr)).max(axis=2) < tol).sum())
+
+
+def gaze(probe: Node, page: Any, yaw_deg: float, pitch_deg: float, stamp: int) -> None:
+    """Publish eye control (radians) to the driver until the page has the new target."""
+    pub = probe.publisher(keys.EYE_CONTROL)
+    msg = m.EyeControl(stamp_ns=stamp, yaw=math.radians(yaw_deg), pitch=math.radians(pitch_deg),
+                       target_distance_cm=120)
+
+    def arrived() -> bool:
+        pub.put(msg)
+        target = page.evaluate("[window.eyes.target.yaw, window.eyes.target.pitch]")
+        return abs(target[0] - yaw_deg) < 1e-6 and abs(target[1] - pitch_deg) < 1e-6
+
+    retry_until(arrived, 20, 0.2, f"page target yaw {yaw_deg} pitch {pitch_deg}")
+    settled(page)
+
+
+def test_page_follows_published_direction(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    spawn("eyes")
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "left")
+    cx0, cy0 = pupil_centre(shot(page))
+    assert abs(cx0 - W / 2) < 6 and abs(cy0 - H / 2) < 6      # starts looking ahead
+
+    gaze(probe, page, 30, 0, 1)
+    x_left, _ = pupil_centre(shot(page, "direction_yaw+30"))
+    gaze(probe, page, -30, 0, 2)
+    x_right, _ = pupil_centre(shot(page, "direction_yaw-30"))
+    # Robot's left (+yaw) -> pupil to the viewer's right (+x on screen).
+    assert x_left > W / 2 + 20 and x_right < W / 2 - 20, (x_left, x_right)
+
+    gaze(probe, page, 0, 20, 3)
+    _, y_up = pupil_centre(shot(page))
+    gaze(probe, page, 0, -20, 4)
+    _, y_down = pupil_centre(shot(page))
+    assert y_up < H / 2 - 15 and y_down > H / 2 + 15, (y_up, y_down)
+    page.close()
+
+
+def test_lids_close_on_sleep_and_open_on_awake(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    spawn("eyes")
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "both")
+    open_white = sclera_pixels(shot(page))
+    assert open_white > 0.1 * W * H
+    expression = probe.publisher(keys.EXPRESSION)
+    expression.put(m.ScreenExpression(stamp_ns=1, action=A.EYE_SLEEP))
+    page.wait_for_function("window.eyes.target.lids.left.top === 50 "
+                           "&& window.eyes.target.lids.right.bottom === 50", timeout=20_000)
+    settled(page)
+    assert sclera_pixels(shot(page)) < 0.002 * open_white
+    expression.put(m.ScreenExpression(stamp_ns=2, action=A.EYE_AWAKE))
+    page.wait_for_function("window.eyes.target.lids.left.top === 0", timeout=20_000)
+    settled(page)
+    assert sclera_pixels(shot(page)) > 0.95 * open_white
+    page.close()
+
+
+def test_screenshots_of_every_expression(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    spawn("eyes")
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "both")
+    expression = probe.publisher(keys.EXPRESSION)
+    images: dict[A, np.ndarray] = {}
+    for stamp, action in enumerate(A, start=1):
+        expression.put(m.ScreenExpression(stamp_ns=stamp, action=action))
+        top = 50 if action == A.EYE_SLEEP else None
+        page.wait_for_function(
+            f"window.eyes.target.expression === {int(action)}"
+            + (f" && window.eyes.target.lids.left.top === {top}" if top else ""),
+            timeout=20_000)
+        settled(page)
+        images[action] = shot(page, f"{int(action)}_{action.name}")
+    white = {a: sclera_pixels(img) for a, img in images.items()}
+    awake = white[A.EYE_AWAKE]
+    assert white[A.EYE_SLEEP] < 0.002 * awake
+    for narrowed in (A.EYE_SLEEPY, A.EYE_GRIN, A.EYE_SAD):
+        assert white[narrowed] < 0.9 * awake, narrowed.name
+    assert white[A.EYE_SLEEPY] < white[A.EYE_SAD]
+    # Hearts are red, stars gold, and the plain iris is gone in both.
+    iris = (0xD0, 0x7F, 0x2F)  # #2f7fd0 as BGR
+    assert colour_pixels(images[A.ANIMATE_LOVE], (0x5E, 0x24, 0xE0)) > 2000
+    assert colour_pixels(images[A.ANIMATE_STAR], (0x00, 0xB4, 0xF5)) > 2000
+    assert colour_pixels(images[A.EYE_AWAKE], iris) > 2000
+    assert colour_pixels(images[A.ANIMATE_LOVE], iris) < 50
+    assert colour_pixels(images[A.ANIMATE_STAR], iris) < 50
+    # Sad lids slant: the outer corners (screen edges of the pair) droop.
+    sad = images[A.EYE_SAD]
+    col_outer = sad[:, W // 4 - 70].min(axis=1) > 225    # robot's right eye, outer side
+    col_inner = sad[:, W // 4 + 70].min(axis=1) > 225    # same eye, inner side
+    assert np.argmax(col_outer) > np.argmax(col_inner), "sad: outer corner should droop"
+    page.close()
+
+
+def test_page_blinks_and_saccades_on_its_own(
+    browser: Any, spawn: Callable[..., Process]
+) -> None:
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "both", extra="")
+    page.wait_for_function("window.eyes.stats.blinks >= 2", timeout=30_000)
+    close_ms = page.evaluate("window.eyes.stats.lastBlinkCloseMs")
+    assert 50 <= close_ms <= 120, close_ms     # ~60 ms to close, measured at frame granularity
+    # Idle eyes make small saccades without any message.
+    page.wait_for_function("Math.abs(window.eyes.cur.yaw) > 0.5 "
+                           "|| Math.abs(window.eyes.cur.pitch) > 0.5", timeout=15_000)
+    assert page.evaluate("window.eyes.stats.messages") >= 1   # only the hello
+    page.close()
+
+
+def test_page_reconnects_after_server_restart(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    spawn("eyes")
+    proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "left")
+    expression = probe.publisher(keys.EXPRESSION)   # one publisher: one latched value
+    expression.put(m.ScreenExpression(stamp_ns=1, action=A.EYE_SLEEPY))
+    page.wait_for_function("window.eyes.target.expression === 2", timeout=20_000)
+    proc.stop()
+    page.wait_for_function("!window.eyes.connected", timeout=20_000)
+    # The page keeps animating while the server is away.
+    frames = page.evaluate("window.eyes.stats.frames")
+    page.wait_for_function(f"window.eyes.stats.frames > {frames + 10}", timeout=10_000)
+    # Meanwhile the robot changes its mind; the new renderer gets it from the latched keys.
+    expression.put(m.ScreenExpression(stamp_ns=2, action=A.EYE_GRIN))
+    start_renderer(spawn, port)
+    page.wait_for_function("window.eyes.connected && window.eyes.stats.connects >= 2",
+                           timeout=30_000)
+    page.wait_for_function("window.eyes.target.expression === 3 "
+                           "&& window.eyes.target.lids.left.bottom === 28", timeout=20_000)
+    gaze(probe, page, 25, 0, 10)
+    x, _ = pupil_centre(shot(page))
+    assert x > W / 2 + 15
+    page.close()
