@@ -227,6 +227,47 @@ def accuracy() -> None:
             print(f"  {photo.name:<12} {z:3.1f} m   full box: {cells[0]:<30} refined: {cells[1]}")
 
 
+def turned(photo, yaw_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+    """The photo warped as if the head, a vertical cylinder of radius 1.6 IPD through the
+    eyes' midpoint, turned by `yaw_deg` (crude: a 2-D photo has no depth)."""
+    img = photo.bgr
+    h, w = img.shape[:2]
+    mx = photo.eyes_mid[0]
+    radius = photo.ipd_px * 1.6
+    th = np.radians(yaw_deg)
+    xs = np.arange(w, dtype=np.float32) - mx
+    phi_src = np.arcsin(np.clip(xs / radius, -1, 1)) - th
+    src = np.where(np.abs(phi_src) < np.pi / 2, radius * np.sin(phi_src), 1e6) + mx
+    mapx = np.where(np.abs(xs) < radius, src, xs + mx).astype(np.float32)
+    mapx = np.tile(mapx, (h, 1))
+    mapy = np.tile(np.arange(h, dtype=np.float32)[:, None], (1, w))
+    return cv2.remap(img, mapx, mapy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+
+
+def head_turn() -> None:
+    from tests.camera import scenes
+
+    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
+    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
+    print("head turn (synthetic cylinder warp), true distance 1.0 m: width cue / fused / "
+          "estimated yaw")
+    for photo_fn in (scenes.astronaut, scenes.grace_hopper):
+        photo = photo_fn()
+        cells = []
+        for yaw in (0, 15, 30, 45):
+            warped = scenes.Photo(photo.name, turned(photo, yaw), photo.right_pupil,
+                                  photo.left_pupil)
+            img, _ = scenes.scene(warped, 1.0)
+            r = FacePipeline(full, FaceDetectorSettings(smoothing=False), short).process(img, 1)
+            if r.point is None or r.estimate is None:
+                cells.append(f"{yaw}deg: -")
+                continue
+            e = r.estimate
+            cells.append(f"{yaw:2d}deg: {e.from_width_m:.3f}/{e.z_m:.3f}/"
+                         f"{np.degrees(e.yaw_rad):4.1f}deg")
+        print(f"  {photo.name:<12} " + "   ".join(cells))
+
+
 def jitter() -> None:
     from tests.camera import scenes
 
@@ -252,7 +293,8 @@ def main() -> None:
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--peer-python", default="/tmp/peer-venv/bin/python")
     parser.add_argument("--core", type=int, default=0, help="CPU core to pin to")
-    parser.add_argument("--skip", nargs="*", default=[], choices=["speed", "accuracy", "jitter"])
+    parser.add_argument("--skip", nargs="*", default=[],
+                        choices=["speed", "accuracy", "turn", "jitter"])
     args = parser.parse_args()
     os.sched_setaffinity(0, {args.core})
     cv2.setNumThreads(1)
@@ -260,6 +302,8 @@ def main() -> None:
         speed(args)
     if "accuracy" not in args.skip:
         accuracy()
+    if "turn" not in args.skip:
+        head_turn()
     if "jitter" not in args.skip:
         jitter()
 
