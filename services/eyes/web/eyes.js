@@ -48,6 +48,7 @@
     which, target, cur, connected: false,
     stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0, lastBlinkCloseMs: 0 },
     frameIntervals: [],          // last 1200 requestAnimationFrame intervals, ms
+    drawTimes: [],               // last 1200 per-frame update+draw costs, ms
     latency: [],                 // {stamp_ns, recv_ms, frame_ms} per direction message
     blinkNow: () => startBlink(now()),
   };
@@ -210,6 +211,7 @@
       if (iv.length > 1200) iv.shift();
     }
     lastFrame = t;
+    const work0 = now();
     updateSaccade(t);
     const yawGoal = target.yaw + saccade.yaw;
     const pitchGoal = target.pitch + saccade.pitch;
@@ -228,6 +230,8 @@
     cur.star = approach(cur.star, ex === EXPR.STAR ? 1 : 0, TAU.shape, dt);
     const blink = blinkAmount(t);
     draw(t, blink);
+    eyes.drawTimes.push(now() - work0);
+    if (eyes.drawTimes.length > 1200) eyes.drawTimes.shift();
     eyes.stats.frames++;
     if (pendingLatency) {        // first frame drawn with the new gaze target
       pendingLatency.frame_ms = epochMs();
