@@ -1,0 +1,102 @@
+"""The whole robot as separate processes on a test router, for system tests.
+
+Radar frames go through a real pty (the bridge's simulated LD2410), camera
+images come from an image sequence of a real face photo composed at known
+places, sound plays on miniaudio's null device, the eye renderer serves
+its page without a browser.
+"""
+
+from __future__ import annotations
+
+import wave
+from collections.abc import Callable
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from buddybot.camera.sim import compose, face_path
+from buddybot.core.node import Node
+from buddybot.core.testing import Process, free_port, retry_until
+from buddybot.core.tools import list_nodes
+
+Spawn = Callable[..., Process]
+
+# Everything but the radar bridge, which starts last so its scripted visitor
+# walks in only once the robot is listening.
+BASE_SERVICES: dict[str, tuple[str, ...]] = {
+    "audio-player": ("--backend", "null"),
+    "audio": (),
+    "eyes": (),
+    "controller": (),
+    "face-detector": (),
+    "radar-presence": (),
+}
+
+
+def write_face_sequence(folder: Path, n: int = 40) -> str:
+    """Frames of one face (1 m away, fx 600): first half image-left, then image-right.
+
+    Image-left is the camera's (and the robot's) left, so the eyes must turn
+    to +yaw for the first half and -yaw for the second.
+    """
+    folder.mkdir(parents=True, exist_ok=True)
+    face = cv2.imread(str(face_path()), cv2.IMREAD_COLOR)
+    assert face is not None
+    rng = np.random.default_rng(1)
+    for i in range(n):
+        background = rng.integers(70, 110, (480, 640, 3), dtype=np.uint8)
+        u = 190 if i < n // 2 else 450
+        frame = compose(background, face, None, u, 220, 240)
+        cv2.imwrite(str(folder / f"{i:04d}.png"), frame)
+    return str(folder / "%04d.png")
+
+
+GREETING_S, FAREWELL_S = 0.6, 1.2
+
+
+def write_tone(path: Path, seconds: float, hz: float, rate: int = 16000) -> None:
+    """A plain sine tone WAV (so each sound has its own, known length)."""
+    t = np.arange(int(seconds * rate)) / rate
+    samples = (0.3 * np.sin(2 * np.pi * hz * t) * 32767).astype("<i2")
+    with wave.open(str(path), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(rate)
+        out.writeframes(samples.tobytes())
+
+
+def write_config(folder: Path) -> Path:
+    """A robot config whose greeting and farewell differ in length (told apart in tests)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    write_tone(folder / "hello.wav", GREETING_S, 660)
+    write_tone(folder / "bye.wav", FAREWELL_S, 440)
+    path = folder / "robot.toml"
+    path.write_text('[audio.sounds]\ngreeting = "hello.wav"\nfarewell = "bye.wav"\n')
+    return path
+
+
+def start_robot(spawn: Spawn, tmp_path: Path, *, robot: str = "buddy", fps: int = 15,
+                renderer: bool = False,
+                services: dict[str, tuple[str, ...]] | None = None) -> dict[str, Process]:
+    """Start every service but the radar bridge (see `start_radar`)."""
+    chosen = dict(BASE_SERVICES if services is None else services)
+    config = write_config(tmp_path / "config")
+    pattern = write_face_sequence(tmp_path / "frames")
+    chosen["camera"] = ("--source", pattern, "--fps", str(fps), "--loop")
+    if renderer:
+        chosen["eye-renderer"] = ("--no-browser", "--port", str(free_port()))
+    return {name: spawn(name, "--config", str(config), *args, robot=robot)
+            for name, args in chosen.items()}
+
+
+def wait_nodes(probe: Node, names: list[str], robot: str = "buddy",
+               timeout: float = 60.0) -> None:
+    retry_until(lambda: set(names) <= set(list_nodes(probe.session, robot)), timeout, 0.3,
+                f"nodes {names} up")
+
+
+def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",
+                speed: float = 1.0) -> Process:
+    return spawn("radar-bridge", "--sim", "--sim-scenario", scenario, "--sim-speed", str(speed),
+                 robot=robot)

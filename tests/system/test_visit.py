@@ -1,0 +1,89 @@
+"""A full simulated visit through a real router, every service its own process.
+
+The simulated LD2410 (behind a pty) plays a visitor who walks in from 4 m,
+stands at 1 m and leaves; the camera plays an image sequence of a real
+face photo, first on the camera's left then on its right. The robot must
+wake its eyes, look the right way, greet on the null audio device, say
+goodbye once the visitor has gone, and go back to sleep.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, retry_until
+
+from .robot import (
+    BASE_SERVICES,
+    FAREWELL_S,
+    GREETING_S,
+    Spawn,
+    start_radar,
+    start_robot,
+    wait_nodes,
+)
+
+A = m.ExpressionAction
+
+
+def sounds_played(status: Collector[m.PlaySoundStatus]) -> list[str]:
+    """Goals that SUCCEEDED, in order, told apart by length (PLAYING says "<s> s")."""
+    lengths: dict[str, float] = {}
+    done: list[str] = []
+    for s in status.messages:
+        if s.state == "PLAYING" and s.message.endswith(" s"):
+            lengths[s.goal_id] = float(s.message.split()[0])
+        if s.state == "SUCCEEDED" and s.goal_id in lengths and s.goal_id not in done:
+            done.append(s.goal_id)
+    return ["greeting" if abs(lengths[g] - GREETING_S) < 0.05 else
+            "farewell" if abs(lengths[g] - FAREWELL_S) < 0.05 else f"?{lengths[g]}"
+            for g in done]
+
+
+def test_visit_wakes_follows_greets_says_goodbye_and_sleeps(
+    probe: Node, spawn: Spawn, tmp_path: Path
+) -> None:
+    expression = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    lids = Collector[m.EyeLidControl](probe, keys.LIDS)
+    faces = Collector[m.FacePosition](probe, keys.FACE, camera="front")
+    direction = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
+    status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)
+    procs = start_robot(spawn, tmp_path)
+    wait_nodes(probe, [*BASE_SERVICES, "camera"])
+    procs["radar-bridge"] = start_radar(spawn, "walk-in")
+
+    # Eyes wake (and the lids open) when the visitor comes within range.
+    expression.wait_for(lambda e: e.action == A.EYE_AWAKE, 60, "EYE_AWAKE")
+    lids.wait_for(lambda x: x.top_lid_position == 0 and x.bottom_lid_position == 0, 20,
+                  "open lids")
+
+    # The gaze follows the face with the right signs, matched by the face's stamp.
+    def signs_seen() -> bool:
+        by_stamp = {f.stamp_ns: f.point.y for f in faces.messages}
+        pairs = [(by_stamp[d.stamp_ns], d.yaw) for d in direction.messages
+                 if d.stamp_ns in by_stamp and abs(by_stamp[d.stamp_ns]) > 0.05]
+        assert all((y > 0) == (yaw > 0) for y, yaw in pairs), pairs[:10]
+        return any(y > 0 for y, _ in pairs) and any(y < 0 for y, _ in pairs)
+
+    retry_until(signs_seen, 60, 0.2, "gaze left and right")
+
+    # Greeting, then (visitor gone) farewell, each played to the end once.
+    retry_until(lambda: sounds_played(status)[:1] == ["greeting"], 60, 0.2, "greeting played")
+    retry_until(lambda: sounds_played(status) == ["greeting", "farewell"], 60, 0.2,
+                "farewell played")
+    # ... and the eyes go back to sleep (the first SLEEP was the robot's initial state).
+    def asleep_again() -> bool:
+        actions = [e.action for e in expression.messages]
+        return actions[-1] == A.EYE_SLEEP and A.EYE_AWAKE in actions
+    retry_until(asleep_again, 30, 0.1, "EYE_SLEEP after the visit")
+    retry_until(lambda: (last := lids.messages[-1]).top_lid_position == 50
+                and last.bottom_lid_position == 50, 20, 0.1, "closed lids")
+
+    actions = [e.action for e in expression.messages]
+    assert all(a != b for a, b in itertools.pairwise(actions)), actions
+    for name, proc in procs.items():
+        assert proc.alive(), f"{name} died:\n{proc.output()[-3000:]}"
