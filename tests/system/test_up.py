@@ -42,7 +42,7 @@ def test_up_sim_runs_restarts_a_crashed_service_and_stops_cleanly(tmp_path: Path
         everyone = psutil.Process(up.pid).children(recursive=True)
         up.proc.send_signal(signal.SIGINT)
         assert up.proc.wait(30) == 0
-        gone, alive = psutil.wait_procs(everyone, timeout=10)
+        _gone, alive = psutil.wait_procs(everyone, timeout=10)
         assert not alive, [p.cmdline() for p in alive]
         assert "all stopped" in up.output()
     finally:
