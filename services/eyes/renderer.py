@@ -176,7 +176,7 @@ def _read_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in ("eyes.html", *STATIC)}
 
 
-def make_app(hub: Hub, node: Node | None = None) -> web.Application:
+def make_app(hub: Hub) -> web.Application:
     """The web application: page, static files, WebSocket, health."""
     files = _read_static()
     sockets: set[web.WebSocketResponse] = set()
@@ -260,7 +260,7 @@ async def serve(ctx: ServiceContext, node: Node, host: str, port: int,
     s = ctx.config.eye_renderer
     hub = Hub(wire.Hello(iris_color=s.iris_color, max_yaw_deg=s.max_yaw_deg,
                          max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]))
-    runner = web.AppRunner(make_app(hub, node), access_log=None)
+    runner = web.AppRunner(make_app(hub), access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
     try:

@@ -124,6 +124,21 @@ def test_page_follows_published_direction(
     gaze(probe, page, 0, -20, 4)
     _, y_down = pupil_centre(shot(page))
     assert y_up < H / 2 - 15 and y_down > H / 2 + 15, (y_up, y_down)
+
+    # Near -> large pupil, far -> small (the driver's curve), measured as black area.
+    pupil_area = {}
+    pub = probe.publisher(keys.EYE_CONTROL)
+    for stamp, cm, expected in ((5, 35.0, 87.9), (6, 280.0, 28.5)):
+        msg = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)
+
+        def arrived(msg: m.EyeControl = msg, expected: float = expected) -> bool:
+            pub.put(msg)
+            return abs(page.evaluate("window.eyes.target.dilation") - expected) < 0.1
+
+        retry_until(arrived, 20, 0.2, f"pupil target for {cm} cm")
+        settled(page)
+        pupil_area[cm] = int((shot(page, f"pupil_{int(cm)}cm").max(axis=2) < 12).sum())
+    assert pupil_area[35.0] > 2 * pupil_area[280.0], pupil_area
     page.close()
 
 
@@ -198,6 +213,19 @@ def test_page_blinks_and_saccades_on_its_own(
     page.wait_for_function("Math.abs(window.eyes.cur.yaw) > 0.5 "
                            "|| Math.abs(window.eyes.cur.pitch) > 0.5", timeout=15_000)
     assert page.evaluate("window.eyes.stats.messages") >= 1   # only the hello
+    page.close()
+
+
+def test_look_random_looks_around(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "both", extra="&blink=0")
+    probe.publisher(keys.EXPRESSION).put(
+        m.ScreenExpression(stamp_ns=1, action=A.EYE_LOOK_RANDOM))
+    page.wait_for_function("window.eyes.target.expression === 5", timeout=20_000)
+    # Wanders well beyond the small idle saccades (+-3 degrees).
+    page.wait_for_function("Math.abs(window.eyes.cur.yaw) > 6", timeout=20_000)
     page.close()
 
 

@@ -285,7 +285,9 @@
       ctx.lineWidth = irisR * 0.08;
       ctx.strokeStyle = "rgba(0,0,0,0.25)";
       ctx.stroke();
-      const pupilR = irisR * (0.22 + 0.58 * cur.dilation / 100);
+      // Seed: dilation is a percentage of the iris; kept within 12..92 % so
+      // the pupil never vanishes and a ring of iris always shows.
+      const pupilR = irisR * clamp(cur.dilation / 100, 0.12, 0.92);
       ctx.beginPath();
       ctx.arc(gx, gy, pupilR, 0, 2 * Math.PI);
       ctx.fillStyle = PUPIL;
