@@ -8,6 +8,7 @@ files, changed in nothing but where the certificates are.
 
 from __future__ import annotations
 
+import re
 import subprocess
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
@@ -135,8 +136,8 @@ def host_process(profile: HostProfile, tls_router: TlsRouter,
     def start(host: str, *args: str) -> Process:
         config = profile.toml(host, tls_router.endpoint)
         argv = buddybot_argv(*args, "--config", str(config))
-        proc = Process(argv, f"{host}-{args[0]}-{args[1] if len(args) > 1 else ''}-"
-                       f"{len(started)}", tmp_path / "logs")
+        label = re.sub(r"[^\w.-]+", "_", "-".join(args[:2]))
+        proc = Process(argv, f"{host}-{label}-{len(started)}", tmp_path / "logs")
         started.append(proc)
         return proc
 

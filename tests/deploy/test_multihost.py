@@ -1,0 +1,300 @@
+"""The multi-host profile on loopback: TLS, client certificates, access control.
+
+A real `buddybot router` loads deploy/zenoh/router.json5 (certificates from
+scripts/make-test-certs.sh); clients use the shipped client files. Hosts are told
+apart only by their certificate, as on a real robot. "Nothing arrives" is always
+shown after a positive control: an allowed sample sent after the denied one, over
+the same path, has arrived, and then a bounded extra wait sees nothing more.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import msgspec
+import pytest
+import zenoh
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node, ServiceError
+from buddybot.core.testing import LOOPBACK, Collector, Process, retry_until
+from tests.deploy.conftest import HOSTS, HostProfile, TlsRouter, open_client
+
+pytestmark = pytest.mark.integration
+
+QUIET_S = 1.5  # bounded wait after the positive control: a denied sample would be here by now
+STAMP = 1_700_000_000_000_000_000
+
+
+def frames(stamp: int) -> m.LD2410TargetDataFrameArray:
+    return m.LD2410TargetDataFrameArray(stamp_ns=stamp, device_id=0, sensors=[])
+
+
+def diagnostics(stamp: int, node: str) -> m.DiagnosticStatus:
+    return m.DiagnosticStatus(stamp_ns=stamp, node=node, level="OK", message="test")
+
+
+# --- who may connect -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("host", HOSTS)
+def test_host_with_its_certificate_connects(profile: HostProfile, tls_router: TlsRouter,
+                                            host: str) -> None:
+    session = open_client(tls_router.endpoint, profile.zenoh_file(host))
+    try:
+        assert str(session.info.zid())
+        assert list(session.info.routers_zid()), "connected, but not to the router"
+    finally:
+        session.close()
+
+
+def _no_client_certificate(profile: HostProfile) -> str:
+    """robot.json5 as a plain TLS client: it trusts the router but shows no certificate."""
+    path = profile.work / "anonymous.json5"
+    text = Path(profile.zenoh_file("robot")).read_text()
+    lines = [ln for ln in text.splitlines() if "connect_private_key" not in ln
+             and "connect_certificate" not in ln]
+    text = "\n".join(lines).replace("enable_mtls: true", "enable_mtls: false")
+    assert "enable_mtls: false" in text
+    path.write_text(text)
+    return str(path)
+
+
+def _mismatched_key(profile: HostProfile) -> str:
+    """The robot's certificate with another host's private key."""
+    path = profile.work / "mismatched.json5"
+    text = Path(profile.zenoh_file("robot")).read_text()
+    path.write_text(text.replace("/robot.key", "/radar-board.key"))
+    return str(path)
+
+
+def _distrusting_client(profile: HostProfile) -> str:
+    """A valid robot certificate, but trusting another CA: the router cannot prove itself."""
+    path = profile.work / "distrusting.json5"
+    text = Path(profile.zenoh_file("robot")).read_text()
+    path.write_text(text.replace("/ca.pem", "/rogue-ca.pem"))
+    return str(path)
+
+
+BAD_CLIENTS: dict[str, Callable[[HostProfile], str | None]] = {
+    "no-client-certificate": _no_client_certificate,
+    "certificate-from-another-ca": lambda p: p.zenoh_file("robot", cert_name="rogue"),
+    "key-does-not-match-certificate": _mismatched_key,
+    "client-does-not-trust-the-router": _distrusting_client,
+    "plain-tcp": lambda p: None,
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CLIENTS))
+def test_client_without_a_valid_certificate_cannot_connect(
+    profile: HostProfile, tls_router: TlsRouter, case: str
+) -> None:
+    zenoh_file = BAD_CLIENTS[case](profile)
+    endpoint = tls_router.endpoint
+    if zenoh_file is None:
+        endpoint = f"tcp/{LOOPBACK}:{tls_router.port}"
+    with pytest.raises(zenoh.ZError, match="Unable to connect"):
+        session = open_client(endpoint, zenoh_file, timeout_ms=3000)
+        session.close()
+    # The router shrugged it off: still up, and a real host still gets in.
+    assert tls_router.process.alive()
+    good = open_client(tls_router.endpoint, profile.zenoh_file("robot"))
+    good.close()
+
+
+# --- who may publish -------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class PublishCase:
+    """`host` tries `denied`; then `control_host` puts `allowed`, which must arrive."""
+
+    host: str
+    node: str
+    denied: tuple[keys.Topic, dict[str, str], Callable[[int], Any]]
+    allowed: tuple[keys.Topic, dict[str, str], Callable[[int], Any]]
+    control_host: str | None = None  # None: the same session (same path, later sample)
+
+
+PUBLISH_CASES = {
+    "radar-board-sets-the-expression": PublishCase(
+        "radar-board", "radar-bridge",
+        (keys.EXPRESSION, {}, lambda s: m.ScreenExpression(stamp_ns=s, action=3)),
+        (keys.RADAR_FRAMES, {"device": "0"}, frames),
+    ),
+    "radar-board-impersonates-the-controller": PublishCase(
+        "radar-board", "radar-bridge",
+        (keys.DIAGNOSTICS, {"node": "controller"}, lambda s: diagnostics(s, "controller")),
+        (keys.RADAR_FRAMES, {"device": "0"}, frames),
+    ),
+    "eye-screen-moves-the-eyes": PublishCase(
+        "eye-screen", "eye-renderer",
+        (keys.EYES_DIRECTION, {}, lambda s: m.EyesDirection(stamp_ns=s, yaw=30.0, pitch=0.0)),
+        (keys.DIAGNOSTICS, {"node": "eye-renderer"}, lambda s: diagnostics(s, "eye-renderer")),
+    ),
+    "robot-fakes-radar-frames": PublishCase(
+        "robot", "controller",
+        (keys.RADAR_FRAMES, {"device": "0"}, frames),
+        (keys.EXPRESSION, {}, lambda s: m.ScreenExpression(stamp_ns=s, action=0)),
+    ),
+    "operator-closes-the-lids": PublishCase(
+        "operator", "operator",
+        (keys.LIDS, {}, lambda s: m.EyeLidControl(stamp_ns=s, eye_id=2, top_lid_position=50,
+                                                  bottom_lid_position=50)),
+        (keys.LIDS, {}, lambda s: m.EyeLidControl(stamp_ns=s, eye_id=2, top_lid_position=0,
+                                                  bottom_lid_position=0)),
+        control_host="robot",
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(PUBLISH_CASES))
+def test_host_cannot_publish_on_a_key_its_acl_does_not_grant(
+    host_node: Callable[..., Node], name: str
+) -> None:
+    case = PUBLISH_CASES[name]
+    watcher = host_node("operator", "watcher")  # full read rights
+    d_topic, d_params, d_make = case.denied
+    a_topic, a_params, a_make = case.allowed
+    seen_denied = Collector[Any](watcher, d_topic, **{k: "*" for k in d_params})
+    seen_allowed = seen_denied if a_topic is d_topic else Collector[Any](
+        watcher, a_topic, **{k: "*" for k in a_params})
+
+    publisher = host_node(case.host, case.node)
+    denied_pub = publisher.publisher(d_topic, **d_params)
+    control = host_node(case.control_host, "control") if case.control_host else publisher
+    allowed_pub = control.publisher(a_topic, **a_params)
+    denied_stamp, allowed_stamp = STAMP + 1, STAMP + 2
+
+    def attempt() -> bool:
+        # Denied first, then the control: both are repeated until the control shows up
+        # (the watcher's subscription may still be on its way to the publisher).
+        denied_pub.put(d_make(denied_stamp))
+        allowed_pub.put(a_make(allowed_stamp))
+        return any(msg.stamp_ns == allowed_stamp for msg in seen_allowed.messages)
+
+    retry_until(attempt, timeout=20, interval=0.2, what=f"{name}: the allowed sample")
+    with pytest.raises(TimeoutError):
+        seen_denied.wait_for(lambda msg: msg.stamp_ns == denied_stamp, timeout=QUIET_S)
+    assert all(msg.stamp_ns != denied_stamp for msg in seen_denied.messages)
+
+
+def test_denied_publisher_does_not_break_the_host(host_node: Callable[..., Node]) -> None:
+    """A denial is silent: the same session keeps publishing what it may."""
+    watcher = host_node("operator", "watcher")
+    seen = Collector[m.LD2410TargetDataFrameArray](watcher, keys.RADAR_FRAMES, device="*")
+    radar = host_node("radar-board", "radar-bridge")
+    denied = radar.publisher(keys.EYES_DIRECTION)
+    allowed = radar.publisher(keys.RADAR_FRAMES, device="0")
+    for i in range(50):
+        denied.put(m.EyesDirection(stamp_ns=STAMP + i, yaw=1.0, pitch=1.0))
+    retry_until(lambda: allowed.put(frames(STAMP + 99)) or seen.messages, 20, 0.2,
+                what="frames after 50 denied puts")
+
+
+# --- who may read ------------------------------------------------------------------------
+
+
+def test_eye_screen_reads_the_eyes_and_nothing_else(host_node: Callable[..., Node]) -> None:
+    screen = host_node("eye-screen", "eye-renderer")
+    screen_eyes = Collector[m.EyesDirection](screen, keys.EYES_DIRECTION)
+    screen_frames = Collector[Any](screen, keys.RADAR_FRAMES, device="*")
+    screen_faces = Collector[Any](screen, keys.FACE, camera="*")
+    watcher = host_node("operator", "watcher")
+    watched_frames = Collector[Any](watcher, keys.RADAR_FRAMES, device="*")
+    watched_faces = Collector[Any](watcher, keys.FACE, camera="*")
+
+    robot = host_node("robot", "face-detector")
+    radar = host_node("radar-board", "radar-bridge")
+    face_pub = robot.publisher(keys.FACE, camera="front")
+    eyes_pub = robot.publisher(keys.EYES_DIRECTION)
+    frames_pub = radar.publisher(keys.RADAR_FRAMES, device="0")
+    face = m.FacePosition(stamp_ns=STAMP, frame_id="front", point=m.Point(x=1.0, y=0.0, z=0.0),
+                          confidence=0.9)
+
+    def attempt() -> bool:
+        face_pub.put(face)
+        frames_pub.put(frames(STAMP))
+        eyes_pub.put(m.EyesDirection(stamp_ns=STAMP, yaw=5.0, pitch=0.0))
+        return bool(screen_eyes.messages and watched_frames.messages and watched_faces.messages)
+
+    retry_until(attempt, timeout=20, interval=0.2, what="eyes at the screen, all at the watcher")
+    with pytest.raises(TimeoutError):
+        screen_frames.wait_for(timeout=QUIET_S)
+    assert not screen_faces.messages and not screen_frames.messages
+
+
+def test_latched_state_reaches_a_late_eye_screen(host_node: Callable[..., Node]) -> None:
+    """History and late-publisher detection run on "@adv" keys: the grants cover them."""
+    robot = host_node("robot", "eyes")
+    robot.publisher(keys.LIDS).put(
+        m.EyeLidControl(stamp_ns=STAMP, eye_id=2, top_lid_position=50, bottom_lid_position=50))
+    robot.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=STAMP, action=1))
+
+    late = host_node("eye-screen", "eye-renderer")
+    lids = Collector[m.EyeLidControl](late, keys.LIDS)
+    expression = Collector[m.ScreenExpression](late, keys.EXPRESSION)
+    assert lids.wait_for(timeout=20, what="latched lids").top_lid_position == 50
+    assert expression.wait_for(timeout=20, what="latched expression").action == 1
+
+
+def test_only_the_robot_calls_its_services(host_node: Callable[..., Node]) -> None:
+    player = host_node("robot", "audio-player")
+    calls: list[str] = []
+
+    def stop(_req: m.Trigger) -> m.TriggerReply:
+        calls.append("stop")
+        return m.TriggerReply(success=True, message="stopped")
+
+    player.serve(keys.AUDIO_STOP, stop)
+    controller = host_node("robot", "controller")
+    reply = retry_until(lambda: controller.call(keys.AUDIO_STOP, m.Trigger(), timeout=2), 20,
+                        0.2, "robot calling its own player")
+    assert reply.success
+    count = len(calls)
+    for host in ("operator", "eye-screen", "radar-board"):
+        intruder = host_node(host, f"intruder-{host}")
+        with pytest.raises(ServiceError, match="no reply"):
+            intruder.call(keys.AUDIO_STOP, m.Trigger(), timeout=2)
+    assert len(calls) == count, "a denied query reached the player"
+
+
+# --- real processes, configured like the hosts ------------------------------------------
+
+
+def test_radar_board_and_robot_services_work_through_the_profile(
+    host_process: Callable[..., Process], host_node: Callable[..., Node]
+) -> None:
+    """radar-bridge (--sim) as the radar board, radar-presence as the robot computer,
+    each `buddybot run` with a TOML naming its Zenoh file: presence reaches the operator."""
+    watcher = host_node("operator", "watcher")
+    seen_frames = Collector[m.LD2410TargetDataFrameArray](watcher, keys.RADAR_FRAMES, device="*")
+    presence = Collector[m.PresenceDetection](watcher, keys.PRESENCE)
+    host_process("radar-board", "run", "radar-bridge", "--sim")
+    host_process("robot", "run", "radar-presence")
+    seen_frames.wait_for(timeout=60, what="simulated radar frames from the radar board")
+    got = presence.wait_for(lambda p: p.presence_state == m.PresenceState.IN_RANGE, timeout=60,
+                            what="presence from the robot computer")
+    assert got.distance_m < 2.0
+
+
+def test_buddybot_pub_as_the_wrong_host_is_dropped(
+    host_process: Callable[..., Process], host_node: Callable[..., Node]
+) -> None:
+    """The CLI as each host would run it: only the allowed publish arrives."""
+    watcher = host_node("operator", "watcher")
+    expression = Collector[m.ScreenExpression](watcher, keys.EXPRESSION)
+    denied = host_process("radar-board", "pub", "eyes/expression",
+                          msgspec.json.encode({"stamp_ns": STAMP + 1, "action": 3}).decode(),
+                          "--rate", "20")
+    allowed = host_process("robot", "pub", "eyes/expression",
+                           msgspec.json.encode({"stamp_ns": STAMP + 2, "action": 0}).decode(),
+                           "--rate", "20")
+    expression.wait_for(lambda x: x.stamp_ns == STAMP + 2, timeout=30, what="robot's expression")
+    with pytest.raises(TimeoutError):
+        expression.wait_for(lambda x: x.stamp_ns == STAMP + 1, timeout=QUIET_S)
+    assert denied.alive() and allowed.alive(), "a denial must not kill the publisher"
