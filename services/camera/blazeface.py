@@ -86,12 +86,12 @@ class Letterbox:
     @staticmethod
     def fit(width: int, height: int, size: int) -> Letterbox:
         scale = size / max(width, height)
-        new_w, new_h = round(width * scale), round(height * scale)
+        new_w, new_h = max(1, round(width * scale)), max(1, round(height * scale))
         return Letterbox(scale, (size - new_w) // 2, (size - new_h) // 2, size)
 
     def resized_shape(self, width: int, height: int) -> tuple[int, int]:
-        """(w, h) the image is resized to before padding."""
-        return round(width * self.scale), round(height * self.scale)
+        """(w, h) the image is resized to before padding (at least one pixel each)."""
+        return max(1, round(width * self.scale)), max(1, round(height * self.scale))
 
     def to_image(self, xy: FloatArray) -> FloatArray:
         """Normalised input coordinates (..., 2) -> image pixels."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import time
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -46,10 +47,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="measure the face on the whole-frame detection only")
 
 
+def pick(cli: object, cfg: object) -> Any:
+    """The command-line value when given, else the config's."""
+    return cfg if cli is None else cli
+
+
 def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
     s = ctx.config.face_detector
     a = ctx.args
-    pick = lambda cli, cfg: cfg if cli is None else cli  # noqa: E731
     merged = FaceDetectorSettings(
         camera=a.camera or s.camera, face_width_m=pick(a.face_width_m, s.face_width_m),
         fx=pick(a.fx, s.fx), fy=pick(a.fy, s.fy), cx=pick(a.cx, s.cx), cy=pick(a.cy, s.cy),

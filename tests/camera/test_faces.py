@@ -173,3 +173,10 @@ def test_the_wrong_model_for_the_spec_is_refused() -> None:
 def test_bad_arrays_are_refused(full: FaceNet, bad: np.ndarray) -> None:
     with pytest.raises(ValueError):
         full.detect(bad)
+
+
+@pytest.mark.parametrize("shape", [(1, 400, 3), (400, 1, 3), (1, 1, 3), (2000, 30, 3)])
+def test_odd_frame_shapes_do_not_break_detection(full: FaceNet, short: FaceNet,
+                                                 shape: tuple[int, int, int]) -> None:
+    img = np.full(shape, 128, np.uint8)
+    assert pipeline(full, short).process(img, 1).point is None
