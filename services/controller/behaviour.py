@@ -168,7 +168,7 @@ class Behaviour:
         self._farewell_since: float | None = None
         self._next_request = 1
         self._orphan_status: dict[str, str] = {}
-        self._recovered_sound_age: float | None = None
+        self._recovered_sound_at: float | None = None
         self.counters: dict[str, int] = {
             "greetings": 0, "farewells": 0, "cancels": 0, "farewells_dropped": 0,
             "sounds_lost": 0, "sounds_refused": 0,
@@ -295,14 +295,14 @@ class Behaviour:
             self._goal = _Goal(SoundKind.UNKNOWN, now, goal_id=goal_id)
             age_s = 0.0 if age_s is None else age_s
         if age_s is not None and age_s < self.s.regreet_cooldown_s:
-            self._recovered_sound_age = max(0.0, age_s)
+            self._recovered_sound_at = now - max(0.0, age_s)
 
     def _finish_recovery(self, now: float) -> None:
         self._recover_until = None
-        age = self._recovered_sound_age
-        if age is not None:
+        sound_at = self._recovered_sound_at
+        if sound_at is not None:
             # A sound less than a cooldown ago: assume it was this visit's greeting.
-            self._last_greet = now - age
+            self._last_greet = sound_at
             if self._present:
                 self._visit.greeted = True
 
@@ -348,6 +348,10 @@ class Behaviour:
 
     def _watchdog(self, now: float) -> None:
         goal = self._goal
+        # A goal still waiting for its reply is never dropped: the service always
+        # answers (call timeout), and the server may yet start it.
+        if goal is not None and goal.request is not None and goal.goal_id is None:
+            return
         if goal is not None and now - goal.since > self.s.sound_timeout_s:
             self.counters["sounds_lost"] += 1
             self._goal = None

@@ -38,7 +38,7 @@ from buddybot.controller.transform import RigidTransform, face_gaze
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
-from buddybot.core.node import Node, RateLimitedLog, ServiceError
+from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
@@ -230,7 +230,7 @@ class Controller:
                     if not reply.accepted:
                         log.warning("play_sound %r refused: %s", cmd.sound, reply.message)
                     self._post("reply", cmd.request, reply.accepted, reply.goal_id)
-                except ServiceError as exc:
+                except Exception as exc:  # ServiceError, or Zenoh failing: always answer
                     self.node.diagnostics.increment("sound_call_failures")
                     log.warning("play_sound %r failed: %s", cmd.sound, exc)
                     self._post("reply", cmd.request, False, "")
@@ -240,7 +240,7 @@ class Controller:
                     answer = self.node.call(keys.PLAY_SOUND_CANCEL,
                                             m.CancelGoal(goal_id=cmd.goal_id), timeout=timeout)
                     self._post("cancel_reply", cmd.goal_id, answer.success)
-                except ServiceError as exc:
+                except Exception as exc:
                     log.warning("cancel of %s failed: %s", cmd.goal_id, exc)
                     self._post("cancel_reply", cmd.goal_id, False)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import msgspec
 import pytest
+
 from buddybot.controller.behaviour import (
     Behaviour,
     CancelSound,
@@ -445,3 +446,15 @@ def test_recovery_playing_sound_blocks_until_it_ends() -> None:
 def test_negative_timings_are_refused(field: str) -> None:
     with pytest.raises(msgspec.ValidationError):
         msgspec.convert({field: -1.0}, ControllerSettings)
+
+
+def test_recovery_recent_sound_while_nobody_there_still_blocks_a_quick_regreet() -> None:
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0)
+    r.presence(False)
+    r.status("old", "SUCCEEDED", age=3.0)
+    r.at(1.0)
+    r.presence(True)
+    r.faces(4.0)  # 8 s after that sound: still within the cooldown
+    assert r.sounds() == []
+    r.faces(3.0)
+    assert r.sounds() == ["greeting"]

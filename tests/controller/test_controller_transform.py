@@ -5,14 +5,15 @@ from __future__ import annotations
 import math
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
 from buddybot.controller.transform import (
     RigidTransform,
     face_gaze,
     gaze_angles,
     rotation_from_rpy,
 )
-from hypothesis import given
-from hypothesis import strategies as st
 
 approx = pytest.approx
 

@@ -1,0 +1,244 @@
+"""Property-based (hypothesis stateful) tests of the behaviour against a model world.
+
+The world is a radar, a camera, an audio action server (replies, status,
+device_free, cancel, possibly refusing) and another program that may
+occupy the speaker, all driven in arbitrary order and timing. After
+every step the invariants of issue 5 are checked on what the controller
+commanded:
+
+* never two greetings within the cooldown (also across controller restarts);
+* never a farewell without a greeting before it (and since the last farewell);
+* never a sound started while another one plays (ours or someone else's);
+* never the same expression twice in a row (also across restarts).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import msgspec
+from hypothesis import HealthCheck, event, settings
+from hypothesis import strategies as st
+from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
+
+from buddybot.controller.behaviour import (
+    Behaviour,
+    CancelSound,
+    Command,
+    Look,
+    PlaySound,
+    SetExpression,
+)
+from buddybot.controller.settings import ControllerSettings
+from buddybot.controller.transform import Gaze
+from buddybot.core.messages import ExpressionAction
+
+COOLDOWN = 4.0
+SETTINGS = msgspec.convert(
+    {
+        "absence_hold_s": 0.5, "face_timeout_s": 0.3, "gaze_hold_s": 0.5,
+        "look_around_after_s": 1.0, "greet_dwell_s": 0.5, "regreet_cooldown_s": COOLDOWN,
+        "sleepy_s": 1.0, "farewell_max_delay_s": 2.0, "sound_timeout_s": 6.0, "recover_s": 0.3,
+    },
+    ControllerSettings,
+)
+
+
+@dataclass
+class Playing:
+    goal_id: str
+    sound: str
+    since: float
+
+
+class World(RuleBasedStateMachine):
+    def __init__(self) -> None:
+        super().__init__()
+        self.t = 0.0
+        self.b = Behaviour(SETTINGS, self.t)
+        self.life = 0
+        self.restarted = False
+        self.in_range = False
+        self.playing: Playing | None = None
+        self.other_busy = False
+        self.device_free = True
+        self.pending: list[tuple[int, int, str]] = []  # (life, request, sound)
+        self.cancels: list[tuple[int, str]] = []
+        self.next_goal = 0
+        self.latched_status: tuple[str, str, float] | None = None
+        self.latched_expression: ExpressionAction | None = None
+        # what was commanded
+        self.greetings: list[float] = []  # accepted greetings (they really played)
+        self.issued: list[tuple[float, str]] = []
+        self.expressions: list[ExpressionAction] = []
+        self.violations: list[str] = []
+
+    # -- applying the controller's commands --
+
+    def apply(self, cmds: list[Command]) -> None:
+        for cmd in cmds:
+            if isinstance(cmd, SetExpression):
+                if self.expressions and self.expressions[-1] == cmd.action:
+                    self.violations.append(f"expression {cmd.action.name} repeated")
+                self.expressions.append(cmd.action)
+                self.latched_expression = cmd.action
+            elif isinstance(cmd, PlaySound):
+                busy = self.playing is not None or self.other_busy or any(
+                    life == self.life for life, _, _ in self.pending)
+                if busy:
+                    self.violations.append(f"{cmd.sound} started while a sound plays")
+                self.issued.append((self.t, cmd.sound))
+                self.pending.append((self.life, cmd.request, cmd.sound))
+            elif isinstance(cmd, CancelSound):
+                self.cancels.append((self.life, cmd.goal_id))
+            else:
+                assert isinstance(cmd, Look)
+
+    def publish_status(self, goal_id: str, state: str) -> None:
+        self.latched_status = (goal_id, state, self.t)
+        self.apply(self.b.sound_status(self.t, goal_id, state))
+
+    def update_device(self) -> None:
+        free = self.playing is None and not self.other_busy
+        if free != self.device_free:
+            self.device_free = free
+            self.apply(self.b.device_free(self.t, free))
+
+    # -- rules: time and senses --
+
+    @rule(dt=st.sampled_from([0.05, 0.1, 0.3, 0.6, 1.5, 5.0]), watching=st.booleans(),
+          server=st.booleans(), yaw=st.floats(-1.0, 1.0))
+    def advance(self, dt: float, watching: bool, server: bool, yaw: float) -> None:
+        """Time passes in 50 ms ticks. `watching`: a face in view at 10 frames/s;
+        `server`: the audio server answers goals at once and sounds last 1 s."""
+        end = self.t + dt
+        n = 0
+        while self.t < end:
+            self.t = min(end, self.t + 0.05)
+            n += 1
+            if watching and n % 2 == 0:
+                self.apply(self.b.face(self.t, Gaze(yaw, 0.0, 100.0), 1))
+            if server:
+                if self.pending and self.playing is None:
+                    self.reply(accept=True, status_first=n % 3 == 0)
+                elif self.cancels:
+                    self.cancel()
+                elif self.playing is not None and self.t - self.playing.since >= 1.0:
+                    self.finish("SUCCEEDED")
+            self.apply(self.b.tick(self.t))
+
+    @rule(in_range=st.booleans())
+    def presence(self, in_range: bool) -> None:
+        self.in_range = in_range
+        self.apply(self.b.presence(self.t, in_range))
+
+    @rule(yaw=st.floats(-1.0, 1.0))
+    def face(self, yaw: float) -> None:
+        self.apply(self.b.face(self.t, Gaze(yaw, 0.0, 100.0), 1))
+
+    @rule(busy=st.booleans())
+    def other_program(self, busy: bool) -> None:
+        self.other_busy = busy
+        self.update_device()
+
+    # -- rules: the audio action server --
+
+    @precondition(lambda self: bool(self.pending))
+    @rule(accept=st.booleans(), status_first=st.booleans())
+    def reply(self, accept: bool, status_first: bool) -> None:
+        life, request, sound = self.pending.pop(0)
+        if not accept:
+            if life == self.life:
+                self.apply(self.b.sound_reply(self.t, request, False))
+            return
+        self.next_goal += 1
+        gid = f"g{self.next_goal}"
+        if self.playing is not None:
+            self.violations.append("audio server asked to play two sounds")
+        self.playing = Playing(gid, sound, self.t)
+        if sound == "greeting":
+            if self.greetings and self.t - self.greetings[-1] < COOLDOWN - 1e-9:
+                self.violations.append(f"greetings at {self.greetings[-1]} and {self.t}")
+            self.greetings.append(self.t)
+        if status_first:
+            self.publish_status(gid, "ACCEPTED")
+        if life == self.life:
+            self.apply(self.b.sound_reply(self.t, request, True, gid))
+        if not status_first:
+            self.publish_status(gid, "ACCEPTED")
+        self.publish_status(gid, "PLAYING")
+        self.update_device()
+
+    @precondition(lambda self: self.playing is not None)
+    @rule(outcome=st.sampled_from(["SUCCEEDED", "ABORTED"]))
+    def finish(self, outcome: str) -> None:
+        assert self.playing is not None
+        gid, self.playing = self.playing.goal_id, None
+        self.publish_status(gid, outcome)
+        self.update_device()
+
+    @precondition(lambda self: bool(self.cancels))
+    @rule()
+    def cancel(self) -> None:
+        life, gid = self.cancels.pop(0)
+        hit = self.playing is not None and self.playing.goal_id == gid
+        if life == self.life:
+            self.apply(self.b.cancel_reply(self.t, gid, hit))
+        if hit:
+            self.playing = None
+            self.publish_status(gid, "CANCELED")
+            self.update_device()
+
+    # -- rule: the controller process restarts --
+
+    @precondition(lambda self: self.life < 2)
+    @rule(dice=st.integers(0, 4), play_inflight=st.booleans())
+    def restart(self, dice: int, play_inflight: bool) -> None:
+        if dice:
+            return  # restarts are rare
+        # A goal the dying process sent is served at once or never (the new
+        # process then learns of it from the latched status and device_free).
+        while self.pending:
+            self.reply(accept=play_inflight and self.playing is None, status_first=False)
+        self.cancels.clear()
+        self.life += 1
+        self.restarted = True
+        self.b = Behaviour(SETTINGS, self.t)
+        # latched values replayed to the new process
+        if self.latched_expression is not None:
+            self.apply(self.b.expression_seen(self.t, self.latched_expression))
+        self.apply(self.b.presence(self.t, self.in_range))
+        self.apply(self.b.device_free(self.t, self.device_free))
+        if self.latched_status is not None:
+            gid, state, stamp = self.latched_status
+            self.apply(self.b.sound_status(self.t, gid, state, self.t - stamp))
+
+    # -- invariants --
+
+    def teardown(self) -> None:
+        event(f"greetings: {min(len(self.greetings), 3)}")
+        event(f"farewells: {min(sum(1 for _, s in self.issued if s == 'farewell'), 2)}")
+        event(f"restarted: {self.restarted}")
+
+    @invariant()
+    def no_violation(self) -> None:
+        assert not self.violations, self.violations
+
+    @invariant()
+    def farewell_only_after_a_greeting(self) -> None:
+        if self.restarted:
+            return  # a restarted controller infers "greeted" from the latched status
+        owed = False
+        for _, sound in self.issued:
+            if sound == "greeting":
+                owed = True
+            elif sound == "farewell":
+                assert owed, f"farewell without a greeting: {self.issued}"
+                owed = False
+
+
+World.TestCase.settings = settings(
+    max_examples=400, stateful_step_count=60, deadline=None,
+    suppress_health_check=[HealthCheck.too_slow],
+)
+TestControllerProperties = World.TestCase
