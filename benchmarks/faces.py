@@ -287,6 +287,53 @@ def jitter() -> None:
               f"y {sd[1]:5.1f} mm, z {sd[2]:5.1f} mm")
 
 
+def end_to_end(seconds: float = 15.0) -> None:
+    """Router + `camera --sim` + `face-detector` as processes (not pinned): capture-to-face
+    latency seen by a subscriber, and the face rate."""
+    import threading
+
+    from buddybot.core import keys
+    from buddybot.core import messages as m
+    from buddybot.core.node import Node
+    from buddybot.core.testing import Router, run_service
+
+    os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
+    router = Router()
+    procs = []
+    latencies: list[float] = []
+    lock = threading.Lock()
+
+    def on_face(msg: m.FacePosition, _key: str) -> None:
+        with lock:
+            latencies.append((m.now_ns() - msg.stamp_ns) / 1e6)
+
+    node = Node("bench", connect=[router.endpoint])
+    try:
+        node.subscribe(keys.FACE, on_face, camera="front")
+        procs.append(run_service("camera", router.endpoint, "--sim"))
+        procs.append(run_service("face-detector", router.endpoint))
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and len(latencies) < 10:
+            time.sleep(0.2)
+        with lock:
+            latencies.clear()
+        time.sleep(seconds)
+        with lock:
+            got = sorted(latencies)
+    finally:
+        node.close()
+        for proc in procs:
+            proc.stop()
+        router.stop()
+    if not got:
+        print("end to end: no face positions received")
+        return
+    print(f"end to end (camera --sim 30 fps -> face-detector, through a router, both cores, "
+          f"load average {os.getloadavg()[0]:.1f}): {len(got) / seconds:.1f} faces/s, "
+          f"capture-to-face latency median {statistics.median(got):.1f} ms, "
+          f"p95 {got[min(len(got) - 1, int(0.95 * len(got)))]:.1f} ms")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=60)
@@ -294,7 +341,7 @@ def main() -> None:
     parser.add_argument("--peer-python", default="/tmp/peer-venv/bin/python")
     parser.add_argument("--core", type=int, default=0, help="CPU core to pin to")
     parser.add_argument("--skip", nargs="*", default=[],
-                        choices=["speed", "accuracy", "turn", "jitter"])
+                        choices=["speed", "accuracy", "turn", "jitter", "e2e"])
     args = parser.parse_args()
     os.sched_setaffinity(0, {args.core})
     cv2.setNumThreads(1)
@@ -306,6 +353,8 @@ def main() -> None:
         head_turn()
     if "jitter" not in args.skip:
         jitter()
+    if "e2e" not in args.skip:
+        end_to_end()
 
 
 if __name__ == "__main__":
