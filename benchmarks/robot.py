@@ -1,0 +1,120 @@
+"""Whole-robot benchmark: latencies end to end, CPU and memory of every service.
+
+Starts a router and all nine services (simulated camera at 30 frames/s,
+simulated radar with a visitor who comes and goes) as separate processes,
+then for `--seconds`:
+
+* gaze latency: time from an image's capture (`stamp_ns`, kept by the face,
+  eye control and direction) to the `eyes/direction` sample arriving here;
+* presence latency: time from the radar frame (`stamp_ns` kept by presence
+  and expression) to `eyes/expression` EYE_AWAKE arriving here; entering
+  needs no hold, so this is the pipeline's own latency;
+* CPU (% of one core) and resident memory of each process and in total.
+
+    .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+from tempfile import mkdtemp
+
+import psutil
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, Process, Router, free_port, retry_until, run_service
+from buddybot.core.tools import list_nodes
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--fps", type=float, default=30.0)
+    parser.add_argument("--sim-speed", type=float, default=3.0,
+                        help="radar scenario speed (more visits per minute)")
+    args = parser.parse_args()
+    log_dir = Path(mkdtemp(prefix="buddybot-bench-"))
+    router = Router(log_dir=log_dir)
+    services: dict[str, tuple[str, ...]] = {
+        "audio-player": ("--backend", "null"),
+        "audio": (),
+        "eyes": (),
+        "eye-renderer": ("--no-browser", "--port", str(free_port())),
+        "controller": (),
+        "face-detector": (),
+        "radar-presence": (),
+        "camera": ("--sim", "--fps", str(args.fps)),
+        "radar-bridge": ("--sim", "--sim-scenario", "visit", "--sim-speed", str(args.sim_speed)),
+    }
+    procs: dict[str, Process] = {}
+    probe = Node("bench-probe", connect=[router.endpoint])
+    try:
+        for name, extra in services.items():
+            procs[name] = run_service(name, router.endpoint, *extra, log_dir=log_dir)
+        retry_until(lambda: set(services) <= set(list_nodes(probe.session, "buddy")), 90, 0.5,
+                    "all nodes up")
+        gaze_ms: list[float] = []
+        awake_ms: list[float] = []
+
+        def on_direction(msg: m.EyesDirection, _key: str) -> None:
+            gaze_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
+
+        def on_expression(msg: m.ScreenExpression, _key: str) -> None:
+            if msg.action == m.ExpressionAction.EYE_AWAKE:
+                awake_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
+
+        Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
+        time.sleep(3.0)  # warm-up: detector models loaded, caches filled
+        probe.subscribe(keys.EYES_DIRECTION, on_direction)
+        probe.subscribe(keys.EXPRESSION, on_expression, history=False)
+
+        ps = {name: psutil.Process(p.pid) for name, p in procs.items()}
+        ps["router"] = psutil.Process(router.pid)
+        for p in ps.values():
+            p.cpu_percent(None)
+        rss: dict[str, list[float]] = {name: [] for name in ps}
+        end = time.monotonic() + args.seconds
+        while time.monotonic() < end:
+            time.sleep(1.0)
+            for name, p in ps.items():
+                rss[name].append(p.memory_info().rss / 2**20)
+        cpu = {name: p.cpu_percent(None) for name, p in ps.items()}
+    finally:
+        probe.close()
+        for proc in procs.values():
+            proc.stop()
+        router.stop()
+
+    print(f"whole robot, {args.seconds:.0f} s, camera {args.fps:.0f} fps (simulated), "
+          f"radar visit x{args.sim_speed:g}; logs in {log_dir}")
+    if gaze_ms:
+        print(f"gaze latency capture -> eyes/direction: median {statistics.median(gaze_ms):.1f} ms,"
+              f" p95 {percentile(gaze_ms, 0.95):.1f} ms, n={len(gaze_ms)} "
+              f"({len(gaze_ms) / args.seconds:.1f}/s)")
+    else:
+        print("gaze latency: no eyes/direction received")
+    if awake_ms:
+        print(f"presence latency radar frame -> eyes/expression AWAKE: "
+              f"median {statistics.median(awake_ms):.1f} ms, max {max(awake_ms):.1f} ms, "
+              f"n={len(awake_ms)}")
+    else:
+        print("presence latency: no EYE_AWAKE seen (run longer)")
+    print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}")
+    for name in ps:
+        print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}")
+    total_rss = sum(max(v or [0]) for v in rss.values())
+    print(f"{'total':<16}{sum(cpu.values()):>16.1f}{total_rss:>14.1f}")
+
+
+if __name__ == "__main__":
+    main()
