@@ -21,7 +21,7 @@ import zenoh
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node, ServiceError
-from buddybot.core.testing import LOOPBACK, Collector, Process, retry_until
+from buddybot.core.testing import LOOPBACK, Collector, Process, free_port, retry_until
 from tests.deploy.conftest import HOSTS, HostProfile, TlsRouter, open_client
 
 pytestmark = pytest.mark.integration
@@ -298,3 +298,26 @@ def test_buddybot_pub_as_the_wrong_host_is_dropped(
     with pytest.raises(TimeoutError):
         expression.wait_for(lambda x: x.stamp_ns == STAMP + 1, timeout=QUIET_S)
     assert denied.alive() and allowed.alive(), "a denial must not kill the publisher"
+
+
+def test_remote_eye_screen_renders_what_the_robot_sends(
+    host_process: Callable[..., Process], host_node: Callable[..., Node]
+) -> None:
+    """eye-renderer as the eye screen: the robot's latched lids and its gaze reach the
+    renderer through the router, and the renderer's diagnostics reach the operator."""
+    watcher = host_node("operator", "watcher")
+    health = Collector[m.DiagnosticStatus](watcher, keys.DIAGNOSTICS, node="eye-renderer")
+    robot = host_node("robot", "eyes")
+    robot.publisher(keys.LIDS).put(
+        m.EyeLidControl(stamp_ns=STAMP, eye_id=2, top_lid_position=0, bottom_lid_position=0))
+    gaze = robot.publisher(keys.EYES_DIRECTION)
+    renderer = host_process("eye-screen", "run", "eye-renderer", "--no-browser",
+                            "--port", str(free_port()))
+    renderer.wait_for_output("eye renderer serving", timeout=60)
+
+    def forwarded() -> bool:
+        gaze.put(m.EyesDirection(stamp_ns=STAMP, yaw=10.0, pitch=0.0))
+        return any(int(d.values.get("messages", 0)) >= 2 for d in health.messages)
+
+    retry_until(forwarded, timeout=60, interval=0.5, what="renderer counting eye messages")
+    assert renderer.alive()
