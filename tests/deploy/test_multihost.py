@@ -280,6 +280,11 @@ def test_radar_board_and_robot_services_work_through_the_profile(
     got = presence.wait_for(lambda p: p.presence_state == m.PresenceState.IN_RANGE, timeout=60,
                             what="presence from the robot computer")
     assert got.distance_m < 2.0
+    # `buddybot nodes` from the operator's laptop sees both hosts' services.
+    listing = host_process("operator", "nodes")
+    assert listing.proc.wait(60) == 0, listing.output()
+    names = listing.output().split()
+    assert "radar-bridge" in names and "radar-presence" in names, listing.output()
 
 
 def test_buddybot_pub_as_the_wrong_host_is_dropped(
