@@ -1,7 +1,7 @@
 # The README's two commands. Both set up .venv first.
 .PHONY: run test schemas
 run:
-	scripts/run.sh --sim
+	scripts/run.sh
 test:
 	scripts/test.sh
 schemas:
