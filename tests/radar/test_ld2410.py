@@ -287,17 +287,32 @@ def _structural_offsets(data: bytes) -> list[int]:
     return [0, 1, 2, 3, 4, 5, 6, 7, n - 6, n - 5, n - 4, n - 3, n - 2, n - 1]
 
 
+# Noise may not contain report-tail bytes or a command head: noise that
+# completes a truncated frame with its own missing tail *is* that frame on
+# the wire (the protocol has no checksum), so no parser could tell.
+_NOISE_BYTE = st.integers(0, 255).filter(lambda b: b not in (0xF5, 0xF6, 0xF7, 0xF8, 0xFD))
+
+
+def noise(min_size: int = 0, max_size: int = 12) -> st.SearchStrategy[bytes]:
+    return st.lists(_NOISE_BYTE, min_size=min_size, max_size=max_size).map(bytes)
+
+
 @st.composite
-def mutated_streams(draw: st.DrawFn) -> tuple[bytes, list[p.Report], list[int]]:
-    """Frames, each intact or with exactly one mutation, garbage between them."""
+def mutated_streams(
+        draw: st.DrawFn) -> tuple[bytes, list[p.Report], list[p.Report], list[int], list[str]]:
+    """Frames, each intact or with exactly one mutation, garbage between them.
+
+    Returns the bytes, the frames sent, the ones left intact, chunk cuts, mutations."""
     frames = draw(st.lists(reports(), min_size=1, max_size=8))
     out = bytearray()
     intact: list[p.Report] = []
+    kinds: list[str] = []
     for frame in frames:
-        out += draw(st.binary(max_size=12))
+        out += draw(noise())
         data = bytearray(p.encode_report(frame))
         kind = draw(st.sampled_from(["intact", "intact", "truncate", "delete", "insert",
                                      "overwrite"]))
+        kinds.append(kind)
         if kind == "intact":
             intact.append(frame)
         elif kind == "truncate":
@@ -306,20 +321,20 @@ def mutated_streams(draw: st.DrawFn) -> tuple[bytes, list[p.Report], list[int]]:
             del data[draw(st.integers(0, len(data) - 1))]
         elif kind == "insert":
             at = draw(st.integers(1, len(data) - 1))
-            data[at:at] = draw(st.binary(min_size=1, max_size=5))
+            data[at:at] = draw(noise(1, 5))
         else:
             at = draw(st.sampled_from(_structural_offsets(data)))
             data[at] = (data[at] + draw(st.integers(1, 255))) % 256
         out += data
     cuts = draw(st.lists(st.integers(0, len(out)), max_size=6))
-    return bytes(out), intact, sorted(cuts)
+    return bytes(out), frames, intact, sorted(cuts), kinds
 
 
 @settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
 @given(mutated_streams())
-def test_mutated_streams_yield_exactly_the_intact_frames(
-        case: tuple[bytes, list[p.Report], list[int]]) -> None:
-    data, intact, cuts = case
+def test_mutated_streams_yield_every_intact_frame_and_nothing_unsent(
+        case: tuple[bytes, list[p.Report], list[p.Report], list[int], list[str]]) -> None:
+    data, sent, intact, cuts, _kinds = case
     parser = p.Parser()
     got: list[p.Frame] = []
     last = 0
@@ -330,7 +345,12 @@ def test_mutated_streams_yield_exactly_the_intact_frames(
     # behind it until it can be judged: at most one frame period on a live
     # stream, where bytes keep coming (here: filler).
     got += parser.feed(bytes(p.MAX_REPORT_LENGTH + 10))
-    assert got == intact
+    # Nothing that was not sent. (Two mutated neighbours can rebuild a sent frame
+    # byte for byte, e.g. a frame cut after `F4` followed by one missing its `F4`.)
+    assert all(frame in sent for frame in got)
+    # Every intact frame, in order.
+    remaining = iter(got)
+    assert all(any(frame == g for g in remaining) for frame in intact)
 
 
 @settings(max_examples=300)
