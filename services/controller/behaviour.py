@@ -43,11 +43,14 @@ Gaze: every face gives a `Look` at once (the seed's behaviour); when no
 face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
 
 Expressions are emitted only on change, never the same action twice in a
-row. After a start, `recover_s` is spent listening to latched values: the
-expression already shown is adopted (not repeated), a sound still playing
-blocks new sounds, and a sound that ended less than the cooldown ago
-counts as this visit's greeting, so a restarted controller does not greet
-twice.
+row. After a start, `recover_s` is spent listening to the latched inputs
+(presence, sound status, device free): a sound still playing blocks new
+sounds, and a sound less than a cooldown old counts as this visit's
+greeting, so a restarted controller does not greet twice. The first
+expression after the recovery is always published, even if the previous
+process showed the same one: the latched value lived in the dead
+process's publisher cache, and without a new publication an eyes driver
+started later would get nothing.
 
 Setting every timing to 0 and `look_around` to false is the seed's
 controller exactly.
@@ -262,16 +265,6 @@ class Behaviour:
         goal = self._goal
         if not success and goal is not None and goal.goal_id == goal_id:
             goal.cancel_sent = True  # do not retry; the watchdog ends it if need be
-        return self._step(now)
-
-    def expression_seen(self, now: float, action: ExpressionAction) -> list[Command]:
-        """The latched `eyes/expression` (our previous life's last output).
-
-        Adopted only while recovering and before we published anything:
-        afterwards the echo of our own publications would be stale.
-        """
-        if self.recovering and self._expression is None:
-            self._expression = action
         return self._step(now)
 
     def tick(self, now: float) -> list[Command]:

@@ -86,7 +86,6 @@ class Controller:
 
     def start(self) -> None:
         node = self.node
-        node.subscribe(keys.EXPRESSION, self._on_expression, history=True)
         node.subscribe(keys.PRESENCE, self._on_presence)
         node.subscribe(keys.DEVICE_FREE, self._on_device_free)
         node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
@@ -120,9 +119,6 @@ class Controller:
     def _on_status(self, msg: m.PlaySoundStatus, _key: str) -> None:
         age = (m.now_ns() - msg.stamp_ns) / 1e9 if msg.stamp_ns > 0 else None
         self._post("status", msg.goal_id, msg.state, age)
-
-    def _on_expression(self, msg: m.ScreenExpression, _key: str) -> None:
-        self._post("expression", msg.action)
 
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
         with self._cond:
@@ -166,8 +162,6 @@ class Controller:
                 self._execute(b.device_free(now, *args))
             elif kind == "status":
                 self._execute(b.sound_status(now, *args))
-            elif kind == "expression":
-                self._execute(b.expression_seen(now, *args))
             elif kind == "reply":
                 self._execute(b.sound_reply(now, *args))
             elif kind == "cancel_reply":
@@ -212,6 +206,8 @@ class Controller:
         values["expression"] = snap.expression.name if snap.expression is not None else "-"
         values["greeted"] = snap.greeted
         values["sound"] = snap.sound or "-"
+        values["recovering"] = snap.recovering
+        values["farewell_pending"] = snap.farewell_pending
         values.update(snap.counters)
 
     # -- sound thread --

@@ -394,22 +394,15 @@ def test_seed_mode_all_timings_zero() -> None:
 # --- restart recovery ----------------------------------------------------------------
 
 
-def test_recovery_adopts_latched_expression_and_does_not_repeat_it() -> None:
+def test_recovery_waits_then_publishes_the_current_state_once() -> None:
     r = Rig(recover_s=0.5)
-    r._rec(r.b.expression_seen(r.t, X.EYE_AWAKE))
     r.presence(True)
+    r.at(0.4)
+    assert r.expressions() == []  # still listening to the latched inputs
     r.at(0.2)
-    assert r.expressions() == []
-    r.at(0.5)
-    assert r.expressions() == []  # EYE_AWAKE already shown
-
-
-def test_recovery_publishes_the_right_state_when_it_differs() -> None:
-    r = Rig(recover_s=0.5)
-    r._rec(r.b.expression_seen(r.t, X.EYE_AWAKE))
-    r.presence(False)
+    assert r.expressions() == [X.EYE_AWAKE]
     r.at(1.0)
-    assert r.expressions() == [X.EYE_SLEEP]
+    assert r.expressions() == [X.EYE_AWAKE]
 
 
 def test_recovery_recent_sound_means_already_greeted() -> None:

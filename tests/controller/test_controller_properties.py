@@ -9,7 +9,7 @@ commanded:
 * never two greetings within the cooldown (also across controller restarts);
 * never a farewell without a greeting before it (and since the last farewell);
 * never a sound started while another one plays (ours or someone else's);
-* never the same expression twice in a row (also across restarts).
+* never the same expression twice in a row (within one controller process).
 """
 
 from __future__ import annotations
@@ -66,7 +66,6 @@ class World(RuleBasedStateMachine):
         self.cancels: list[tuple[int, str]] = []
         self.next_goal = 0
         self.latched_status: tuple[str, str, float] | None = None
-        self.latched_expression: ExpressionAction | None = None
         # what was commanded
         self.greetings: list[float] = []  # accepted greetings (they really played)
         self.issued: list[tuple[float, str]] = []
@@ -81,7 +80,6 @@ class World(RuleBasedStateMachine):
                 if self.expressions and self.expressions[-1] == cmd.action:
                     self.violations.append(f"expression {cmd.action.name} repeated")
                 self.expressions.append(cmd.action)
-                self.latched_expression = cmd.action
             elif isinstance(cmd, PlaySound):
                 busy = self.playing is not None or self.other_busy or any(
                     life == self.life for life, _, _ in self.pending)
@@ -205,8 +203,9 @@ class World(RuleBasedStateMachine):
         self.restarted = True
         self.b = Behaviour(SETTINGS, self.t)
         # latched values replayed to the new process
-        if self.latched_expression is not None:
-            self.apply(self.b.expression_seen(self.t, self.latched_expression))
+        # The expression's latched value died with the old process: the new one
+        # publishes the current state again, which may equal the last one.
+        self.expressions.clear()
         self.apply(self.b.presence(self.t, self.in_range))
         self.apply(self.b.device_free(self.t, self.device_free))
         if self.latched_status is not None:

@@ -1,0 +1,269 @@
+"""Scenario tests: the controller as its own process behind the real router, a fake
+audio action server and a radar/camera stimulus as real Zenoh nodes."""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, Process, retry_until
+
+X = m.ExpressionAction
+pytestmark = pytest.mark.integration
+
+Spawn = Callable[..., Process]
+
+
+def expressions(col: Collector[m.ScreenExpression]) -> list[X]:
+    return [msg.action for msg in col.messages]
+
+
+def wait_expressions(col: Collector[m.ScreenExpression], tail: list[X],
+                     timeout: float = 15.0) -> list[X]:
+    """Wait until the expressions published so far end with `tail`."""
+    return retry_until(lambda: expressions(col)[-len(tail):] == tail and expressions(col),
+                       timeout, what=f"expressions ending with {tail}")
+
+
+def no_repeats(seq: list[X]) -> bool:
+    return all(a != b for a, b in itertools.pairwise(seq))
+
+
+@pytest.fixture
+def watch(probe: Node) -> tuple[Collector[m.ScreenExpression], Collector[m.EyeControl]]:
+    return Collector(probe, keys.EXPRESSION), Collector(probe, keys.EYE_CONTROL)
+
+
+def start_controller(spawn: Spawn, config: Path,
+                     expr: Collector[m.ScreenExpression]) -> Process:
+    proc = spawn("controller", "--config", str(config))
+    # Up and past its recovery window: it has published the eyes' state.
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=20, what="initial EYE_SLEEP")
+    return proc
+
+
+def test_approach_greet_follow_leave_farewell(spawn, fast_config, stimulus, make_audio,
+                                              watch) -> None:
+    expr, control = watch
+    audio = make_audio(durations={"greeting": 0.8, "farewell": 0.8})
+    proc = start_controller(spawn, fast_config, expr)
+
+    stimulus.presence(True)
+    wait_expressions(expr, [X.EYE_AWAKE])
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "play:greeting" in log, what="greeting")
+    wait_expressions(expr, [X.EYE_GRIN])
+    audio.wait_log(lambda log: "end:greeting" in log)
+    wait_expressions(expr, [X.EYE_AWAKE])
+
+    # Following: a face to the left and up gives +yaw, +pitch, its stamp kept.
+    stimulus.watch(False)
+    stimulus.point = m.Point(x=1.0, y=0.5, z=0.2)
+    stamp = stimulus.face(stamp_ns=123_456_789)
+    msg = control.wait_for(lambda c: c.stamp_ns == stamp, what="eye control of that face")
+    # camera 10 cm above the eyes centre (FAST_CONFIG): z = 0.3 in the eyes frame
+    assert msg.yaw == pytest.approx(math.atan2(0.5, 1.0))
+    assert msg.pitch == pytest.approx(math.atan2(0.3, math.hypot(1.0, 0.5)))
+    assert msg.target_distance_cm == pytest.approx(math.sqrt(1.0 + 0.25 + 0.09) * 100)
+
+    stimulus.presence(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert audio.sounds() == ["greeting", "farewell"]
+    assert audio.overlaps == 0
+    assert no_repeats(seq), seq
+    assert seq == [X.EYE_SLEEP, X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+    assert proc.alive()
+
+
+def test_passer_by_is_not_greeted(spawn, tmp_path, stimulus, make_audio, watch) -> None:
+    expr, _ = watch
+    config = tmp_path / "c.toml"
+    config.write_text("[controller]\ngreet_dwell_s = 3.0\nabsence_hold_s = 0.3\n"
+                      "sleepy_s = 0.3\nrecover_s = 0.3\n")
+    audio = make_audio()
+    start_controller(spawn, config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    wait_expressions(expr, [X.EYE_AWAKE])
+    stimulus.presence(False)  # walks on well within the 3 s dwell
+    stimulus.watch(False)
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert audio.sounds() == []
+    assert seq == [X.EYE_SLEEP, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+
+
+def test_radar_flicker_neither_flaps_the_eyes_nor_regreets(spawn, tmp_path, stimulus,
+                                                            make_audio, watch) -> None:
+    expr, _ = watch
+    config = tmp_path / "c.toml"
+    config.write_text("[controller]\ngreet_dwell_s = 0.3\nabsence_hold_s = 2.0\n"
+                      "sleepy_s = 0.3\nrecover_s = 0.3\n")
+    audio = make_audio(durations={"greeting": 0.3})
+    start_controller(spawn, config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log)
+    wait_expressions(expr, [X.EYE_AWAKE])
+    for _ in range(8):  # a radar at the edge of its range: 100 ms dropouts
+        stimulus.presence(False)
+        stimulus.presence(True)
+    stimulus.presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert audio.sounds() == ["greeting", "farewell"]
+    assert seq == [X.EYE_SLEEP, X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+
+
+def test_face_occlusion_holds_then_centres_and_looks_around(spawn, fast_config, stimulus,
+                                                             make_audio, watch) -> None:
+    expr, control = watch
+    audio = make_audio(durations={"greeting": 0.3})
+    start_controller(spawn, fast_config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log)
+    wait_expressions(expr, [X.EYE_AWAKE])
+    stimulus.watch(False)  # the face is hidden
+    centre = control.wait_for(lambda c: c.yaw == 0.0 and c.pitch == 0.0,
+                              what="gaze back to centre")
+    assert centre.target_distance_cm == pytest.approx(100.0)
+    wait_expressions(expr, [X.EYE_LOOK_RANDOM])
+    stimulus.watch(True)  # visible again: same visit, no second greeting
+    wait_expressions(expr, [X.EYE_LOOK_RANDOM, X.EYE_AWAKE])
+    stimulus.presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
+    assert audio.sounds() == ["greeting", "farewell"]
+    assert no_repeats(expressions(expr))
+
+
+def test_quick_walk_away_cancels_the_greeting_then_says_farewell(spawn, fast_config, stimulus,
+                                                                  make_audio, watch) -> None:
+    expr, _ = watch
+    audio = make_audio(durations={"greeting": 30.0, "farewell": 0.5})
+    start_controller(spawn, fast_config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "play:greeting" in log, what="greeting")
+    stimulus.presence(False)
+    stimulus.watch(False)
+    log = audio.wait_log(lambda log: "end:farewell" in log, what="farewell played")
+    assert log == ["play:greeting", "cancel:greeting", "canceled:greeting", "play:farewell",
+                   "end:farewell"]
+    assert audio.overlaps == 0
+    wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+
+
+def test_refused_and_failing_audio_do_not_stop_the_controller(spawn, fast_config, stimulus,
+                                                               make_audio, watch) -> None:
+    expr, control = watch
+    audio = make_audio(refuse={"greeting"})
+    proc = start_controller(spawn, fast_config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "refused:greeting" in log, what="greeting refused")
+    stimulus.presence(False)
+    stimulus.watch(False)
+    wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert audio.sounds() == []  # nobody was greeted, so no farewell
+    stamp = stimulus.face(stamp_ns=77)
+    control.wait_for(lambda c: c.stamp_ns == stamp, what="still following faces")
+    assert proc.alive()
+
+
+MALFORMED: list[bytes] = [
+    b"", b"\xff\xfe garbage", b"{", b"[]", b"null", b'{"stamp_ns": -1}',
+    b'{"stamp_ns": 1, "presence_state": 7, "target_state": 0, "distance_m": 1.0}',
+    b'{"stamp_ns": 1, "frame_id": "f", "point": {"x": 1e999, "y": 0, "z": 0}, '
+    b'"confidence": 0.5}',
+    b'{"stamp_ns": 1, "frame_id": "f", "point": {"x": "a", "y": 0, "z": 0}, '
+    b'"confidence": 0.5}',
+    b'{"goal_id": "x", "state": "EXPLODED"}', b'{"stamp_ns": 1, "data": "yes"}',
+    b'{"stamp_ns": 1, "action": 99}', b"x" * 100_000,
+]
+
+
+def test_malformed_payloads_on_every_input_are_survived(spawn, fast_config, stimulus,
+                                                         make_audio, watch, endpoint) -> None:
+    expr, control = watch
+    audio = make_audio(durations={"greeting": 0.3})
+    proc = start_controller(spawn, fast_config, expr)
+    inputs = [keys.PRESENCE.key(), keys.FACE.key(camera="front"), keys.DEVICE_FREE.key(),
+              keys.PLAY_SOUND_STATUS.key(), keys.EXPRESSION.key()]
+    with zenoh.open(_probe_config(endpoint)) as session:
+        for rel in inputs:
+            for payload in MALFORMED:
+                session.put(keys.absolute("buddy", rel), payload)
+        # A face point that decodes but is not finite never reaches the eyes.
+        session.put(keys.absolute("buddy", keys.FACE.key(camera="front")),
+                    b'{"stamp_ns": 5, "frame_id": "f", "point": {"x": 1e999, "y": 0, "z": 0},'
+                    b' "confidence": 0.5}')
+    # Still working end to end: follows faces, greets, says goodbye.
+    stamp = stimulus.face(stamp_ns=4242)
+    control.wait_for(lambda c: c.stamp_ns == stamp, what="eye control after garbage")
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log, what="greeting after garbage")
+    stimulus.presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell after garbage")
+    assert proc.alive()
+    assert all(math.isfinite(c.yaw) and math.isfinite(c.pitch) for c in control.messages)
+    assert 5 not in [c.stamp_ns for c in control.messages]
+    assert no_repeats(expressions(expr))
+
+
+def test_restart_recovers_state_and_does_not_greet_again(spawn, fast_config, stimulus,
+                                                          make_audio, watch, probe) -> None:
+    expr, _ = watch
+    diag: Collector[m.DiagnosticStatus] = Collector(probe, keys.DIAGNOSTICS, node="controller")
+    audio = make_audio(durations={"greeting": 0.3})
+    first = start_controller(spawn, fast_config, expr)
+    stimulus.presence(True)
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log)
+    wait_expressions(expr, [X.EYE_AWAKE])
+    first.kill()  # SIGKILL: no goodbye, no clean-up
+    expr.clear()
+    diag.clear()
+    spawn("controller", "--config", str(fast_config))
+    # The new process reads the latched presence and sound status: it knows the
+    # visitor (engaged, greeted) without greeting again, and re-publishes EYE_AWAKE
+    # (the old latched value died with the old process's publisher cache).
+    diag.wait_for(lambda d: d.values.get("phase") == "engaged" and d.values.get("greeted")
+                  and d.values.get("recovering") is False, timeout=20, what="recovered state")
+    n = len(diag.messages)
+    diag.wait_count(n + 1, timeout=10)  # one more period (2 s) past the 0.5 s dwell
+    assert audio.sounds() == ["greeting"]
+    assert expressions(expr) == [X.EYE_AWAKE]
+    stimulus.presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell after restart")
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert audio.sounds() == ["greeting", "farewell"]
+    assert seq == [X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+
+
+def test_bad_config_is_refused_with_the_key_named(spawn, tmp_path) -> None:
+    config = tmp_path / "bad.toml"
+    config.write_text("[controller]\nsleepy_s = -2.0\n")
+    proc = spawn("controller", "--config", str(config))
+    retry_until(lambda: not proc.alive(), 20, what="controller exit")
+    assert proc.proc.returncode == 2
+    assert "sleepy_s" in proc.output()
+
+
+def _probe_config(endpoint: str) -> zenoh.Config:
+    from buddybot.core.node import zenoh_config
+
+    return zenoh_config(connect=[endpoint])
