@@ -181,6 +181,10 @@ def _extension(entry: registry.Entry, prog: str, argv: list[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    tool = next((t for t in registry.TOOLS if argv and argv[0] == t.name), None)
+    if tool is not None:  # its own parser sees everything, `--help` included
+        return _extension(tool, f"buddybot {tool.name}", argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.verb == "run":
