@@ -10,6 +10,7 @@ test-artifacts/eyes/ for a person to look at.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable
 from typing import Any
@@ -206,9 +207,18 @@ def test_page_blinks_and_saccades_on_its_own(
 ) -> None:
     _proc, port = start_renderer(spawn)
     page = open_page(browser, port, "both", extra="")
-    page.wait_for_function("window.eyes.stats.blinks >= 2", timeout=30_000)
-    close_ms = page.evaluate("window.eyes.stats.lastBlinkCloseMs")
-    assert 50 <= close_ms <= 120, close_ms     # ~60 ms to close, measured at frame granularity
+    page.wait_for_function("window.eyes.stats.blinks >= 3", timeout=40_000)
+    log = page.evaluate("window.eyes.blinkLog")
+    # Closing ~60 ms, reopening slower; measured at frame granularity (a frame
+    # delayed by a busy machine can only make a phase look longer), so the
+    # fastest blink is the one that shows the design.
+    close_ms = min(b["close_ms"] for b in log if b["close_ms"] > 0)
+    open_ms = min(b["open_ms"] for b in log if b["open_ms"] > 0)
+    assert 50 <= close_ms <= 90, log
+    assert open_ms > close_ms + 50, log
+    # Every few seconds.
+    gaps = [b["start_ms"] - a["start_ms"] for a, b in itertools.pairwise(log)]
+    assert all(2000 <= gap <= 9000 for gap in gaps), gaps
     # Idle eyes make small saccades without any message.
     page.wait_for_function("Math.abs(window.eyes.cur.yaw) > 0.5 "
                            "|| Math.abs(window.eyes.cur.pitch) > 0.5", timeout=15_000)

@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import shutil
+import signal
 import urllib.error
 import urllib.request
 from collections.abc import Callable
@@ -16,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 import aiohttp
+import psutil
 import pytest
 
 from buddybot.core import keys
@@ -201,3 +204,10 @@ def test_kiosk_windows_open_one_page_per_display(spawn: Callable[..., Process]) 
     out = proc.output()
     assert "opening left eye on display 1 window" in out
     assert "opening right eye on display 2 window" in out
+    browsers = [c for c in psutil.Process(proc.pid).children(recursive=True)
+                if "chromium" in c.name()]
+    assert browsers
+    # A renderer killed outright (SIGKILL to it alone) still takes its windows with it.
+    os.kill(proc.pid, signal.SIGKILL)
+    retry_until(lambda: not any(b.is_running() and b.status() != psutil.STATUS_ZOMBIE
+                                for b in browsers), 30, 0.2, "kiosk windows gone")

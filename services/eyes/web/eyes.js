@@ -46,7 +46,8 @@
   // Debug/benchmark surface (read by the tests and benchmarks/eyes.py).
   const eyes = {
     which, target, cur, connected: false,
-    stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0, lastBlinkCloseMs: 0 },
+    stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0 },
+    blinkLog: [],                // last 50 blinks: {start_ms, close_ms, open_ms} as drawn
     frameIntervals: [],          // last 1200 requestAnimationFrame intervals, ms
     drawTimes: [],               // last 1200 per-frame update+draw costs, ms
     latency: [],                 // {stamp_ns, recv_ms, frame_ms} per direction message
@@ -137,7 +138,7 @@
 
   // --- autonomous behaviour: blinks and saccades --------------------------------------
   let blinkStart = -1;
-  let blinkClosed = false;
+  let blinkClosedAt = -1;
   let nextBlink = now() + rand(1500, 4500);
   let saccade = { yaw: 0, pitch: 0 };
   let nextSaccade = now() + rand(600, 2000);
@@ -155,14 +156,14 @@
     const e = t - blinkStart;
     if (e < BLINK_CLOSE_MS) return easeIn(e / BLINK_CLOSE_MS);
     if (e < BLINK_CLOSE_MS + BLINK_OPEN_MS) {
-      if (!blinkClosed) {        // first frame past full closure: how long closing took
-        blinkClosed = true;
-        eyes.stats.lastBlinkCloseMs = e;
-      }
+      if (blinkClosedAt < 0) blinkClosedAt = e;   // first frame past full closure
       return 1 - easeOut((e - BLINK_CLOSE_MS) / BLINK_OPEN_MS);
     }
+    eyes.blinkLog.push({ start_ms: blinkStart, close_ms: blinkClosedAt,
+      open_ms: blinkClosedAt < 0 ? -1 : e - blinkClosedAt });
+    if (eyes.blinkLog.length > 50) eyes.blinkLog.shift();
     blinkStart = -1;
-    blinkClosed = false;
+    blinkClosedAt = -1;
     eyes.stats.blinks++;
     return 0;
   }
