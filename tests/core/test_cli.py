@@ -16,7 +16,8 @@ from buddybot.core.node import Node
 from buddybot.core.registry import SERVICES
 from buddybot.core.testing import Collector, Process, buddybot_argv, retry_until
 
-VERBS = ["up", "router", "run", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas"]
+VERBS = ["up", "router", "run", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
+         "radar"]
 
 
 def bb(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
