@@ -211,3 +211,15 @@ def test_kiosk_windows_open_one_page_per_display(spawn: Callable[..., Process]) 
     os.kill(proc.pid, signal.SIGKILL)
     retry_until(lambda: not any(b.is_running() and b.status() != psutil.STATUS_ZOMBIE
                                 for b in browsers), 30, 0.2, "kiosk windows gone")
+
+
+def test_a_window_that_exits_is_reopened(spawn: Callable[..., Process]) -> None:
+    """A browser that dies at once (here `false`) is reopened with a backoff; the
+    renderer itself stays up and keeps serving."""
+    false = shutil.which("false")
+    assert false is not None
+    proc, port = start_renderer(spawn, "--browser", false, "--display", "640x360+0+0")
+    retry_until(lambda: proc.output().count("opening both eye on display 1 window") >= 2, 30,
+                0.2, "window reopened")
+    assert "window exited (status 1); reopening in 1 s" in proc.output()
+    assert http(port, "/eyes?eye=both")[0] == 200 and proc.alive()
