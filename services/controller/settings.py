@@ -31,9 +31,9 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
 
     Timings, all in seconds (why each default):
 
-    * `absence_hold_s` 1.0: radar OUT_OF_RANGE must last this long before the
-      visitor counts as gone; a one-frame dropout never closes the eyes or
-      triggers a farewell (the radar presence service has its own hold, so
+    * `absence_hold_s` 0.5: radar OUT_OF_RANGE must last this long before the
+      visitor counts as gone; a dropout never closes the eyes or triggers a
+      farewell (the radar presence service already holds absence 3 s, so
       this stays short to keep the goodbye within earshot).
     * `face_timeout_s` 0.5: a face older than this is "not seen" (a few
       frames at any usable camera rate).
@@ -43,9 +43,10 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
       long -> EYE_LOOK_RANDOM (searching); `look_around = false` disables it.
     * `greet_dwell_s` 1.0: in range with a face for this long before the
       greeting, so a passer-by is not greeted.
-    * `regreet_cooldown_s` 15.0: coming back within this time after leaving
+    * `regreet_cooldown_s` 6.0: coming back within this time after leaving
       is the same visit (no second greeting, no second farewell), and two
-      greetings are never closer than this.
+      greetings are never closer than this. Kept below the simulated
+      radar's ~10 s between visits, so the demo greets every visitor.
     * `sleepy_s` 2.0: EYE_SLEEPY shown this long (and while the farewell
       plays) before EYE_SLEEP.
     * `farewell_max_delay_s` 5.0: a farewell that could not start within
@@ -65,12 +66,12 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     farewell_sound: Annotated[str, msgspec.Meta(min_length=1)] = "farewell"
     centre_distance_cm: Annotated[float, msgspec.Meta(ge=0.0)] = 100.0
     look_around: bool = True
-    absence_hold_s: Seconds = 1.0
+    absence_hold_s: Seconds = 0.5
     face_timeout_s: Seconds = 0.5
     gaze_hold_s: Seconds = 1.0
     look_around_after_s: Seconds = 2.0
     greet_dwell_s: Seconds = 1.0
-    regreet_cooldown_s: Seconds = 15.0
+    regreet_cooldown_s: Seconds = 6.0
     sleepy_s: Seconds = 2.0
     farewell_max_delay_s: Seconds = 5.0
     sound_timeout_s: PositiveSeconds = 30.0

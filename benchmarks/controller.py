@@ -1,0 +1,158 @@
+"""Benchmark: face message -> published eye control, through a real router.
+
+Starts `buddybot router` and `buddybot run controller` on loopback, then a
+probe node publishes faces on `camera/front/face` and times each until the
+matching `eyes/control` (same `stamp_ns`) comes back. The figure covers
+probe -> router -> controller -> router -> probe, i.e. the controller's
+work plus two router crossings; a loopback baseline (probe -> router ->
+probe on a scratch key) is printed next to it so the controller's own
+share can be read off. Also prints the pure per-face cost of the
+transform + behaviour step without any I/O.
+
+    .venv/bin/python benchmarks/controller.py [--count N] [--rate HZ]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import threading
+import time
+import timeit
+
+import msgspec
+import zenoh
+
+from buddybot.controller.behaviour import Behaviour
+from buddybot.controller.settings import ControllerSettings
+from buddybot.controller.transform import RigidTransform, face_gaze
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Router, retry_until, run_service
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def summary(name: str, values_ms: list[float]) -> str:
+    return (f"{name}: n={len(values_ms)} median={statistics.median(values_ms):.3f} ms "
+            f"p99={percentile(values_ms, 0.99):.3f} ms max={max(values_ms):.3f} ms")
+
+
+class Timer:
+    """Send times by stamp_ns and the latencies of the answers that came back."""
+
+    def __init__(self) -> None:
+        self.sent: dict[int, int] = {}
+        self.latencies_ms: list[float] = []
+        self.lock = threading.Lock()
+
+    def arrived(self, stamp: int) -> None:
+        now = time.perf_counter_ns()
+        with self.lock:
+            start = self.sent.pop(stamp, None)
+            if start is not None:
+                self.latencies_ms.append((now - start) / 1e6)
+
+
+def run_faces(node: Node, count: int, rate: float) -> list[float]:
+    timer = Timer()
+    node.subscribe(keys.EYE_CONTROL, lambda msg, _k: timer.arrived(msg.stamp_ns))
+    pub = node.publisher(keys.FACE, camera="front")
+    point = m.Point(x=1.0, y=0.2, z=0.1)
+
+    def send(stamp: int) -> None:
+        with timer.lock:
+            timer.sent[stamp] = time.perf_counter_ns()
+        pub.put(m.FacePosition(stamp_ns=stamp, frame_id="front", point=point, confidence=0.9))
+
+    # Wait until the controller answers at all (discovery), then warm up.
+    retry_until(lambda: send(1) or timer.latencies_ms, 30, 0.2, what="controller answering")
+    for i in range(200):
+        send(10 + i)
+        time.sleep(1.0 / rate)
+    timer.latencies_ms.clear()
+    base = 1_000_000
+    period = 1.0 / rate
+    next_t = time.perf_counter()
+    for i in range(count):
+        send(base + i)
+        next_t += period
+        delay = next_t - time.perf_counter()
+        if delay > 0:
+            time.sleep(delay)
+    retry_until(lambda: len(timer.latencies_ms) >= count * 0.99 or None, 10, 0.1,
+                what="answers")
+    return list(timer.latencies_ms)
+
+
+def run_loopback(endpoint: str, count: int, rate: float) -> list[float]:
+    """Baseline: one probe puts on a scratch key and hears it back through the router."""
+    timer = Timer()
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    key = "buddybot/bench/loopback"
+    with zenoh.open(config) as a, zenoh.open(config) as b:
+        b.declare_subscriber(key, lambda s: timer.arrived(int(s.payload.to_string())))
+        pub = a.declare_publisher(key, express=True)
+
+        def send(stamp: int) -> None:
+            with timer.lock:
+                timer.sent[stamp] = time.perf_counter_ns()
+            pub.put(str(stamp))
+
+        retry_until(lambda: send(1) or timer.latencies_ms, 30, 0.2, what="loopback")
+        timer.latencies_ms.clear()
+        period = 1.0 / rate
+        for i in range(count):
+            send(1000 + i)
+            time.sleep(period)
+        retry_until(lambda: len(timer.latencies_ms) >= count * 0.99 or None, 10, 0.1,
+                    what="loopback answers")
+    return list(timer.latencies_ms)
+
+
+def pure_cost_us() -> float:
+    settings = msgspec.convert({"recover_s": 0.0}, ControllerSettings)
+    behaviour = Behaviour(settings, 0.0)
+    transform = RigidTransform.from_rpy((0.0, 0.02, 0.1), (0.0, 0.1, 0.0))
+    clock = [0.0]
+
+    def step() -> None:
+        clock[0] += 0.01
+        behaviour.face(clock[0], face_gaze(transform, (1.0, 0.2, 0.1)), 1)
+
+    n = 20000
+    return timeit.timeit(step, number=n) / n * 1e6
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=2000)
+    parser.add_argument("--rate", type=float, default=200.0, help="faces per second")
+    args = parser.parse_args()
+    print(f"pure transform + behaviour step per face: {pure_cost_us():.1f} us")
+    router = Router()
+    controller = run_service("controller", router.endpoint)
+    try:
+        with Node("bench", connect=[router.endpoint]) as node:
+            lat = run_faces(node, args.count, args.rate)
+        base = run_loopback(router.endpoint, args.count, args.rate)
+        print(summary("face -> eye control via router (2 crossings)", lat))
+        print(summary("baseline loopback probe -> router -> probe", base))
+        print(f"controller share (median difference): "
+              f"{statistics.median(lat) - statistics.median(base):.3f} ms")
+        print(f"received {len(lat)}/{args.count} eye controls")
+    finally:
+        controller.stop()
+        router.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
