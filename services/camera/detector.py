@@ -63,7 +63,7 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
         eye_distance_m=s.eye_distance_m, smoothing=s.smoothing and not a.no_smoothing,
         refine=s.refine and not a.no_refine, min_cutoff_hz=s.min_cutoff_hz, beta=s.beta,
         switch_after_s=s.switch_after_s,
-        debug_jpeg_quality=s.debug_jpeg_quality,
+        debug_jpeg_quality=s.debug_jpeg_quality, threads=s.threads,
     )
     problems = []
     if not keys.valid_robot_id(merged.camera):
@@ -78,6 +78,10 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
         problems.append("eye_distance_m must be >= 0")
     if merged.min_cutoff_hz <= 0 or merged.beta < 0:
         problems.append("min_cutoff_hz must be > 0 and beta >= 0")
+    if not 1 <= merged.threads <= 64:
+        problems.append("threads must be in 1..64")
+    if merged.switch_after_s < 0:
+        problems.append("switch_after_s must be >= 0")
     if not 1 <= merged.debug_jpeg_quality <= 100:
         problems.append("debug_jpeg_quality must be in 1..100")
     if problems:
@@ -127,7 +131,7 @@ def image_to_bgr(img: m.Image) -> np.ndarray | None:
 
 def run(ctx: ServiceContext) -> int:
     settings = effective_settings(ctx)
-    cv2.setNumThreads(1)
+    cv2.setNumThreads(settings.threads)
     net, refiner = load_nets(ctx, settings)
     pipeline = FacePipeline(net, settings, refiner)
     node = ctx.node()

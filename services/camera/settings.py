@@ -62,3 +62,6 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     switch_after_s: float = 0.5
     """How long the followed face must be gone before another face is taken."""
     debug_jpeg_quality: int = 80
+    threads: int = 1
+    """OpenCV threads for inference: 1 leaves the other core to capture and the rest of
+    the robot on a 2-core computer (and is what the benchmark measures)."""
