@@ -107,14 +107,17 @@ def test_simulated_camera_to_face_position(probe: Node, spawn: Spawn) -> None:
     face = faces.wait_for(timeout=60, what="a face position from the simulated camera")
     assert face.frame_id == "camera_front"
     assert 0.3 < face.point.x < 3.0 and 0.5 < face.confidence <= 1.0
-    stamps = {img.stamp_ns for img in images.messages}
-    assert face.stamp_ns in stamps  # the face keeps its image's capture time
     first = images.messages[0]
     assert (first.width, first.height, first.encoding) == (640, 480, "bgr8")
     # the face moves: lateral positions spread over time
     faces.wait_count(60, timeout=60)
     ys = [f.point.y for f in faces.messages]
     assert max(ys) - min(ys) > 0.05
+    # every face keeps its image's capture time (an image sample the probe
+    # itself missed under congestion is tolerated)
+    stamps = {img.stamp_ns for img in images.messages}
+    kept = sum(f.stamp_ns in stamps for f in faces.messages)
+    assert kept >= 0.9 * len(faces.messages)
 
 
 def image_message(bgr: np.ndarray, stamp_ns: int, frame_id: str = "cam_test") -> m.Image:
