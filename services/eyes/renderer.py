@@ -164,11 +164,16 @@ class Hub:
 
 
 async def _sender(ws: web.WebSocketResponse, client: Client) -> None:
-    while not ws.closed:
-        await client.wake.wait()
-        client.wake.clear()
-        for text in client.outbox.take():
-            await ws.send_str(text)
+    """Flush the page's outbox whenever something new is in it; a page that
+    went away ends this task quietly (the reader side cleans up)."""
+    try:
+        while not ws.closed:
+            await client.wake.wait()
+            client.wake.clear()
+            for text in client.outbox.take():
+                await ws.send_str(text)
+    except (ConnectionError, RuntimeError) as exc:  # closing transport
+        log.debug("page send failed: %r", exc)
 
 
 def _read_static() -> dict[str, bytes]:
@@ -224,7 +229,7 @@ def make_app(hub: Hub) -> web.Application:
             hub.clients.discard(client)
             sockets.discard(ws)
             sender.cancel()
-            with contextlib.suppress(asyncio.CancelledError, ConnectionError):
+            with contextlib.suppress(asyncio.CancelledError):
                 await sender
             log.info("page left (eye=%s, %d pages)", eye, len(hub.clients))
         return ws

@@ -264,3 +264,30 @@ def test_page_reconnects_after_server_restart(
     x, _ = pupil_centre(shot(page))
     assert x > W / 2 + 15
     page.close()
+
+
+def test_page_survives_malformed_messages(browser: Any, spawn: Callable[..., Process]) -> None:
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "left")
+    before = page.evaluate("JSON.stringify(window.eyes.target)")
+    junk = [
+        "", "not json", "null", "42", "[]", '{"topic": "direction"}',
+        '{"topic": "direction", "msg": {"yaw": "left", "pitch": 0}}',
+        '{"topic": "direction", "msg": {"yaw": null, "pitch": 0}}',
+        '{"topic": "lids", "msg": {"eye_id": 9, "top_lid_position": 50, '
+        '"bottom_lid_position": 50}}',
+        '{"topic": "expression", "msg": {"action": 99}}',
+        '{"topic": "pupil", "msg": {"dilation_percentage": "big"}}',
+        '{"topic": "unknown", "msg": {}}',
+    ]
+    for text in junk:
+        page.evaluate("(t) => window.eyes.receive(t)", text)
+    assert page.evaluate("window.eyes.stats.badMessages") == len(junk)
+    assert page.evaluate("JSON.stringify(window.eyes.target)") == before
+    # Out-of-range but well-formed values are clamped, not trusted.
+    page.evaluate("""(t) => window.eyes.receive(t)""",
+                  '{"topic": "pupil", "msg": {"dilation_percentage": 1000}}')
+    assert page.evaluate("window.eyes.target.dilation") == 100
+    frames = page.evaluate("window.eyes.stats.frames")
+    page.wait_for_function(f"window.eyes.stats.frames > {frames + 10}", timeout=10_000)
+    page.close()

@@ -52,6 +52,7 @@
     drawTimes: [],               // last 1200 per-frame update+draw costs, ms
     latency: [],                 // {stamp_ns, recv_ms, frame_ms} per direction message
     blinkNow: () => startBlink(now()),
+    receive: (text) => onMessage(text),   // feed a server message by hand (devtools, tests)
   };
   window.eyes = eyes;
 
