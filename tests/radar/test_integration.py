@@ -1,0 +1,309 @@
+"""Bridge + presence end to end: simulated LD2410s on real ptys, a real router, real processes."""
+
+from __future__ import annotations
+
+import random
+import socket
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import msgspec
+import pytest
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import LOOPBACK, Collector, Process, retry_until
+from buddybot.radar import ld2410 as p
+from buddybot.radar.scenarios import NOBODY, SCENARIOS, Scenario, Target
+from buddybot.radar.sim import FRAME_PERIOD_S, PtySensor, SimulatedLD2410
+
+pytestmark = pytest.mark.integration
+
+IN, OUT = m.PresenceState.IN_RANGE, m.PresenceState.OUT_OF_RANGE
+Spawn = Callable[..., Process]
+
+
+class Gated:
+    """A scenario that shows nobody until `go()`, then plays `inner` from its start."""
+
+    def __init__(self, inner: Scenario) -> None:
+        self.inner = inner
+        self.started: float | None = None
+        self.sensor: PtySensor | None = None
+
+    def __call__(self, t: float, rng: random.Random) -> Target:
+        if self.started is None:
+            return NOBODY
+        return self.inner(t - self.started, rng)
+
+    def go(self) -> None:
+        assert self.sensor is not None
+        self.started = self.sensor.scenario_time()
+
+
+def standing(t: float, rng: random.Random) -> Target:
+    return Target(2, 100, 5, 100, 70, 100)
+
+
+@pytest.fixture
+def sensors(tmp_path: Path) -> Iterator[Callable[..., PtySensor]]:
+    made: list[PtySensor] = []
+
+    def make(scenario: str | Scenario, name: str = "ttyLD", **kw: object) -> PtySensor:
+        sensor = PtySensor(scenario, link=tmp_path / name, **kw).start()  # type: ignore[arg-type]
+        if isinstance(scenario, Gated):
+            scenario.sensor = sensor
+        made.append(sensor)
+        return sensor
+
+    yield make
+    for sensor in made:
+        sensor.stop()
+
+
+def frames_of(collector: Collector[m.LD2410TargetDataFrameArray], radar_id: int) -> int:
+    return sum(1 for msg in collector.messages for f in msg.sensors if f.radar_id == radar_id)
+
+
+def wait_more_frames(collector: Collector[m.LD2410TargetDataFrameArray], radar_id: int, n: int,
+                     timeout: float = 20.0) -> None:
+    start = frames_of(collector, radar_id)
+    retry_until(lambda: frames_of(collector, radar_id) >= start + n, timeout,
+                what=f"{n} more frames from radar {radar_id}")
+
+
+def diag_value(msg: m.DiagnosticStatus, name: str) -> object:
+    return msg.values.get(name)
+
+
+def test_approach_and_leave_gives_one_visit(sensors: Callable[..., PtySensor], spawn: Spawn,
+                                            probe: Node,
+                                            node_factory: Callable[..., Node]) -> None:
+    script = Gated(SCENARIOS["walk-in"])
+    sensor = sensors(script, speed=2.0)
+    presence = Collector(probe, keys.PRESENCE)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    bridge = spawn("radar-bridge", "--sensor", sensor.path)
+    service = spawn("radar-presence", "--absence-hold-s", "1.0")
+    pdiag.wait_for(lambda d: d.level == "OK", 30, "presence seeing the sensor")
+    script.go()
+    entered = presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+    left = presence.wait_for(lambda v: v.presence_state == OUT, 30, "OUT_OF_RANGE")
+    # The scenario is over (nobody, for good): let 2 s of frames more pass.
+    wait_more_frames(frames, 0, 20)
+    states = [v.presence_state for v in presence.messages]
+    edges = [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s]
+    assert edges == [IN, OUT], presence.messages
+    assert states.count(OUT) == 1
+    assert 1.5 <= entered.distance_m <= 2.0
+    # IN_RANGE carries the arrival stamp of the frame that caused it.
+    stamps = {msg.stamp_ns for msg in frames.messages}
+    assert entered.stamp_ns in stamps and left.stamp_ns >= entered.stamp_ns
+    # A late joiner gets the latched verdict at once.
+    late = Collector(node_factory("late"), keys.PRESENCE)
+    assert late.wait_for(timeout=10).presence_state == OUT
+    assert bridge.alive() and service.alive()
+
+
+def test_unplug_and_replug_is_survived_and_the_other_sensor_goes_on(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    a = sensors("visit", "ttyA")
+    b = sensors("nobody", "ttyB")
+    frames = Collector(probe, keys.RADAR_FRAMES, device="4")
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    bridge = spawn("radar-bridge", "--sensor", a.path, "--sensor", b.path, "--device-id", "4")
+    wait_more_frames(frames, 0, 5, 30)
+    wait_more_frames(frames, 1, 5)
+
+    diag.clear()
+    a.unplug()
+    down = diag.wait_for(lambda d: diag_value(d, "radar0.connected") is False, 20,
+                         "radar 0 reported down")
+    assert down.level == "WARN" and "radar 0" in down.message
+    wait_more_frames(frames, 1, 10)  # the other sensor goes on meanwhile
+    diag.clear()
+
+    a.replug()
+    up = diag.wait_for(lambda d: diag_value(d, "radar0.connected") is True, 30,
+                       "radar 0 back")
+    assert up.level == "OK"
+    assert int(diag_value(up, "radar0.reconnects")) >= 1  # type: ignore[arg-type]
+    assert int(diag_value(up, "reconnects")) >= 1  # type: ignore[arg-type]
+    wait_more_frames(frames, 0, 10)
+    assert bridge.alive()
+
+
+def test_flickering_noisy_sensor_does_not_flap_presence(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    sensor = sensors("noisy", seed=7)
+    presence = Collector(probe, keys.PRESENCE)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    spawn("radar-bridge", "--sensor", sensor.path)
+    service = spawn("radar-presence")  # default holds
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+    wait_more_frames(frames, 0, 80, 40)
+    assert [v.presence_state for v in presence.messages].count(OUT) == 0, presence.messages
+    diag.wait_for(lambda d: int(diag_value(d, "bad_frames") or 0) > 0
+                  and int(diag_value(d, "clamped_energies") or 0) > 0
+                  and int(diag_value(d, "frames") or 0) > 50, 20,
+                  "bad frames and clamped energies counted")
+    assert service.alive()
+
+
+def test_silent_sensor_is_reported_not_taken_for_nobody(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    sensor = sensors(standing)
+    presence = Collector(probe, keys.PRESENCE)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    spawn("radar-bridge", "--sensor", sensor.path)
+    spawn("radar-presence", "--absence-hold-s", "0.5", "--stale-after-s", "1.0")
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+    sensor.unplug()
+    silent = pdiag.wait_for(lambda d: d.level == "ERROR", 20, "presence reporting silence")
+    assert "0/0" in silent.message
+    # Several absence holds later (diagnostics come every 2 s), still IN_RANGE.
+    pdiag.wait_for(lambda d: d.stamp_ns > silent.stamp_ns + 3e9, 20, "time passing")
+    assert [v.presence_state for v in presence.messages] == [IN]
+    sensor.replug()
+    pdiag.wait_for(lambda d: d.level == "OK" and d.stamp_ns > silent.stamp_ns, 30, "sensor back")
+
+
+def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:
+    presence = Collector(probe, keys.PRESENCE)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    service = spawn("radar-presence")
+    pdiag.wait_for(timeout=30, what="presence up")
+    raw = probe.session.declare_publisher(probe.key(keys.RADAR_FRAMES, device="7"))
+    good = probe.publisher(keys.RADAR_FRAMES, device="7")
+    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
+                                   movement_distance=120, movement_energy=50,
+                                   stationary_distance=0, stationary_energy=0,
+                                   detection_distance=120)
+    over = msgspec.json.encode(msgspec.to_builtins(near)).replace(b'"movement_energy":50',
+                                                                    b'"movement_energy":300')
+
+    def send() -> bool:
+        raw.put(b"\x00\xff not json")
+        raw.put(b'{"stamp_ns":1,"device_id":7,"sensors":[' + over + b"]}")
+        good.put(m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=7, sensors=[near]))
+        return any(v.presence_state == IN for v in presence.messages)
+
+    retry_until(send, 30, 0.2, "IN_RANGE from the valid frame")
+    d = pdiag.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 2, 20, "malformed counted")
+    assert d.level in ("OK", "WARN")
+    raw.undeclare()
+    assert service.alive()
+
+
+def test_bridge_sim_option_publishes_engineering_frames_at_10_hz(spawn: Spawn,
+                                                                   probe: Node) -> None:
+    frames = Collector(probe, keys.RADAR_FRAMES, device="3")
+    spawn("radar-bridge", "--sim", "--device-id", "3")
+    first = frames.wait_for(timeout=30, what="first frame")
+    frames.wait_count(len(frames.messages) + 30, timeout=20)
+    msgs = frames.messages[-30:]
+    span_s = (msgs[-1].stamp_ns - msgs[0].stamp_ns) / 1e9
+    assert 29 / span_s > 5.0, span_s  # ~10 Hz on a busy machine, never once a second
+    frame = first.sensors[0]
+    assert first.device_id == 3 and frame.radar_id == 0
+    assert frame.moving_gate_energy is not None and len(frame.moving_gate_energy) == 9
+
+
+def test_bridge_reports_a_missing_sensor_and_reads_the_others(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    good = sensors("nobody")
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    missing = str(tmp_path / "ttyUSB-not-here")
+    bridge = spawn("radar-bridge", "--sensor", missing, "--sensor", good.path)
+    wait_more_frames(frames, 1, 10, 30)
+    d = diag.wait_for(lambda d: d.level == "WARN" and missing in d.message, 20, "missing named")
+    assert "cannot open" in str(diag_value(d, "radar0.error"))
+    assert frames_of(frames, 0) == 0
+    assert bridge.alive()
+
+
+class TcpSensor:
+    """An ESP32/ser2net-style serial-over-TCP bridge: a simulated LD2410 behind a socket."""
+
+    def __init__(self) -> None:
+        self.sim = SimulatedLD2410(SCENARIOS["nobody"])
+        self.server = socket.create_server((LOOPBACK, 0))
+        self.port = self.server.getsockname()[1]
+        self.connections = 0
+        self.drop = threading.Event()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        self.server.settimeout(0.2)
+        while not self.stop.is_set():
+            try:
+                conn, _ = self.server.accept()
+            except TimeoutError:
+                continue
+            self.connections += 1
+            self.drop.clear()
+            with conn:
+                while not (self.stop.is_set() or self.drop.is_set()):
+                    try:
+                        conn.sendall(self.sim.report(0.0, time.monotonic()))
+                    except OSError:
+                        break
+                    self.stop.wait(FRAME_PERIOD_S)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.server.close()
+
+
+def test_tcp_sensor_drop_is_retried(spawn: Spawn, probe: Node) -> None:
+    tcp = TcpSensor()
+    try:
+        frames = Collector(probe, keys.RADAR_FRAMES)
+        diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+        spawn("radar-bridge", "--sensor", f"socket://{LOOPBACK}:{tcp.port}")
+        wait_more_frames(frames, 0, 5, 30)
+        tcp.drop.set()  # the TCP connection drops (Wi-Fi gone, ser2net restarted)
+        diag.wait_for(lambda d: int(diag_value(d, "reconnects") or 0) >= 1, 30, "reconnect")
+        wait_more_frames(frames, 0, 5)
+        assert tcp.connections >= 2
+    finally:
+        tcp.close()
+
+
+@pytest.mark.parametrize(("toml", "needle"), [
+    ("[radar_presence]\nrange_m = -1.0\n", "range_m"),
+    ("[radar_presence]\nrange = 2.0\n", "range"),
+    ("[radar_bridge]\nsim_scenario = 'party'\nsim = true\n", "party"),
+])
+def test_bad_config_is_a_clear_error(tmp_path: Path, toml: str, needle: str) -> None:
+    config = tmp_path / "bad.toml"
+    config.write_text(toml)
+    service = "radar-bridge" if "radar_bridge" in toml else "radar-presence"
+    out = subprocess.run(
+        [sys.executable, "-m", "buddybot", "run", service, "--config", str(config),
+         "--connect", f"tcp/{LOOPBACK}:1"], capture_output=True, text=True, timeout=60)
+    assert out.returncode == 2, out.stderr
+    assert needle in out.stderr
+
+
+def test_report_frame_bytes_on_the_wire_match_what_the_bridge_publishes(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """16-bit distances with a 0x0A byte (266 cm) survive the whole serial path."""
+    sensor = sensors(lambda t, rng: Target(3, 266, 40, 300, 100, 256), engineering=False)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    spawn("radar-bridge", "--sensor", sensor.path)
+    msg = frames.wait_for(timeout=30, what="frame")
+    f = msg.sensors[0]
+    assert (f.target_state, f.movement_distance, f.movement_energy) == (3, 266, 40)
+    assert (f.stationary_distance, f.stationary_energy, f.detection_distance) == (300, 100, 256)
+    assert b"\x0a" in p.encode_report(p.Report(3, 266, 40, 300, 100, 256))
