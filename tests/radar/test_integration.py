@@ -13,6 +13,7 @@ from pathlib import Path
 
 import msgspec
 import pytest
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
