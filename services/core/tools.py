@@ -7,7 +7,9 @@ contain wildcards; messages are decoded with the catalogue's types.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
+import os
 import statistics
 import sys
 import threading
@@ -57,6 +59,7 @@ def echo(ctx: ServiceContext) -> int:
     key = keys.absolute(ctx.robot, args.key)
     count = 0
     done = threading.Event()
+    closed = threading.Event()
     lock = threading.Lock()
 
     def on_sample(sample: zenoh.Sample) -> None:
@@ -68,7 +71,12 @@ def echo(ctx: ServiceContext) -> int:
             if done.is_set():
                 return
             line = f"{sample.key_expr}: {text}" if args.show_key else text
-            print(line, flush=True)
+            try:
+                print(line, flush=True)
+            except (BrokenPipeError, ValueError):  # `| head` closed the pipe: stop quietly
+                closed.set()
+                done.set()
+                return
             count += 1
             if args.count and count >= args.count:
                 done.set()
@@ -88,6 +96,10 @@ def echo(ctx: ServiceContext) -> int:
         sub.undeclare()
     finally:
         session.close()
+    if closed.is_set():
+        with contextlib.suppress(OSError):  # no traceback at exit for the closed stdout
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115
+        return 0
     if args.count and count < args.count:
         print(f"buddybot echo: got {count} of {args.count} messages", file=sys.stderr)
         return 1
