@@ -21,7 +21,14 @@ import zenoh
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node, ServiceError
-from buddybot.core.testing import LOOPBACK, Collector, Process, free_port, retry_until
+from buddybot.core.testing import (
+    LOOPBACK,
+    Collector,
+    Process,
+    buddybot_argv,
+    free_port,
+    retry_until,
+)
 from tests.deploy.conftest import HOSTS, HostProfile, TlsRouter, open_client
 
 pytestmark = pytest.mark.integration
@@ -326,3 +333,38 @@ def test_remote_eye_screen_renders_what_the_robot_sends(
 
     retry_until(forwarded, timeout=60, interval=0.5, what="renderer counting eye messages")
     assert renderer.alive()
+
+
+# --- a broken router profile -------------------------------------------------------------
+
+
+def _router_exit(zenoh_file: str, tmp_path: Path) -> tuple[int, str]:
+    port = free_port()
+    proc = Process(buddybot_argv("router", "--listen", f"tls/{LOOPBACK}:{port}",
+                                 "--zenoh-config", zenoh_file), f"bad-router-{port}",
+                   tmp_path / "logs")
+    try:
+        code = proc.proc.wait(60)
+    finally:
+        proc.stop()
+    return code, proc.output()
+
+
+def test_router_with_a_mangled_profile_is_a_config_error(profile: HostProfile,
+                                                         tmp_path: Path) -> None:
+    """Exit status 2 (systemd does not restart on it) and the file named."""
+    text = Path(profile.zenoh_file("router")).read_text()
+    broken = tmp_path / "router-broken.json5"
+    broken.write_text(text[: len(text) // 2])
+    code, output = _router_exit(str(broken), tmp_path)
+    assert code == 2, output
+    assert "config error" in output and "router-broken.json5" in output
+
+
+def test_router_without_its_key_says_which_file(profile: HostProfile, tmp_path: Path) -> None:
+    text = Path(profile.zenoh_file("router")).read_text()
+    missing = tmp_path / "router-nokey.json5"
+    missing.write_text(text.replace("/router.key", "/no-such.key"))
+    code, output = _router_exit(str(missing), tmp_path)
+    assert code != 0, output
+    assert "private key" in output
