@@ -55,12 +55,13 @@ class HostProfile:
         out.write_text(text)
         return str(out)
 
-    def toml(self, host: str, endpoint: str, robot: str = "buddy") -> Path:
+    def toml(self, host: str, endpoint: str, robot: str = "buddy",
+             cert_name: str | None = None) -> Path:
         """A BuddyBot config for one host: where the router is and which TLS file to use."""
-        path = self.work / f"{host}.toml"
+        path = self.work / f"{host}-as-{cert_name or host}.toml"
         path.write_text(
             f'[robot]\nid = "{robot}"\n[zenoh]\nconnect = ["{endpoint}"]\n'
-            f'config_file = "{self.zenoh_file(host)}"\n'
+            f'config_file = "{self.zenoh_file(host, cert_name)}"\n'
         )
         return path
 
@@ -133,8 +134,8 @@ def host_process(profile: HostProfile, tls_router: TlsRouter,
     """`buddybot ARGS... --config HOST.toml` processes, stopped (and shown) afterwards."""
     started: list[Process] = []
 
-    def start(host: str, *args: str) -> Process:
-        config = profile.toml(host, tls_router.endpoint)
+    def start(host: str, *args: str, cert_name: str | None = None) -> Process:
+        config = profile.toml(host, tls_router.endpoint, cert_name=cert_name)
         argv = buddybot_argv(*args, "--config", str(config))
         label = re.sub(r"[^\w.-]+", "_", "-".join(args[:2]))
         proc = Process(argv, f"{host}-{label}-{len(started)}", tmp_path / "logs")

@@ -113,6 +113,24 @@ def test_client_without_a_valid_certificate_cannot_connect(
     good.close()
 
 
+def test_service_with_a_rogue_certificate_stays_outside(
+    host_process: Callable[..., Process], host_node: Callable[..., Node]
+) -> None:
+    """A real radar bridge whose certificate our CA did not sign keeps waiting for the
+    router (it does not crash) and none of its frames arrive; the same service with
+    the board's real certificate gets through (the control)."""
+    watcher = host_node("operator", "watcher")
+    frames = Collector[m.LD2410TargetDataFrameArray](watcher, keys.RADAR_FRAMES, device="*")
+    rogue = host_process("radar-board", "run", "radar-bridge", "--sim", "--device-id", "7",
+                         cert_name="rogue")
+    host_process("radar-board", "run", "radar-bridge", "--sim", "--device-id", "1")
+    frames.wait_for(lambda f: f.device_id == 1, timeout=60, what="frames of the real board")
+    rogue.wait_for_output("waiting for the Zenoh router", timeout=30)
+    with pytest.raises(TimeoutError):
+        frames.wait_for(lambda f: f.device_id == 7, timeout=QUIET_S)
+    assert rogue.alive(), rogue.output()
+
+
 # --- who may publish -------------------------------------------------------------------
 
 
