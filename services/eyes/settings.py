@@ -13,7 +13,7 @@ import msgspec
 
 def _default_curve() -> list[list[float]]:
     # Same values as buddybot.eyes.driver.DEFAULT_PUPIL_CURVE (kept import-free here).
-    return [[30.0, 90.0], [100.0, 60.0], [300.0, 25.0]]
+    return [[30.0, 75.0], [100.0, 55.0], [300.0, 30.0]]
 
 
 class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

@@ -129,7 +129,7 @@ def test_page_follows_published_direction(
     # Near -> large pupil, far -> small (the driver's curve), measured as black area.
     pupil_area = {}
     pub = probe.publisher(keys.EYE_CONTROL)
-    for stamp, cm, expected in ((5, 35.0, 87.9), (6, 280.0, 28.5)):
+    for stamp, cm, expected in ((5, 35.0, 75.0 - 20.0 / 14), (6, 280.0, 32.5)):
         msg = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)
 
         def arrived(msg: m.EyeControl = msg, expected: float = expected) -> bool:

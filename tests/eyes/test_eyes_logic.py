@@ -51,13 +51,13 @@ def test_direction_is_degrees_with_the_same_signs(
 
 
 def test_default_curve_near_large_far_small() -> None:
-    assert CURVE(30) == pytest.approx(90.0)
-    assert CURVE(100) == pytest.approx(60.0)
-    assert CURVE(300) == pytest.approx(25.0)
-    assert CURVE(65) == pytest.approx(75.0)         # linear between points
-    assert CURVE(5) == pytest.approx(90.0)          # flat before the first point
-    assert CURVE(10_000) == pytest.approx(25.0)     # flat after the last
-    assert CURVE(math.inf) == pytest.approx(25.0)
+    assert CURVE(30) == pytest.approx(75.0)
+    assert CURVE(100) == pytest.approx(55.0)
+    assert CURVE(300) == pytest.approx(30.0)
+    assert CURVE(65) == pytest.approx(65.0)         # linear between points
+    assert CURVE(5) == pytest.approx(75.0)          # flat before the first point
+    assert CURVE(10_000) == pytest.approx(30.0)     # flat after the last
+    assert CURVE(math.inf) == pytest.approx(30.0)
 
 
 @given(st.floats(0, 70_000), st.floats(0, 70_000))

@@ -23,6 +23,7 @@
   const BG = "#101522";          // background and lid colour: the eyes are cut-outs
   const SCLERA = "#f2f4f8";
   const PUPIL = "#000000";
+  const LASH = "#3c4966";        // lash line of a closed eye
 
   const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30 };
 
@@ -352,6 +353,20 @@
     ctx.quadraticCurveTo(cx, yB - c - 2 * lift, cx - ext, yB + c);
     ctx.closePath();
     ctx.fill();
+    // Closed (asleep, or mid-blink): a soft lash line so the eye reads as shut,
+    // not as a screen that went off.
+    const shut = clamp(((top + bottom) / 100 - 0.9) / 0.1, 0, 1);
+    if (shut > 0) {
+      ctx.globalAlpha = shut;
+      ctx.beginPath();
+      ctx.moveTo(cx - R * 0.85, cy);
+      ctx.quadraticCurveTo(cx, cy + R * 0.28, cx + R * 0.85, cy);
+      ctx.lineWidth = Math.max(2, R * 0.06);
+      ctx.lineCap = "round";
+      ctx.strokeStyle = LASH;
+      ctx.stroke();
+      ctx.globalAlpha = 1;
+    }
   }
 
   function heart(x, y, s, color) {
