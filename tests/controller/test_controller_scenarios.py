@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -113,9 +114,12 @@ def test_radar_flicker_neither_flaps_the_eyes_nor_regreets(spawn, tmp_path, stim
     stimulus.watch(True)
     audio.wait_log(lambda log: "end:greeting" in log)
     wait_expressions(expr, [X.EYE_AWAKE])
-    for _ in range(8):  # a radar at the edge of its range: 100 ms dropouts
+    pace = threading.Event()
+    for _ in range(8):  # a radar at the edge of its range: 150 ms dropouts (stimulus pacing)
         stimulus.presence(False)
+        pace.wait(0.15)
         stimulus.presence(True)
+        pace.wait(0.15)
     stimulus.presence(False)
     stimulus.watch(False)
     audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
@@ -267,3 +271,17 @@ def _probe_config(endpoint: str) -> zenoh.Config:
     from buddybot.core.node import zenoh_config
 
     return zenoh_config(connect=[endpoint])
+
+
+def test_follows_the_configured_camera_only(spawn, fast_config, stimulus, watch,
+                                            node_factory) -> None:
+    expr, control = watch
+    spawn("controller", "--config", str(fast_config), "--camera", "side")
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=20, what="initial EYE_SLEEP")
+    side = node_factory("side-camera").publisher(keys.FACE, camera="side")
+    stimulus.face(stamp_ns=11)  # camera "front": not followed
+    side.put(m.FacePosition(stamp_ns=12, frame_id="side", point=m.Point(x=1.0, y=0.0, z=-0.1),
+                            confidence=0.8))
+    msg = control.wait_for(lambda c: c.stamp_ns == 12, what="eye control from camera side")
+    assert msg.pitch == pytest.approx(0.0)  # z -0.1 + 0.1 camera height = level
+    assert 11 not in [c.stamp_ns for c in control.messages]
