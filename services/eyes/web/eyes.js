@@ -323,8 +323,10 @@
     const top = lids.top + (50 - lids.top) * blink;
     const bottom = lids.bottom + (50 - lids.bottom) * blink;
     const span = R * 1.04;
-    const yT = cy - span + (top / 50) * span;      // middle of the top lid's edge
-    const yB = cy + span - (bottom / 50) * span;   // middle of the bottom lid's edge
+    // Middles of the lid edges; closed lids overlap a little so no seam of
+    // sclera shows through the anti-aliasing.
+    const yT = cy - span + (top / 50) * (span + R * 0.03);
+    const yB = cy + span - (bottom / 50) * (span + R * 0.03);
     const openness = clamp(1 - (top + bottom) / 100, 0, 1);
     const c = R * 0.22 * openness;                 // lid curvature, flat when closed
     const ext = R * 1.3;
