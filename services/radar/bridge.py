@@ -13,12 +13,10 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import tempfile
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any
 
 import serial
@@ -218,13 +216,16 @@ def run(ctx: ServiceContext) -> int:
 
     cfg = ctx.config.radar_bridge
     args = ctx.args
-    urls = list(args.sensor or cfg.sensors)
+    sim_on = bool(args.sim or cfg.sim)
+    # --sim means "the simulated sensor": configured hardware is left alone
+    # (sensors given explicitly with --sensor are still read alongside it).
+    urls = list(args.sensor or ([] if sim_on else cfg.sensors))
     device_id = args.device_id if args.device_id is not None else cfg.device_id
     if device_id < 0:
         raise ConfigError("--device-id must be >= 0")
     baud = args.baudrate or cfg.baudrate
     sims: list[PtySensor] = []
-    if args.sim or cfg.sim:
+    if sim_on:
         scenario = args.sim_scenario or cfg.sim_scenario
         if scenario not in SCENARIOS:
             raise ConfigError(f"radar_bridge.sim_scenario: unknown {scenario!r}; "
@@ -232,8 +233,7 @@ def run(ctx: ServiceContext) -> int:
         speed = args.sim_speed or cfg.sim_speed
         if speed <= 0:
             raise ConfigError("--sim-speed must be > 0")
-        folder = Path(tempfile.mkdtemp(prefix="buddybot-ld2410-"))
-        sims.append(PtySensor(scenario, link=folder / "ld2410-sim", speed=speed).start())
+        sims.append(PtySensor(scenario, speed=speed).start())
         urls.append(sims[-1].path)
     if not urls:
         print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim")
