@@ -291,3 +291,28 @@ def test_page_survives_malformed_messages(browser: Any, spawn: Callable[..., Pro
     frames = page.evaluate("window.eyes.stats.frames")
     page.wait_for_function(f"window.eyes.stats.frames > {frames + 10}", timeout=10_000)
     page.close()
+
+
+def test_both_page_puts_the_robots_left_eye_on_the_right_half(
+    browser: Any, spawn: Callable[..., Process], probe: Node
+) -> None:
+    """Per-eye lids: closing only the robot's LEFT eye darkens the viewer's right half."""
+    _proc, port = start_renderer(spawn)
+    page = open_page(browser, port, "both")
+    lids = probe.publisher(keys.LIDS)
+    lids.put(m.EyeLidControl(stamp_ns=1, eye_id=m.EyeId.LEFT, top_lid_position=50,
+                             bottom_lid_position=50))
+    page.wait_for_function("window.eyes.target.lids.left.top === 50", timeout=20_000)
+    settled(page)
+    img = shot(page, "left_eye_closed_both_page")
+    viewer_left, viewer_right = sclera_pixels(img[:, : W // 2]), sclera_pixels(img[:, W // 2:])
+    assert viewer_right == 0 and viewer_left > 0.1 * W * H / 2, (viewer_left, viewer_right)
+    # And the single-eye pages show their own eye.
+    left_page = open_page(browser, port, "left")
+    right_page = open_page(browser, port, "right")
+    settled(left_page)
+    settled(right_page)
+    assert sclera_pixels(shot(left_page)) == 0
+    assert sclera_pixels(shot(right_page)) > 0.1 * W * H
+    for p in (page, left_page, right_page):
+        p.close()
