@@ -182,6 +182,8 @@ class Bridge:
         diag.values = values  # one reference swap: the publisher copies it
         if not down:
             diag.set("OK", f"{len(self.readers)} sensor(s) connected")
+        elif all(s.last_error == "connecting" for s in down):
+            diag.set("WARN", f"connecting to {len(down)} sensor(s)")
         else:
             text = "; ".join(f"radar {s.radar_id} ({s.url}) down: {s.last_error}" for s in down)
             diag.set("ERROR" if len(down) == len(self.readers) else "WARN", text)
