@@ -36,6 +36,7 @@ import zenoh.ext
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
 
 log = logging.getLogger("buddybot.node")
 
@@ -63,7 +64,10 @@ def zenoh_config(
 ) -> zenoh.Config:
     """A Zenoh config with BuddyBot's rules: explicit endpoints, no multicast
     scouting, clients that wait for their router and reconnect quickly."""
-    config = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
+    try:
+        config = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
+    except zenoh.ZError as exc:  # exit status 2 (systemd units do not restart on it)
+        raise ConfigError(f"{base_file}: not a valid Zenoh config: {exc}") from None
     config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("scouting/multicast/enabled", "false")
     if connect:

@@ -7,7 +7,6 @@ import threading
 
 import zenoh
 
-from buddybot.core.config import ConfigError
 from buddybot.core.node import zenoh_config
 
 log = logging.getLogger("buddybot.router")
@@ -21,10 +20,7 @@ def run_router(
     A Zenoh file that Zenoh cannot parse is a ConfigError (exit status 2, which the
     systemd units do not restart on), naming the file.
     """
-    try:
-        config = zenoh_config(mode="router", listen=listen, base_file=base_file)
-    except zenoh.ZError as exc:
-        raise ConfigError(f"{base_file}: not a valid Zenoh config: {exc}") from None
+    config = zenoh_config(mode="router", listen=listen, base_file=base_file)
     session = zenoh.open(config)
     try:
         log.info("router listening on %s (zid %s)", ", ".join(listen), session.info.zid())

@@ -13,7 +13,7 @@ import sys
 import threading
 from dataclasses import dataclass, field
 
-from buddybot.core.config import Config, ConfigError, load_config
+from buddybot.core.config import Config, ConfigError, load_config, resolve_path
 from buddybot.core.node import Node, install_signal_handlers
 
 
@@ -69,6 +69,8 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
 
     if not valid_robot_id(robot):
         raise ConfigError(f"--robot: {robot!r} is not a valid id (letters, digits, '-', '_')")
+    if config.zenoh.config_file:  # relative to the TOML file, like every path in it
+        config.zenoh.config_file = str(resolve_path(config, config.zenoh.config_file))
     return ServiceContext(name=name, args=args, config=config, robot=robot, connect=connect)
 
 

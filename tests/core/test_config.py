@@ -100,3 +100,18 @@ def test_cli_config_prints_effective_config(tmp_path: Path) -> None:
     assert result.returncode == 0, result.stderr
     assert "range_m = 3.5" in result.stdout
     assert 'id = "zz"' in result.stdout
+
+
+def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
+    """`[zenoh] config_file` resolves next to the TOML file; one Zenoh cannot parse stops
+    the service with status 2 (the systemd units do not restart on it)."""
+    (tmp_path / "zenoh.json5").write_text("{ this is: not json5 ")
+    path = tmp_path / "robot.toml"
+    path.write_text('[zenoh]\nconfig_file = "zenoh.json5"\n')
+    result = subprocess.run(
+        [sys.executable, "-m", "buddybot", "run", "eyes", "--config", str(path)],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 2, result.stderr
+    assert str(tmp_path / "zenoh.json5") in result.stderr
+    assert "Traceback" not in result.stderr
