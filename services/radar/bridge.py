@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -238,7 +239,8 @@ def run(ctx: ServiceContext) -> int:
         sims.append(PtySensor(scenario, speed=speed).start())
         urls.append(sims[-1].path)
     if not urls:
-        print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim")
+        print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim",
+              file=sys.stderr)
         return 2
     node = ctx.node()
     bridge = Bridge(node, urls, device_id, baud, (cfg.reconnect_initial_s, cfg.reconnect_max_s),

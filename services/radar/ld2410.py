@@ -343,6 +343,22 @@ def decode_mac(data: bytes) -> str:
     return ":".join(f"{b:02x}" for b in data[:6])
 
 
+@dataclass(frozen=True, slots=True)
+class LightControl:
+    """0x00AE: OUT pin light function (0 off, 1 below, 2 above threshold)."""
+
+    function: int
+    threshold: int
+    out_level: int
+
+
+def decode_light_control(data: bytes) -> LightControl:
+    _need(data, 3, "read light control")
+    if data[0] > 2 or data[2] > 1:
+        raise ProtocolError(f"read light control: bad values {data[:3].hex(' ')}")
+    return LightControl(data[0], data[1], data[2])
+
+
 # --- the incremental parser --------------------------------------------------------
 
 

@@ -182,6 +182,11 @@ def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:
     pdiag.wait_for(timeout=30, what="presence up")
     raw = probe.session.declare_publisher(probe.key(keys.RADAR_FRAMES, device="7"))
     good = probe.publisher(keys.RADAR_FRAMES, device="7")
+    other = probe.publisher(keys.RADAR_FRAMES, device="8")  # a second bridge: nobody there
+    empty = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.NO_TARGET,
+                                    movement_distance=0, movement_energy=0,
+                                    stationary_distance=0, stationary_energy=0,
+                                    detection_distance=0)
     near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
                                    movement_distance=120, movement_energy=50,
                                    stationary_distance=0, stationary_energy=0,
@@ -192,12 +197,16 @@ def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:
     def send() -> bool:
         raw.put(b"\x00\xff not json")
         raw.put(b'{"stamp_ns":1,"device_id":7,"sensors":[' + over + b"]}")
+        other.put(m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=8,
+                                               sensors=[empty]))
         good.put(m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=7, sensors=[near]))
         return any(v.presence_state == IN for v in presence.messages)
 
     retry_until(send, 30, 0.2, "IN_RANGE from the valid frame")
-    d = pdiag.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 2, 20, "malformed counted")
+    d = pdiag.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 2
+                       and d.values.get("sensors") == 2, 20, "malformed counted, 2 devices")
     assert d.level in ("OK", "WARN")
+    assert [v.distance_m for v in presence.messages][:1] == [1.2]
     raw.undeclare()
     assert service.alive()
 
@@ -279,6 +288,19 @@ def test_tcp_sensor_drop_is_retried(spawn: Spawn, probe: Node) -> None:
         assert tcp.connections >= 2
     finally:
         tcp.close()
+
+
+def test_bad_command_line_values_are_clear_errors() -> None:
+    for service, args, needle in (
+        ("radar-presence", ["--range-m", "-1"], "range_m"),
+        ("radar-bridge", ["--sim", "--sim-speed", "-2"], "--sim-speed"),
+        ("radar-bridge", [], "no sensor"),
+    ):
+        out = subprocess.run(
+            [sys.executable, "-m", "buddybot", "run", service, *args,
+             "--connect", f"tcp/{LOOPBACK}:1"], capture_output=True, text=True, timeout=60)
+        assert out.returncode == 2, (service, args, out.stderr)
+        assert needle in out.stdout + out.stderr
 
 
 @pytest.mark.parametrize(("toml", "needle"), [

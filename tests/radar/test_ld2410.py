@@ -112,6 +112,9 @@ def test_ack_decoders_refuse_short_or_wrong_data() -> None:
         p.decode_resolution(b"\x05\x00")
     with pytest.raises(p.ProtocolError):
         p.decode_enable(b"\x01")
+    with pytest.raises(p.ProtocolError):
+        p.decode_light_control(b"\x03\x80\x00\x00")
+    assert p.decode_light_control(b"\x01\x80\x01\x00") == p.LightControl(1, 0x80, 1)
     assert p.decode_resolution(b"\x01\x00") == 0.2
     assert p.decode_mac(bytes.fromhex("8f27c6d91a3b")) == "8f:27:c6:d9:1a:3b"
 
