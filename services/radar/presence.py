@@ -99,12 +99,17 @@ class PresenceTracker:
     """Feed frames with `update()` and call `tick()` periodically (for holds and staleness).
 
     Both return a Verdict when the published state changes, else None.
-    The initial state is OUT_OF_RANGE/MOVING and, as in the seed, is not
-    published until it changes.
+
+    The state starts *unknown* (None), not OUT_OF_RANGE as in the seed: a
+    presence service that restarts while the robot believes someone is
+    there must say OUT_OF_RANGE once nobody is seen, or the latched IN_RANGE
+    of its previous life would stand forever. So the first verdict is
+    IN_RANGE with the first frame in range, or OUT_OF_RANGE after
+    `absence_hold_s` of fresh data with nobody in range.
     """
 
     rules: PresenceRules = field(default_factory=PresenceRules)
-    presence: PresenceState = PresenceState.OUT_OF_RANGE
+    presence: PresenceState | None = None
     target: PresenceTarget = PresenceTarget.MOVING
     _sensors: dict[str, _Sensor] = field(default_factory=dict)
     _absent_since: float | None = None
@@ -168,7 +173,7 @@ class PresenceTracker:
             self._absent_since = None
             kind = (PresenceTarget.STANDING if reading.target_state == TargetState.STATIONARY
                     else PresenceTarget.MOVING)
-            if self.presence == PresenceState.OUT_OF_RANGE:
+            if self.presence != PresenceState.IN_RANGE:
                 self.presence = PresenceState.IN_RANGE
                 self.target = kind
                 self._pending_target = None
@@ -201,4 +206,5 @@ class PresenceTracker:
         return None
 
     def _verdict(self, stamp_ns: int) -> Verdict:
+        assert self.presence is not None
         return Verdict(self.presence, self.target, round(self._distance_m, 3), stamp_ns)

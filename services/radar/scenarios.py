@@ -64,10 +64,14 @@ def visit(t: float, rng: random.Random) -> Target:
 
 
 def walk_in(t: float, rng: random.Random) -> Target:
-    """Once: nobody 1 s, walks in from 4 m (3 s), stands at 1 m (4 s), leaves (3 s), nobody."""
-    if t < 1.0:
+    """Once: nobody 0.5 s, walks in from 4 m (3 s), stands at 1 m (4 s), leaves (3 s), nobody.
+
+    Within 2 m from t = 2.5 s: before a freshly started presence service's
+    first "nobody" verdict (after its 3 s absence hold), so a visit that
+    starts with the sensor reads as exactly one arrival and one departure."""
+    if t < 0.5:
         return NOBODY
-    t -= 1.0
+    t -= 0.5
     if t < 3.0:
         return _walking(_lerp(400, 100, t, 3.0))
     if t < 7.0:

@@ -92,6 +92,9 @@ def test_approach_and_leave_gives_one_visit(sensors: Callable[..., PtySensor], s
     bridge = spawn("radar-bridge", "--sensor", sensor.path)
     service = spawn("radar-presence", "--absence-hold-s", "1.0")
     pdiag.wait_for(lambda d: d.level == "OK", 30, "presence seeing the sensor")
+    # The first verdict of a fresh service: nobody, once the absence hold has passed.
+    assert presence.wait_for(timeout=30).presence_state == OUT
+    presence.clear()
     script.go()
     entered = presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
     left = presence.wait_for(lambda v: v.presence_state == OUT, 30, "OUT_OF_RANGE")
@@ -173,6 +176,33 @@ def test_silent_sensor_is_reported_not_taken_for_nobody(
     assert [v.presence_state for v in presence.messages] == [IN]
     sensor.replug()
     pdiag.wait_for(lambda d: d.level == "OK" and d.stamp_ns > silent.stamp_ns, 30, "sensor back")
+
+
+class Switch:
+    """A person at 1 m while `here` is set, else nobody."""
+
+    def __init__(self) -> None:
+        self.here = threading.Event()
+
+    def __call__(self, t: float, rng: random.Random) -> Target:
+        return standing(t, rng) if self.here.is_set() else NOBODY
+
+
+def test_restarted_presence_contradicts_a_stale_in_range(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """Killed while IN_RANGE, restarted after the visitor left: it says OUT_OF_RANGE."""
+    switch = Switch()
+    switch.here.set()
+    sensor = sensors(switch)
+    presence = Collector(probe, keys.PRESENCE)
+    spawn("radar-bridge", "--sensor", sensor.path)
+    first = spawn("radar-presence", "--absence-hold-s", "0.5")
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+    first.kill()
+    switch.here.clear()
+    spawn("radar-presence", "--absence-hold-s", "0.5")
+    presence.wait_for(lambda v: v.presence_state == OUT, 30, "OUT_OF_RANGE from the new one")
+    assert [v.presence_state for v in presence.messages] == [IN, OUT]
 
 
 def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:

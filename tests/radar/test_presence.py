@@ -158,7 +158,24 @@ def test_sensor_coming_back_is_used_again() -> None:
     assert c.tracker.stale_sensors(c.t) == ["0/0"]
     c.feed(at(100), sensor="0/0")
     assert c.tracker.stale_sensors(c.t) == []
-    assert c.states == [(IN, MOVING)]
+    assert c.states == [(OUT, MOVING), (IN, MOVING)]
+
+
+def test_unknown_start_says_out_of_range_after_the_hold() -> None:
+    """A restarted service must contradict a stale latched IN_RANGE of its previous life."""
+    c = Clock(PresenceRules(absence_hold_s=2.0))
+    c.feed(NOBODY, 1.9)
+    assert c.verdicts == []
+    c.feed(NOBODY, 0.2)
+    assert c.states == [(OUT, MOVING)]
+    c.feed(NOBODY, 5.0)
+    assert len(c.verdicts) == 1
+
+
+def test_no_data_at_all_says_nothing() -> None:
+    c = Clock()
+    c.idle(10.0)
+    assert c.verdicts == [] and c.tracker.presence is None
 
 
 def test_zero_detection_distance_falls_back_to_the_reported_kind() -> None:
@@ -191,6 +208,7 @@ def test_walk_in_scenario_gives_one_visit() -> None:
     presence = [v.presence for v in c.verdicts]
     assert presence[0] == IN and presence[-1] == OUT
     assert presence.count(OUT) == 1
+    # After a (re)start with someone already on the way, the first verdict is IN.
     assert [p for i, p in enumerate(presence) if i == 0 or presence[i - 1] != p] == [IN, OUT]
 
 
@@ -205,7 +223,9 @@ def test_visit_loop_is_20_to_30_s_in_range_then_away() -> None:
 
 
 def test_passer_by_never_in_range() -> None:
-    assert _run_scenario("passer-by", 30.0).verdicts == []
+    c = _run_scenario("passer-by", 30.0)
+    assert [v.presence for v in c.verdicts] == [OUT]  # the initial verdict, after the hold
+    assert c.verdicts[0].stamp_ns == round(3.0 * 1e9)
 
 
 def test_noisy_sensor_does_not_flap() -> None:
