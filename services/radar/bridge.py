@@ -25,7 +25,7 @@ import serial
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
-from buddybot.core.node import Node
+from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext
 from buddybot.radar.convert import report_to_frame
 from buddybot.radar.ld2410 import Parser, Report
@@ -116,12 +116,16 @@ class SensorReader:
         st = self.status
         st.last_frame = time.monotonic()
         parser = self._parser
+        skipped_at_open = parser.stats.skipped_bytes
         while not self._stop.is_set():
             data = port.read(port.in_waiting or 1)
             now = time.monotonic()
             if not data:
                 if now - st.last_frame > self._silence_s:
-                    raise serial.SerialException(f"no valid frame for {self._silence_s:g} s")
+                    hint = " (bytes arrive but never a frame: wrong baud rate?)" \
+                        if parser.stats.skipped_bytes > skipped_at_open else ""
+                    raise serial.SerialException(
+                        f"no valid frame for {self._silence_s:g} s{hint}")
                 continue
             stamp = time.time_ns()
             for frame in parser.feed(data):
@@ -142,6 +146,8 @@ class Bridge:
         self.device_id = device_id
         self._pub = node.publisher(keys.RADAR_FRAMES, device=str(device_id))
         self._lock = threading.Lock()
+        self._warn = RateLimitedLog(node.log)
+        self.publish_errors = 0
         self.readers = [
             SensorReader(url, i, baudrate, self._publish, self._report, node.stop_event,
                          backoff, silence_s, node.log)
@@ -154,8 +160,12 @@ class Bridge:
             self.readers[radar_id].status.clamped += clamped
         msg = m.LD2410TargetDataFrameArray(stamp_ns=stamp_ns, device_id=self.device_id,
                                            sensors=[frame])
-        with self._lock:  # one publisher, several reader threads
-            self._pub.put(msg)
+        try:
+            with self._lock:  # one publisher, several reader threads
+                self._pub.put(msg)
+        except Exception as exc:  # a Zenoh hiccup must not end the sensor's reader
+            self.publish_errors += 1
+            self._warn.warning("put", "publishing frames failed: %r", exc)
 
     def _report(self) -> None:
         """Diagnostics: level from the sensors' connection state, counters per sensor."""
@@ -180,6 +190,7 @@ class Bridge:
             if st.last_error:
                 values[f"radar{st.radar_id}.error"] = st.last_error
         values.update(totals)
+        values["publish_errors"] = self.publish_errors
         diag.values = values  # one reference swap: the publisher copies it
         if not down:
             diag.set("OK", f"{len(self.readers)} sensor(s) connected")
