@@ -360,3 +360,21 @@ def test_report_frame_bytes_on_the_wire_match_what_the_bridge_publishes(
     assert (f.target_state, f.movement_distance, f.movement_energy) == (3, 266, 40)
     assert (f.stationary_distance, f.stationary_energy, f.detection_distance) == (300, 100, 256)
     assert b"\x0a" in p.encode_report(p.Report(3, 266, 40, 300, 100, 256))
+
+
+def test_a_line_of_pure_garbage_is_reported_with_a_hint(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """What a sensor at another baud rate looks like: bytes, never a valid frame."""
+
+    def garbage(t: float, rng: random.Random) -> Target:
+        return Target(garbage=bytes(rng.randrange(256) for _ in range(20)), corrupt=True)
+
+    sensor = sensors(garbage)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    bridge = spawn("radar-bridge", "--sensor", sensor.path)
+    d = diag.wait_for(lambda d: "wrong baud rate" in str(diag_value(d, "radar0.error")), 30,
+                      "garbage reported")
+    assert int(diag_value(d, "bad_frames")) > 0  # type: ignore[arg-type]
+    assert frames.messages == []
+    assert bridge.alive()
