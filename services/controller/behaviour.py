@@ -256,6 +256,9 @@ class Behaviour:
                 self._visit.greeted = False  # nobody was greeted: no farewell either
         else:
             goal.goal_id = goal_id
+            goal.since = now  # the watchdog counts from the acceptance
+            if goal.kind is SoundKind.GREETING:
+                self._last_greet = now  # the cooldown counts from when it really started
             if self._orphan_status.pop(goal_id, None) in TERMINAL_GOAL_STATES:
                 self._goal = None
         return self._step(now)

@@ -58,6 +58,7 @@ class World(RuleBasedStateMachine):
         self.b = Behaviour(SETTINGS, self.t)
         self.life = 0
         self.restarted = False
+        self.dead = False  # between a controller's death and its restart
         self.in_range = False
         self.playing: Playing | None = None
         self.other_busy = False
@@ -94,13 +95,15 @@ class World(RuleBasedStateMachine):
 
     def publish_status(self, goal_id: str, state: str) -> None:
         self.latched_status = (goal_id, state, self.t)
-        self.apply(self.b.sound_status(self.t, goal_id, state))
+        if not self.dead:
+            self.apply(self.b.sound_status(self.t, goal_id, state))
 
     def update_device(self) -> None:
         free = self.playing is None and not self.other_busy
         if free != self.device_free:
             self.device_free = free
-            self.apply(self.b.device_free(self.t, free))
+            if not self.dead:
+                self.apply(self.b.device_free(self.t, free))
 
     # -- rules: time and senses --
 
@@ -124,6 +127,15 @@ class World(RuleBasedStateMachine):
                 elif self.playing is not None and self.t - self.playing.since >= 1.0:
                     self.finish("SUCCEEDED")
             self.apply(self.b.tick(self.t))
+
+    @rule(stay=st.sampled_from([0.3, 1.0, 3.0]), away=st.sampled_from([0.3, 1.0, 3.0, 8.0]),
+          server=st.booleans())
+    def visit(self, stay: float, away: float, server: bool) -> None:
+        """A whole visit in one step (makes greetings and farewells common)."""
+        self.presence(True)
+        self.advance(stay, watching=True, server=server, yaw=0.2)
+        self.presence(False)
+        self.advance(away, watching=False, server=server, yaw=0.0)
 
     @rule(in_range=st.booleans())
     def presence(self, in_range: bool) -> None:
@@ -195,11 +207,14 @@ class World(RuleBasedStateMachine):
         if dice:
             return  # restarts are rare
         # A goal the dying process sent is served at once or never (the new
-        # process then learns of it from the latched status and device_free).
+        # process then learns of it from the latched status and device_free);
+        # the dead process hears nothing of it.
+        self.life += 1
+        self.dead = True
         while self.pending:
             self.reply(accept=play_inflight and self.playing is None, status_first=False)
         self.cancels.clear()
-        self.life += 1
+        self.dead = False
         self.restarted = True
         self.b = Behaviour(SETTINGS, self.t)
         # latched values replayed to the new process
