@@ -120,21 +120,19 @@ class SensorReader:
         while not self._stop.is_set():
             data = port.read(port.in_waiting or 1)
             now = time.monotonic()
-            if not data:
-                if now - st.last_frame > self._silence_s:
-                    hint = " (bytes arrive but never a frame: wrong baud rate?)" \
-                        if parser.stats.skipped_bytes > skipped_at_open else ""
-                    raise serial.SerialException(
-                        f"no valid frame for {self._silence_s:g} s{hint}")
-                continue
-            stamp = time.time_ns()
-            for frame in parser.feed(data):
-                if isinstance(frame, Report):
-                    st.last_frame = now
-                    st.frames += 1
-                    self._publish(st.radar_id, frame, stamp)
-            st.bad_frames = parser.stats.bad_frames
-            st.skipped_bytes = parser.stats.skipped_bytes
+            if data:
+                stamp = time.time_ns()
+                for frame in parser.feed(data):
+                    if isinstance(frame, Report):
+                        st.last_frame = now
+                        st.frames += 1
+                        self._publish(st.radar_id, frame, stamp)
+                st.bad_frames = parser.stats.bad_frames
+                st.skipped_bytes = parser.stats.skipped_bytes
+            if now - st.last_frame > self._silence_s:
+                hint = " (bytes arrive but never a frame: wrong baud rate?)" \
+                    if parser.stats.skipped_bytes > skipped_at_open else ""
+                raise serial.SerialException(f"no valid frame for {self._silence_s:g} s{hint}")
 
 
 class Bridge:
