@@ -48,13 +48,15 @@ class PresenceService:
         self._known: list[str] = []
         self._published = 0
 
-    def on_frames(self, msg: m.LD2410TargetDataFrameArray, _key: str) -> None:
+    def on_frames(self, msg: m.LD2410TargetDataFrameArray, key: str) -> None:
         now = time.monotonic()
+        # The key names the bridge (the payload's device_id should agree; the key wins).
+        device = (keys.RADAR_FRAMES.match(key) or {}).get("device", str(msg.device_id))
         with self._lock:
             for frame in msg.sensors:
                 reading = Reading(int(frame.target_state), frame.detection_distance,
                                   frame.movement_distance, frame.stationary_distance)
-                verdict = self.tracker.update(f"{msg.device_id}/{frame.radar_id}", reading,
+                verdict = self.tracker.update(f"{device}/{frame.radar_id}", reading,
                                               now, msg.stamp_ns)
                 if verdict is not None:
                     self._publish(verdict)
