@@ -84,8 +84,10 @@ def run_faces(node: Node, count: int, rate: float) -> list[float]:
         delay = next_t - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
-    retry_until(lambda: len(timer.latencies_ms) >= count * 0.99 or None, 10, 0.1,
-                what="answers")
+    # The last face is always answered (nothing supersedes it); earlier ones may be
+    # dropped by the controller's latest-value slot when two arrive within one wake-up.
+    last = base + count - 1
+    retry_until(lambda: last not in timer.sent, 10, 0.05, what="answer to the last face")
     return list(timer.latencies_ms)
 
 
@@ -133,8 +135,9 @@ def pure_cost_us() -> float:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--count", type=int, default=2000)
-    parser.add_argument("--rate", type=float, default=200.0, help="faces per second")
+    parser.add_argument("--count", type=int, default=1000)
+    parser.add_argument("--rate", type=float, default=50.0,
+                        help="faces per second (a camera gives 10-30)")
     args = parser.parse_args()
     print(f"pure transform + behaviour step per face: {pure_cost_us():.1f} us")
     router = Router()
@@ -147,7 +150,8 @@ def main() -> int:
         print(summary("baseline loopback probe -> router -> probe", base))
         print(f"controller share (median difference): "
               f"{statistics.median(lat) - statistics.median(base):.3f} ms")
-        print(f"received {len(lat)}/{args.count} eye controls")
+        print(f"answered {len(lat)}/{args.count} faces (the rest superseded in the "
+              f"latest-value slot)")
     finally:
         controller.stop()
         router.stop()
