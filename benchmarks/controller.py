@@ -22,6 +22,7 @@ import timeit
 
 import msgspec
 import zenoh
+from common import summary
 
 from buddybot.controller.behaviour import Behaviour
 from buddybot.controller.settings import ControllerSettings
@@ -30,16 +31,6 @@ from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Router, retry_until, run_service
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
-def summary(name: str, values_ms: list[float]) -> str:
-    return (f"{name}: n={len(values_ms)} median={statistics.median(values_ms):.3f} ms "
-            f"p99={percentile(values_ms, 0.99):.3f} ms max={max(values_ms):.3f} ms")
 
 
 class Timer:

@@ -29,34 +29,14 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
+from common import ROUTES, make_message, percentile, reply_for
 
-from buddybot.core import keys
-from buddybot.core import messages as m
 from buddybot.core.node import Node, zenoh_config
 from buddybot.core.testing import LOOPBACK, Process, buddybot_argv, free_port, wait_port
 
 REPO = Path(__file__).resolve().parents[1]
 ZENOH_DIR = REPO / "deploy" / "zenoh"
 ROBOT = "buddy"  # the id the shipped access control names
-ROUTES: dict[str, tuple[keys.Topic, keys.Topic, dict[str, str], dict[str, str]]] = {
-    "small": (keys.EYE_CONTROL, keys.EYES_DIRECTION, {}, {}),
-    "image": (keys.CAMERA_IMAGE, keys.DEBUG_IMAGE, {"camera": "ping"}, {"camera": "pong"}),
-}
-
-
-def make_message(kind: str, i: int) -> m.Message:
-    if kind == "small":
-        return m.EyeControl(stamp_ns=i, yaw=0.1, pitch=-0.05, target_distance_cm=120.0)
-    return m.Image(stamp_ns=i, frame_id="bench", width=640, height=480, encoding="bgr8",
-                   data=bytes(640 * 480 * 3))
-
-
-def reply_for(msg: Any) -> m.Message:
-    if isinstance(msg, m.EyeControl):
-        return m.EyesDirection(stamp_ns=msg.stamp_ns, yaw=5.7, pitch=-2.9)
-    return msg
-
-
 # --- the echo process ----------------------------------------------------------------
 
 
@@ -95,11 +75,6 @@ def start_router(listen: str, port: int, zenoh_file: str | None, logs: Path) -> 
     proc = Process(buddybot_argv("router", "--listen", listen, *extra), f"router-{port}", logs)
     wait_port(port)
     return proc
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(q * (len(ordered) - 1)))]
 
 
 def setup_times(endpoint: str, zenoh_file: str | None, times: int = 7) -> list[float]:

@@ -23,17 +23,13 @@ from pathlib import Path
 from tempfile import mkdtemp
 
 import psutil
+from common import percentile
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Process, Router, free_port, retry_until, run_service
 from buddybot.core.tools import list_nodes
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def main() -> None:

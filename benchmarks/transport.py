@@ -25,32 +25,12 @@ from collections.abc import Callable
 from typing import Any
 
 import zenoh
+from common import ROUTES, make_message, percentile, reply_for
 
-from buddybot.core import keys
-from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Process, Router, retry_until
 
 ROBOT = "bench"
-# (ping topic, pong topic, ping params, pong params) per payload kind
-ROUTES: dict[str, tuple[keys.Topic, keys.Topic, dict[str, str], dict[str, str]]] = {
-    "small": (keys.EYE_CONTROL, keys.EYES_DIRECTION, {}, {}),
-    "image": (keys.CAMERA_IMAGE, keys.DEBUG_IMAGE, {"camera": "ping"}, {"camera": "pong"}),
-}
-
-
-def make_message(kind: str, i: int) -> m.Message:
-    if kind == "small":
-        return m.EyeControl(stamp_ns=i, yaw=0.1, pitch=-0.05, target_distance_cm=120.0)
-    return m.Image(stamp_ns=i, frame_id="bench", width=640, height=480, encoding="bgr8",
-                   data=bytes(640 * 480 * 3))
-
-
-def reply_for(msg: Any) -> m.Message:
-    if isinstance(msg, m.EyeControl):
-        return m.EyesDirection(stamp_ns=msg.stamp_ns, yaw=5.7, pitch=-2.9)
-    return msg
-
 
 # --- echo process -------------------------------------------------------------------
 
@@ -80,11 +60,6 @@ def echo_main(endpoint: str, mode: str, kind: str) -> None:
 
 
 # --- measurements -------------------------------------------------------------------
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 class Pinger:

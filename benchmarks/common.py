@@ -1,0 +1,45 @@
+"""Shared by the benchmark scripts: percentiles and the ping-pong payloads.
+
+Scripts run as `python benchmarks/<name>.py`, so this folder is on
+`sys.path` and they import it as `common`.
+"""
+
+from __future__ import annotations
+
+import statistics
+from typing import Any
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+
+# Payload kind -> (ping topic, pong topic, ping params, pong params)
+ROUTES: dict[str, tuple[keys.Topic, keys.Topic, dict[str, str], dict[str, str]]] = {
+    "small": (keys.EYE_CONTROL, keys.EYES_DIRECTION, {}, {}),
+    "image": (keys.CAMERA_IMAGE, keys.DEBUG_IMAGE, {"camera": "ping"}, {"camera": "pong"}),
+}
+
+
+def make_message(kind: str, i: int) -> m.Message:
+    """A small control message, or a 640x480 bgr8 image (921,600 bytes)."""
+    if kind == "small":
+        return m.EyeControl(stamp_ns=i, yaw=0.1, pitch=-0.05, target_distance_cm=120.0)
+    return m.Image(stamp_ns=i, frame_id="bench", width=640, height=480, encoding="bgr8",
+                   data=bytes(640 * 480 * 3))
+
+
+def reply_for(msg: Any) -> m.Message:
+    """What an echo answers: direction for a control message, the image itself."""
+    if isinstance(msg, m.EyeControl):
+        return m.EyesDirection(stamp_ns=msg.stamp_ns, yaw=5.7, pitch=-2.9)
+    return msg
+
+
+def percentile(values: list[float], q: float) -> float:
+    """The q-quantile (0..1) by nearest rank."""
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def summary(name: str, values_ms: list[float]) -> str:
+    return (f"{name}: n={len(values_ms)} median={statistics.median(values_ms):.3f} ms "
+            f"p99={percentile(values_ms, 0.99):.3f} ms max={max(values_ms):.3f} ms")
