@@ -43,6 +43,9 @@ class FacePipeline:
         self.tracker = TargetTracker(switch_after_s=settings.switch_after_s)
         self.smoother = PointSmoother(settings.min_cutoff_hz, settings.beta)
         self._intrinsics: dict[tuple[int, int], Intrinsics] = {}
+        self._last: bf.Detection | None = None  # the followed face as last measured
+        self._full_t = -np.inf  # when the whole frame was last searched
+        self.tracked = 0
 
     def intrinsics(self, width: int, height: int) -> Intrinsics:
         key = (width, height)
@@ -52,20 +55,44 @@ class FacePipeline:
                                                        s.hfov_deg)
         return self._intrinsics[key]
 
+    def _track(self, bgr: np.ndarray, t: float) -> bf.Detection | None:
+        """The followed face re-found in its own crop, between whole-frame passes."""
+        if (self.refiner is None or self._last is None or self.s.full_every_s <= 0
+                or not 0 < t - self._full_t < self.s.full_every_s):
+            return None
+        found = self.refiner.refine(bgr, self._last)
+        if found is None:
+            return None
+        same, _new = self.tracker.select([found], t)
+        return same
+
     def process(self, bgr: np.ndarray, stamp_ns: int) -> FaceResult:
-        faces = self.net.detect(bgr)
         t = stamp_ns * 1e-9
+        tracked = self._track(bgr, t)
+        if tracked is not None:
+            self.tracked += 1
+            return self._locate(bgr, [tracked], tracked, False, t, tracked)
+        faces = self.net.detect(bgr)
+        self._full_t = t
         target, new_person = self.tracker.select(faces, t)
         if target is None:
+            self._last = None
             return FaceResult(faces, None, None, None, None, None)
+        return self._locate(bgr, faces, target, new_person, t, None)
+
+    def _locate(self, bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection,
+                new_person: bool, t: float, measured: bf.Detection | None) -> FaceResult:
+        """Distance, back-projection and smoothing of the followed face."""
         k = self.intrinsics(bgr.shape[1], bgr.shape[0])
         eye_m = self.s.eye_distance_m if self.s.eye_distance_m > 0 else None
-        measured = target
-        if self.refiner is not None:
-            better = self.refiner.refine(bgr, target)
-            if better is not None:
-                measured = better
-                self.refined += 1
+        if measured is None:
+            measured = target
+            if self.refiner is not None:
+                better = self.refiner.refine(bgr, target)
+                if better is not None:
+                    measured = better
+                    self.refined += 1
+        self._last = measured
         est = estimate_distance(measured, k.fx, self.s.face_width_m, eye_m)
         u, v = measured.centre
         raw = back_project(u, v, est.z_m, k)

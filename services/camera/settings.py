@@ -61,6 +61,11 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     """One-Euro filter: how fast the cut-off rises with speed (per m/s)."""
     switch_after_s: float = 0.5
     """How long the followed face must be gone before another face is taken."""
+    full_every_s: float = 0.25
+    """Between whole-frame detections, follow the tracked face by re-detecting it only in
+    its crop (the refiner, ~4 ms instead of ~17 ms a frame): gaze latency drops to a third.
+    A new or larger face is still noticed at the next whole-frame pass, at most this late.
+    0: the whole frame every time. Needs `refine`."""
     debug_jpeg_quality: int = 80
     threads: int = 1
     """OpenCV threads for inference: 1 leaves the other core to capture and the rest of

@@ -120,20 +120,43 @@ def test_no_face_no_position(full: FaceNet, short: FaceNet, picture: str) -> Non
     assert result.faces == [] and result.point is None
 
 
-def test_two_faces_choose_the_nearer_then_stay_with_them(full: FaceNet, short: FaceNet) -> None:
-    pipe = pipeline(full, short)
-    chosen_y = []
+@pytest.mark.parametrize("full_every_s", [0.0, 0.25], ids=["whole-frame", "crop-tracking"])
+def test_two_faces_choose_the_nearer_then_stay_with_them(full: FaceNet, short: FaceNet,
+                                                         full_every_s: float) -> None:
+    pipe = pipeline(full, short, full_every_s=full_every_s)
+    chosen_y, seen = [], []
     for i in range(12):
         # The astronaut (left) starts nearer; Grace Hopper (right) walks closer
         # until she is nearer still: the choice must not change.
         frame, _ = scenes.scene(scenes.astronaut(), 1.0, 170, 240)
         frame, _ = scenes.place(frame, scenes.grace_hopper(), 1.6 - 0.08 * i, 470, 240)
         result = pipe.process(frame, (i + 1) * 33_000_000)
-        assert len(result.faces) == 2
         assert result.point is not None
         chosen_y.append(result.point[1])
+        seen.append(len(result.faces))
     assert all(y > 0 for y in chosen_y), chosen_y  # always the one on the left
     assert pipe.tracker.target_changes == 1
+    # Whole-frame passes see both faces; crop-tracking frames only the followed one.
+    # 12 frames 33 ms apart, a whole-frame pass every 0.25 s: frames 1 and 9.
+    expected = [2] * 12 if full_every_s == 0 else [2 if i in (0, 8) else 1 for i in range(12)]
+    assert seen == expected
+    assert pipe.tracked == expected.count(1)
+
+
+def test_crop_tracking_follows_a_moving_face_like_the_whole_frame(full: FaceNet,
+                                                                   short: FaceNet) -> None:
+    """Tracking in the crop gives the same positions as searching the whole frame."""
+    tracking = pipeline(full, short, full_every_s=0.25)
+    whole = pipeline(full, short, full_every_s=0.0)
+    for i in range(15):
+        frame, placed = scenes.scene(scenes.astronaut(), 1.2, 200 + 15 * i, 230 + 4 * i)
+        a = tracking.process(frame, (i + 1) * 33_000_000)
+        b = whole.process(frame, (i + 1) * 33_000_000)
+        assert a.point is not None and b.point is not None
+        assert np.allclose(a.point, b.point, atol=0.06), (i, a.point, b.point)
+        truth = scenes.truth(placed)
+        assert abs(a.point[1] - truth[1]) < 0.05 and abs(a.point[0] - truth[0]) < 0.12
+    assert tracking.tracked >= 10 and whole.tracked == 0
 
 
 def test_simulated_camera_shows_a_detectable_moving_face(full: FaceNet) -> None:
