@@ -38,6 +38,7 @@ def main() -> None:
     parser.add_argument("--fps", type=float, default=30.0)
     parser.add_argument("--sim-speed", type=float, default=3.0,
                         help="radar scenario speed (more visits per minute)")
+    parser.add_argument("--config", help="robot config file for every service")
     args = parser.parse_args()
     log_dir = Path(mkdtemp(prefix="buddybot-bench-"))
     router = Router(log_dir=log_dir)
@@ -55,8 +56,9 @@ def main() -> None:
     procs: dict[str, Process] = {}
     probe = Node("bench-probe", connect=[router.endpoint])
     try:
+        common = ("--config", args.config) if args.config else ()
         for name, extra in services.items():
-            procs[name] = run_service(name, router.endpoint, *extra, log_dir=log_dir)
+            procs[name] = run_service(name, router.endpoint, *common, *extra, log_dir=log_dir)
         retry_until(lambda: set(services) <= set(list_nodes(probe.session, "buddy")), 90, 0.5,
                     "all nodes up")
         gaze_ms: list[float] = []
