@@ -45,6 +45,7 @@ class FacePipeline:
         self._intrinsics: dict[tuple[int, int], Intrinsics] = {}
         self._last: bf.Detection | None = None  # the followed face as last measured
         self._full_t = -np.inf  # when the whole frame was last searched
+        self._search_due = False  # a deferred whole-frame pass is owed
         self.tracked = 0
 
     def intrinsics(self, width: int, height: int) -> Intrinsics:
@@ -56,9 +57,9 @@ class FacePipeline:
         return self._intrinsics[key]
 
     def _track(self, bgr: np.ndarray, t: float) -> bf.Detection | None:
-        """The followed face re-found in its own crop, between whole-frame passes."""
+        """The followed face re-found in its own crop (the refiner only)."""
         if (self.refiner is None or self._last is None or self.s.full_every_s <= 0
-                or not 0 < t - self._full_t < self.s.full_every_s):
+                or t <= self._full_t):
             return None
         found = self.refiner.refine(bgr, self._last)
         if found is None:
@@ -66,19 +67,47 @@ class FacePipeline:
         same, _new = self.tracker.select([found], t)
         return same
 
-    def process(self, bgr: np.ndarray, stamp_ns: int) -> FaceResult:
+    def process(self, bgr: np.ndarray, stamp_ns: int, *,
+                defer_search: bool = False) -> FaceResult:
+        """The face to follow in this frame.
+
+        Between whole-frame passes (`full_every_s`) the followed face is tracked in
+        its crop. When a pass is due it runs first, unless `defer_search`: then the
+        frame is answered from the crop and `search_if_due()` does the pass after
+        the caller has published, off the latency path.
+        """
         t = stamp_ns * 1e-9
-        tracked = self._track(bgr, t)
-        if tracked is not None:
-            self.tracked += 1
-            return self._locate(bgr, [tracked], tracked, False, t, tracked)
+        due = not 0 < t - self._full_t < self.s.full_every_s
+        if not due or defer_search:
+            tracked = self._track(bgr, t)
+            if tracked is not None:
+                self.tracked += 1
+                self._search_due = due
+                return self._locate(bgr, [tracked], tracked, False, t, tracked)
         faces = self.net.detect(bgr)
         self._full_t = t
+        self._search_due = False
         target, new_person = self.tracker.select(faces, t)
         if target is None:
             self._last = None
             return FaceResult(faces, None, None, None, None, None)
         return self._locate(bgr, faces, target, new_person, t, None)
+
+    def search_if_due(self, bgr: np.ndarray, stamp_ns: int) -> list[bf.Detection] | None:
+        """The whole-frame pass a deferred `process` put off; None when none was due.
+
+        Target choice stays with the followed person while they are seen, so the
+        pass only has to confirm them: a tracked face the whole-frame detector does
+        not see is dropped, and the next frame searches the whole frame again.
+        """
+        if not self._search_due:
+            return None
+        self._search_due = False
+        faces = self.net.detect(bgr)
+        self._full_t = stamp_ns * 1e-9
+        if not self.tracker.confirms(faces):
+            self._last = None
+        return faces
 
     def _locate(self, bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection,
                 new_person: bool, t: float, measured: bf.Detection | None) -> FaceResult:

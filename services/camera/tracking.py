@@ -125,6 +125,10 @@ class TargetTracker:
                 best = (rank, det)
         return None if best is None else best[1]
 
+    def confirms(self, dets: list[bf.Detection]) -> bool:
+        """Whether the followed face is among `dets` (nothing is changed)."""
+        return self._match(dets) is not None
+
     def select(self, dets: list[bf.Detection], t: float) -> tuple[bf.Detection | None, bool]:
         same = self._match(dets)
         if same is not None:

@@ -203,3 +203,35 @@ def test_odd_frame_shapes_do_not_break_detection(full: FaceNet, short: FaceNet,
                                                  shape: tuple[int, int, int]) -> None:
     img = np.full(shape, 128, np.uint8)
     assert pipeline(full, short).process(img, 1).point is None
+
+
+def test_deferred_search_answers_from_the_crop_then_searches_off_the_latency_path(
+    full: FaceNet, short: FaceNet
+) -> None:
+    """The detector service answers every frame after the first from the crop and does
+    the due whole-frame pass after publishing (`search_if_due`)."""
+    pipe = pipeline(full, short, full_every_s=0.25)
+    searched = []
+    for i in range(12):
+        frame, _ = scenes.scene(scenes.astronaut(), 1.2, 200 + 8 * i, 240)
+        result = pipe.process(frame, (i + 1) * 33_000_000, defer_search=True)
+        assert result.point is not None and result.point[1] > 0
+        found = pipe.search_if_due(frame, (i + 1) * 33_000_000)
+        searched.append(None if found is None else len(found))
+    assert pipe.tracked == 11  # only the very first frame waited for a whole-frame pass
+    assert searched == [None if i != 8 else 1 for i in range(12)]
+
+
+def test_deferred_search_drops_a_track_the_whole_frame_does_not_confirm(
+    full: FaceNet, short: FaceNet
+) -> None:
+    pipe = pipeline(full, short, full_every_s=0.25)
+    frame, _ = scenes.scene(scenes.astronaut(), 1.2, 300, 240)
+    for i in range(9):
+        pipe.process(frame, (i + 1) * 33_000_000, defer_search=True)
+    assert pipe.tracked == 8
+    # The due pass sees no face (here: an empty frame): the track is dropped ...
+    assert pipe.search_if_due(scenes.background(), 9 * 33_000_000) == []
+    # ... so the next frame is searched whole again instead of tracked.
+    result = pipe.process(frame, 10 * 33_000_000, defer_search=True)
+    assert pipe.tracked == 8 and len(result.faces) == 1 and result.point is not None
