@@ -166,10 +166,13 @@ class Diagnostics:
             self.values[name] = int(self.values.get(name, 0)) + by
 
     def publish(self) -> None:
+        # Samples a worker dropped for newer ones ("latest" delivery: expected) or
+        # because its queue was full (a handler slower than its input).
+        dropped = {f"dropped {w.label}": w.dropped for w in self._node._workers if w.dropped}
         with self._lock:
             status = m.DiagnosticStatus(
                 stamp_ns=m.now_ns(), node=self._node.name, level=self.level,
-                message=self.message, values=dict(self.values),
+                message=self.message, values={**self.values, **dropped},
             )
         self._pub.put(status)
 
@@ -238,7 +241,8 @@ class _Worker:
     """Runs a handler on its own thread, fed by a latest slot or a bounded FIFO."""
 
     def __init__(self, name: str, handler: Callable[..., None], latest: bool, maxlen: int,
-                 on_error: Callable[[BaseException], None]) -> None:
+                 on_error: Callable[[BaseException], None], label: str = "") -> None:
+        self.label = label or name
         self._handler = handler
         self._on_error = on_error
         self._items: collections.deque[tuple[Any, ...]] = collections.deque(
@@ -384,7 +388,7 @@ class Node:
         sink: Callable[..., None] = callback
         if not inline:
             worker = _Worker(f"{self.name}:{topic.pattern}", callback, delivery == "latest",
-                             queue_size, on_error)
+                             queue_size, on_error, label=topic.pattern)
             self._workers.append(worker)
             sink = worker.submit
         put_kind = zenoh.SampleKind.PUT
@@ -465,7 +469,8 @@ class Node:
         def on_error(exc: BaseException) -> None:
             self.log.error("query handling on %s failed: %r", key, exc)
 
-        worker = _Worker(f"{self.name}:{service.pattern}", answer, False, queue_size, on_error)
+        worker = _Worker(f"{self.name}:{service.pattern}", answer, False, queue_size, on_error,
+                         label=service.pattern)
         self._workers.append(worker)
 
         def on_query(query: zenoh.Query) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+import threading
 from collections.abc import Callable
 from pathlib import Path
 
@@ -191,3 +192,29 @@ def test_service_call_replies_and_errors(node_factory: Callable[..., Node]) -> N
     with pytest.raises(ServiceError, match="no reply"):
         client.call(keys.AUDIO_PAUSE, m.Trigger(), timeout=0.5)
     assert {c.path for c in calls} == {"a.wav"}  # retries may repeat it; "boom" never lands
+
+
+def test_latest_delivery_keeps_the_newest_and_reports_what_it_dropped(
+    node_factory: Callable[..., Node]
+) -> None:
+    """A slow handler on `latest` sees the newest sample, never a backlog; the samples it
+    skipped are counted in diagnostics."""
+    sender, slow = node_factory("sender"), node_factory("slow", diagnostics_period_s=0.2)
+    release, seen = threading.Event(), []
+
+    def handler(msg: m.PupilControl, _key: str) -> None:
+        seen.append(msg.stamp_ns)
+        release.wait(10)
+
+    slow.subscribe(keys.PUPIL, handler, delivery="latest")
+    diag = Collector[m.DiagnosticStatus](node_factory("watcher"), keys.DIAGNOSTICS, node="slow")
+    pub = sender.publisher(keys.PUPIL)
+    retry_until(lambda: pub.put(m.PupilControl(stamp_ns=1, dilation_percentage=1)) or seen,
+                10, 0.1, "handler busy with the first sample")
+    for stamp in range(2, 52):  # the handler is stuck: these pile onto the latest slot
+        pub.put(m.PupilControl(stamp_ns=stamp, dilation_percentage=1))
+    status = diag.wait_for(lambda s: int(s.values.get("dropped eyes/pupil", 0)) >= 40, 20,
+                           what="dropped count in diagnostics")
+    release.set()
+    retry_until(lambda: seen[-1] == 51, 10, 0.05, "the newest sample handled next")
+    assert len(seen) <= 3 and int(status.values["dropped eyes/pupil"]) <= 50
