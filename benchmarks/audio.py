@@ -17,34 +17,22 @@ import statistics
 import sys
 import tempfile
 import time
-import wave
 from pathlib import Path
 
-import numpy as np
+from common import percentile
 
 from buddybot.audio.player import decode_file
 from buddybot.audio.sounds import resolve_file
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Router, retry_until, run_service
+from buddybot.core.testing import Collector, Router, retry_until, run_service, write_tone
 
 
 def figures(name: str, values_ms: list[float]) -> None:
-    values = sorted(values_ms)
-    p90 = values[min(len(values) - 1, int(0.9 * len(values)))]
-    print(f"{name:<46} median {statistics.median(values):7.2f} ms   p90 {p90:7.2f} ms   "
-          f"max {values[-1]:7.2f} ms   (n={len(values)})")
-
-
-def write_tone(path: Path, seconds: float) -> None:
-    t = np.arange(int(48000 * seconds)) / 48000
-    mono = (np.sin(2 * np.pi * 440 * t) * 8000).astype("<i2")
-    with wave.open(str(path), "wb") as out:
-        out.setnchannels(2)
-        out.setsampwidth(2)
-        out.setframerate(48000)
-        out.writeframes(np.repeat(mono[:, None], 2, axis=1).tobytes())
+    print(f"{name:<46} median {statistics.median(values_ms):7.2f} ms   "
+          f"p90 {percentile(values_ms, 0.9):7.2f} ms   max {max(values_ms):7.2f} ms   "
+          f"(n={len(values_ms)})")
 
 
 def main() -> int:
@@ -52,8 +40,8 @@ def main() -> int:
     parser.add_argument("--runs", type=int, default=30)
     args = parser.parse_args()
     folder = Path(tempfile.mkdtemp(prefix="buddybot-bench-audio-"))
-    write_tone(folder / "blip.wav", 0.15)
-    write_tone(folder / "long.wav", 5.0)
+    write_tone(folder / "blip.wav", 0.15, channels=2, amplitude=0.25)
+    write_tone(folder / "long.wav", 5.0, channels=2, amplitude=0.25)
     config = folder / "buddybot.toml"
     config.write_text('[audio.sounds]\nblip = "blip.wav"\nlong = "long.wav"\n')
 

@@ -27,6 +27,8 @@ import sys
 import time
 from typing import Any
 
+from common import percentile
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
@@ -36,14 +38,10 @@ CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networki
                  "--disable-component-update"]
 
 
-def pct(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
-
-
 def figures(name: str, values: list[float]) -> None:
-    print(f"{name:<44} median {statistics.median(values):7.2f} ms   p95 {pct(values, 0.95):7.2f} ms"
-          f"   p99 {pct(values, 0.99):7.2f} ms   max {max(values):7.2f} ms   (n={len(values)})")
+    print(f"{name:<44} median {statistics.median(values):7.2f} ms   "
+          f"p95 {percentile(values, 0.95):7.2f} ms   p99 {percentile(values, 0.99):7.2f} ms   "
+          f"max {max(values):7.2f} ms   (n={len(values)})")
 
 
 def measure_latency(page: Any, count: int, rate_hz: float, send: Any) -> tuple[list[float],
@@ -108,7 +106,7 @@ def main() -> int:
             fps = 1000.0 / statistics.mean(intervals)
             figures("frame time (rAF interval)", intervals)
             figures("update+draw per frame", draws)
-            met = "met" if pct(intervals, 0.95) < 17 else "NOT met"
+            met = "met" if percentile(intervals, 0.95) < 17 else "NOT met"
             print(f"{'frames per second':<44} {fps:7.1f}   (p95 frame time < 17 ms: {met})")
 
             direction = node.publisher(keys.EYES_DIRECTION)
@@ -130,8 +128,8 @@ def main() -> int:
             to_page, to_frame = measure_latency(page, args.count, args.rate, send_control)
             figures("eyes/control -> driver -> page", to_page)
             figures("eyes/control -> driver -> pupil moving", to_frame)
-            print(f"(target direction -> page < 30 ms: "
-                  f"{'met' if pct(to_frame, .95) < 30 else 'NOT met'} at p95 incl. the driver)")
+            met = "met" if percentile(to_frame, 0.95) < 30 else "NOT met"
+            print(f"(target direction -> page < 30 ms: {met} at p95 incl. the driver)")
             browser.close()
     finally:
         if node is not None:

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from buddybot.core.node import Node
-from buddybot.core.testing import Process, Router, run_service
+from buddybot.core.testing import Process, Router, run_service, stop_and_report
 
 ARTIFACTS = Path(os.environ.get("BUDDYBOT_ARTIFACTS", "test-artifacts"))
 
@@ -68,6 +68,4 @@ def spawn(endpoint: str, log_dir: Path) -> Iterator[Callable[..., Process]]:
         return proc
 
     yield start
-    for proc in reversed(started):
-        proc.stop()
-        print(f"--- {proc.name} (exit {proc.proc.returncode}) ---\n{proc.output()[-4000:]}")
+    stop_and_report(started)

@@ -16,10 +16,12 @@ import sys
 import tempfile
 import threading
 import time
+import wave
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
+import numpy as np
 import zenoh
 
 from buddybot.core import keys
@@ -116,6 +118,27 @@ class Process:
     def wait_for_output(self, text: str, timeout: float = 15.0) -> str:
         return retry_until(lambda: text in self.output() and self.output(), timeout,
                            what=f"{self.name} printing {text!r}")
+
+
+def write_tone(path: Path, seconds: float, hz: float = 440.0, rate: int = 48000,
+               channels: int = 1, amplitude: float = 0.3) -> Path:
+    """A sine-tone WAV (int16) of a known length, for sound tests and benchmarks."""
+    t = np.arange(int(seconds * rate)) / rate
+    mono = (amplitude * np.sin(2 * np.pi * hz * t) * 32767).astype("<i2")
+    with wave.open(str(path), "wb") as out:
+        out.setnchannels(channels)
+        out.setsampwidth(2)
+        out.setframerate(rate)
+        out.writeframes(np.repeat(mono[:, None], channels, axis=1).tobytes())
+    return path
+
+
+def stop_and_report(processes: list[Process], tail: int = 4000) -> None:
+    """Stop test processes (newest first) and print the end of each log, so a failing
+    test shows what its services said."""
+    for proc in reversed(processes):
+        proc.stop()
+        print(f"--- {proc.name} (exit {proc.proc.returncode}) ---\n{proc.output()[-tail:]}")
 
 
 def buddybot_argv(*args: str) -> list[str]:

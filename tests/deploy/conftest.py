@@ -18,7 +18,14 @@ import pytest
 import zenoh
 
 from buddybot.core.node import Node, zenoh_config
-from buddybot.core.testing import LOOPBACK, Process, buddybot_argv, free_port, wait_port
+from buddybot.core.testing import (
+    LOOPBACK,
+    Process,
+    buddybot_argv,
+    free_port,
+    stop_and_report,
+    wait_port,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 DEPLOY = REPO / "deploy"
@@ -143,6 +150,4 @@ def host_process(profile: HostProfile, tls_router: TlsRouter,
         return proc
 
     yield start
-    for proc in reversed(started):
-        proc.stop()
-        print(f"--- {proc.name} (exit {proc.proc.returncode}) ---\n{proc.output()[-3000:]}")
+    stop_and_report(started, tail=3000)

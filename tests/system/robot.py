@@ -8,7 +8,6 @@ its page without a browser.
 
 from __future__ import annotations
 
-import wave
 from collections.abc import Callable
 from pathlib import Path
 
@@ -17,7 +16,7 @@ import numpy as np
 
 from buddybot.camera.sim import compose, face_path
 from buddybot.core.node import Node
-from buddybot.core.testing import Process, free_port, retry_until
+from buddybot.core.testing import Process, free_port, retry_until, write_tone
 from buddybot.core.tools import list_nodes
 
 Spawn = Callable[..., Process]
@@ -55,22 +54,11 @@ def write_face_sequence(folder: Path, n: int = 40) -> str:
 GREETING_S, FAREWELL_S = 0.6, 1.2
 
 
-def write_tone(path: Path, seconds: float, hz: float, rate: int = 16000) -> None:
-    """A plain sine tone WAV (so each sound has its own, known length)."""
-    t = np.arange(int(seconds * rate)) / rate
-    samples = (0.3 * np.sin(2 * np.pi * hz * t) * 32767).astype("<i2")
-    with wave.open(str(path), "wb") as out:
-        out.setnchannels(1)
-        out.setsampwidth(2)
-        out.setframerate(rate)
-        out.writeframes(samples.tobytes())
-
-
 def write_config(folder: Path) -> Path:
     """A robot config whose greeting and farewell differ in length (told apart in tests)."""
     folder.mkdir(parents=True, exist_ok=True)
-    write_tone(folder / "hello.wav", GREETING_S, 660)
-    write_tone(folder / "bye.wav", FAREWELL_S, 440)
+    write_tone(folder / "hello.wav", GREETING_S, 660, rate=16000)
+    write_tone(folder / "bye.wav", FAREWELL_S, 440, rate=16000)
     path = folder / "robot.toml"
     path.write_text('[audio.sounds]\ngreeting = "hello.wav"\nfarewell = "bye.wav"\n')
     return path
