@@ -17,16 +17,20 @@ import time
 import cv2
 import numpy as np
 
+from buddybot.camera import frames
 from buddybot.camera.backoff import Backoff
 from buddybot.camera.settings import CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
-from buddybot.core.node import Node, Publisher
+from buddybot.core.limits import clip
+from buddybot.core.node import Node, Publisher, RateLimitedLog
 from buddybot.core.service import ServiceContext
 
 DEFAULT_FPS = 30.0
+MESSAGE_OVERHEAD = 256
+"""Bytes of an Image message besides data and frame_id (MessagePack field names, numbers)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -85,7 +89,9 @@ class Capture:
         self.pub: Publisher[m.Image] = node.publisher(keys.CAMERA_IMAGE, camera=settings.name)
         self.backoff = Backoff(settings.reopen_initial_s, settings.reopen_max_s)
         self.diag = node.diagnostics
-        self.diag.values.update({"source": spec.kind, "frames": 0, "reopens": 0, "fps": 0.0})
+        self.diag.values.update({"source": spec.kind, "frames": 0, "reopens": 0, "fps": 0.0,
+                                 "bad_frames": 0, "too_large": 0})
+        self.warn = RateLimitedLog(node.log)
         self._frames_window: list[float] = []
 
     def _size(self, frame: np.ndarray) -> np.ndarray:
@@ -93,8 +99,8 @@ class Capture:
         fh, fw = frame.shape[:2]
         if self.spec.kind == "sim" or (w is None and h is None):
             return frame
-        tw = w or round(fw * (h or fh) / fh)
-        th = h or round(fh * tw / fw)
+        tw = w or max(1, round(fw * (h or fh) / fh))
+        th = h or max(1, round(fh * tw / fw))
         if (tw, th) == (fw, fh):
             return frame
         return cv2.resize(frame, (tw, th), interpolation=cv2.INTER_AREA)
@@ -110,6 +116,36 @@ class Capture:
             data = np.ascontiguousarray(frame).tobytes()
         return m.Image(stamp_ns=stamp_ns, frame_id=self.frame_id, width=w, height=h,
                        encoding=self.s.encoding, data=data)
+
+    def _checked(self, frame: np.ndarray, stamp_ns: int) -> m.Image | None:
+        """The message for a frame as delivered, or None (counted, warned) when it
+        cannot become a valid `Image`: the loop goes on with the next frame."""
+        try:
+            bgr = frames.to_bgr8(self._size(frames.to_bgr8(frame, max_side=None)))
+        except frames.FrameRefused as refused:
+            self.diag.increment(refused.reason)
+            self.warn.warning(f"refused:{refused.reason}", "dropped a frame from %s: %s",
+                              self.spec.kind, refused.text)
+            return None
+        except cv2.error as exc:  # resize of a degenerate frame
+            self.diag.increment("bad_frames")
+            self.warn.warning("cv-error", "dropped a frame from %s: %s", self.spec.kind,
+                              clip(exc))
+            return None
+        msg = self._message(bgr, stamp_ns)
+        if msg is None:
+            self.diag.increment("bad_frames")
+            self.warn.warning("encode", "dropped a %dx%d frame: JPEG encoding failed",
+                              bgr.shape[1], bgr.shape[0])
+        elif len(msg.data) + len(msg.frame_id) + MESSAGE_OVERHEAD > self.pub.topic.max_bytes:
+            # Every subscriber would drop it unread (and the link refuse it).
+            self.diag.increment("too_large")
+            self.warn.warning("too-large", "dropped a %dx%d %s frame of %d bytes: above the "
+                              "image message limit of %d bytes (use encoding jpeg or a "
+                              "smaller width/height)", bgr.shape[1], bgr.shape[0],
+                              msg.encoding, len(msg.data), self.pub.topic.max_bytes)
+            return None
+        return msg
 
     def _open(self) -> bool:
         """Open the source, retrying with backoff until it works or we are stopped."""
@@ -150,7 +186,7 @@ class Capture:
                     self.backoff.reset()
                     self.diag.set("OK", f"capturing from {self.spec.kind} {self.spec.target!r}"
                                   if self.spec.target else f"capturing from {self.spec.kind}")
-                msg = self._message(self._size(frame), stamp_ns)
+                msg = self._checked(frame, stamp_ns)
                 if msg is not None:
                     self.pub.put(msg)
                     self.diag.increment("frames")

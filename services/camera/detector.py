@@ -16,16 +16,16 @@ from pathlib import Path
 from typing import Any
 
 import cv2
-import numpy as np
 
 from buddybot.camera import blazeface as bf
-from buddybot.camera import draw, models
+from buddybot.camera import draw, frames, models
 from buddybot.camera.facenet import FaceNet, ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError, resolve_path
+from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import RateLimitedLog
 from buddybot.core.service import ServiceContext
 
@@ -45,6 +45,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-smoothing", action="store_true", help="publish raw positions")
     parser.add_argument("--no-refine", action="store_true",
                         help="measure the face on the whole-frame detection only")
+    parser.add_argument("--max-pixels", type=int,
+                        help="refuse larger frames, before decoding (default 3840*2160)")
 
 
 def pick(cli: object, cfg: object) -> Any:
@@ -62,8 +64,9 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
         model_path=pick(a.model_path, s.model_path), min_score=pick(a.min_score, s.min_score),
         eye_distance_m=s.eye_distance_m, smoothing=s.smoothing and not a.no_smoothing,
         refine=s.refine and not a.no_refine, min_cutoff_hz=s.min_cutoff_hz, beta=s.beta,
-        switch_after_s=s.switch_after_s,
+        switch_after_s=s.switch_after_s, full_every_s=s.full_every_s,
         debug_jpeg_quality=s.debug_jpeg_quality, threads=s.threads,
+        max_pixels=pick(a.max_pixels, s.max_pixels),
     )
     problems = []
     if not keys.valid_robot_id(merged.camera):
@@ -84,6 +87,10 @@ def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
         problems.append("switch_after_s must be >= 0")
     if not 1 <= merged.debug_jpeg_quality <= 100:
         problems.append("debug_jpeg_quality must be in 1..100")
+    if merged.full_every_s < 0:
+        problems.append("full_every_s must be >= 0")
+    if not 1 <= merged.max_pixels <= frames.MAX_SIDE ** 2:
+        problems.append(f"max_pixels must be in 1..{frames.MAX_SIDE ** 2}")
     if problems:
         raise ConfigError("face_detector: " + "; ".join(problems))
     return merged
@@ -114,21 +121,6 @@ def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
         raise ConfigError(str(exc)) from None
 
 
-def image_to_bgr(img: m.Image) -> np.ndarray | None:
-    """The frame as an HxWx3 array, or None when the payload does not match its header."""
-    if img.encoding == "bgr8":
-        if len(img.data) != img.width * img.height * 3:
-            return None
-        return np.frombuffer(img.data, np.uint8).reshape(img.height, img.width, 3)
-    buf = np.frombuffer(img.data, np.uint8)
-    if buf.size == 0:
-        return None
-    bgr = cv2.imdecode(buf, cv2.IMREAD_COLOR)
-    if bgr is None or bgr.shape[1] != img.width or bgr.shape[0] != img.height:
-        return None
-    return bgr
-
-
 def run(ctx: ServiceContext) -> int:
     settings = effective_settings(ctx)
     cv2.setNumThreads(settings.threads)
@@ -139,21 +131,30 @@ def run(ctx: ServiceContext) -> int:
     warn = RateLimitedLog(log)
     diag = node.diagnostics
     diag.values.update({"model": settings.model, "frames": 0, "faces": 0, "bad_frames": 0,
-                        "infer_ms": 0.0, "latency_ms": 0.0})
+                        "too_large": 0, "infer_ms": 0.0, "latency_ms": 0.0})
     face_pub = node.publisher(keys.FACE, camera=settings.camera)
     debug_pub = node.publisher(keys.DEBUG_IMAGE, camera=settings.camera)
     log.info("face detector: %s-range model %s", settings.model, net.path)
 
     def on_image(img: m.Image, _key: str) -> None:
-        bgr = image_to_bgr(img)
-        if bgr is None:
-            diag.increment("bad_frames")
-            warn.warning("bad-frame", "dropped image %dx%d %s with %d bytes: payload does "
-                               "not match the header", img.width, img.height, img.encoding,
-                               len(img.data))
+        try:
+            bgr = frames.decode_image(img, settings.max_pixels)
+        except frames.FrameRefused as refused:
+            diag.increment(refused.reason)
+            warn.warning(f"refused:{refused.reason}", "dropped image from %s: %s",
+                         clip(img.frame_id, 60), refused.text)
             return
+        # One wrong clock must not hold back every later frame (tracking and
+        # smoothing order by stamp) nor reach the controller: such a stamp
+        # becomes the arrival time. The node runtime does the same on arrival
+        # (same counter); this keeps the detector safe on its own.
+        stamp_ns, replaced = plausible_stamp(img.stamp_ns, m.now_ns())
+        if replaced:
+            diag.increment("stamps replaced")
+            warn.warning("stamp", "image stamp %d is not plausible (now %d): using the "
+                         "arrival time", img.stamp_ns, stamp_ns)
         t0 = time.perf_counter()
-        result = pipeline.process(bgr, img.stamp_ns, defer_search=True)
+        result = pipeline.process(bgr, stamp_ns, defer_search=True)
         diag.increment("frames")
         if diag.level != "OK" or diag.message.startswith("waiting"):
             diag.set("OK", "detecting")
@@ -161,14 +162,14 @@ def run(ctx: ServiceContext) -> int:
         if result.point is not None and result.target is not None:
             x, y, z = result.point
             face_pub.put(m.FacePosition(
-                stamp_ns=img.stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
+                stamp_ns=stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
                 confidence=min(max(result.target.score, 0.0), 1.0),
             ))
             diag.increment("faces")
-        diag.values["latency_ms"] = round((m.now_ns() - img.stamp_ns) / 1e6, 1)
+        diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)
         diag.values["target_changes"] = pipeline.tracker.target_changes
         # The whole-frame pass, when due, runs after the face is out (off the latency path).
-        searched = pipeline.search_if_due(bgr, img.stamp_ns)
+        searched = pipeline.search_if_due(bgr, stamp_ns)
         if debug_pub.has_subscribers():
             faces = result.faces if searched is None else searched
             jpeg = draw.encode_jpeg(
@@ -176,7 +177,7 @@ def run(ctx: ServiceContext) -> int:
                 settings.debug_jpeg_quality,
             )
             if jpeg is not None:
-                debug_pub.put(m.Image(stamp_ns=img.stamp_ns, frame_id=img.frame_id,
+                debug_pub.put(m.Image(stamp_ns=stamp_ns, frame_id=img.frame_id,
                                       width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
                                       data=jpeg))
                 diag.increment("debug_images")

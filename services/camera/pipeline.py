@@ -15,6 +15,7 @@ from buddybot.camera.facenet import FaceNet
 from buddybot.camera.geometry import DistanceEstimate, Intrinsics, back_project, estimate_distance
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.tracking import PointSmoother, TargetTracker
+from buddybot.core.limits import BoundedDict
 
 
 @dataclass(frozen=True)
@@ -42,7 +43,9 @@ class FacePipeline:
         self.s = settings
         self.tracker = TargetTracker(switch_after_s=settings.switch_after_s)
         self.smoother = PointSmoother(settings.min_cutoff_hz, settings.beta)
-        self._intrinsics: dict[tuple[int, int], Intrinsics] = {}
+        # Per frame size; bounded because the sizes come from the bus (a sender
+        # changing the size every frame must not grow it without end).
+        self._intrinsics: BoundedDict[tuple[int, int], Intrinsics] = BoundedDict(8)
         self._last: bf.Detection | None = None  # the followed face as last measured
         self._full_t = -np.inf  # when the whole frame was last searched
         self._search_due = False  # a deferred whole-frame pass is owed
@@ -50,11 +53,12 @@ class FacePipeline:
 
     def intrinsics(self, width: int, height: int) -> Intrinsics:
         key = (width, height)
-        if key not in self._intrinsics:
+        found = self._intrinsics.get(key)
+        if found is None:
             s = self.s
-            self._intrinsics[key] = Intrinsics.resolve(width, height, s.fx, s.fy, s.cx, s.cy,
-                                                       s.hfov_deg)
-        return self._intrinsics[key]
+            found = Intrinsics.resolve(width, height, s.fx, s.fy, s.cx, s.cy, s.hfov_deg)
+            self._intrinsics[key] = found
+        return found
 
     def _track(self, bgr: np.ndarray, t: float) -> bf.Detection | None:
         """The followed face re-found in its own crop (the refiner only)."""

@@ -51,6 +51,9 @@ def parse_source(text: str, sim: bool = False) -> SourceSpec:
 
 
 class FrameSource(Protocol):
+    """`read()` gives a frame as delivered (any channels, uint8 or uint16), None when
+    the source failed or ended; the capture loop converts or refuses it (`frames.py`)."""
+
     def open(self) -> bool: ...
     def read(self) -> np.ndarray | None: ...
     def release(self) -> None: ...
@@ -93,10 +96,6 @@ class CvSource:
             return None
         if not ok or frame is None or frame.size == 0:
             return None
-        if frame.ndim == 2:
-            frame = cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
-        elif frame.shape[2] == 4:
-            frame = cv2.cvtColor(frame, cv2.COLOR_BGRA2BGR)
         return frame
 
     def native_fps(self) -> float | None:

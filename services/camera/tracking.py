@@ -75,7 +75,10 @@ class PointSmoother:
         self._last_t = None
 
     def __call__(self, point: tuple[float, float, float], t: float) -> tuple[float, float, float]:
-        if self._last_t is not None and t - self._last_t > self.reset_after_s:
+        # A gap, or time going backwards, starts afresh. Backwards matters: the filters
+        # hold their value for stamps older than their last one, so after one stamp from
+        # the future they would otherwise freeze until real time caught up with it.
+        if self._last_t is not None and not 0 <= t - self._last_t <= self.reset_after_s:
             self.reset()
         self._last_t = t
         x, y, z = (f(v, t) for f, v in zip(self._filters, point, strict=True))
@@ -136,8 +139,10 @@ class TargetTracker:
             return same, False
         if not dets:
             return None, False
-        if self._box is not None and t - self._seen_t < self.switch_after_s:
-            return None, False  # our person may be back next frame: do not jump yet
+        # Our person may be back next frame: do not jump yet. Measured both ways, so a
+        # sighting with a stamp from the future cannot hold the choice forever.
+        if self._box is not None and abs(t - self._seen_t) < self.switch_after_s:
+            return None, False
         chosen = max(dets, key=lambda d: d.area)
         self._box, self._seen_t = chosen.box, t
         self.target_changes += 1

@@ -32,6 +32,9 @@ class ConfigError(Exception):
 
 class RobotSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     id: str = DEFAULT_ROBOT
+    allow_duplicate_nodes: bool = False
+    """A second process with a service's name on the same robot is refused at
+    start (two controllers would cancel each other's greetings); true allows it."""
 
 
 def _default_connect() -> list[str]:

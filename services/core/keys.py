@@ -108,12 +108,15 @@ def codec_for_encoding(encoding: str) -> Codec | None:
 class QoS:
     """Delivery policy as data.
 
-    `congestion` "drop" = latest wins (streams: a slow reader never stalls
-    the writer); "block" = never drop (small state changes and requests;
-    a stalled reader can block `put` for up to 5 s, so only tiny messages).
+    Every preset uses congestion control DROP: with BLOCK, one stalled
+    reader made the router hold back every other stream (radar frames
+    stopped for 4-5 s, issue 11). What must not be lost (state) is latched
+    instead: the advanced publisher keeps its last samples and the
+    subscribers detect a missed sample (heartbeat) and fetch it again, so
+    "state" means "always converges to the newest value", not "blocks".
     """
 
-    congestion: Literal["drop", "block"]
+    congestion: Literal["drop"]
     priority: Literal["real_time", "interactive_high", "data", "background"]
     express: bool = False
 
@@ -122,10 +125,16 @@ STREAM = QoS("drop", "data")
 """Sensor streams: every sample matters little once a newer one exists."""
 IMAGES = QoS("drop", "data")
 """Camera images: large, dropped under congestion."""
-STATE = QoS("block", "interactive_high", express=True)
-"""State changes and commands: small, never dropped, sent at once."""
+STATE = QoS("drop", "interactive_high", express=True)
+"""State changes: small, sent at once, latched so a dropped one is recovered."""
 BACKGROUND = QoS("drop", "background")
 """Diagnostics and debug output."""
+
+SMALL_MESSAGE_BYTES = 64 * 1024
+"""Largest payload accepted on a non-image key (real ones are under 2 kB)."""
+IMAGE_MESSAGE_BYTES = 16 * 1024 * 1024
+"""Largest image payload accepted (a 1920x1080 bgr8 frame is 6.2 MB); the
+router's `max_message_size` is set to the same bound."""
 
 
 # --- catalogue entries -------------------------------------------------------
@@ -177,6 +186,10 @@ class Topic(_Entry):
     codec: Codec = JSON
     qos: QoS = STATE
     latched: bool = False
+    history: int = 1
+    """Samples a latched topic's publisher keeps for late joiners and recovery."""
+    max_bytes: int = SMALL_MESSAGE_BYTES
+    """Larger samples are dropped unread (counted as `oversized`)."""
 
     @property
     def encoding(self) -> str:
@@ -190,6 +203,8 @@ class Service(_Entry):
     request: type[m.Message] = m.Trigger
     reply: type[m.Message] = m.TriggerReply
     codec: Codec = field(default=JSON)
+    max_bytes: int = SMALL_MESSAGE_BYTES
+    """Larger requests get an error reply unread."""
 
 
 RADAR_FRAMES = Topic(
@@ -202,7 +217,7 @@ PRESENCE = Topic(
 )
 CAMERA_IMAGE = Topic(
     "camera/{camera}/image", "camera frames with capture time",
-    type=m.Image, codec=MSGPACK, qos=IMAGES,
+    type=m.Image, codec=MSGPACK, qos=IMAGES, max_bytes=IMAGE_MESSAGE_BYTES,
 )
 FACE = Topic(
     "camera/{camera}/face", "tracked face centre, metres, ROS axes",
@@ -210,7 +225,7 @@ FACE = Topic(
 )
 DEBUG_IMAGE = Topic(
     "camera/{camera}/debug_image", "JPEG with detections drawn, only while watched",
-    type=m.Image, codec=MSGPACK, qos=IMAGES,
+    type=m.Image, codec=MSGPACK, qos=IMAGES, max_bytes=IMAGE_MESSAGE_BYTES,
 )
 EXPRESSION = Topic(
     "eyes/expression", "the eyes' expression", type=m.ScreenExpression, qos=STATE, latched=True,
@@ -233,7 +248,7 @@ PLAY_SOUND = Service(
 )
 PLAY_SOUND_STATUS = Topic(
     "audio/play_sound/status", "action progress and result",
-    type=m.PlaySoundStatus, qos=STATE, latched=True,
+    type=m.PlaySoundStatus, qos=STATE, latched=True, history=16,
 )
 PLAY_SOUND_CANCEL = Service(
     "audio/play_sound/cancel", "cancel an action goal",
@@ -249,7 +264,10 @@ AUDIO_RESUME = Service("audio/resume", "player: resume playback")
 DEVICE_FREE = Topic(
     "audio/device_free", "true when the player is idle", type=m.Bool, qos=STATE, latched=True,
 )
-NODES = _Entry("nodes/{node}", "liveliness token of each running service")
+NODES = _Entry(
+    "nodes/{node}/{instance}",
+    "liveliness token of each running service; instance = its Zenoh session id (zid)",
+)
 DIAGNOSTICS = Topic(
     "diagnostics/{node}", "health of each node", type=m.DiagnosticStatus, qos=BACKGROUND,
 )

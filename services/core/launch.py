@@ -4,11 +4,19 @@ Children are started with the same Python (`python -m buddybot ...`), their
 output is prefixed with the service name, a child that dies is restarted
 with exponential backoff and reported, and one Ctrl-C (or SIGTERM) stops
 them all: SIGTERM first, SIGKILL for any still alive after a grace period.
+
+Two faults are guarded against. A supervisor killed with SIGKILL cannot stop
+its children, so each child asks the kernel for SIGTERM when its parent dies
+(`die_with_supervisor`, PR_SET_PDEATHSIG); without it the router and the nine
+services lived on as orphans. And a second `up` on a port where a robot
+already runs refuses to start instead of joining it (two robots on one bus,
+with a status line counting the other robot's nodes as its own).
 """
 
 from __future__ import annotations
 
 import contextlib
+import ctypes
 import logging
 import os
 import signal
@@ -17,13 +25,17 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
 from typing import IO
+
+import zenoh
 
 from buddybot.core import registry
 from buddybot.core.node import open_session, zenoh_config
 from buddybot.core.service import ServiceContext
 from buddybot.core.status import StatusMonitor
+from buddybot.core.tools import list_nodes
 
 log = logging.getLogger("buddybot.up")
 
@@ -31,6 +43,81 @@ GRACE_S = 5.0
 BACKOFF_MIN_S = 1.0
 BACKOFF_MAX_S = 30.0
 STABLE_S = 30.0
+NO_RESTART_STATUS = frozenset({2})
+"""Exit statuses that restarting cannot fix: a bad option or config, or a node of
+that name already running elsewhere (the same rule as `RestartPreventExitStatus=2`
+in the systemd units)."""
+SUPERVISOR_ENV = "BUDDYBOT_SUPERVISOR_PID"
+"""Set in each child's environment to the pid of the `up` that started it."""
+_PR_SET_PDEATHSIG = 1
+# Variables systemd sets for the unit's main process only: a child of `up` that
+# inherited them would answer for `up` (READY=1, watchdog pings).
+_SYSTEMD_ONLY = ("NOTIFY_SOCKET", "WATCHDOG_USEC", "WATCHDOG_PID")
+
+
+@dataclass
+class RestartPolicy:
+    """When to restart a child that exited: pure, so the rule is tested without processes.
+
+    The delay starts at `min_s` and doubles with each quick crash up to `max_s`;
+    a run of at least `stable_s` counts as healthy and starts the series again.
+    An exit status in `no_restart` is final (restarting would fail the same way).
+    """
+
+    min_s: float = BACKOFF_MIN_S
+    max_s: float = BACKOFF_MAX_S
+    stable_s: float = STABLE_S
+    no_restart: frozenset[int] = NO_RESTART_STATUS
+    backoff: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.backoff = self.min_s
+
+    def after_exit(self, status: int | None, ran_s: float) -> float | None:
+        """Seconds to wait before the restart, or None: do not restart."""
+        if status in self.no_restart:
+            return None
+        if ran_s >= self.stable_s:
+            self.backoff = self.min_s
+        delay = self.backoff
+        self.backoff = min(self.backoff * 2, self.max_s)
+        return delay
+
+
+def die_with_supervisor(env: MutableMapping[str, str]) -> bool:
+    """In a child of `up`, first thing: have the kernel send SIGTERM when `up` dies.
+
+    The child sets this itself rather than through `preexec_fn`, which runs
+    Python between fork and exec in a multi-threaded parent (output pumps,
+    Zenoh) and can deadlock there. The price is a short window, from exec to
+    this call, in which the parent could die unnoticed; comparing the parent's
+    pid with the one `up` put in the environment closes it. PR_SET_PDEATHSIG
+    fires when the *thread* that forked us ends, so `up` starts every child
+    from its main thread, which lives as long as `up` does.
+
+    SIGTERM rather than SIGKILL: the child leaves the way Ctrl-C makes it
+    leave (the eye renderer closes its kiosk browsers, the player its device),
+    which takes about two seconds for the whole robot.
+
+    Returns False when the supervisor is already gone (the caller exits).
+    Without the variable (not started by `up`) nothing is done.
+    """
+    raw = env.pop(SUPERVISOR_ENV, "")  # not inherited by our own children
+    if not raw.isdigit():
+        return True
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(None, use_errno=True)
+        if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
+            log.warning("prctl(PR_SET_PDEATHSIG) failed: %s", os.strerror(ctypes.get_errno()))
+    return os.getppid() == int(raw)
+
+
+def child_env(env: Mapping[str, str], supervisor_pid: int) -> dict[str, str]:
+    """The environment of a child of `up`."""
+    out = {k: v for k, v in env.items() if k not in _SYSTEMD_ONLY}
+    out.update(PYTHONUNBUFFERED="1")
+    out[SUPERVISOR_ENV] = str(supervisor_pid)
+    return out
 
 
 def connect_endpoint(listen: str) -> str:
@@ -42,19 +129,56 @@ def connect_endpoint(listen: str) -> str:
     return f"{proto}/{host}:{port}"
 
 
-def wait_for_port(endpoint: str, timeout: float, stop: threading.Event) -> bool:
-    """True once a TCP endpoint accepts connections."""
+def _host_port(endpoint: str) -> tuple[str, int]:
     _, _, addr = endpoint.partition("/")
     host, _, port = addr.rpartition(":")
-    host = host.strip("[]")
+    return host.strip("[]"), int(port)
+
+
+def accepting(endpoint: str) -> bool:
+    """Whether something accepts TCP connections on `endpoint` right now."""
+    try:
+        with socket.create_connection(_host_port(endpoint), timeout=0.5):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def wait_for_port(endpoint: str, timeout: float, stop: threading.Event) -> bool:
+    """True once a TCP endpoint accepts connections."""
     end = time.monotonic() + timeout
     while time.monotonic() < end and not stop.is_set():
-        try:
-            with socket.create_connection((host, int(port)), timeout=0.5):
-                return True
-        except OSError:
-            time.sleep(0.1)
+        if accepting(endpoint):
+            return True
+        time.sleep(0.1)
     return False
+
+
+def probe_nodes(endpoint: str, timeout_s: float = 3.0) -> list[str] | None:
+    """Live BuddyBot nodes (`robot/node`) behind a Zenoh router at `endpoint`,
+    or None when no Zenoh router answers there."""
+    config = zenoh_config(connect=[endpoint])
+    config.insert_json5("connect/timeout_ms", str(int(timeout_s * 1000)))
+    try:
+        session = zenoh.open(config)
+    except Exception:  # ZError: not a Zenoh router, or it would not talk to us (TLS)
+        return None
+    try:
+        return list_nodes(session, None, timeout=timeout_s)
+    finally:
+        session.close()
+
+
+def busy_message(listen: str, nodes: list[str] | None) -> str:
+    """The one line `up` prints when its router's port is taken."""
+    if nodes is None:
+        who = "something that does not answer as a Zenoh router listens there"
+    elif nodes:
+        who = f"a Zenoh router answers there, with live nodes: {', '.join(nodes)}"
+    else:
+        who = "a Zenoh router answers there (no live BuddyBot nodes)"
+    return (f"buddybot up: {listen} is already in use: {who}. A robot may already be "
+            "running: stop it first, or give --listen another port. Nothing started.")
 
 
 @dataclass
@@ -63,16 +187,20 @@ class Child:
 
     name: str
     argv: list[str]
-    restart: bool = True
+    policy: RestartPolicy = field(default_factory=RestartPolicy)
+    given_up: bool = False
     proc: subprocess.Popen[bytes] | None = None
     started: float = 0.0
-    backoff: float = BACKOFF_MIN_S
     next_start: float = 0.0
     restarts: int = 0
     threads: list[threading.Thread] = field(default_factory=list)
 
     def start(self, out: IO[str], lock: threading.Lock) -> None:
-        env = dict(os.environ, PYTHONUNBUFFERED="1")
+        # The child's PR_SET_PDEATHSIG watches the thread that forks it: only the
+        # main thread lives as long as `up` (see die_with_supervisor).
+        if threading.current_thread() is not threading.main_thread():
+            raise RuntimeError("children of `up` must be started from its main thread")
+        env = child_env(os.environ, os.getpid())
         self.proc = subprocess.Popen(
             self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env=env, start_new_session=True,
@@ -135,6 +263,11 @@ def up(ctx: ServiceContext) -> int:
     entries = registry.available_services()
     if args.only:
         entries = [e for e in entries if e.name in args.only]
+    for endpoint in listen:
+        local = connect_endpoint(endpoint)
+        if local.startswith(("tcp/", "tls/")) and accepting(local):
+            print(busy_message(endpoint, probe_nodes(local)), file=sys.stderr, flush=True)
+            return 1
     log.info("starting router on %s and %d services: %s", ", ".join(listen), len(entries),
              ", ".join(e.name for e in entries))
     router.start(out, lock)
@@ -191,16 +324,20 @@ def _supervise(children: list[Child], stop: threading.Event, out: IO[str],
                 out.write(f"[{'status':<14}] {line}\n")
                 out.flush()
         for child in children:
-            if child.alive() or child.proc is None:
-                if child.alive() and now - child.started > STABLE_S:
-                    child.backoff = BACKOFF_MIN_S
+            if child.proc is None or child.given_up or child.alive():
                 continue
             if child.next_start == 0.0:
                 code = child.proc.returncode
-                child.next_start = now + child.backoff
+                delay = child.policy.after_exit(code, now - child.started)
+                if delay is None:
+                    child.given_up = True
+                    log.error("%s exited with status %s (bad option or config, or a node of "
+                              "that name already runs): not restarting it; the others keep "
+                              "running", child.name, code)
+                    continue
+                child.next_start = now + delay
                 log.warning("%s exited with status %s; restarting in %.0f s",
-                            child.name, code, child.backoff)
-                child.backoff = min(child.backoff * 2, BACKOFF_MAX_S)
+                            child.name, code, delay)
             elif now >= child.next_start:
                 child.restarts += 1
                 child.next_start = 0.0

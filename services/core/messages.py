@@ -28,8 +28,13 @@ Centimetres = Annotated[int, msgspec.Meta(ge=0, le=65535, description="cm, 16-bi
 Energy = Annotated[int, msgspec.Meta(ge=0, le=100, description="LD2410 energy 0..100")]
 Percent = Annotated[float, msgspec.Meta(ge=0.0, le=100.0)]
 Unit = Annotated[float, msgspec.Meta(ge=0.0, le=1.0)]
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
+Metres = Annotated[float, msgspec.Meta(ge=0.0, le=1000.0, description="m, finite")]
+Coordinate = Annotated[float, msgspec.Meta(ge=-1000.0, le=1000.0, description="m, finite")]
+DistanceCm = Annotated[float, msgspec.Meta(ge=0.0, le=100000.0, description="cm, finite")]
 Gate = Annotated[int, msgspec.Meta(ge=0, le=8)]
+FrameId = Annotated[str, msgspec.Meta(max_length=256, description="camera frame name")]
+GoalId = Annotated[str, msgspec.Meta(max_length=64)]
+Text = Annotated[str, msgspec.Meta(max_length=4096, description="human-readable text")]
 Byte = Annotated[int, msgspec.Meta(ge=0, le=255)]
 
 
@@ -47,12 +52,19 @@ class Message(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
 
 class TargetState(enum.IntEnum):
-    """LD2410 target state byte: bit 0 moving, bit 1 stationary."""
+    """LD2410 target state byte: bit 0 moving, bit 1 stationary.
+
+    Values 4-6 are sent by LD2410C firmware while it measures the room's
+    background noise (auto thresholds): no target information then.
+    """
 
     NO_TARGET = 0
     MOVING = 1
     STATIONARY = 2
     MOVING_AND_STATIONARY = 3
+    NOISE_DETECTING = 4
+    NOISE_DETECTION_SUCCEEDED = 5
+    NOISE_DETECTION_FAILED = 6
 
 
 class LD2410TargetDataFrame(Message):
@@ -98,7 +110,7 @@ class PresenceDetection(Message):
     stamp_ns: StampNs
     target_state: PresenceTarget
     presence_state: PresenceState
-    distance_m: NonNegative
+    distance_m: Metres
 
 
 # --- camera ----------------------------------------------------------------
@@ -109,7 +121,7 @@ class Image(Message):
     Always MessagePack on the wire (JSON would cost 40x more)."""
 
     stamp_ns: StampNs
-    frame_id: str
+    frame_id: FrameId
     width: Annotated[int, msgspec.Meta(gt=0, le=16384)]
     height: Annotated[int, msgspec.Meta(gt=0, le=16384)]
     encoding: Literal["bgr8", "jpeg"]
@@ -119,16 +131,16 @@ class Image(Message):
 class Point(Message):
     """A 3-D point in metres (ROS axes: x forward, y left, z up)."""
 
-    x: float
-    y: float
-    z: float
+    x: Coordinate
+    y: Coordinate
+    z: Coordinate
 
 
 class FacePosition(Message):
     """The tracked face centre relative to the camera, in metres."""
 
     stamp_ns: StampNs
-    frame_id: str
+    frame_id: FrameId
     point: Point
     confidence: Unit
 
@@ -158,7 +170,7 @@ class EyeControl(Message):
     stamp_ns: StampNs
     yaw: Annotated[float, msgspec.Meta(ge=-3.15, le=3.15)]
     pitch: Annotated[float, msgspec.Meta(ge=-1.58, le=1.58)]
-    target_distance_cm: NonNegative
+    target_distance_cm: DistanceCm
 
 
 class EyesDirection(Message):
@@ -199,31 +211,31 @@ TERMINAL_GOAL_STATES: frozenset[str] = frozenset({"SUCCEEDED", "CANCELED", "ABOR
 class PlaySound(Message):
     """Goal of the `audio/play_sound` action: a sound name from [audio.sounds]."""
 
-    sound: Annotated[str, msgspec.Meta(min_length=1)]
+    sound: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
 
 
 class PlaySoundReply(Message):
-    goal_id: str
+    goal_id: GoalId
     accepted: bool
-    message: str = ""
+    message: Text = ""
 
 
 class PlaySoundStatus(Message):
-    goal_id: str
+    goal_id: GoalId
     state: GoalState
     progress: Unit = 0.0
-    message: str = ""
+    message: Text = ""
     stamp_ns: StampNs = 0
 
 
 class CancelGoal(Message):
-    goal_id: str
+    goal_id: GoalId
 
 
 class PlayAudioFile(Message):
     """Request to the player: a file path or a configured sound name."""
 
-    path: Annotated[str, msgspec.Meta(min_length=1)]
+    path: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)]
 
 
 class Trigger(Message):
@@ -232,7 +244,7 @@ class Trigger(Message):
 
 class TriggerReply(Message):
     success: bool
-    message: str = ""
+    message: Text = ""
 
 
 class Bool(Message):
@@ -251,16 +263,17 @@ class DiagnosticStatus(Message):
     """Health of one node: published periodically and on every change."""
 
     stamp_ns: StampNs
-    node: str
+    node: Annotated[str, msgspec.Meta(max_length=64)]
     level: DiagnosticLevel
-    message: str
-    values: dict[str, DiagnosticValue] = msgspec.field(default_factory=dict)
+    message: Text
+    values: Annotated[dict[str, DiagnosticValue], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=dict)
 
 
 class ErrorReply(Message):
     """Body of a query's error reply: what was wrong with the request."""
 
-    error: str
+    error: Text
 
 
 ALL_MESSAGES: tuple[type[Message], ...] = (

@@ -6,8 +6,15 @@ Everything a service needs from Zenoh lives here, written once:
   scouting off, and it waits for a router that is not up yet (services
   start in any order) while staying interruptible by Ctrl-C;
 * every key is the catalogue's pattern under `buddybot/<robot>/`;
-* a liveliness token `nodes/<name>` says the node is alive, and
-  `diagnostics/<name>` says how it is doing;
+* a liveliness token `nodes/<name>/<zid>` says the node is alive (the zid
+  names the process, so a second instance of a name is seen and, for
+  services, refused), and `diagnostics/<name>` says how it is doing;
+* nothing uses congestion control BLOCK (one stalled reader would stall
+  the router): state keys are latched and recovered instead, and a
+  stalled link is closed after 100 ms of blocking;
+* no sample can freeze or bloat a handler: oversized payloads are dropped
+  unread, values are range-checked at decode, and a `stamp_ns` outside
+  the plausible window is replaced by the arrival time (counted);
 * latched topics use zenoh.ext advanced publishers (a one-sample cache)
   and advanced subscribers (history of late publishers), so a process
   that starts late or restarts gets the current value at once;
@@ -34,7 +41,7 @@ import msgspec
 import zenoh
 import zenoh.ext
 
-from buddybot.core import keys
+from buddybot.core import keys, limits
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
 
@@ -43,7 +50,7 @@ log = logging.getLogger("buddybot.node")
 T = TypeVar("T", bound=m.Message)
 Delivery = Literal["inline", "latest", "queue"]
 
-_CONGESTION = {"drop": zenoh.CongestionControl.DROP, "block": zenoh.CongestionControl.BLOCK}
+_CONGESTION = {"drop": zenoh.CongestionControl.DROP}
 _PRIORITY = {
     "real_time": zenoh.Priority.REAL_TIME,
     "interactive_high": zenoh.Priority.INTERACTIVE_HIGH,
@@ -53,6 +60,16 @@ _PRIORITY = {
 
 
 # --- session configuration ------------------------------------------------------
+
+WAIT_BEFORE_CLOSE_US = 100_000
+"""Zenoh's `wait_before_close` (microseconds) for router and clients."""
+MAX_MESSAGE_BYTES = keys.IMAGE_MESSAGE_BYTES
+"""Zenoh's `max_message_size`: nothing larger than the largest image we accept."""
+
+
+class DuplicateNodeError(ConfigError):
+    """Another process already runs a node of this name on this robot (exit 2:
+    restarting would only collide again)."""
 
 
 def zenoh_config(
@@ -70,6 +87,14 @@ def zenoh_config(
         raise ConfigError(f"{base_file}: not a valid Zenoh config: {exc}") from None
     config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("scouting/multicast/enabled", "false")
+    # A link that stays blocked this long is closed instead of holding back
+    # every other stream behind one stalled reader (5 s by default; measured:
+    # only this removed the radar gaps when one client was SIGSTOPped).
+    config.insert_json5(
+        "transport/link/tx/queue/congestion_control/block/wait_before_close",
+        str(WAIT_BEFORE_CLOSE_US),
+    )
+    config.insert_json5("transport/link/rx/max_message_size", str(MAX_MESSAGE_BYTES))
     if connect:
         config.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen:
@@ -154,6 +179,7 @@ class Diagnostics:
 
     def set(self, level: m.DiagnosticLevel, message: str) -> None:
         """Change the status; publishes at once when it differs."""
+        message = limits.clip(message)
         with self._lock:
             changed = (level, message) != (self.level, self.message)
             self.level, self.message = level, message
@@ -187,6 +213,10 @@ class Diagnostics:
 # --- typed publishers ----------------------------------------------------------------
 
 
+HEARTBEAT_S = 0.5
+"""Period of a latched publisher's heartbeat after it published (miss detection)."""
+
+
 class Publisher(Generic[T]):
     """Puts messages of one catalogue topic on one concrete key."""
 
@@ -205,10 +235,12 @@ class Publisher(Generic[T]):
         if topic.latched:
             self._z: Any = zenoh.ext.declare_advanced_publisher(
                 node.session, key,
-                cache=zenoh.ext.CacheConfig(max_samples=1),
+                cache=zenoh.ext.CacheConfig(max_samples=topic.history),
                 publisher_detection=True,
+                # A sample dropped under congestion is noticed by the next
+                # heartbeat and fetched from the cache (state keys use DROP).
                 sample_miss_detection=zenoh.ext.MissDetectionConfig(
-                    heartbeat=None, sporadic_heartbeat=1.0
+                    heartbeat=None, sporadic_heartbeat=HEARTBEAT_S
                 ),
                 **options,
             )
@@ -255,11 +287,23 @@ class _Worker:
         self._thread.start()
 
     def submit(self, *item: Any) -> None:
+        """Queue an item; when full the oldest is dropped (counted)."""
         with self._cond:
             if len(self._items) == self._items.maxlen:
                 self.dropped += 1
             self._items.append(item)
             self._cond.notify()
+
+    def offer(self, *item: Any) -> bool:
+        """Queue an item unless full: False means the caller must refuse it
+        (queries: a dropped query would leave its caller with no answer)."""
+        with self._cond:
+            if len(self._items) == self._items.maxlen:
+                self.dropped += 1
+                return False
+            self._items.append(item)
+            self._cond.notify()
+            return True
 
     def _run(self) -> None:
         while True:
@@ -302,7 +346,13 @@ class Node:
         diagnostics_period_s: float = 2.0,
         stop_event: threading.Event | None = None,
         session: zenoh.Session | None = None,
+        unique: bool = False,
+        stamp_window_s: tuple[float, float] = (limits.STAMP_PAST_S, limits.STAMP_FUTURE_S),
     ) -> None:
+        """`unique`: refuse to start (DuplicateNodeError) when another process
+        already runs a node of this name on this robot (services set it; tools
+        and tests that open several probes do not). `stamp_window_s`: how far
+        (past, future) a received `stamp_ns` may lie from its arrival time."""
         self.name = name
         self.robot = robot
         self.prefix = keys.prefix(robot)
@@ -313,6 +363,7 @@ class Node:
         self._threads: list[threading.Thread] = []
         self._closed = False
         self._warn = RateLimitedLog(self.log)
+        self._stamp_window = stamp_window_s
         if session is None:
             config = zenoh_config(connect=connect, base_file=zenoh_config_file)
             opened = open_session(config, self.stop_event, "router at " + ", ".join(connect))
@@ -323,10 +374,67 @@ class Node:
         else:
             self._owns_session = False
         self.session: zenoh.Session = session
-        self._token = self.session.liveliness().declare_token(self.key(keys.NODES, node=name))
+        self.instance = str(session.info.zid())
+        """This process's identity on the bus (its Zenoh session id)."""
+        if unique:
+            self._refuse_duplicate()
         self.diagnostics = Diagnostics(self, diagnostics_period_s)
+        self._token = self.session.liveliness().declare_token(
+            self.key(keys.NODES, node=name, instance=self.instance))
+        self.watch_node(name, self._on_own_instances)
         self.every(diagnostics_period_s, self.diagnostics.publish, name="diagnostics")
-        self.log.info("node %s up (robot %s)", name, robot)
+        self.log.info("node %s up (robot %s, instance %s)", name, robot, self.instance)
+
+    # -- identity --
+
+    def _refuse_duplicate(self) -> None:
+        others = live_instances(self.session, self.key(keys.NODES, node=self.name))
+        others.discard(self.instance)
+        if others:
+            if self._owns_session:
+                self.session.close()
+            raise DuplicateNodeError(
+                f"another {self.name} is already running on robot {self.robot} "
+                f"(instance {', '.join(sorted(others))}); stop it first, or set "
+                "[robot] allow_duplicate_nodes = true to run several on purpose"
+            )
+
+    def _on_own_instances(self, instances: frozenset[str]) -> None:
+        others = sorted(instances - {self.instance})
+        self.diagnostics.values["instances"] = len(instances)
+        if others:
+            self.diagnostics.set("WARN", f"another {self.name} is running: {', '.join(others)}")
+        elif self.diagnostics.message.startswith(f"another {self.name} is running"):
+            self.diagnostics.set("OK", "running")
+
+    def watch_node(
+        self, name: str, on_change: Callable[[frozenset[str]], None]
+    ) -> None:
+        """Call `on_change(instances)` with the set of live instances (zids) of
+        node `name` now and whenever it changes: one source of truth for "is X
+        running", from liveliness tokens only (runs in Zenoh's thread: be quick)."""
+        alive: set[str] = set()
+        lock = threading.Lock()
+        put = zenoh.SampleKind.PUT
+
+        def on_token(sample: zenoh.Sample) -> None:
+            found = keys.NODES.match(self.relative(str(sample.key_expr)))
+            if found is None:
+                return
+            with lock:
+                if sample.kind == put:
+                    alive.add(found["instance"])
+                else:
+                    alive.discard(found["instance"])
+                current = frozenset(alive)
+            try:
+                on_change(current)
+            except Exception as exc:
+                self._warn.warning(f"watch:{name}", "node watcher for %s failed: %r", name, exc)
+
+        sub = self.session.liveliness().declare_subscriber(
+            self.key(keys.NODES, node=name), on_token, history=True)
+        self._declared.append(sub)
 
     # -- keys --
 
@@ -393,19 +501,45 @@ class Node:
             sink = worker.submit
         put_kind = zenoh.SampleKind.PUT
         bad = (msgspec.DecodeError, msgspec.ValidationError)
+        max_bytes = topic.max_bytes
+        stamped = "stamp_ns" in msg_type.__struct_fields__
+        # A latched value is old by design (it was published when it changed):
+        # only its future bound is checked.
+        future_ns = int(self._stamp_window[1] * 1e9)
+        past_ns = None if topic.latched else int(self._stamp_window[0] * 1e9)
 
         def on_sample(sample: zenoh.Sample) -> None:
             if sample.kind != put_kind:
                 return
+            payload = sample.payload
+            if len(payload) > max_bytes:
+                self.diagnostics.increment("oversized")
+                self._warn.warning(
+                    f"big:{key}", "dropped a %d-byte sample on %s (limit %d)",
+                    len(payload), limits.clip(str(sample.key_expr)), max_bytes,
+                )
+                return
             try:
-                msg = decode(sample.payload.to_bytes(), msg_type)
+                msg = decode(payload.to_bytes(), msg_type)
             except bad as exc:
                 self.diagnostics.increment("malformed")
                 self._warn.warning(
                     f"bad:{key}", "dropped malformed %s on %s: %s",
-                    msg_type.__name__, sample.key_expr, exc,
+                    msg_type.__name__, limits.clip(str(sample.key_expr)), limits.clip(exc),
                 )
                 return
+            if stamped:
+                now = time.time_ns()
+                stamp = msg.stamp_ns
+                if stamp > now + future_ns or (past_ns is not None and stamp < now - past_ns):
+                    # Never let one wrong clock hold back every later sample.
+                    msg.stamp_ns = now
+                    self.diagnostics.increment("stamps replaced")
+                    self._warn.warning(
+                        f"stamp:{key}", "replaced implausible stamp_ns %d on %s "
+                        "(%.1f s from arrival) by the arrival time",
+                        stamp, limits.clip(str(sample.key_expr)), (stamp - now) / 1e9,
+                    )
             try:
                 sink(msg, rel(sample.key_expr))
             except Exception as exc:  # only inline handlers raise here
@@ -455,14 +589,15 @@ class Node:
                 request = codec.decode(raw or b"{}", service.request)
             except (msgspec.DecodeError, msgspec.ValidationError) as exc:
                 self.diagnostics.increment("malformed")
-                self._warn.warning(f"bad:{key}", "refused malformed request on %s: %s", key, exc)
-                query.reply_err(_error_payload(f"bad {service.request.__name__}: {exc}"))
+                text = limits.clip(exc)
+                self._warn.warning(f"bad:{key}", "refused malformed request on %s: %s", key, text)
+                query.reply_err(_error_payload(f"bad {service.request.__name__}: {text}"))
                 return
             try:
                 reply = handler(request)
             except Exception as exc:
                 self.log.exception("handler for %s failed", key)
-                query.reply_err(_error_payload(f"{type(exc).__name__}: {exc}"))
+                query.reply_err(_error_payload(f"{type(exc).__name__}: {limits.clip(exc)}"))
                 return
             query.reply(key, codec.encode(reply), encoding=reply_encoding)
 
@@ -474,7 +609,22 @@ class Node:
         self._workers.append(worker)
 
         def on_query(query: zenoh.Query) -> None:
-            worker.submit(query)
+            # Every query gets an answer: too large or too many at once are
+            # refused here at once (Zenoh's thread; replying is quick), never
+            # silently dropped.
+            payload = query.payload
+            if payload is not None and len(payload) > service.max_bytes:
+                self.diagnostics.increment("oversized")
+                with query:
+                    query.reply_err(_error_payload(
+                        f"request too large: {len(payload)} bytes (limit {service.max_bytes})"))
+                return
+            if not worker.offer(query):
+                self.diagnostics.increment("busy")
+                self._warn.warning(f"busy:{key}", "refused a request on %s: busy", key)
+                with query:
+                    query.reply_err(_error_payload(
+                        f"busy: {queue_size} requests already waiting on {service.pattern}"))
 
         self._declared.append(self.session.declare_queryable(key, on_query))
 
@@ -571,6 +721,19 @@ def call_service(
                 raise ServiceError(f"{key}: malformed reply: {exc}") from None
         raise ServiceError(f"{key}: {error_text(reply.err.payload.to_bytes())}")
     raise ServiceError(f"{key}: no reply within {timeout:g} s (is the service running?)")
+
+
+def live_instances(session: zenoh.Session, key: str, timeout: float = 2.0) -> set[str]:
+    """Instance ids of the liveliness tokens matching `key` (`.../nodes/<name>/*`)."""
+    found: set[str] = set()
+    for reply in session.liveliness().get(key, timeout=timeout):
+        if reply.ok is None:
+            continue
+        parts = keys.split_absolute(str(reply.ok.key_expr))
+        match = keys.NODES.match(parts[1]) if parts else None
+        if match is not None:
+            found.add(match["instance"])
+    return found
 
 
 def install_signal_handlers(stop: threading.Event) -> None:

@@ -8,6 +8,7 @@ import threading
 import zenoh
 
 from buddybot.core.node import zenoh_config
+from buddybot.core.sdnotify import Notifier
 
 log = logging.getLogger("buddybot.router")
 
@@ -22,10 +23,13 @@ def run_router(
     """
     config = zenoh_config(mode="router", listen=listen, base_file=base_file)
     session = zenoh.open(config)
+    notifier = Notifier.from_env()  # systemd Type=notify: ready, then watchdog pings
     try:
         log.info("router listening on %s (zid %s)", ", ".join(listen), session.info.zid())
+        notifier.ready(f"listening on {', '.join(listen)}")
         while not stop.wait(0.5):
-            pass
+            notifier.watchdog()
     finally:
+        notifier.close()
         session.close()
         log.info("router stopped")

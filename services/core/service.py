@@ -3,18 +3,24 @@
 Common options (`--connect`, `--robot`, `--config`, `--log-level`) are the
 same for every service and tool; the effective values combine the command
 line (wins), the config file and the defaults.
+
+Under systemd (`Type=notify`, `WatchdogSec=`) the service reports ready once
+its node is up, and its node's timer thread sends the watchdog pings: a
+process that hangs or stops loses its pings and systemd restarts it.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import os
 import sys
 import threading
 from dataclasses import dataclass, field
 
 from buddybot.core.config import Config, ConfigError, load_config, resolve_path
 from buddybot.core.node import Node, install_signal_handlers
+from buddybot.core.sdnotify import Notifier
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -50,14 +56,27 @@ class ServiceContext:
     robot: str
     connect: list[str]
     stop: threading.Event = field(default_factory=threading.Event)
+    notifier: Notifier = field(default_factory=Notifier.from_env)
 
     def node(self, name: str | None = None, **kwargs: object) -> Node:
-        """Open this service's node (waits for the router; Ctrl-C aborts)."""
-        return Node(
+        """Open this service's node (waits for the router; Ctrl-C aborts).
+
+        Then tell systemd the service is ready, and ping its watchdog from the
+        node's own timer thread, which stops with the node.
+        """
+        node = Node(
             name or self.name, robot=self.robot, connect=self.connect,
             zenoh_config_file=self.config.zenoh.config_file, stop_event=self.stop,
+            unique=not self.config.robot.allow_duplicate_nodes,
             **kwargs,  # type: ignore[arg-type]
         )
+        notifier = self.notifier
+        if notifier.enabled:
+            notifier.ready(f"node {node.name} up (robot {self.robot})")
+            if notifier.watchdog_s:
+                notifier.watchdog()
+                node.every(notifier.watchdog_s, notifier.watchdog, name="watchdog")
+        return node
 
 
 def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
@@ -76,6 +95,12 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
 
 def run_main(name: str, args: argparse.Namespace, main: object) -> int:
     """Run a service's `run(ctx)` with logging, signals and config errors handled."""
+    from buddybot.core.launch import die_with_supervisor  # launch imports this module
+
+    if not die_with_supervisor(os.environ):
+        print(f"buddybot {name}: the `buddybot up` that started it is gone; not starting",
+              file=sys.stderr)
+        return 1
     setup_logging(getattr(args, "log_level", "INFO"))
     try:
         ctx = resolve(args, name)

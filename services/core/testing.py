@@ -101,6 +101,11 @@ class Process:
             os.killpg(self.proc.pid, signum)
             self.proc.wait(10)
 
+    def send_signal(self, signum: int) -> None:
+        """Signal the process group without waiting (SIGSTOP/SIGCONT to freeze it)."""
+        if self.alive():
+            os.killpg(self.proc.pid, signum)
+
     def stop(self, timeout: float = 10.0) -> int | None:
         """SIGTERM, then SIGKILL after `timeout`; returns the exit status."""
         if self.alive():

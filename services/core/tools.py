@@ -186,7 +186,7 @@ def pub(ctx: ServiceContext) -> int:
     try:
         publisher = session.declare_publisher(
             key, encoding=zenoh.Encoding(entry.encoding),
-            congestion_control=zenoh.CongestionControl.BLOCK,
+            congestion_control=zenoh.CongestionControl.DROP,
         )
         # Give discovery a moment so the first put reaches existing subscribers.
         end = time.monotonic() + args.wait
@@ -236,31 +236,45 @@ def call(ctx: ServiceContext) -> int:
 # --- nodes --------------------------------------------------------------------------
 
 
-def list_nodes(session: zenoh.Session, robot: str | None, timeout: float = 2.0) -> list[str]:
-    """Live node names (`robot/name` when robot is None), from liveliness tokens."""
+def list_node_instances(
+    session: zenoh.Session, robot: str | None, timeout: float = 2.0
+) -> dict[str, set[str]]:
+    """Live node names (`robot/name` when robot is None) -> their instances (zids),
+    from liveliness tokens. More than one instance of a name is a duplicate."""
     pattern = keys.NODES.wildcard()
     key = f"{keys.PREFIX_ROOT}/{robot or '*'}/{pattern}"
-    names = set()
+    found: dict[str, set[str]] = {}
     for reply in session.liveliness().get(key, timeout=timeout):
         if reply.ok is None:
             continue
         parts = keys.split_absolute(str(reply.ok.key_expr))
         if parts is None:
             continue
-        found = keys.NODES.match(parts[1])
-        if found:
-            names.add(found["node"] if robot else f"{parts[0]}/{found['node']}")
-    return sorted(names)
+        match = keys.NODES.match(parts[1])
+        if match:
+            name = match["node"] if robot else f"{parts[0]}/{match['node']}"
+            found.setdefault(name, set()).add(match["instance"])
+    return found
+
+
+def list_nodes(session: zenoh.Session, robot: str | None, timeout: float = 2.0) -> list[str]:
+    """Live node names (`robot/name` when robot is None), from liveliness tokens."""
+    return sorted(list_node_instances(session, robot, timeout))
 
 
 def nodes(ctx: ServiceContext) -> int:
     session = _session(ctx)
     try:
-        names = list_nodes(session, None if ctx.args.all_robots else ctx.robot, ctx.args.timeout)
+        found = list_node_instances(
+            session, None if ctx.args.all_robots else ctx.robot, ctx.args.timeout)
     finally:
         session.close()
-    for name in names:
-        print(name)
+    for name in sorted(found):
+        instances = sorted(found[name])
+        if len(instances) > 1:
+            print(f"{name}  DUPLICATE: {len(instances)} instances ({', '.join(instances)})")
+        else:
+            print(name)
     return 0
 
 

@@ -235,3 +235,45 @@ def test_deferred_search_drops_a_track_the_whole_frame_does_not_confirm(
     # ... so the next frame is searched whole again instead of tracked.
     result = pipe.process(frame, 10 * 33_000_000, defer_search=True)
     assert pipe.tracked == 8 and len(result.faces) == 1 and result.point is not None
+
+
+@pytest.mark.parametrize("shape", [(1, 400, 3), (400, 1, 3), (1, 1, 3), (2000, 30, 3)])
+def test_odd_frame_shapes_render_a_debug_image(shape: tuple[int, int, int]) -> None:
+    img = np.full(shape, 128, np.uint8)
+    jpeg = draw.encode_jpeg(draw.render(img, [], None, None), 80)
+    assert jpeg is not None and cv2.imdecode(np.frombuffer(jpeg, np.uint8), 1).shape == shape
+
+
+@pytest.mark.parametrize("wrong_ns", [2**63 - 1, 15_000_000_000], ids=["max", "15s-ahead"])
+def test_one_wrong_stamp_does_not_freeze_the_followed_face(full: FaceNet, short: FaceNet,
+                                                           wrong_ns: int) -> None:
+    """With smoothing and crop tracking, as the service runs: after one frame stamped
+    far ahead, later frames must move the published point again at once."""
+    pipe = FacePipeline(full, FaceDetectorSettings(), short)
+    t0 = 1_700_000_000_000_000_000
+    left, _ = scenes.scene(scenes.grace_hopper(), 1.2, 220, 240)
+    for i in range(8):
+        pipe.process(left, t0 + i * 33_000_000, defer_search=True)
+        pipe.search_if_due(left, t0 + i * 33_000_000)
+    wrong = t0 + wrong_ns if wrong_ns < 2**62 else wrong_ns
+    pipe.process(left, wrong, defer_search=True)
+    pipe.search_if_due(left, wrong)
+    right, placed = scenes.scene(scenes.grace_hopper(), 1.2, 420, 240)
+    ys = []
+    for i in range(9, 25):  # half a second of frames with the person moved right
+        stamp = t0 + i * 33_000_000
+        result = pipe.process(right, stamp, defer_search=True)
+        pipe.search_if_due(right, stamp)
+        if result.point is not None:
+            ys.append(result.point[1])
+    assert ys, "the moved face was never published"
+    assert ys[-1] == pytest.approx(scenes.truth(placed)[1], abs=0.05)
+
+
+def test_a_new_frame_size_every_frame_does_not_grow_the_pipeline(full: FaceNet) -> None:
+    pipe = pipeline(full, None)
+    frame, _ = scenes.scene(scenes.astronaut(), 1.0)
+    for i in range(40):
+        result = pipe.process(frame[: 400 + i, : 500 + i], i * 33_000_000)
+        assert result.point is not None
+    assert len(pipe._intrinsics) <= 8 and pipe._intrinsics.evicted >= 32

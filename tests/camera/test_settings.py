@@ -56,8 +56,22 @@ def test_command_line_overrides_config() -> None:
     (detector, "[face_detector]\nface_width_m = -1.0\n", [], "face_width_m"),
     (detector, "", ["--min-score", "1.5"], "min_score"),
     (detector, "[face_detector]\nbeta = -1.0\n", [], "beta"),
+    (detector, "[face_detector]\nmax_pixels = 0\n", [], "max_pixels"),
+    (detector, "", ["--max-pixels", str(16384 * 16384 + 1)], "max_pixels"),
+    (detector, "[face_detector]\nfull_every_s = -1.0\n", [], "full_every_s"),
 ])
 def test_impossible_values_are_config_errors(module: object, toml: str, argv: list[str],
                                              text: str) -> None:
     with pytest.raises(ConfigError, match=text):
         module.effective_settings(ctx_for(module, toml, *argv))  # type: ignore[attr-defined]
+
+
+def test_max_pixels_and_full_every_s_reach_the_detector() -> None:
+    d = detector.effective_settings(ctx_for(detector, ""))
+    assert d.max_pixels == 3840 * 2160 and d.full_every_s == 0.25
+    d = detector.effective_settings(ctx_for(
+        detector, "[face_detector]\nmax_pixels = 2000000\nfull_every_s = 0.0\n"))
+    assert (d.max_pixels, d.full_every_s) == (2_000_000, 0.0)
+    d = detector.effective_settings(ctx_for(detector, "[face_detector]\nmax_pixels = 5\n",
+                                            "--max-pixels", "307200"))
+    assert d.max_pixels == 307200

@@ -83,3 +83,38 @@ def test_switches_when_the_target_has_really_gone() -> None:
 
 def test_no_faces_no_target() -> None:
     assert TargetTracker().select([], 0.0) == (None, False)
+
+
+FUTURE = (2**63 - 1) * 1e-9  # the largest stamp a message can carry, in seconds
+
+
+@pytest.mark.parametrize("wrong_t", [FUTURE, 15.0, 0.9])
+def test_one_stamp_from_the_future_does_not_freeze_the_smoothed_point(wrong_t: float) -> None:
+    """The filters hold for stamps older than their last one: after a wrong stamp ahead
+    they must start afresh, not hold until real time catches up with it."""
+    s = PointSmoother(reset_after_s=0.5)
+    for i in range(10):
+        s((1.0, 0.0, 0.0), i / 30)
+    s((1.0, 0.0, 0.0), wrong_t)
+    out = [s((1.0, 0.5, 0.0), 0.4 + i / 30) for i in range(5)]
+    assert out[-1][1] == pytest.approx(0.5, abs=0.05)
+
+
+def test_time_going_backwards_restarts_the_smoothing_and_a_repeat_does_not() -> None:
+    s = PointSmoother(reset_after_s=0.5)
+    s((1.0, 0.0, 0.0), 1.0)
+    assert s((2.0, 0.0, 0.0), 1.0)[0] == 1.0  # same stamp: no time passed, held
+    assert s((2.0, 0.0, 0.0), 0.99)[0] == 2.0  # older: a fresh start, never a hold
+    assert 2.0 < s((3.0, 0.0, 0.0), 1.02)[0] < 3.0  # and smoothed again after it
+
+
+def test_a_sighting_stamped_in_the_future_does_not_hold_the_choice_forever() -> None:
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(100, 100, 100)], 0.0)
+    tr.select([face(101, 100, 100)], FUTURE)  # a frame with a wrong stamp
+    chosen = None
+    for i in range(1, 30):
+        chosen, new = tr.select([face(400, 100, 80)], 0.1 + i / 30)
+        if chosen is not None:
+            break
+    assert chosen is not None and chosen.centre[0] == 400 and new

@@ -68,7 +68,7 @@ def test_approach_greet_follow_leave_farewell(spawn, fast_config, stimulus, make
     # Following: a face to the left and up gives +yaw, +pitch, its stamp kept.
     stimulus.watch(False)
     stimulus.point = m.Point(x=1.0, y=0.5, z=0.2)
-    stamp = stimulus.face(stamp_ns=123_456_789)
+    stamp = stimulus.face()
     msg = control.wait_for(lambda c: c.stamp_ns == stamp, what="eye control of that face")
     # camera 10 cm above the eyes centre (FAST_CONFIG): z = 0.3 in the eyes frame
     assert msg.yaw == pytest.approx(math.atan2(0.5, 1.0))
@@ -180,7 +180,7 @@ def test_refused_and_failing_audio_do_not_stop_the_controller(spawn, fast_config
     stimulus.watch(False)
     wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
     assert audio.sounds() == []  # nobody was greeted, so no farewell
-    stamp = stimulus.face(stamp_ns=77)
+    stamp = stimulus.face()
     control.wait_for(lambda c: c.stamp_ns == stamp, what="still following faces")
     assert proc.alive()
 
@@ -209,11 +209,12 @@ def test_malformed_payloads_on_every_input_are_survived(spawn, fast_config, stim
             for payload in MALFORMED:
                 session.put(keys.absolute("buddy", rel), payload)
         # A face point that decodes but is not finite never reaches the eyes.
+        bad_stamp = m.now_ns()
         session.put(keys.absolute("buddy", keys.FACE.key(camera="front")),
-                    b'{"stamp_ns": 5, "frame_id": "f", "point": {"x": 1e999, "y": 0, "z": 0},'
-                    b' "confidence": 0.5}')
+                    b'{"stamp_ns": %d, "frame_id": "f", "point": {"x": 1e999, "y": 0, "z": 0},'
+                    b' "confidence": 0.5}' % bad_stamp)
     # Still working end to end: follows faces, greets, says goodbye.
-    stamp = stimulus.face(stamp_ns=4242)
+    stamp = stimulus.face()
     control.wait_for(lambda c: c.stamp_ns == stamp, what="eye control after garbage")
     stimulus.presence(True)
     stimulus.watch(True)
@@ -223,7 +224,7 @@ def test_malformed_payloads_on_every_input_are_survived(spawn, fast_config, stim
     audio.wait_log(lambda log: "play:farewell" in log, what="farewell after garbage")
     assert proc.alive()
     assert all(math.isfinite(c.yaw) and math.isfinite(c.pitch) for c in control.messages)
-    assert 5 not in [c.stamp_ns for c in control.messages]
+    assert bad_stamp not in [c.stamp_ns for c in control.messages]
     assert no_repeats(expressions(expr))
 
 
@@ -279,9 +280,26 @@ def test_follows_the_configured_camera_only(spawn, fast_config, stimulus, watch,
     spawn("controller", "--config", str(fast_config), "--camera", "side")
     expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=20, what="initial EYE_SLEEP")
     side = node_factory("side-camera").publisher(keys.FACE, camera="side")
-    stimulus.face(stamp_ns=11)  # camera "front": not followed
-    side.put(m.FacePosition(stamp_ns=12, frame_id="side", point=m.Point(x=1.0, y=0.0, z=-0.1),
-                            confidence=0.8))
-    msg = control.wait_for(lambda c: c.stamp_ns == 12, what="eye control from camera side")
+    front_stamp = stimulus.face()  # camera "front": not followed
+    side_stamp = front_stamp + 1
+    side.put(m.FacePosition(stamp_ns=side_stamp, frame_id="side",
+                            point=m.Point(x=1.0, y=0.0, z=-0.1), confidence=0.8))
+    msg = control.wait_for(lambda c: c.stamp_ns == side_stamp, what="eye control from camera side")
     assert msg.pitch == pytest.approx(0.0)  # z -0.1 + 0.1 camera height = level
-    assert 11 not in [c.stamp_ns for c in control.messages]
+    assert front_stamp not in [c.stamp_ns for c in control.messages]
+
+
+def test_a_face_stamped_in_the_future_never_freezes_the_gaze(spawn, fast_config, stimulus,
+                                                             watch) -> None:
+    """Issue 11: one face stamped 2**63-1 (or 15 s ahead) must not hold back later
+    faces, and no eye control may carry an implausible stamp."""
+    expr, control = watch
+    spawn("controller", "--config", str(fast_config))
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=20, what="initial EYE_SLEEP")
+    for future in (2**63 - 1, m.now_ns() + 15 * 10**9):
+        control.clear()
+        stimulus.face(stamp_ns=future)
+        control.wait_for(what="eye control of the future-stamped face")
+    stamp = stimulus.face()
+    control.wait_for(lambda c: c.stamp_ns == stamp, what="gaze still following")
+    assert all(c.stamp_ns <= m.now_ns() for c in control.messages)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from buddybot.core import keys
+from buddybot.core import messages as m
 
 
 def test_patterns_are_unique() -> None:
@@ -44,10 +45,28 @@ def test_lookup_and_params() -> None:
 
 
 def test_qos_presets() -> None:
-    assert keys.CAMERA_IMAGE.qos.congestion == "drop"
-    assert keys.DEBUG_IMAGE.qos.congestion == "drop"
-    for topic in (keys.PRESENCE, keys.EXPRESSION, keys.LIDS, keys.DEVICE_FREE):
-        assert topic.latched and topic.qos.congestion == "block"
+    """Nothing may block the router: every key drops under congestion, and every
+    state key is latched (so a dropped state sample is recovered from the cache)."""
+    for topic in keys.TOPICS:
+        assert topic.qos.congestion == "drop", topic.pattern
+    for topic in (keys.PRESENCE, keys.EXPRESSION, keys.LIDS, keys.DEVICE_FREE,
+                  keys.PLAY_SOUND_STATUS):
+        assert topic.qos is keys.STATE and topic.latched, topic.pattern
+    for topic in keys.TOPICS:
+        if topic.qos is keys.STATE:
+            assert topic.latched, f"{topic.pattern}: a state key must be latched"
+
+
+def test_payload_limits() -> None:
+    """Only image keys accept large payloads; the router bound matches the largest."""
+    from buddybot.core import node
+
+    for topic in keys.TOPICS:
+        big = topic.type is m.Image
+        assert (topic.max_bytes == keys.IMAGE_MESSAGE_BYTES) == big, topic.pattern
+        assert topic.max_bytes <= node.MAX_MESSAGE_BYTES
+    for service in keys.SERVICES:
+        assert service.max_bytes == keys.SMALL_MESSAGE_BYTES
 
 
 def test_codec_for_encoding() -> None:

@@ -10,7 +10,9 @@ from buddybot.core import messages as m
 
 
 def sample_messages() -> list[m.Message]:
-    """One valid instance of every message type."""
+    """One valid instance of every message type (stamped now, so the runtime's
+    plausible-stamp window lets them through unchanged)."""
+    now = m.now_ns()
     frame = m.LD2410TargetDataFrame(
         radar_id=0, target_state=m.TargetState.MOVING_AND_STATIONARY, movement_distance=266,
         movement_energy=50, stationary_distance=300, stationary_energy=100,
@@ -18,17 +20,17 @@ def sample_messages() -> list[m.Message]:
     )
     return [
         frame,
-        m.LD2410TargetDataFrameArray(stamp_ns=1, device_id=0, sensors=[frame]),
-        m.PresenceDetection(stamp_ns=1, target_state=m.PresenceTarget.STANDING,
+        m.LD2410TargetDataFrameArray(stamp_ns=now, device_id=0, sensors=[frame]),
+        m.PresenceDetection(stamp_ns=now, target_state=m.PresenceTarget.STANDING,
                             presence_state=m.PresenceState.IN_RANGE, distance_m=1.25),
-        m.Image(stamp_ns=1, frame_id="cam", width=2, height=1, encoding="bgr8", data=b"\x00" * 6),
+        m.Image(stamp_ns=now, frame_id="cam", width=2, height=1, encoding="bgr8", data=b"\x00" * 6),
         m.Point(x=1.0, y=-0.5, z=0.25),
-        m.FacePosition(stamp_ns=1, frame_id="cam", point=m.Point(x=1, y=0, z=0), confidence=0.9),
-        m.ScreenExpression(stamp_ns=1, action=m.ExpressionAction.ANIMATE_STAR),
-        m.EyeControl(stamp_ns=1, yaw=0.3, pitch=-0.1, target_distance_cm=120.0),
-        m.EyesDirection(stamp_ns=1, yaw=17.0, pitch=-5.0),
-        m.PupilControl(stamp_ns=1, dilation_percentage=42.0),
-        m.EyeLidControl(stamp_ns=1, eye_id=m.EyeId.BOTH, top_lid_position=50,
+        m.FacePosition(stamp_ns=now, frame_id="cam", point=m.Point(x=1, y=0, z=0), confidence=0.9),
+        m.ScreenExpression(stamp_ns=now, action=m.ExpressionAction.ANIMATE_STAR),
+        m.EyeControl(stamp_ns=now, yaw=0.3, pitch=-0.1, target_distance_cm=120.0),
+        m.EyesDirection(stamp_ns=now, yaw=17.0, pitch=-5.0),
+        m.PupilControl(stamp_ns=now, dilation_percentage=42.0),
+        m.EyeLidControl(stamp_ns=now, eye_id=m.EyeId.BOTH, top_lid_position=50,
                         bottom_lid_position=50),
         m.PlaySound(sound="greeting"),
         m.PlaySoundReply(goal_id="abc", accepted=True),
@@ -37,8 +39,8 @@ def sample_messages() -> list[m.Message]:
         m.PlayAudioFile(path="/tmp/x.wav"),
         m.Trigger(),
         m.TriggerReply(success=True, message="ok"),
-        m.Bool(stamp_ns=1, data=True),
-        m.DiagnosticStatus(stamp_ns=1, node="n", level="WARN", message="x", values={"a": 1}),
+        m.Bool(stamp_ns=now, data=True),
+        m.DiagnosticStatus(stamp_ns=now, node="n", level="WARN", message="x", values={"a": 1}),
         m.ErrorReply(error="bad"),
     ]
 

@@ -161,6 +161,63 @@ def test_systemd_analyze_verify(tmp_path: Path) -> None:
     assert done.returncode == 0 and not done.stderr.strip(), done.stderr
 
 
+MAX_EXPOSURE = 4.0
+"""`systemd-analyze security` rates exposure 0 (locked down) .. 10; 8.8 before hardening."""
+
+
+def exposure(path: Path) -> float:
+    """The overall exposure `systemd-analyze security --offline=yes` gives a unit file."""
+    done = subprocess.run(["systemd-analyze", "security", "--offline=yes", str(path)],
+                          capture_output=True, text=True, timeout=120, check=False)
+    found = re.search(r"Overall exposure level for \S+: (\d+(?:\.\d+)?)", done.stdout)
+    assert found, f"{path.name}: no exposure in {done.stdout[-500:]!r} {done.stderr[-500:]!r}"
+    return float(found.group(1))
+
+
+@pytest.mark.skipif(shutil.which("systemd-analyze") is None,
+                    reason="systemd-analyze is not installed (systemd's own rating is the check)")
+@pytest.mark.parametrize("path", service_units(), ids=lambda p: p.stem)
+def test_unit_is_hardened(path: Path) -> None:
+    """systemd's own rating of the sandbox, read from the file alone (offline)."""
+    value = exposure(path)
+    assert value < MAX_EXPOSURE, f"{path.name}: exposure {value} (must stay below {MAX_EXPOSURE})"
+
+
+@pytest.mark.parametrize("path", service_units(), ids=lambda p: p.stem)
+def test_unit_sandbox_and_notify(path: Path) -> None:
+    """The settings the rating alone would let slip: readiness, watchdog, journal name,
+    no capabilities, read-only system, devices only where the hardware is."""
+    service = unit(path)["Service"]
+    name = path.stem.removeprefix("buddybot-")
+    assert service["SyslogIdentifier"] == f"buddybot-{name}"
+    assert service["Type"] == "notify"
+    assert service["NotifyAccess"] == "main"
+    assert 0 < int(service["WatchdogSec"]) <= 30
+    assert service["Restart"] == "on-failure", "a missed watchdog is a failure: restarted"
+    if name != "router":  # services wait for a router that may live elsewhere
+        assert service["TimeoutStartSec"] == "infinity"
+    assert service["ProtectSystem"] == "strict"
+    assert service["ProtectHome"] == "yes"
+    assert service["PrivateTmp"] == "yes"
+    assert service["NoNewPrivileges"] == "yes"
+    assert service["CapabilityBoundingSet"] == ""
+    assert service["SystemCallFilter"] == "@system-service"
+    assert set(service["RestrictAddressFamilies"].split()) <= {
+        "AF_UNIX", "AF_INET", "AF_INET6", "AF_NETLINK"}
+    text = path.read_text()
+    hardware = {"radar-bridge": ("dialout", "char-tty"), "camera": ("video", "char-video4linux"),
+                "audio-player": ("audio", "char-alsa")}
+    if name in hardware:
+        group, device = hardware[name]
+        assert service["SupplementaryGroups"] == group
+        assert service["DevicePolicy"] == "closed"
+        assert re.search(rf"^DeviceAllow={device}\S* rw$", text, re.M), f"{path.name}: {device}"
+    else:
+        assert service["PrivateDevices"] == "yes"
+        assert "SupplementaryGroups" not in service
+        assert "DeviceAllow" not in service
+
+
 # --- Zenoh profiles ----------------------------------------------------------------
 
 
