@@ -5,7 +5,12 @@ audio` as processes (as in production), sends goals for a short configured
 sound and reads the player's diagnostics, which carry the wall-clock time
 the first sample of each play was handed to the device (same host, same
 clock). Also: goal round trip, player-internal start latency, cancel ->
-device free, and the decode time of the shipped greeting.
+device free, and the decode time of the shipped greeting; then the fault
+figures of issue 11: how fast play_file refuses a path outside the sound
+folders, a 30-minute WAV and a 2 GB file, and how much the player's peak
+memory grew; 200 concurrent goals (answers, time until all answered); and
+the time from a router killed with SIGKILL and restarted to the next goal
+that succeeds.
 
     .venv/bin/python benchmarks/audio.py [--runs 30]
 """
@@ -19,14 +24,106 @@ import tempfile
 import time
 from pathlib import Path
 
+import msgspec
 from common import percentile
 
 from buddybot.audio.player import decode_file
 from buddybot.audio.sounds import resolve_file
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node
+from buddybot.core.node import Node, ServiceError
 from buddybot.core.testing import Collector, Router, retry_until, run_service, write_tone
+
+MB = 1024 * 1024
+
+
+def write_long_wav(path: Path, seconds: float, rate: int = 8000) -> Path:
+    """A PCM WAV header (8 kHz mono 8-bit) announcing `seconds`, data left sparse."""
+    data = int(seconds * rate)
+    fmt = b"fmt " + (16).to_bytes(4, "little") + bytes([1, 0, 1, 0]) + rate.to_bytes(
+        4, "little") + rate.to_bytes(4, "little") + bytes([1, 0, 8, 0])
+    with path.open("wb") as out:
+        out.write(b"RIFF" + (36 + data).to_bytes(4, "little") + b"WAVE" + fmt + b"data"
+                  + data.to_bytes(4, "little"))
+        out.truncate(44 + data)
+    return path
+
+
+def peak_rss(pid: int) -> int:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) * 1024
+    return 0
+
+
+def fault_figures(node: Node, player_pid: int, folder: Path) -> None:
+    """Refusals of hostile play_file requests and the player's memory meanwhile."""
+    write_long_wav(folder / "long30min.wav", 30 * 60)
+    with (folder / "huge.wav").open("wb") as out:
+        out.truncate(2 * 1024**3)
+    before = peak_rss(player_pid)
+    for label, path in [("outside the sound folders (/etc/passwd)", "/etc/passwd"),
+                        ("30-minute WAV (header)", str(folder / "long30min.wav")),
+                        ("2 GB sparse file (size)", str(folder / "huge.wav"))]:
+        times = []
+        for _ in range(10):
+            t0 = time.perf_counter()
+            reply = node.call(keys.PLAY_FILE, m.PlayAudioFile(path=path), timeout=60)
+            times.append((time.perf_counter() - t0) * 1e3)
+            assert not reply.success, reply
+        figures(f"play_file refused: {label}", times)
+    grown = (peak_rss(player_pid) - before) / MB
+    print(f"player peak RSS (VmHWM) {before / MB:.1f} MB before, grew {grown:.1f} MB "
+          "over those 30 refusals")
+    for made in ("long30min.wav", "huge.wav"):
+        (folder / made).unlink()
+
+
+def burst_figures(node: Node, status: Collector, goals: int = 200) -> None:
+    """`goals` concurrent play_sound queries: every one answered, how fast."""
+    payload = msgspec.json.encode(m.PlaySound(sound="blip"))
+    key = node.key(keys.PLAY_SOUND)
+    t0 = time.perf_counter()
+    pending = [node.session.get(key, payload=payload, timeout=30) for _ in range(goals)]
+    answers = [list(replies) for replies in pending]
+    elapsed = (time.perf_counter() - t0) * 1e3
+    ok = [a[0] for a in answers if len(a) == 1 and a[0].ok is not None]
+    accepted = [r for r in (msgspec.json.decode(a.ok.payload.to_bytes(), type=m.PlaySoundReply)
+                            for a in ok) if r.accepted]
+    errors = sum(1 for a in answers if len(a) == 1 and a[0].err is not None)
+    silent = sum(1 for a in answers if not a)
+    print(f"{goals} concurrent goals: all answered in {elapsed:.0f} ms: {len(accepted)} "
+          f"accepted, {len(ok) - len(accepted)} refused, {errors} busy errors, "
+          f"{silent} without an answer")
+    if accepted:
+        status.wait_for(lambda s: s.goal_id == accepted[-1].goal_id
+                        and s.state in m.TERMINAL_GOAL_STATES, timeout=30)
+
+
+def router_restart_figure(router: Router, node: Node, status: Collector, folder: Path
+                          ) -> Router:
+    """SIGKILL the router, start it again on its port, time the next successful goal."""
+    router.kill()
+    t0 = time.perf_counter()
+    again = Router(port=router.port, log_dir=folder / "router-again")
+    t1 = time.perf_counter()
+
+    def succeeded() -> bool:
+        try:
+            reply = node.call(keys.PLAY_SOUND, m.PlaySound(sound="blip"), timeout=2)
+        except ServiceError:
+            return False
+        if not reply.accepted:
+            return False
+        end = status.wait_for(lambda s: s.goal_id == reply.goal_id
+                              and s.state in m.TERMINAL_GOAL_STATES, timeout=10)
+        return end.state == "SUCCEEDED"
+
+    retry_until(succeeded, 60, 0.05, "a goal after the router restart")
+    t2 = time.perf_counter()
+    print(f"router SIGKILL + restart: port listening after {(t1 - t0) * 1e3:.0f} ms, next "
+          f"goal SUCCEEDED (0.15 s sound) {(t2 - t1) * 1e3:.0f} ms after that")
+    return again
 
 
 def figures(name: str, values_ms: list[float]) -> None:
@@ -53,6 +150,7 @@ def main() -> int:
         decode_ms.append((time.perf_counter() - began) * 1e3)
 
     router = Router(log_dir=folder)
+    routers = [router]
     procs = [
         run_service("audio-player", router.endpoint, "--config", str(config),
                     "--backend", "null", log_dir=folder),
@@ -111,11 +209,16 @@ def main() -> int:
         print("audio still buffered in the device after a stop: <= 3 periods = 30 ms")
         target = statistics.median(to_first) < 50.0
         print(f"target goal -> first sample < 50 ms: {'met' if target else 'NOT met'}")
+        print("faults (issue 11):")
+        fault_figures(node, procs[0].pid, folder)
+        burst_figures(node, status)
+        routers.append(router_restart_figure(router, node, status, folder))
     finally:
         node.close()
         for proc in procs:
             proc.stop()
-        router.stop()
+        for each in routers:
+            each.stop()
     return 0
 
 

@@ -7,15 +7,21 @@ with `{goal_id, accepted, message}`, then handed to the player by name
 `audio/play_sound/status`: ACCEPTED, PLAYING with progress every
 `progress_period_s`, then SUCCEEDED when `audio/device_free` turns true,
 CANCELED (cancel query, preemption) or ABORTED (with the player's reason).
+
+"Is the player running" has one source of truth: the set of its live
+instances (`Node.watch_node`, liveliness tokens). It does not depend on the
+order in which a token and a `device_free` sample arrive, which differs
+after a router restart. The instance that answered a play request is
+remembered, so when that process dies the goal is aborted even while
+another token of the same name (a second instance, or a fake one) lives.
 """
 
 from __future__ import annotations
 
 import argparse
-import queue
 import threading
 import time
-from typing import Any
+from collections.abc import Callable
 
 import msgspec
 import zenoh
@@ -24,10 +30,17 @@ from buddybot.audio import protocol
 from buddybot.audio.goals import GoalBook
 from buddybot.audio.settings import AudioSettings
 from buddybot.audio.sounds import effective_sounds
-from buddybot.core import keys
+from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError, new_goal_id
+from buddybot.core.node import Node, ServiceError, error_text, new_goal_id
 from buddybot.core.service import ServiceContext
+
+RETRY_S = 0.05
+"""Pause between play requests that found no player queryable yet (a starting
+player declares its token before its queryables)."""
+TEXT_MAX = 1000
+"""Characters of a player's message kept in a status or a log line (they name
+files, whose paths may be long, but never a client's whole request)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -39,7 +52,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 class ActionServer:
-    """Wires a GoalBook to the node: requests, cancels, player state, progress."""
+    """Wires a GoalBook to the node: requests, cancels, player state, progress.
+
+    Every goal is answered by `_on_goal` at once (accepted or refused with
+    the reason); the one worker thread only ever holds the newest accepted
+    goal (a preempted goal was already ended in the book), so a burst of
+    goals cannot queue up work.
+    """
 
     def __init__(self, node: Node, settings: AudioSettings, policy: str) -> None:
         self.node = node
@@ -48,54 +67,52 @@ class ActionServer:
         self.book = GoalBook(sounds.keys(), policy)
         self.lock = threading.Lock()
         self.status = node.publisher(keys.PLAY_SOUND_STATUS)
-        self.player_alive = False
-        """The player's liveliness token is there and it published device_free since
-        (its token comes before its queryables; device_free comes after them)."""
-        self._token = False
+        self.instances: frozenset[str] = frozenset()
+        """Live instances (Zenoh ids) of the player node: running = not empty."""
+        self.answering: str | None = None
+        """The player instance that accepted the active goal's play request."""
         self.device_free: bool | None = None
-        self._goals: queue.SimpleQueue[tuple[str, str] | None] = queue.SimpleQueue()
-        """Work for the goal thread: (goal id, sound) to play, ("", "") = player lost."""
-        self._liveliness: Any = None
+        self._wake = threading.Condition()
+        self._pending: tuple[str, str] | None = None
+        """The newest accepted goal (id, sound) not yet handed to the player."""
+        self._players_changed = False
+        self._closed = False
 
     def start(self) -> None:
         node = self.node
+        self._report_players(frozenset())
         node.subscribe(keys.DEVICE_FREE, self._on_device_free, delivery="queue")
-        player_key = node.key(keys.NODES, node=self.settings.player)
-        self._liveliness = node.session.liveliness().declare_subscriber(
-            player_key, self._on_player, history=True)
+        node.watch_node(self.settings.player, self._on_players)
         node.serve(keys.PLAY_SOUND, self._on_goal)
         node.serve(keys.PLAY_SOUND_CANCEL, self._on_cancel)
         node.every(self.settings.progress_period_s, self._tick, name="progress")
-        threading.Thread(target=self._play_loop, name="goals", daemon=True).start()
+        threading.Thread(target=self._work_loop, name="goals", daemon=True).start()
 
     def close(self) -> None:
-        self._goals.put(None)
-        if self._liveliness is not None:
-            self._liveliness.undeclare()
+        with self._wake:
+            self._closed = True
+            self._wake.notify()
 
     def _publish(self, statuses: list[m.PlaySoundStatus]) -> None:
         for status in statuses:
             self.status.put(status)
             if status.state in m.TERMINAL_GOAL_STATES:
                 self.node.log.info("goal %s %s %s", status.goal_id, status.state,
-                                   status.message)
+                                   limits.clip(status.message, TEXT_MAX))
 
     # -- inputs --
 
-    def _on_player(self, sample: zenoh.Sample) -> None:
-        """Liveliness of the player (Zenoh's thread: only set a flag and hand over)."""
-        alive = sample.kind == zenoh.SampleKind.PUT
+    def _on_players(self, instances: frozenset[str]) -> None:
+        """The player's live instances changed (Zenoh's thread: note it, hand over)."""
         with self.lock:
-            self._token = alive
-            if not alive:
-                self.player_alive = False
-        if not alive:
-            self._goals.put(("", ""))
+            self.instances = instances
+        with self._wake:
+            self._players_changed = True
+            self._wake.notify()
 
     def _on_device_free(self, msg: m.Bool, _key: str) -> None:
         with self.lock:
             self.device_free = msg.data
-            self.player_alive = self._token
             if msg.data:
                 self._publish(self.book.device_free(time.monotonic()))
 
@@ -103,14 +120,18 @@ class ActionServer:
         goal_id = new_goal_id()
         with self.lock:
             busy = self.device_free is False
-            decision = self.book.request(goal_id, req.sound, player_present=self.player_alive,
+            decision = self.book.request(goal_id, req.sound, player_present=bool(self.instances),
                                          player_busy=busy)
             self._publish(decision.statuses)
+            self.node.diagnostics.values["goals_tracked"] = self.book.tracked
         if decision.accepted:
-            self._goals.put((goal_id, req.sound))
+            with self._wake:
+                self._pending = (goal_id, req.sound)  # replaces a goal it preempted
+                self._wake.notify()
         else:
             self.node.diagnostics.increment("refused")
-            self.node.log.info("refused goal for %r: %s", req.sound, decision.reply.message)
+            self.node.log.info("refused goal for %r: %s", limits.clip(req.sound),
+                               decision.reply.message)
         return decision.reply
 
     def _on_cancel(self, req: m.CancelGoal) -> m.TriggerReply:
@@ -122,8 +143,8 @@ class ActionServer:
                 self.node.call(keys.AUDIO_STOP, m.Trigger(),
                                timeout=self.settings.player_timeout_s)
             except ServiceError as exc:
-                reply = m.TriggerReply(success=True,
-                                       message=f"canceled, but the player did not stop: {exc}")
+                reply = m.TriggerReply(success=True, message=limits.clip(
+                    f"canceled, but the player did not stop: {exc}", TEXT_MAX))
         self._publish(result.statuses)
         return reply
 
@@ -131,51 +152,125 @@ class ActionServer:
         with self.lock:
             self._publish(self.book.tick(time.monotonic(), self.device_free))
 
-    # -- the worker handing goals to the player --
+    # -- the worker: player changes and handing goals to the player --
 
-    def _play_loop(self) -> None:
+    def _work_loop(self) -> None:
         while True:
-            item = self._goals.get()
-            if item is None:
-                return
-            if item == ("", ""):
-                with self.lock:
-                    self._publish(self.book.player_lost())
-                self.node.diagnostics.set("WARN", "audio player not running")
+            with self._wake:
+                while not (self._closed or self._pending or self._players_changed):
+                    self._wake.wait()
+                if self._closed:
+                    return
+                pending, self._pending = self._pending, None
+                changed, self._players_changed = self._players_changed, False
+            if changed:
+                self._check_players()
+            if pending is None:
                 continue
             try:
-                self._play(*item)
+                self._play(*pending)
             except Exception as exc:
-                self.node.log.exception("goal %s failed", item[0])
+                self.node.log.exception("goal %s failed", pending[0])
                 with self.lock:
-                    self._publish(self.book.failed(item[0], f"internal error: {exc!r}"))
+                    self._publish(self.book.failed(pending[0], f"internal error: {exc!r}"))
+
+    def _check_players(self) -> None:
+        """Abort the active goal when the player, or the instance playing it, is gone."""
+        with self.lock:
+            instances = self.instances
+            if not instances:
+                self._publish(self.book.player_lost())
+                self.answering = None
+            elif self.answering is not None and self.answering not in instances:
+                self._publish(self.book.player_lost(
+                    f"the audio player that was playing it ({self.answering}) stopped running"))
+                self.answering = None
+        self._report_players(instances)
+
+    def _report_players(self, instances: frozenset[str]) -> None:
+        diag = self.node.diagnostics
+        player = self.settings.player
+        diag.values["player_instances"] = len(instances)
+        if diag.message.startswith(f"another {self.node.name} is running"):
+            return  # the runtime's own duplicate warning matters more; it clears it
+        if not instances:
+            diag.set("WARN", f"audio player {player} not running")
+        elif len(instances) > 1:
+            diag.set("WARN", f"{len(instances)} instances of {player}: "
+                     f"{limits.clip(', '.join(sorted(instances)))}")
+        else:
+            diag.set("OK", "running")
 
     def _play(self, goal_id: str, sound: str) -> None:
-        with self.lock:
-            if not self.book.should_play(goal_id):
-                return
-        self.node.diagnostics.set("OK", "running")
-        try:
-            reply = self.node.call(keys.PLAY_FILE, m.PlayAudioFile(path=sound),
-                                   timeout=self.settings.player_timeout_s)
-        except ServiceError as exc:
+        def still_wanted() -> bool:
             with self.lock:
-                self._publish(self.book.failed(goal_id, f"audio player: {exc}"))
+                return self.book.should_play(goal_id) and bool(self.instances)
+
+        if not still_wanted():
             return
         with self.lock:
+            self.answering = None
+        try:
+            reply, replier = self._ask_player(m.PlayAudioFile(path=sound), still_wanted)
+        except ServiceError as exc:
+            with self.lock:
+                self._publish(self.book.failed(
+                    goal_id, limits.clip(f"audio player: {exc}", TEXT_MAX)))
+            return
+        lost = False
+        with self.lock:
             if not reply.success:
-                self._publish(self.book.failed(goal_id, reply.message))
+                self._publish(self.book.failed(goal_id, limits.clip(reply.message, TEXT_MAX)))
                 return
             statuses = self.book.started(goal_id, protocol.parse_duration(reply.message),
                                          time.monotonic())
+            if statuses:
+                self.answering = replier
+                lost = replier is not None and replier not in self.instances
             self._publish(statuses)
             orphan = not statuses and self.book.active is None
+        if lost:  # it died between answering and now
+            with self._wake:
+                self._players_changed = True
+                self._wake.notify()
         if orphan:  # canceled while the player was starting it
             try:
                 self.node.call(keys.AUDIO_STOP, m.Trigger(),
                                timeout=self.settings.player_timeout_s)
             except ServiceError as exc:
-                self.node.log.warning("could not stop a canceled goal's sound: %s", exc)
+                self.node.log.warning("could not stop a canceled goal's sound: %s",
+                                      limits.clip(exc, TEXT_MAX))
+
+    def _ask_player(self, request: m.PlayAudioFile, still_wanted: Callable[[], bool]
+                    ) -> tuple[m.TriggerReply, str | None]:
+        """The player's reply to a play request and the instance that sent it.
+
+        No reply at all while the player's token is up means its queryables
+        are not declared yet (it is starting, or reconnecting after a router
+        restart): asked again until `player_timeout_s` is spent.
+        """
+        service = keys.PLAY_FILE
+        codec = service.codec
+        key = self.node.key(service)
+        payload = codec.encode(request)
+        encoding = zenoh.Encoding(codec.encoding(service.request))
+        timeout = self.settings.player_timeout_s
+        deadline = time.monotonic() + timeout
+        while True:
+            left = max(0.01, deadline - time.monotonic())
+            for answer in self.node.session.get(key, payload=payload, encoding=encoding,
+                                                timeout=left):
+                source = answer.replier_id  # the queryable's entity: zid = its process
+                replier = None if source is None else str(source.zid)
+                if answer.ok is None:
+                    raise ServiceError(error_text(answer.err.payload.to_bytes()))
+                try:
+                    return codec.decode(answer.ok.payload.to_bytes(), service.reply), replier
+                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                    raise ServiceError(f"malformed reply: {exc}") from None
+            if time.monotonic() + RETRY_S >= deadline or not still_wanted():
+                raise ServiceError(f"no reply within {timeout:g} s (is it running?)")
+            time.sleep(RETRY_S)
 
 
 def run(ctx: ServiceContext) -> int:

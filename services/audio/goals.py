@@ -15,10 +15,10 @@ service adapter only publishes them.
 
 from __future__ import annotations
 
-import collections
 from collections.abc import Collection
 from dataclasses import dataclass, field
 
+from buddybot.core import limits
 from buddybot.core import messages as m
 from buddybot.core.messages import TERMINAL_GOAL_STATES, GoalState
 
@@ -78,8 +78,8 @@ class GoalBook:
         self.sounds = set(sounds)
         self.policy = policy
         self.active: Goal | None = None
-        self._recent: collections.OrderedDict[str, Goal] = collections.OrderedDict()
-        self._history = history
+        self._recent: limits.BoundedDict[str, Goal] = limits.BoundedDict(history)
+        """Finished goals (for a late cancel's answer); refused goals are never kept."""
 
     def get(self, goal_id: str) -> Goal | None:
         if self.active is not None and self.active.goal_id == goal_id:
@@ -93,9 +93,12 @@ class GoalBook:
         if self.active is goal:
             self.active = None
         self._recent[goal.goal_id] = goal
-        while len(self._recent) > self._history:
-            self._recent.popitem(last=False)
         return goal.status()
+
+    @property
+    def tracked(self) -> int:
+        """Goals held in memory: the active one and the bounded finished history."""
+        return len(self._recent) + (self.active is not None)
 
     # -- requests --
 
@@ -107,7 +110,8 @@ class GoalBook:
 
         if sound not in self.sounds:
             known = ", ".join(sorted(self.sounds)) or "none"
-            return refuse(f"unknown sound {sound!r} (configured: {known})")
+            return refuse(f"unknown sound {limits.clip(sound)!r} (configured: "
+                          f"{limits.clip(known)})")
         if not player_present:
             return refuse("the audio player is not running")
         statuses = []
@@ -170,11 +174,13 @@ class GoalBook:
                 success=False, message=f"goal {goal_id} already ended ({old.state})"))
         return CancelResult(m.TriggerReply(success=False, message=f"unknown goal {goal_id!r}"))
 
-    def player_lost(self) -> list[m.PlaySoundStatus]:
-        """The player process went away: the active goal cannot finish."""
+    def player_lost(self, message: str = "the audio player stopped running"
+                    ) -> list[m.PlaySoundStatus]:
+        """The player process (or the instance playing the goal) went away: the
+        active goal cannot finish."""
         if self.active is None:
             return []
-        return [self._end(self.active, "ABORTED", "the audio player stopped running")]
+        return [self._end(self.active, "ABORTED", message)]
 
     def tick(self, now: float, device_free: bool | None = None) -> list[m.PlaySoundStatus]:
         """Progress of the playing goal (capped below 1 until the device is free).

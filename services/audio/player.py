@@ -7,6 +7,12 @@ and the first sample of a new sound goes out within one period. Files are
 decoded whole (robot sounds are short) into the device's format, and kept
 in a small cache; the configured sounds are decoded at start.
 
+A file is checked before it costs anything: only configured sounds and
+files in the allowed folders are opened (`access.py`), its size and the
+duration in its header are checked first, and decoding streams from disk
+and stops at `max_duration_s` (a header that lies cannot make the player
+allocate more than that).
+
 No Zenoh here: `player_service.py` wires this to keys. A `tap` callback
 receives every audio sample handed to the device (tests compare it with
 the file).
@@ -19,6 +25,7 @@ import contextlib
 import logging
 import os
 import queue
+import stat
 import threading
 import time
 from collections.abc import Callable, Generator, Iterator
@@ -29,8 +36,8 @@ from typing import Any
 import miniaudio
 import numpy as np
 
+from buddybot.audio import access, tts
 from buddybot.audio import sounds as snd
-from buddybot.audio import tts
 from buddybot.audio.pcm import Chunk, Cursor, Track, apply_volume
 from buddybot.audio.settings import AudioPlayerSettings
 
@@ -54,35 +61,70 @@ def _why(exc: BaseException) -> str:
 # --- decoding -----------------------------------------------------------------------
 
 
-def decode_file(path: Path, *, name: str, sample_rate: int, channels: int,
-                volume: float = 1.0, max_duration_s: float = 600.0) -> Track:
-    """Decode any WAV/FLAC/MP3/Ogg Vorbis file into int16 frames at the device rate."""
-    if not path.exists():
-        raise AudioError(f"{path}: no such file")
-    if not path.is_file():
-        raise AudioError(f"{path}: not a regular file")
+STREAM_FRAMES = 16384
+"""Frames decoded per step (miniaudio's stream buffer): memory grows by this much
+at a time, so the length cap is checked long before a huge file is decoded."""
+
+
+def check_file(path: Path, *, max_file_bytes: int, max_duration_s: float) -> None:
+    """Refuse a missing, special, empty, too large or (by its header) too long file
+    before anything is read or decoded."""
     try:
-        with path.open("rb") as fh:
-            head = fh.read(16)
+        st = path.stat()
+    except FileNotFoundError:
+        raise AudioError(f"{path}: no such file") from None
     except OSError as exc:
         raise AudioError(f"{path}: cannot read: {exc.strerror}") from None
-    if not head:
+    if not stat.S_ISREG(st.st_mode):
+        raise AudioError(f"{path}: not a regular file")
+    if st.st_size == 0:
         raise AudioError(f"{path}: empty file")
+    if st.st_size > max_file_bytes:
+        raise AudioError(f"{path}: {st.st_size} bytes, more than max_file_bytes "
+                         f"({max_file_bytes})")
+    if not os.access(path, os.R_OK):
+        raise AudioError(f"{path}: cannot read: permission denied")
     try:
-        decoded = miniaudio.decode_file(
-            str(path), miniaudio.SampleFormat.SIGNED16, channels, sample_rate
-        )
+        info = miniaudio.get_file_info(str(path))
+    except miniaudio.MiniaudioError:
+        return  # no readable header for its suffix: the decoder says why
+    if info.sample_rate > 0 and info.num_frames / info.sample_rate > max_duration_s:
+        raise AudioError(f"{path}: {info.num_frames / info.sample_rate:.0f} s long, more "
+                         f"than max_duration_s ({max_duration_s:g} s)")
+
+
+def _stream_decode(path: Path, sample_rate: int, channels: int, max_frames: int
+                   ) -> np.ndarray:
+    """Decode step by step into int16 samples, refusing past `max_frames` frames."""
+    parts: list[np.ndarray] = []
+    frames = 0
+    stream = miniaudio.stream_file(str(path), miniaudio.SampleFormat.SIGNED16, channels,
+                                   sample_rate, frames_to_read=STREAM_FRAMES)
+    with contextlib.closing(stream):
+        for chunk in stream:
+            part = np.frombuffer(chunk, dtype=np.int16)
+            frames += part.size // channels
+            if frames > max_frames:
+                raise AudioError(f"{path}: longer than max_duration_s "
+                                 f"({max_frames / sample_rate:g} s)")
+            parts.append(part)
+    return np.concatenate(parts) if parts else np.zeros(0, np.int16)
+
+
+def decode_file(path: Path, *, name: str, sample_rate: int, channels: int,
+                volume: float = 1.0, max_duration_s: float = 60.0,
+                max_file_bytes: int = 50_000_000) -> Track:
+    """Decode any WAV/FLAC/MP3/Ogg Vorbis file into int16 frames at the device rate."""
+    check_file(path, max_file_bytes=max_file_bytes, max_duration_s=max_duration_s)
+    try:
+        samples = _stream_decode(path, sample_rate, channels,
+                                 int(max_duration_s * sample_rate))
     except miniaudio.MiniaudioError as exc:
         raise AudioError(f"{path}: {snd.format_hint(path)} (miniaudio: {_why(exc)})") from None
-    samples = np.frombuffer(decoded.samples, dtype=np.int16)
     usable = samples.size - samples.size % channels
     samples = samples[:usable].reshape(-1, channels)
     if samples.shape[0] == 0:
         raise AudioError(f"{path}: contains no audio")
-    duration = samples.shape[0] / sample_rate
-    if duration > max_duration_s:
-        raise AudioError(f"{path}: {duration:.0f} s long, more than max_duration_s "
-                         f"({max_duration_s:g} s)")
     samples = np.ascontiguousarray(apply_volume(samples, volume))
     return Track(name=name, samples=samples, sample_rate=sample_rate)
 
@@ -193,6 +235,8 @@ class Player:
         self.settings = settings
         self.sounds = sounds
         self.config_dir = config_dir
+        self.sound_dirs = access.sound_dirs(settings.sound_dirs, sounds, config_dir)
+        """The folders play requests may name files in (resolved)."""
         self.cursor = Cursor(settings.channels)
         self.stats = PlayerStats()
         self._on_busy = on_busy
@@ -243,9 +287,15 @@ class Player:
         return self._busy
 
     def resolve(self, name_or_path: str) -> tuple[str, Path]:
-        """(display name, file) for a configured sound name or a path; may render speech."""
+        """(display name, file) for a configured sound name or an allowed file (else
+        `access.REFUSAL`, whatever the reason); may render speech."""
+        if name_or_path not in self.sounds:
+            path = access.allowed_file(name_or_path, self.sound_dirs)
+            if path is None:
+                raise AudioError(access.REFUSAL)
+            return name_or_path, path
         try:
-            sound = snd.lookup(name_or_path, self.sounds, self.config_dir)
+            sound = snd.parse_sound(self.sounds[name_or_path], self.config_dir)
         except ValueError as exc:
             raise AudioError(f"sound {name_or_path!r}: {exc}") from None
         if isinstance(sound, snd.SpokenSound):
@@ -270,7 +320,8 @@ class Player:
         try:
             track = decode_file(path, name=name, sample_rate=self.settings.sample_rate,
                                 channels=self.settings.channels, volume=self.settings.volume,
-                                max_duration_s=self.settings.max_duration_s)
+                                max_duration_s=self.settings.max_duration_s,
+                                max_file_bytes=self.settings.max_file_bytes)
         except AudioError as exc:
             if name != str(path):
                 raise AudioError(f"sound {name!r}: {exc}") from None

@@ -5,7 +5,8 @@ Thin adapter around `Player`: queryables `audio/play_file`, `audio/stop`,
 `audio/device_free` is false while a sound plays (or is paused) and true
 when it ended, was stopped or failed to start. A bad file or a missing
 device is an unsuccessful reply naming the file and the reason, never an
-exit.
+exit. Only configured sounds and files in `[audio_player] sound_dirs` are
+played; anything else is refused with one text (`access.py`).
 """
 
 from __future__ import annotations
@@ -21,10 +22,14 @@ from buddybot.audio import protocol
 from buddybot.audio.player import AudioError, Player
 from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.audio.sounds import effective_sounds
-from buddybot.core import keys
+from buddybot.core import keys, limits
 from buddybot.core import messages as m
 from buddybot.core.config import Config, ConfigError
 from buddybot.core.service import ServiceContext
+
+TEXT_MAX = 1000
+"""Characters of a refusal reason kept in a reply or a log line (enough for a
+long file path, never a whole hostile request)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -95,7 +100,8 @@ def run(ctx: ServiceContext) -> int:
             if opened is not None and not opened.warning:
                 diag.set("WARN", problem)
         _serve(node, player)
-        # Last: the action server takes this first sample as "the player answers now".
+        # Last: once this is out the queryables answer (the action server does not
+        # wait for it: it retries a play request that finds no queryable yet).
         free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
         node.log.info("audio player ready (backend %s, %d Hz, %d channels)",
                       player.backend, settings.sample_rate, settings.channels)
@@ -114,9 +120,12 @@ def _serve(node: Any, player: Player) -> None:
         try:
             track = player.play(req.path)
         except AudioError as exc:
+            # The text names a file (or repeats the request): clipped, so no
+            # request can become a huge log line or reply.
+            why = limits.clip(str(exc), TEXT_MAX)
             node.diagnostics.increment("failures")
-            node.log.warning("cannot play: %s", exc)
-            return m.TriggerReply(success=False, message=str(exc))
+            node.log.warning("cannot play: %s", why)
+            return m.TriggerReply(success=False, message=why)
         return m.TriggerReply(success=True,
                               message=protocol.playing_message(track.name, track.duration_s))
 

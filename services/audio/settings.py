@@ -63,7 +63,17 @@ class AudioPlayerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     sample_rate: Annotated[int, msgspec.Meta(ge=8000, le=192000)] = 48000
     channels: Annotated[int, msgspec.Meta(ge=1, le=8)] = 2
     period_ms: Annotated[int, msgspec.Meta(ge=1, le=200)] = 10
-    max_duration_s: Annotated[float, msgspec.Meta(gt=0)] = 600.0
-    """Longer files are refused (a file is decoded whole before it plays)."""
+    max_duration_s: Annotated[float, msgspec.Meta(gt=0)] = 60.0
+    """Longer files are refused, from their header before decoding, and a file
+    whose header lies is cut off at this length while decoding (refused too):
+    a decoded sound never takes more than this many seconds of memory."""
+    max_file_bytes: Annotated[int, msgspec.Meta(gt=0)] = 50_000_000
+    """Larger files are refused before they are opened (a robot sound is a
+    few hundred kB; 60 s of 48 kHz stereo WAV is 11.5 MB)."""
+    sound_dirs: list[str] | None = None
+    """Folders `audio/play_file` may play files from (relative: to the config
+    file's folder). None: the package's own `sounds/` and the folder of every
+    configured sound file. Paths are compared after resolving symlinks and
+    `..`; anything else is refused with one text, whatever the reason."""
     cache_size: Annotated[int, msgspec.Meta(ge=0)] = 16
     """Decoded files kept in memory (configured sounds are decoded at start)."""

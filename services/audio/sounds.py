@@ -3,7 +3,8 @@
 `[audio.sounds]` values are file paths, resolved relative to the config
 file's folder, and when not found there relative to this package (so the
 shipped defaults `sounds/greeting.wav` work from any config), or
-`say:<text>` for text-to-speech. Nothing is read or played here.
+`say:<text>` for text-to-speech. Nothing is read or played here; which
+other files a play request may name is `access.py`'s rule.
 """
 
 from __future__ import annotations
@@ -58,13 +59,6 @@ def parse_sound(value: str, config_dir: Path | None) -> Sound:
     if not value.strip():
         raise ValueError("empty file path")
     return FileSound(resolve_file(value, config_dir))
-
-
-def lookup(name_or_path: str, sounds: dict[str, str], config_dir: Path | None) -> Sound:
-    """A play request names a configured sound, else it is a file path (cwd-relative)."""
-    if name_or_path in sounds:
-        return parse_sound(sounds[name_or_path], config_dir)
-    return FileSound(Path(name_or_path).expanduser())
 
 
 def format_hint(path: Path) -> str:

@@ -255,7 +255,7 @@ PLAY_SOUND_CANCEL = Service(
     request=m.CancelGoal, reply=m.TriggerReply,
 )
 PLAY_FILE = Service(
-    "audio/play_file", "player: play a file or configured sound",
+    "audio/play_file", "player: play a configured sound or a file in its sound folders",
     request=m.PlayAudioFile, reply=m.TriggerReply,
 )
 AUDIO_STOP = Service("audio/stop", "player: stop playback")

@@ -233,7 +233,8 @@ class CancelGoal(Message):
 
 
 class PlayAudioFile(Message):
-    """Request to the player: a file path or a configured sound name."""
+    """Request to the player: a configured sound name, or a file inside its sound
+    folders (`[audio_player] sound_dirs`); anything else is refused alike."""
 
     path: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)]
 

@@ -19,13 +19,15 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.tools import list_nodes
+from buddybot.core.tools import list_node_instances
 
 
 @dataclass
 class RobotStatus:
     expected: list[str]
     up: list[str] = field(default_factory=list)
+    duplicates: list[str] = field(default_factory=list)
+    """Node names with more than one live instance (two robots on one bus?)."""
     radar_arrivals: deque[float] = field(default_factory=lambda: deque(maxlen=50))
     presence: m.PresenceDetection | None = None
     face_distance_m: float | None = None
@@ -47,6 +49,8 @@ def format_status(status: RobotStatus, now: float) -> str:
     nodes = f"nodes {len(status.expected) - len(missing)}/{len(status.expected)}"
     if missing:
         nodes += f" (down: {', '.join(missing)})"
+    if status.duplicates:
+        nodes += f" (DUPLICATE: {', '.join(status.duplicates)})"
     parts = [nodes, f"radar {rate_hz(status.radar_arrivals, now):.1f} Hz"]
     if status.camera_fps is not None:
         parts.append(f"camera {status.camera_fps:.1f} fps")
@@ -115,9 +119,10 @@ class StatusMonitor:
                 self.status.camera_fps = float(fps)
 
     def line(self, restarts: int) -> str:
-        up = list_nodes(self._session, self._robot, timeout=1.0)
+        found = list_node_instances(self._session, self._robot, timeout=1.0)
         with self._lock:
-            self.status.up = up
+            self.status.up = sorted(found)
+            self.status.duplicates = sorted(n for n, ids in found.items() if len(ids) > 1)
             self.status.restarts = restarts
             return format_status(self.status, time.monotonic())
 

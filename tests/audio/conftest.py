@@ -1,4 +1,5 @@
-"""Audio test helpers: sound files with known samples, made by the tests themselves."""
+"""Audio test helpers: sound files with known samples, made by the tests themselves,
+and both audio services started as processes on the test router."""
 
 from __future__ import annotations
 
@@ -6,10 +7,16 @@ import shutil
 import subprocess
 import wave
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, Process, retry_until
 
 RATE = 48000
 CHANNELS = 2
@@ -64,3 +71,78 @@ def make_wav(tmp_path: Path) -> Callable[..., tuple[Path, np.ndarray]]:
         return write_wav(tmp_path / name, samples), samples
 
     return make
+
+
+@dataclass
+class Audio:
+    player: Process | None
+    action: Process | None
+    tap: Path
+    free: Collector
+    status: Collector
+
+    def tap_samples(self) -> np.ndarray:
+        return read_raw(self.tap) if self.tap.exists() else np.zeros((0, 2), np.int16)
+
+    def alive(self) -> bool:
+        return all(p.alive() for p in (self.player, self.action) if p is not None)
+
+
+@pytest.fixture
+def audio(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> Callable[..., Audio]:
+    def start(config: str = "", *, player: bool = True, action: bool = True,
+              action_args: tuple[str, ...] = ()) -> Audio:
+        cfg = tmp_path / "buddybot.toml"
+        cfg.write_text(config)
+        tap = tmp_path / "tap.raw"
+        free = Collector(probe, keys.DEVICE_FREE)
+        status = Collector(probe, keys.PLAY_SOUND_STATUS)
+        p = spawn("audio-player", "--config", str(cfg), "--backend", "null",
+                  "--tap", str(tap)) if player else None
+        a = spawn("audio", "--config", str(cfg), *action_args) if action else None
+        if player:
+            free.wait_for(lambda b: b.data, timeout=30, what="player up (device_free true)")
+        return Audio(p, a, tap, free, status)
+
+    return start
+
+
+def send_goal(probe: Node, sound: str, timeout: float = 30.0) -> m.PlaySoundReply:
+    """Send a goal, retrying only while the action server or the player is starting."""
+    def attempt() -> m.PlaySoundReply | None:
+        reply = probe.call(keys.PLAY_SOUND, m.PlaySound(sound=sound), timeout=3)
+        return None if "not running" in reply.message else reply
+
+    return retry_until(attempt, timeout, interval=0.1, what=f"goal {sound!r} answered")
+
+
+def final(audio: Audio, goal_id: str, timeout: float = 30.0) -> m.PlaySoundStatus:
+    return audio.status.wait_for(
+        lambda s: s.goal_id == goal_id and s.state in m.TERMINAL_GOAL_STATES,
+        timeout=timeout, what=f"end of goal {goal_id}")
+
+
+def beep_config(tmp_path: Path, seconds: float, name: str = "beep", **extra: str) -> tuple[
+        str, np.ndarray]:
+    samples = tone(seconds)
+    write_wav(tmp_path / f"{name}.wav", samples)
+    lines = [f'{name} = "{name}.wav"'] + [f'{k} = "{v}"' for k, v in extra.items()]
+    return "[audio.sounds]\n" + "\n".join(lines) + "\n", samples
+
+
+def write_sparse_wav(path: Path, seconds: float, rate: int = 8000, channels: int = 1,
+                     bits: int = 8) -> Path:
+    """A valid PCM WAV header announcing `seconds` of audio, with the data left as a
+    sparse hole: a long file that costs no disk space and no time to make."""
+    frame_bytes = channels * bits // 8
+    data = int(seconds * rate) * frame_bytes
+    fmt = (b"fmt " + (16).to_bytes(4, "little") + (1).to_bytes(2, "little")
+           + channels.to_bytes(2, "little") + rate.to_bytes(4, "little")
+           + (rate * frame_bytes).to_bytes(4, "little") + frame_bytes.to_bytes(2, "little")
+           + bits.to_bytes(2, "little"))
+    header = (b"RIFF" + (36 + data).to_bytes(4, "little") + b"WAVE" + fmt
+              + b"data" + data.to_bytes(4, "little"))
+    with path.open("wb") as out:
+        out.write(header)
+        out.truncate(len(header) + data)
+    return path

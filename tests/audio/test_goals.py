@@ -130,3 +130,31 @@ def test_history_is_bounded_and_policy_checked() -> None:
     assert b.get("g0") is None and b.get("g4").state == "CANCELED"
     with pytest.raises(ValueError):
         GoalBook({"s"}, "queue")
+
+
+def test_a_flood_of_goals_keeps_the_book_bounded_and_refusals_untracked() -> None:
+    b = GoalBook({"greeting"}, "preempt", history=8)
+    for i in range(1000):
+        assert b.request(f"g{i}", "greeting", player_present=True).accepted
+    assert b.tracked == 9 and b.active is not None and b.active.goal_id == "g999"
+    r = GoalBook({"greeting"}, "refuse", history=8)
+    assert r.request("first", "greeting", player_present=True).accepted
+    for i in range(1000):
+        d = r.request(f"r{i}", "greeting", player_present=True)
+        assert not d.accepted and "busy" in d.reply.message and d.statuses == []
+        r.request(f"u{i}", "x" * 10_000, player_present=True)
+    assert r.tracked == 1 and r.get("r5") is None
+
+
+def test_a_huge_sound_name_is_clipped_in_the_refusal() -> None:
+    d = book().request("g1", "x" * 60_000, player_present=True)
+    assert not d.accepted and len(d.reply.message) < 500 and "+59800 chars" in d.reply.message
+
+
+def test_player_lost_aborts_the_active_goal_with_the_reason() -> None:
+    b = book()
+    b.request("g1", "greeting", player_present=True)
+    b.started("g1", 2.0, now=1.0)
+    lost = b.player_lost("the audio player that was playing it (abc) stopped running")
+    assert states(lost) == [("g1", "ABORTED")] and "(abc)" in lost[0].message
+    assert b.player_lost() == []

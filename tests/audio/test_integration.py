@@ -8,78 +8,18 @@ from __future__ import annotations
 
 import shutil
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError
-from buddybot.core.testing import Collector, Process, retry_until
+from buddybot.core.node import ServiceError
+from buddybot.core.testing import retry_until
 
-from .conftest import RATE, read_raw, tone, write_wav
+from .conftest import RATE, beep_config, final, send_goal, tone, write_wav
 
 pytestmark = pytest.mark.integration
-
-
-@dataclass
-class Audio:
-    player: Process | None
-    action: Process | None
-    tap: Path
-    free: Collector
-    status: Collector
-
-    def tap_samples(self) -> np.ndarray:
-        return read_raw(self.tap) if self.tap.exists() else np.zeros((0, 2), np.int16)
-
-    def alive(self) -> bool:
-        return all(p.alive() for p in (self.player, self.action) if p is not None)
-
-
-@pytest.fixture
-def audio(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> Callable[..., Audio]:
-    def start(config: str = "", *, player: bool = True, action: bool = True,
-              action_args: tuple[str, ...] = ()) -> Audio:
-        cfg = tmp_path / "buddybot.toml"
-        cfg.write_text(config)
-        tap = tmp_path / "tap.raw"
-        free = Collector(probe, keys.DEVICE_FREE)
-        status = Collector(probe, keys.PLAY_SOUND_STATUS)
-        p = spawn("audio-player", "--config", str(cfg), "--backend", "null",
-                  "--tap", str(tap)) if player else None
-        a = spawn("audio", "--config", str(cfg), *action_args) if action else None
-        if player:
-            free.wait_for(lambda b: b.data, timeout=30, what="player up (device_free true)")
-        return Audio(p, a, tap, free, status)
-
-    return start
-
-
-def send_goal(probe: Node, sound: str, timeout: float = 30.0) -> m.PlaySoundReply:
-    """Send a goal, retrying only while the action server or the player is starting."""
-    def attempt() -> m.PlaySoundReply | None:
-        reply = probe.call(keys.PLAY_SOUND, m.PlaySound(sound=sound), timeout=3)
-        return None if "not running" in reply.message else reply
-
-    return retry_until(attempt, timeout, interval=0.1, what=f"goal {sound!r} answered")
-
-
-def final(audio: Audio, goal_id: str, timeout: float = 30.0) -> m.PlaySoundStatus:
-    return audio.status.wait_for(
-        lambda s: s.goal_id == goal_id and s.state in m.TERMINAL_GOAL_STATES,
-        timeout=timeout, what=f"end of goal {goal_id}")
-
-
-def beep_config(tmp_path: Path, seconds: float, name: str = "beep", **extra: str) -> tuple[
-        str, np.ndarray]:
-    samples = tone(seconds)
-    write_wav(tmp_path / f"{name}.wav", samples)
-    lines = [f'{name} = "{name}.wav"'] + [f'{k} = "{v}"' for k, v in extra.items()]
-    return "[audio.sounds]\n" + "\n".join(lines) + "\n", samples
 
 
 def test_goal_succeeds_after_the_sounds_length_and_the_samples_match(
@@ -131,7 +71,7 @@ def test_cancel_ends_playback_at_once(audio, probe, tmp_path) -> None:
 def test_player_stop_pause_resume(audio, probe, tmp_path) -> None:
     samples = tone(1.0)
     path = write_wav(tmp_path / "direct.wav", samples)
-    a = audio(action=False)
+    a = audio('[audio.sounds]\ndirect = "direct.wav"\n', action=False)  # allows tmp_path
     ok = retry_until(lambda: probe.call(keys.PLAY_FILE, m.PlayAudioFile(path=str(path))),
                      what="play_file answered")
     assert ok.success and "(1.000 s)" in ok.message, ok

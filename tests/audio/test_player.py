@@ -11,11 +11,20 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from buddybot.audio import access
 from buddybot.audio.player import AudioError, Player, decode_file
 from buddybot.audio.settings import AudioPlayerSettings
 from buddybot.core.testing import retry_until
 
-from .conftest import CHANNELS, RATE, convert_with_sox, tone, write_silent_mp3, write_wav
+from .conftest import (
+    CHANNELS,
+    RATE,
+    convert_with_sox,
+    tone,
+    write_silent_mp3,
+    write_sparse_wav,
+    write_wav,
+)
 
 
 class Recorder:
@@ -40,13 +49,15 @@ class Recorder:
 
 
 @pytest.fixture
-def player_factory() -> Iterator[Callable[..., tuple[Player, Recorder]]]:
+def player_factory(tmp_path: Path) -> Iterator[Callable[..., tuple[Player, Recorder]]]:
+    """Players on the null device that may play the test's own files (tmp_path)."""
     made: list[Player] = []
 
     def make(sounds: dict[str, str] | None = None, config_dir: Path | None = None,
              **settings: object) -> tuple[Player, Recorder]:
         rec = Recorder()
-        conf = AudioPlayerSettings(**{"backend": "null", **settings})  # type: ignore[arg-type]
+        conf = AudioPlayerSettings(**{  # type: ignore[arg-type]
+            "backend": "null", "sound_dirs": [str(tmp_path)], **settings})
         player = Player(conf, sounds or {}, config_dir, on_busy=rec.on_busy, tap=rec.tap)
         made.append(player)
         assert player.open() is not None, player.device_error
@@ -216,3 +227,38 @@ def test_auto_backend_always_opens_something() -> None:
         assert opened.backend != "Null" or "null device" in (opened.warning or "")
     finally:
         player.close()
+
+
+def test_files_outside_the_sound_dirs_get_one_refusal(player_factory, tmp_path) -> None:
+    player, _ = player_factory()
+    outside = tmp_path.parent / f"{tmp_path.name}-outside.wav"
+    write_wav(outside, tone(0.1))
+    try:
+        answers = set()
+        for request in ["/etc/passwd", "/no/such.wav", str(outside), f"../{outside.name}",
+                        str(tmp_path / ".." / outside.name)]:
+            with pytest.raises(AudioError) as err:
+                player.play(request)
+            answers.add(str(err.value))
+        assert answers == {access.REFUSAL}
+    finally:
+        outside.unlink()
+
+
+def test_long_and_large_files_are_refused_from_header_and_size(tmp_path: Path) -> None:
+    long = write_sparse_wav(tmp_path / "long.wav", 30 * 60)
+    with pytest.raises(AudioError, match=r"1800 s long, more than max_duration_s \(60 s\)"):
+        decode_file(long, name="l", sample_rate=RATE, channels=CHANNELS)
+    huge = tmp_path / "huge.wav"
+    with huge.open("wb") as out:
+        out.truncate(2 * 1024**3)  # sparse 2 GB
+    with pytest.raises(AudioError, match="more than max_file_bytes"):
+        decode_file(huge, name="h", sample_rate=RATE, channels=CHANNELS)
+
+
+def test_decoding_stops_at_max_duration_when_no_header_says_the_length(tmp_path) -> None:
+    """A suffix miniaudio has no header reader for: the streamed decode is cut off."""
+    path = write_wav(tmp_path / "tone.snd", tone(1.0))
+    with pytest.raises(AudioError, match="longer than max_duration_s"):
+        decode_file(path, name="s", sample_rate=RATE, channels=CHANNELS, max_duration_s=0.5)
+    assert decode_file(path, name="s", sample_rate=RATE, channels=CHANNELS).frames == RATE

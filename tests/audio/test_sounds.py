@@ -7,7 +7,7 @@ from pathlib import Path
 import miniaudio
 import pytest
 
-from buddybot.audio import protocol, sounds
+from buddybot.audio import access, protocol, sounds
 from buddybot.audio.settings import AudioSettings
 from buddybot.core.config import ConfigError, parse_config
 
@@ -32,10 +32,9 @@ def test_relative_paths_prefer_the_config_folder_then_the_package(tmp_path: Path
     assert sounds.resolve_file("nowhere.wav", tmp_path) == tmp_path / "nowhere.wav"
 
 
-def test_say_prefix_and_lookup() -> None:
-    table = {"hi": "say: Hello there ", "beep": "beep.wav"}
-    assert sounds.lookup("hi", table, None) == sounds.SpokenSound("Hello there")
-    assert sounds.lookup("/tmp/a.ogg", table, None) == sounds.FileSound(Path("/tmp/a.ogg"))
+def test_say_prefix() -> None:
+    assert sounds.parse_sound("say: Hello there ", None) == sounds.SpokenSound("Hello there")
+    assert sounds.parse_sound("/tmp/a.ogg", None) == sounds.FileSound(Path("/tmp/a.ogg"))
     with pytest.raises(ValueError, match="empty text"):
         sounds.parse_sound("say:  ", None)
     with pytest.raises(ValueError, match="empty file"):
@@ -67,3 +66,31 @@ def test_duration_round_trips_through_the_reply_message() -> None:
     assert text == "playing greeting (2.755 s)"
     assert protocol.parse_duration(text) == pytest.approx(2.755)
     assert protocol.parse_duration("stopped") is None
+
+
+def test_default_sound_dirs_are_the_package_and_the_configured_files_folders(
+    tmp_path: Path
+) -> None:
+    (tmp_path / "mine").mkdir()
+    table = {"beep": "mine/beep.wav", "hi": "say:Hi", "bad": " "}
+    dirs = access.sound_dirs(None, table, tmp_path)
+    assert dirs == ((sounds.PACKAGE_DIR / "sounds").resolve(), (tmp_path / "mine").resolve())
+    assert access.sound_dirs(["a", "/abs/b"], table, tmp_path) == (
+        (tmp_path / "a").resolve(), Path("/abs/b"))
+
+
+def test_only_files_inside_the_sound_dirs_are_allowed(tmp_path: Path) -> None:
+    box = tmp_path / "box"
+    box.mkdir()
+    (box / "in.wav").write_bytes(b"x")
+    (tmp_path / "secret.wav").write_bytes(b"x")
+    (box / "link.wav").symlink_to(tmp_path / "secret.wav")
+    (box / "passwd.wav").symlink_to("/etc/passwd")
+    dirs = (box.resolve(),)
+    assert access.allowed_file(str(box / "in.wav"), dirs) == (box / "in.wav").resolve()
+    assert access.allowed_file("in.wav", dirs) == (box / "in.wav").resolve()  # relative: in a dir
+    assert access.allowed_file("gone.wav", dirs) == (box / "gone.wav").resolve()  # says missing
+    for outside in ["/etc/passwd", "/no/such/file.wav", str(tmp_path / "secret.wav"),
+                    str(box / ".." / "secret.wav"), "../secret.wav", str(box / "link.wav"),
+                    "link.wav", str(box / "passwd.wav"), "bad\0name.wav", "/", ""]:
+        assert access.allowed_file(outside, dirs) is None, outside

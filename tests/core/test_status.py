@@ -33,3 +33,11 @@ def test_stale_face_and_unknown_state() -> None:
     status.face_distance_m, status.face_seen_at = 0.8, 1.0
     line = format_status(status, now=10.0)
     assert line == "nodes 1/1 | radar 0.0 Hz | presence ? | face - | eyes ?"
+
+
+def test_a_duplicate_node_is_shown() -> None:
+    """Two processes with one name (an orphaned robot on the same bus) are not `9/9`."""
+    status = RobotStatus(expected=["camera", "eyes"], up=["camera", "eyes"],
+                         duplicates=["camera"])
+    line = format_status(status, now=10.0)
+    assert line.startswith("nodes 2/2 (DUPLICATE: camera) | ")
