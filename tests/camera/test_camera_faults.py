@@ -188,12 +188,15 @@ def test_bgr8_length_and_jpeg_header_mismatches_are_counted(probe: Node, spawn: 
                 data=small),  # header 64x48, message 640x480
         m.Image(stamp_ns=m.now_ns(), frame_id="x", width=1, height=1, encoding="bgr8",
                 data=b""),
-        image(frame, m.now_ns(), "x" * 1_000_000),  # would be copied into the face message
     ]
     for n, img in enumerate(bad, 1):
         pub.put(img)
         diags.wait_for(lambda d, n=n: int(d.values.get("bad_frames", 0)) >= n, timeout=60,
                        what=f"{n} bad frames counted")
+    # A huge frame_id (it would be copied into every face message) is refused at decode.
+    pub.put(image(frame, m.now_ns(), "x" * 1_000_000))
+    diags.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 1, timeout=60,
+                   what="the huge frame_id refused")
     # Above --max-pixels (here 1 MP): refused before decoding, by message or by header.
     big = np.zeros((1000, 1001, 3), np.uint8)
     pub.put(image(big, m.now_ns(), "big", "jpeg"))
