@@ -10,23 +10,35 @@ Debian's headless Chromium through Playwright. Prints:
 * latency from a published `eyes/direction` (stamp_ns = publish time) to
   the page receiving it and to the first frame drawn with the new target
   (the pupil starts moving in that frame) (target < 30 ms);
-* the same from `eyes/control` through the eyes driver.
+* the same from `eyes/control` through the eyes driver;
+* under attack (issue 11): `--stuck N` WebSocket clients that connect and
+  never read plus an `eyes/control` flood for `--flood S` seconds: how old
+  the gaze is that the real page gets, how long `/healthz` takes, the
+  renderer's RSS, and how many pages were accepted, refused and dropped.
 
 Same host, same clock: the page uses performance.timeOrigin + now().
 
-    .venv/bin/python benchmarks/eyes.py [--seconds 5] [--count 200]
+    .venv/bin/python benchmarks/eyes.py [--seconds 5] [--count 200] [--stuck 500] [--flood 20]
+    .venv/bin/python benchmarks/eyes.py --flood-only      # just the attack
 """
 
 from __future__ import annotations
 
 import argparse
+import base64
+import json
 import math
+import os
 import shutil
+import socket
 import statistics
 import sys
+import threading
 import time
+import urllib.request
 from typing import Any
 
+import psutil
 from common import percentile
 
 from buddybot.core import keys
@@ -68,12 +80,148 @@ def measure_latency(page: Any, count: int, rate_hz: float, send: Any) -> tuple[l
     return to_page, to_frame
 
 
+def stuck_page(port: int) -> socket.socket | None:
+    """A WebSocket client that does the handshake and then never reads; None
+    when the server refused the connection outright."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.settimeout(30)
+    try:
+        sock.connect(("127.0.0.1", port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        sock.sendall(f"GET /ws?eye=both HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                     "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                     f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
+        head = b""
+        while b"\r\n\r\n" not in head:
+            byte = sock.recv(1)
+            if not byte:
+                raise ConnectionError("closed")
+            head += byte
+    except OSError:
+        sock.close()
+        return None
+    return sock
+
+
+class Flood:
+    """`eyes/control` (or `eyes/direction` straight to the renderer) as fast as
+    one thread can publish it (stamp = now)."""
+
+    def __init__(self, node: Node, direct: bool) -> None:
+        self._direct = direct
+        self._pub = node.publisher(keys.EYES_DIRECTION if direct else keys.EYE_CONTROL)
+        self._stop = threading.Event()
+        self.count = 0
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            yaw = (self.count % 40) - 20.0
+            if self._direct:
+                self._pub.put(m.EyesDirection(stamp_ns=m.now_ns(), yaw=yaw, pitch=0.0))
+            else:
+                self._pub.put(m.EyeControl(stamp_ns=m.now_ns(), yaw=math.radians(yaw),
+                                           pitch=0.0, target_distance_cm=100))
+            self.count += 1
+
+    def run_for(self, seconds: float, during: Any) -> None:
+        self._thread.start()
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            during()
+        self._stop.set()
+        self._thread.join(30)
+
+
+def attack(page: Any, node: Node, port: int, renderer_pid: int, stuck_n: int,
+           seconds: float, direct: bool) -> None:
+    """Stuck pages plus a control flood while the real page is measured."""
+    proc = psutil.Process(renderer_pid)
+    rss0 = proc.memory_info().rss / 2**20
+    t0 = time.monotonic()
+    socks = [stuck_page(port) for _ in range(stuck_n)]
+    opened = sum(1 for s in socks if s is not None)
+    print(f"{stuck_n} never-reading WebSocket clients: {opened} handshakes completed in "
+          f"{time.monotonic() - t0:.1f} s")
+    page.evaluate("window.eyes.latency.length = 0")
+    messages0 = page.evaluate("window.eyes.stats.messages")
+    health_ms: list[float] = []
+    health_fail = 0
+    rss: list[float] = []
+
+    def probe() -> None:
+        nonlocal health_fail
+        start = time.perf_counter()
+        try:
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=30) as r:
+                r.read()
+            health_ms.append((time.perf_counter() - start) * 1000)
+        except OSError:
+            health_fail += 1
+        rss.append(proc.memory_info().rss / 2**20)
+        time.sleep(0.25)   # sampling period, not synchronisation
+
+    flood = Flood(node, direct)
+    flood_start_ms = time.time() * 1000
+    flood.run_for(seconds, probe)
+    ages = [rec["recv_ms"] - float(rec["stamp_ns"]) / 1e6
+            for rec in page.evaluate("window.eyes.latency")
+            if float(rec["stamp_ns"]) / 1e6 >= flood_start_ms]
+    received = page.evaluate("window.eyes.stats.messages") - messages0
+    topic = "eyes/direction" if direct else "eyes/control"
+    print(f"flood: {flood.count} {topic} in {seconds:.0f} s "
+          f"({flood.count / seconds:.0f}/s); the real page got {received} messages")
+    if ages:
+        figures("gaze age on the real page during the flood", ages)
+    else:
+        print(f"{'gaze age on the real page during the flood':<44} no gaze arrived at all")
+    if health_ms:
+        figures("/healthz during the flood", health_ms)
+    print(f"{'/healthz failures (30 s timeout)':<44} {health_fail}")
+    print(f"{'renderer RSS':<44} before {rss0:.0f} MB, peak {max(rss):.0f} MB, "
+          f"end {rss[-1]:.0f} MB")
+    # Recovery: a distinct gaze published after the flood reaches the page.
+    direction = node.publisher(keys.EYES_DIRECTION)
+    start = time.monotonic()
+    try:
+        retry_until(lambda: direction.put(m.EyesDirection(stamp_ns=m.now_ns(), yaw=33.0,
+                                                          pitch=0.0))
+                    or page.evaluate("window.eyes.target.yaw") == 33, 120, 0.05,
+                    "gaze after the flood")
+        print(f"{'gaze after the flood -> page':<44} {(time.monotonic() - start) * 1000:7.0f} ms")
+    except TimeoutError:
+        print(f"{'gaze after the flood -> page':<44} not within 120 s")
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=30) as r:
+            info = json.loads(r.read())
+        if "samples" in info:
+            print(f"{'renderer got from the bus':<44} {info['samples']} samples, forwarded "
+                  f"{info['messages']} (the rest coalesced)")
+        print(f"{'pages':<44} connected {info['clients']} "
+              f"(max {info.get('max_pages', '-')}), refused {info.get('refused', '-')}, "
+              f"dropped {info.get('dropped', '-')}; RSS now "
+              f"{proc.memory_info().rss / 2**20:.0f} MB")
+    except OSError as exc:
+        print(f"{'pages':<44} /healthz failed: {exc}")
+    for sock in socks:
+        if sock is not None:
+            sock.close()
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=5.0, help="frame-time window")
     parser.add_argument("--count", type=int, default=200, help="gaze targets to publish")
     parser.add_argument("--rate", type=float, default=20.0, help="gaze targets per second")
     parser.add_argument("--size", default="800x480", help="page size (a small HDMI eye screen)")
+    parser.add_argument("--stuck", type=int, default=500,
+                        help="never-reading WebSocket clients during the attack")
+    parser.add_argument("--flood", type=float, default=20.0,
+                        help="seconds of eyes/control flood (0 = no attack)")
+    parser.add_argument("--flood-only", action="store_true", help="skip frame time and latency")
+    parser.add_argument("--flood-direction", action="store_true",
+                        help="flood eyes/direction straight to the renderer (no driver)")
     args = parser.parse_args()
     chromium = shutil.which("chromium")
     if chromium is None:
@@ -94,9 +242,14 @@ def main() -> int:
             browser = pw.chromium.launch(executable_path=chromium, args=CHROMIUM_ARGS)
             page = browser.new_page(viewport={"width": width, "height": height})
             page.goto(f"http://127.0.0.1:{port}/eyes?eye=both")
-            page.wait_for_function("window.eyes && window.eyes.connected", timeout=20_000)
+            page.wait_for_function("window.eyes && window.eyes.ready", timeout=20_000)
             print(f"Chromium {browser.version}, headless, page {width}x{height}, both eyes, "
                   "blinking and saccading")
+            if args.flood_only:
+                attack(page, node, port, procs[1].pid, args.stuck, args.flood,
+                       args.flood_direction)
+                browser.close()
+                return 0
 
             page.evaluate("window.eyes.frameIntervals.length = 0; "
                           "window.eyes.drawTimes.length = 0")
@@ -130,6 +283,9 @@ def main() -> int:
             figures("eyes/control -> driver -> pupil moving", to_frame)
             met = "met" if percentile(to_frame, 0.95) < 30 else "NOT met"
             print(f"(target direction -> page < 30 ms: {met} at p95 incl. the driver)")
+            if args.flood > 0:
+                attack(page, node, port, procs[1].pid, args.stuck, args.flood,
+                       args.flood_direction)
             browser.close()
     finally:
         if node is not None:

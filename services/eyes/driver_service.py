@@ -65,7 +65,9 @@ def run(ctx: ServiceContext) -> int:
             diag.increment("expressions")
             diag.values["expression"] = expression.action.name
 
-        node.subscribe(keys.EYE_CONTROL, on_control, delivery="inline")
+        # "latest": under a flood the driver converts only the newest gaze instead of
+        # working through a backlog (a page once got gaze seconds late).
+        node.subscribe(keys.EYE_CONTROL, on_control, delivery="latest")
         node.subscribe(keys.EXPRESSION, on_expression, delivery="inline")
         node.log.info("eyes driver ready")
         node.spin()

@@ -5,10 +5,15 @@ tablet or a phone can be an eye:
 
 * Zenoh subscriptions to direction, pupil, lids and expression (latched
   ones with history, so a restarted renderer shows the current state);
-* each sample is handed to the asyncio loop and pushed over a WebSocket
-  to every page at `/eyes?eye=left|right|both` (`/ws` carries the data;
-  each page gets a greeting with its looks and the whole current state,
-  then updates, coalesced per slot so a slow page never builds a backlog);
+* the newest sample per slot is handed to the asyncio loop (`Inbox`: a
+  flood coalesces instead of queueing) and pushed over a WebSocket to every
+  page at `/eyes?eye=left|right|both` (`/ws` carries the data; each page
+  gets a greeting with its looks and the whole current state, then updates,
+  coalesced per slot so a slow page never builds a backlog; a page that
+  stops reading is cut, at most `max_pages` are connected, and only the
+  server's own origin or listed ones may open the socket);
+* the HTTP server starts before the Zenoh node, so the pages show a calm
+  "connecting" face while there is no router, never a browser error;
 * one kiosk Chromium window per eye window planned by `placement.py` from
   the displays `screeninfo` finds (or `--display` geometries); none with
   `--no-browser`.
@@ -26,22 +31,27 @@ import asyncio
 import contextlib
 import importlib.resources
 import logging
+import socket
 import sys
 import tempfile
+import threading
 import uuid
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node
+from buddybot.core.limits import clip
+from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext
 from buddybot.eyes import kiosk, placement, wire
 from buddybot.eyes.settings import EyeRendererSettings
 
 log = logging.getLogger("buddybot.eye-renderer")
+_warn = RateLimitedLog(log)
 
 PAGE_EYES = ("left", "right", "both")
 STATIC = {"eyes.js": "application/javascript", "eyes.css": "text/css"}
@@ -124,54 +134,195 @@ def plan_windows(args: argparse.Namespace, s: EyeRendererSettings) -> list[place
 
 # --- the WebSocket hub ---------------------------------------------------------------
 
+PAGE_WRITE_BUFFER = 16 * 1024
+"""Bytes a page's sends may queue in the process before they wait for it to read
+(asyncio's high-water mark and aiohttp's drain threshold, 256 KiB by default):
+a second of eye traffic, and a bound on the memory a stuck page holds."""
+SEND_BUFFER_MAX = 64 * 1024
+"""Bytes queued to one page beyond which it is dropped at once (it stopped reading)."""
+KERNEL_SEND_BUFFER = 32 * 1024
+"""SO_SNDBUF of a page's socket: seconds of eye traffic even on Wi-Fi, and it
+keeps the kernel from buffering megabytes for a page that never reads (which
+would also hide the stall for a long time)."""
+CLOSE_TIMEOUT_S = 2.0
+"""How long a close handshake may take before the connection is cut."""
 
-class Client:
-    """One connected page: its outbox (latest per slot) and a wake-up event."""
 
-    def __init__(self, eye: str) -> None:
+class Page:
+    """One connected page: its outbox (newest message per slot) and a wake-up event.
+
+    The outbox is the page's whole send queue, so it is bounded by the number
+    of slots (a handful) however fast samples arrive and however slowly the
+    page reads: a page only ever needs the latest value of each topic.
+    """
+
+    def __init__(self, eye: str, transport: asyncio.Transport | None) -> None:
         self.eye = eye
+        self.transport = transport
         self.outbox = wire.LatestState()
         self.wake = asyncio.Event()
+        self.cut_off = False
 
     def push(self, slot: str, text: str) -> None:
         self.outbox.put(slot, text)
         self.wake.set()
 
+    def unsent(self) -> int:
+        """Bytes written for this page that it has not taken yet (beyond the kernel's)."""
+        return 0 if self.transport is None else self.transport.get_write_buffer_size()
+
+    def cut(self) -> bool:
+        """Drop the connection now, without a close handshake (which would have
+        to wait behind the data the page is not reading); True the first time."""
+        first = not self.cut_off
+        self.cut_off = True
+        if self.transport is not None:
+            self.transport.abort()
+        return first
+
 
 class Hub:
     """Current state plus the connected pages; used only on the event loop."""
 
-    def __init__(self, hello: wire.Hello) -> None:
+    def __init__(self, hello: wire.Hello, max_pages: int = 16) -> None:
         self.state = wire.LatestState()
-        self.clients: set[Client] = set()
+        self.pages: set[Page] = set()
+        self.max_pages = max_pages
         self.hello_text = wire.encode("hello", hello)
+        self.bus = False
+        self.state.put("status", wire.encode("status", wire.Status(bus=False)))
         self.messages = 0
+        self.samples = 0     # from the bus (copied from the inbox), before coalescing
+        self.dropped = 0     # pages cut because they stopped reading
+        self.refused = 0     # connections over max_pages
+        self.forbidden = 0   # WebSockets from a foreign origin
 
     def publish(self, msg: m.Message) -> None:
-        text = self.state.put_message(msg)
-        slot = wire.slot(msg)
+        self._push(wire.slot(msg), self.state.put_message(msg))
         self.messages += 1
-        for client in self.clients:
-            client.push(slot, text)
 
-    def join(self, eye: str) -> Client:
-        client = Client(eye)
-        client.push("hello", self.hello_text)
+    def publish_batch(self, batch: list[m.Message]) -> None:
+        for msg in batch:
+            self.publish(msg)
+
+    def set_bus(self, up: bool) -> None:
+        """Tell every page when the renderer gets on or falls off the bus."""
+        if up == self.bus:
+            return
+        self.bus = up
+        text = wire.encode("status", wire.Status(bus=up))
+        self.state.put("status", text)
+        self._push("status", text)
+
+    def _push(self, slot: str, text: str) -> None:
+        for page in self.pages:
+            page.push(slot, text)
+
+    @property
+    def full(self) -> bool:
+        return len(self.pages) >= self.max_pages
+
+    def join(self, eye: str, transport: asyncio.Transport | None = None) -> Page:
+        page = Page(eye, transport)
+        page.push("hello", self.hello_text)
         for slot, text in self.state.items():
-            client.push(slot, text)
-        self.clients.add(client)
-        return client
+            page.push(slot, text)
+        self.pages.add(page)
+        return page
+
+    def leave(self, page: Page) -> None:
+        self.pages.discard(page)
+
+    def drop(self, page: Page, why: str) -> None:
+        """Cut a page that stopped reading (counted and logged once per page)."""
+        if page.cut():
+            self.dropped += 1
+            _warn.warning("stall", "page dropped (eye=%s): %s", page.eye, why)
+
+    def health(self) -> dict[str, Any]:
+        per_eye: dict[str, int] = {}
+        for page in self.pages:
+            per_eye[page.eye] = per_eye.get(page.eye, 0) + 1
+        return {"clients": len(self.pages), "pages": per_eye, "max_pages": self.max_pages,
+                "bus": self.bus, "samples": self.samples, "messages": self.messages,
+                "dropped": self.dropped, "refused": self.refused, "forbidden": self.forbidden}
 
 
-async def _sender(ws: web.WebSocketResponse, client: Client) -> None:
-    """Flush the page's outbox whenever something new is in it; a page that
-    went away ends this task quietly (the reader side cleans up)."""
+class Inbox:
+    """Samples from Zenoh's threads to the event loop, newest per slot.
+
+    Handing every sample to the loop on its own (one `call_soon_threadsafe`
+    each) let a flood queue callbacks faster than the loop ran them: memory
+    grew, pages got 17 s old gaze and `/healthz` timed out behind the queue.
+    Here a sample only replaces the pending one of its slot and at most one
+    wake-up is ever queued, so the loop's work per turn is bounded by the
+    number of slots, whatever the sample rate. Batches are also at least
+    `min_interval_s` apart (2 ms: many times the page's frame rate), so under
+    a flood the loop neither wakes per sample nor takes the GIL from the
+    thread that has to keep up with the bus.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop,
+                 deliver: Callable[[list[m.Message]], None],
+                 min_interval_s: float = 0.002) -> None:
+        self._loop = loop
+        self._deliver = deliver
+        self._min_interval = min_interval_s
+        self._last = -1e9
+        self._lock = threading.Lock()
+        self._pending: dict[str, m.Message] = {}
+        self._scheduled = False
+        self.received = 0
+        self.coalesced = 0   # samples replaced by a newer one before the loop saw them
+
+    def put(self, msg: m.Message) -> None:
+        """Called from Zenoh's threads."""
+        slot = wire.slot(msg)
+        with self._lock:
+            self.received += 1
+            if self._pending.pop(slot, None) is not None:
+                self.coalesced += 1
+            self._pending[slot] = msg   # re-inserted last: arrival order is kept
+            if self._scheduled:
+                return
+            self._scheduled = True
+        with contextlib.suppress(RuntimeError):  # the loop is closing
+            self._loop.call_soon_threadsafe(self._wake)
+
+    def _wake(self) -> None:
+        wait = self._last + self._min_interval - self._loop.time()
+        if wait > 0:
+            self._loop.call_later(wait, self._drain)
+        else:
+            self._drain()
+
+    def _drain(self) -> None:
+        self._last = self._loop.time()
+        with self._lock:
+            batch = list(self._pending.values())
+            self._pending.clear()
+            self._scheduled = False
+        self._deliver(batch)
+
+
+async def _sender(ws: web.WebSocketResponse, page: Page, hub: Hub, stall_s: float) -> None:
+    """Flush the page's outbox whenever something new is in it.
+
+    A page that stops reading is cut: its sends not draining within
+    `stall_s`, or more than SEND_BUFFER_MAX bytes waiting for it. A page
+    that went away ends this task quietly (the reader side cleans up).
+    """
     try:
         while not ws.closed:
-            await client.wake.wait()
-            client.wake.clear()
-            for text in client.outbox.take():
-                await ws.send_str(text)
+            await page.wake.wait()
+            page.wake.clear()
+            for text in page.outbox.take():
+                if page.unsent() > SEND_BUFFER_MAX:
+                    raise TimeoutError
+                async with asyncio.timeout(stall_s):
+                    await ws.send_str(text)
+    except TimeoutError:
+        hub.drop(page, f"it has not read what was sent for {stall_s:.1f} s")
     except (ConnectionError, RuntimeError) as exc:  # closing transport
         log.debug("page send failed: %r", exc)
 
@@ -181,10 +332,17 @@ def _read_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in ("eyes.html", *STATIC)}
 
 
-def make_app(hub: Hub) -> web.Application:
-    """The web application: page, static files, WebSocket, health."""
+def make_app(hub: Hub, allowed_origins: tuple[str, ...] = (), stall_s: float = 2.0
+             ) -> web.Application:
+    """The web application: page, static files, WebSocket, health.
+
+    No handler ever waits for a page's sends (each page has its own sender
+    task), so `/healthz` and the pages are answered however busy or stuck
+    the WebSockets are.
+    """
     files = _read_static()
     sockets: set[web.WebSocketResponse] = set()
+    names = wire.own_names(socket.gethostname())
 
     async def index(_request: web.Request) -> web.StreamResponse:
         raise web.HTTPFound("/eyes?eye=both")
@@ -192,7 +350,8 @@ def make_app(hub: Hub) -> web.Application:
     async def page(request: web.Request) -> web.StreamResponse:
         eye = request.query.get("eye", "both")
         if eye not in PAGE_EYES:
-            return web.Response(status=400, text=f"bad eye {eye!r}: use left, right or both\n")
+            return web.Response(status=400, text=f"bad eye {clip(eye, 40)!r}: "
+                                "use left, right or both\n")
         return web.Response(body=files["eyes.html"], content_type="text/html",
                             headers={"Cache-Control": "no-cache"})
 
@@ -204,39 +363,75 @@ def make_app(hub: Hub) -> web.Application:
                             headers={"Cache-Control": "no-cache"})
 
     async def health(_request: web.Request) -> web.StreamResponse:
-        pages: dict[str, int] = {}
-        for client in hub.clients:
-            pages[client.eye] = pages.get(client.eye, 0) + 1
-        return web.json_response({"clients": len(hub.clients), "pages": pages,
-                                  "messages": hub.messages})
+        return web.json_response(hub.health())
+
+    async def refuse(request: web.Request, reason: str) -> web.WebSocketResponse:
+        """Accept the handshake only to close at once with code 1013 and `reason`
+        (a browser shows close reasons, not HTTP error bodies)."""
+        ws = web.WebSocketResponse(timeout=CLOSE_TIMEOUT_S)
+        await ws.prepare(request)
+        with contextlib.suppress(TimeoutError):
+            async with asyncio.timeout(CLOSE_TIMEOUT_S):
+                await ws.close(code=WSCloseCode.TRY_AGAIN_LATER, message=reason.encode())
+        if request.transport is not None:
+            request.transport.abort()
+        return ws
 
     async def websocket(request: web.Request) -> web.StreamResponse:
         eye = request.query.get("eye", "both")
         if eye not in PAGE_EYES:
-            return web.Response(status=400, text=f"bad eye {eye!r}: use left, right or both\n")
-        ws = web.WebSocketResponse(heartbeat=5.0)
+            return web.Response(status=400, text=f"bad eye {clip(eye, 40)!r}: "
+                                "use left, right or both\n")
+        origin = request.headers.get("Origin")
+        if not wire.origin_allowed(origin, request.host, allowed_origins, names):
+            hub.forbidden += 1
+            _warn.warning("origin", "refused a WebSocket from origin %s (not %s; "
+                          "eye_renderer.allowed_origins lists more)", clip(origin, 80),
+                          clip(request.host, 80))
+            return web.Response(status=403, text=f"origin {clip(origin, 80)} may not open "
+                                "the eye WebSocket (see eye_renderer.allowed_origins)\n")
+        if hub.full:
+            hub.refused += 1
+            _warn.warning("full", "refused a page: %d pages connected, the most allowed "
+                          "(eye_renderer.max_pages)", len(hub.pages))
+            return await refuse(request, f"too many pages ({hub.max_pages} max)")
+        # No compression: messages are ~100 bytes, and each compressor costs a
+        # page ~100s of KiB and CPU per message.
+        ws = web.WebSocketResponse(heartbeat=5.0, timeout=CLOSE_TIMEOUT_S, compress=False,
+                                   writer_limit=PAGE_WRITE_BUFFER)
         await ws.prepare(request)
-        client = hub.join(eye)
+        transport = request.transport
+        sock = transport.get_extra_info("socket") if transport is not None else None
+        if sock is not None:
+            with contextlib.suppress(OSError):
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, KERNEL_SEND_BUFFER)
+        if isinstance(transport, asyncio.WriteTransport):
+            transport.set_write_buffer_limits(high=PAGE_WRITE_BUFFER)
+        client = hub.join(eye, transport if isinstance(transport, asyncio.Transport) else None)
         sockets.add(ws)
-        sender = asyncio.create_task(_sender(ws, client))
-        log.info("page connected (eye=%s, %d pages)", eye, len(hub.clients))
+        sender = asyncio.create_task(_sender(ws, client, hub, stall_s))
+        log.info("page connected (eye=%s, %d pages)", eye, len(hub.pages))
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.ERROR:
                     break
                 # Pages have nothing to say; anything they send is ignored.
         finally:
-            hub.clients.discard(client)
+            hub.leave(client)
             sockets.discard(ws)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await sender
-            log.info("page left (eye=%s, %d pages)", eye, len(hub.clients))
+            if client.unsent():   # e.g. no pong: never keep data for a page that is gone
+                hub.drop(client, "it stopped answering with data still unsent")
+            log.info("page left (eye=%s, %d pages)", eye, len(hub.pages))
         return ws
 
     async def close_sockets(_app: web.Application) -> None:
         for ws in list(sockets):
-            await ws.close(code=1001, message=b"server shutdown")
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(CLOSE_TIMEOUT_S):
+                    await ws.close(code=WSCloseCode.GOING_AWAY, message=b"server shutdown")
 
     app = web.Application()
     app.router.add_get("/", index)
@@ -251,21 +446,49 @@ def make_app(hub: Hub) -> web.Application:
 # --- the service ---------------------------------------------------------------------
 
 
-def _subscribe(node: Node, hub: Hub, loop: asyncio.AbstractEventLoop) -> None:
+def _subscribe(node: Node, inbox: Inbox) -> None:
     def forward(msg: Any, _key: str) -> None:
-        with contextlib.suppress(RuntimeError):  # the loop is closing
-            loop.call_soon_threadsafe(hub.publish, msg)
+        inbox.put(msg)
 
     for topic in (keys.EYES_DIRECTION, keys.PUPIL, keys.LIDS, keys.EXPRESSION):
         node.subscribe(topic, forward, delivery="inline")
 
 
-async def serve(ctx: ServiceContext, node: Node, host: str, port: int,
+def _on_bus(node: Node) -> bool:
+    """Whether the node has a router right now (pages show "connecting" otherwise)."""
+    try:
+        return bool(node.session.info.routers_zid())
+    except Exception as exc:  # a closing session
+        log.debug("router check failed: %r", exc)
+        return False
+
+
+async def _open_node(ctx: ServiceContext) -> Node | None:
+    """The node, opened in a thread while the pages are already served; None
+    when the renderer is stopped before a router was found."""
+    def opener() -> Node | None:
+        try:
+            return ctx.node()
+        except KeyboardInterrupt:  # stopped while waiting for the router
+            return None
+
+    return await asyncio.to_thread(opener)
+
+
+async def serve(ctx: ServiceContext, host: str, port: int,
                 windows: list[placement.Window], browser: str | None) -> None:
+    """Serve the pages first, then join the bus.
+
+    The HTTP server starts before the Zenoh node, so with the router down
+    (or still starting) the pages load and show their "connecting" face
+    instead of a browser error, and kiosk windows open at once.
+    """
     s = ctx.config.eye_renderer
     hub = Hub(wire.Hello(iris_color=s.iris_color, max_yaw_deg=s.max_yaw_deg,
-                         max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]))
-    runner = web.AppRunner(make_app(hub), access_log=None)
+                         max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]),
+              s.max_pages)
+    runner = web.AppRunner(make_app(hub, tuple(s.allowed_origins), s.page_stall_s),
+                           access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
     try:
@@ -276,12 +499,14 @@ async def serve(ctx: ServiceContext, node: Node, host: str, port: int,
     actual = runner.addresses[0][1] if runner.addresses else port
     view_host = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
     base = f"http://{view_host}:{actual}"
-    _subscribe(node, hub, asyncio.get_running_loop())
+    inbox = Inbox(asyncio.get_running_loop(), hub.publish_batch)
     print(f"eye renderer serving {base}/eyes?eye=both", flush=True)
     log.info("eyes: %s/eyes?eye=left|right|both", base)
 
     kiosks: list[kiosk.KioskWindow] = []
     profiles = tempfile.TemporaryDirectory(prefix="buddybot-eyes-")
+    opening = asyncio.create_task(_open_node(ctx))
+    node: Node | None = None
     try:
         for win in windows:
             assert browser is not None
@@ -290,19 +515,38 @@ async def serve(ctx: ServiceContext, node: Node, host: str, port: int,
             window = kiosk.KioskWindow(argv, f"{win.eye} eye on display {win.display_number}")
             window.start()
             kiosks.append(window)
-        diag = node.diagnostics
         while not ctx.stop.is_set():
             await asyncio.sleep(0.2)
             for window in kiosks:
                 window.poll()
-            diag.values["pages"] = len(hub.clients)
+            if node is None and opening.done():
+                node = opening.result()
+                if node is None:
+                    break
+                _subscribe(node, inbox)
+            if node is None:
+                continue
+            hub.samples = inbox.received
+            hub.set_bus(_on_bus(node))
+            diag = node.diagnostics
+            diag.values["pages"] = len(hub.pages)
             diag.values["messages"] = hub.messages
             diag.values["windows"] = len(kiosks)
+            diag.values["pages_dropped"] = hub.dropped
+            diag.values["pages_refused"] = hub.refused
+            diag.values["origins_refused"] = hub.forbidden
+            diag.values["samples_coalesced"] = inbox.coalesced
     finally:
+        ctx.stop.set()   # a node still waiting for its router gives up
         for window in kiosks:
             window.stop()
         await runner.cleanup()
         profiles.cleanup()
+        if node is None:
+            with contextlib.suppress(Exception):
+                node = await opening
+        if node is not None:
+            node.close()
 
 
 def run(ctx: ServiceContext) -> int:
@@ -325,12 +569,9 @@ def run(ctx: ServiceContext) -> int:
     except StartupError as exc:
         print(f"buddybot eye-renderer: {exc}", file=sys.stderr)
         return 2
-    node = ctx.node()
     try:
-        asyncio.run(serve(ctx, node, host, port, windows, browser))
+        asyncio.run(serve(ctx, host, port, windows, browser))
     except StartupError as exc:
         print(f"buddybot eye-renderer: {exc}", file=sys.stderr)
         return 2
-    finally:
-        node.close()
     return 0

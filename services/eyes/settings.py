@@ -53,3 +53,15 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     iris_color: Annotated[str, msgspec.Meta(pattern=r"^#[0-9a-fA-F]{6}$")] = "#2f7fd0"
     max_yaw_deg: Annotated[float, msgspec.Meta(gt=0.0, le=90.0)] = 40.0
     max_pitch_deg: Annotated[float, msgspec.Meta(gt=0.0, le=90.0)] = 30.0
+    # At most this many pages connected at once (two kiosk windows, a few
+    # phones); over it a new WebSocket is closed at once with code 1013 and a
+    # reason, so a flood of connections cannot starve the real eyes.
+    max_pages: Annotated[int, msgspec.Meta(ge=1, le=256)] = 16
+    # A page whose sends do not drain for this long (it stopped reading) is
+    # dropped; a real page reconnects by itself and gets the whole state.
+    page_stall_s: Annotated[float, msgspec.Meta(ge=0.2, le=60.0)] = 2.0
+    # Browser origins allowed to open the WebSocket besides the server's own
+    # (same host and port), e.g. ["http://buddy.local:8080"]. A request with no
+    # Origin header is not a browser page and is allowed.
+    allowed_origins: list[Annotated[str, msgspec.Meta(
+        pattern=r"^https?://[^/?#\s]+$", max_length=200)]] = msgspec.field(default_factory=list)

@@ -22,7 +22,14 @@ import pytest
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Process, free_port, retry_until, wait_port
+from buddybot.core.testing import (
+    Process,
+    Router,
+    buddybot_argv,
+    free_port,
+    retry_until,
+    wait_port,
+)
 
 from ..conftest import ARTIFACTS
 
@@ -44,7 +51,9 @@ def open_page(browser: Any, port: int, eye: str = "left", extra: str = "&blink=0
               width: int = W, height: int = H) -> Any:
     page = browser.new_page(viewport={"width": width, "height": height})
     page.goto(f"http://127.0.0.1:{port}/eyes?eye={eye}{extra}")
-    page.wait_for_function("window.eyes && window.eyes.connected", timeout=20_000)
+    # Ready (socket open, renderer on the bus) and the connecting face faded out.
+    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
+                           timeout=20_000)
     return page
 
 
@@ -83,6 +92,12 @@ def pupil_centre(img: np.ndarray) -> tuple[float, float]:
 
 def sclera_pixels(img: np.ndarray) -> int:
     return int((img.min(axis=2) > 225).sum())
+
+
+def dim_sclera_pixels(img: np.ndarray) -> int:
+    """Sclera seen through the connecting face's dimming: a flat mid grey."""
+    return int(((img.min(axis=2) > 90) & (img.max(axis=2) < 150)
+                & (np.ptp(img, axis=2) < 20)).sum())
 
 
 def colour_pixels(img: np.ndarray, bgr: tuple[int, int, int], tol: int = 30) -> int:
@@ -316,3 +331,55 @@ def test_both_page_puts_the_robots_left_eye_on_the_right_half(
     assert sclera_pixels(shot(right_page)) > 0.1 * W * H
     for p in (page, left_page, right_page):
         p.close()
+
+
+def test_page_shows_a_calm_connecting_face_until_the_bus_is_there(
+    browser: Any, tmp_path: Any
+) -> None:
+    """Router down: the renderer still serves the page (it showed "connection
+    refused" before), and the page shows its connecting face: half-closed,
+    dimmed eyes looking ahead. Once a router is up: normal eyes. Router gone
+    again: the connecting face again."""
+    router_port = free_port()
+    port = free_port()
+    renderer = Process(buddybot_argv("run", "eye-renderer", "--connect",
+                                     f"tcp/127.0.0.1:{router_port}", "--port", str(port),
+                                     "--no-browser"), "renderer-no-router", tmp_path)
+    router: Router | None = None
+    try:
+        wait_port(port, 30)
+        page = browser.new_page(viewport={"width": W, "height": H})
+        page.goto(f"http://127.0.0.1:{port}/eyes?eye=both&blink=0&saccade=0")
+        page.wait_for_function("window.eyes && window.eyes.connected", timeout=20_000)
+        page.wait_for_function("window.eyes.cur.calm > 0.999 "
+                               "&& Math.abs(window.eyes.cur.lids.left.top) < 0.01", timeout=20_000)
+        assert page.evaluate("[window.eyes.ready, window.eyes.bus]") == [False, False]
+        connecting = shot(page, "connecting")
+        assert sclera_pixels(connecting) == 0                # nothing bright: dimmed
+        dim = dim_sclera_pixels(connecting)
+        assert dim > 0.05 * W * H, dim                       # but the eyes are there
+        assert page.is_visible("#status")                    # and the grey dot says why
+        # Half closed: no sclera in the top third of the eyes.
+        top_rows = connecting[: int(H * 0.3)]
+        assert dim_sclera_pixels(top_rows) == 0
+
+        router = Router(port=router_port, log_dir=tmp_path)
+        page.wait_for_function("window.eyes.ready && window.eyes.cur.calm < 0.002",
+                               timeout=60_000)
+        settled(page)
+        awake = shot(page, "connected")
+        assert sclera_pixels(awake) > 1.3 * dim, (sclera_pixels(awake), dim)  # lids open
+        assert dim_sclera_pixels(awake) < 0.01 * W * H
+        assert not page.is_visible("#status")
+
+        router.stop()
+        router = None
+        page.wait_for_function("!window.eyes.ready && window.eyes.cur.calm > 0.999",
+                               timeout=30_000)
+        assert sclera_pixels(shot(page, "connecting_again")) == 0
+        page.close()
+    finally:
+        if router is not None:
+            router.stop()
+        renderer.stop()
+        print(renderer.output()[-3000:])

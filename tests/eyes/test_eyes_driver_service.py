@@ -23,14 +23,16 @@ def test_control_becomes_direction_and_pupil(spawn: Callable[..., Process], prob
     directions = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
     pupils = Collector[m.PupilControl](probe, keys.PUPIL)
     pub = probe.publisher(keys.EYE_CONTROL)
-    near = m.EyeControl(stamp_ns=1_000_000_001, yaw=math.radians(20), pitch=math.radians(-10),
+    # Real stamps: the runtime replaces implausible ones (not near now) by the arrival time.
+    now = m.now_ns()
+    near = m.EyeControl(stamp_ns=now, yaw=math.radians(20), pitch=math.radians(-10),
                         target_distance_cm=40)
     retry_until(lambda: pub.put(near) or directions.messages, 20, 0.2, "driver answering")
     d = directions.wait_for(lambda x: x.stamp_ns == near.stamp_ns)
     assert d.yaw == pytest.approx(20.0) and d.pitch == pytest.approx(-10.0)
     p_near = pupils.wait_for(lambda x: x.stamp_ns == near.stamp_ns)
 
-    far = m.EyeControl(stamp_ns=1_000_000_002, yaw=math.radians(-35), pitch=0.0,
+    far = m.EyeControl(stamp_ns=now + 1, yaw=math.radians(-35), pitch=0.0,
                        target_distance_cm=280)
     pub.put(far)
     d = directions.wait_for(lambda x: x.stamp_ns == far.stamp_ns)
@@ -47,7 +49,8 @@ def test_every_expression_becomes_latched_lids(
     lids = Collector[m.EyeLidControl](probe, keys.LIDS)
     pub = probe.publisher(keys.EXPRESSION)
     expected = {A.EYE_AWAKE: (0, 0), A.EYE_SLEEP: (50, 50)}
-    for stamp, action in enumerate(A, start=100):
+    base = m.now_ns()
+    for stamp, action in enumerate(A, start=base):
         pub.put(m.ScreenExpression(stamp_ns=stamp, action=action))
         got = lids.wait_for(lambda x, s=stamp: x.stamp_ns == s, 20, f"lids for {action.name}")
         assert got.eye_id == m.EyeId.BOTH
@@ -56,7 +59,7 @@ def test_every_expression_becomes_latched_lids(
     # Latched: a renderer starting now still gets the current lids (the last: STAR).
     late = Collector[m.EyeLidControl](node_factory("late"), keys.LIDS)
     got = late.wait_for(timeout=20, what="latched lids")
-    assert got.stamp_ns == 100 + len(A) - 1
+    assert got.stamp_ns == base + len(A) - 1
 
 
 def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node) -> None:
@@ -65,7 +68,7 @@ def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node)
     diags = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="eyes")
     control = probe.publisher(keys.EYE_CONTROL)
     expression = probe.publisher(keys.EXPRESSION)
-    good = m.EyeControl(stamp_ns=7, yaw=0.1, pitch=0.0, target_distance_cm=100)
+    good = m.EyeControl(stamp_ns=m.now_ns(), yaw=0.1, pitch=0.0, target_distance_cm=100)
     retry_until(lambda: control.put(good) or directions.messages, 20, 0.2, "driver answering")
     for bad in (b"", b"not json", b"{}", b'{"stamp_ns": 1, "yaw": 9, "pitch": 0, '
                 b'"target_distance_cm": 1}', b'{"stamp_ns": -1, "yaw": 0, "pitch": 0, '
@@ -74,9 +77,10 @@ def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node)
         control.put_bytes(bad)
     for bad in (b'{"stamp_ns": 1, "action": 8}', b'{"stamp_ns": 1}', b"\x00"):
         expression.put_bytes(bad)
-    after = m.EyeControl(stamp_ns=8, yaw=-0.1, pitch=0.0, target_distance_cm=100)
+    after = m.EyeControl(stamp_ns=m.now_ns(), yaw=-0.1, pitch=0.0, target_distance_cm=100)
     control.put(after)
-    directions.wait_for(lambda x: x.stamp_ns == 8, 20, "direction after malformed input")
+    directions.wait_for(lambda x: x.stamp_ns == after.stamp_ns, 20,
+                        "direction after malformed input")
     status = diags.wait_for(lambda x: int(x.values.get("malformed", 0)) >= 11, 20,
                             "malformed count in diagnostics")
     assert status.level == "OK"

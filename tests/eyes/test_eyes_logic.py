@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import math
 from pathlib import Path
 
@@ -13,7 +14,7 @@ from hypothesis import strategies as st
 from buddybot.core import messages as m
 from buddybot.eyes import driver, kiosk, placement, wire
 from buddybot.eyes.placement import Display, PlacementError, Request, plan
-from buddybot.eyes.settings import EyesSettings
+from buddybot.eyes.settings import EyeRendererSettings, EyesSettings
 
 A = m.ExpressionAction
 CURVE = driver.PupilCurve.from_points(driver.DEFAULT_PUPIL_CURVE)
@@ -251,3 +252,108 @@ def test_kiosk_command_positions_an_app_window_on_its_display(tmp_path: Path) ->
 
 def test_find_browser_explicit_missing_is_none() -> None:
     assert kiosk.find_browser("/nonexistent/chromium") is None
+
+
+# --- WebSocket origin and renderer limits --------------------------------------------
+
+
+@pytest.mark.parametrize(("origin", "host", "allowed", "ok"), [
+    (None, "127.0.0.1:8080", [], True),                          # not a browser: allowed
+    ("http://127.0.0.1:8080", "127.0.0.1:8080", [], True),       # the server's own page
+    ("HTTP://LocalHost:8080", "localhost:8080", [], True),       # case does not matter
+    ("http://192.168.1.5", "192.168.1.5:80", [], True),          # default port spelled out
+    ("https://eyes.example", "eyes.example", [], True),
+    ("http://evil.example", "127.0.0.1:8080", [], False),        # another site
+    ("http://127.0.0.1:9999", "127.0.0.1:8080", [], False),      # same host, other port
+    ("https://127.0.0.1:8080", "127.0.0.1:8080", [], True),      # scheme only sets the port
+    ("http://127.0.0.1:8080", None, [], False),                  # no Host: nothing to match
+    ("null", "127.0.0.1:8080", [], False),                       # sandboxed frame, file://
+    ("null", "127.0.0.1:8080", ["null"], True),
+    ("file:///tmp/x.html", "127.0.0.1:8080", [], False),
+    ("http://127.0.0.1:8080/path", "127.0.0.1:8080", [], False),
+    ("http://user@127.0.0.1:8080", "127.0.0.1:8080", [], False),
+    ("http://[::1", "127.0.0.1:8080", [], False),                # unparsable
+    ("http://127.0.0.1:99999", "127.0.0.1:8080", [], False),
+    ("http://tablet.local:8080", "127.0.0.1:8080", ["http://tablet.local:8080"], True),
+    ("http://TABLET.local:8080", "127.0.0.1:8080", ["http://tablet.local:8080"], True),
+    ("http://tablet.local", "127.0.0.1:8080", ["http://tablet.local:80"], True),
+    ("https://tablet.local:8080", "127.0.0.1:8080", ["http://tablet.local:8080"], False),
+    ("http://" + "a" * 5000, "127.0.0.1:8080", [], False),
+])
+def test_websocket_origin_rule(origin: str | None, host: str | None, allowed: list[str],
+                               ok: bool) -> None:
+    assert wire.origin_allowed(origin, host, allowed) is ok
+
+
+@pytest.mark.parametrize(("origin", "host", "ok"), [
+    ("http://127.0.0.1:8080", "127.0.0.1:8080", True),
+    ("http://[::1]:8080", "[::1]:8080", True),
+    ("http://192.168.1.5:8080", "192.168.1.5:8080", True),
+    ("http://localhost:8080", "localhost:8080", True),
+    ("http://buddy.local:8080", "buddy.local:8080", True),
+    ("http://BUDDY:8080", "buddy:8080", True),
+    # DNS rebinding: the attacker's name now points at the robot; Origin and
+    # Host match, but the name is not the robot's.
+    ("http://evil.example:8080", "evil.example:8080", False),
+])
+def test_own_origin_must_name_this_machine(origin: str, host: str, ok: bool) -> None:
+    names = wire.own_names("Buddy.lan")
+    assert names == {"localhost", "buddy.lan", "buddy", "buddy.local"}
+    assert wire.origin_allowed(origin, host, (), names) is ok
+    assert wire.origin_allowed("http://evil.example:8080", "evil.example:8080",
+                               ["http://evil.example:8080"], names)   # unless listed
+
+
+@given(st.text(max_size=300), st.text(max_size=60))
+def test_origin_rule_never_raises(origin: str, host: str) -> None:
+    assert wire.origin_allowed(origin, host, ["http://a:1", "http://[bad"]) in (True, False)
+
+
+@pytest.mark.parametrize(("table", "message"), [
+    ({"max_pages": 0}, "max_pages"),
+    ({"max_pages": 100000}, "max_pages"),
+    ({"page_stall_s": 0}, "page_stall_s"),
+    ({"allowed_origins": ["evil.example"]}, "allowed_origins"),
+    ({"allowed_origins": ["http://a.example/path"]}, "allowed_origins"),
+])
+def test_renderer_limits_are_range_checked(table: dict[str, object], message: str) -> None:
+    with pytest.raises(msgspec.ValidationError, match=message):
+        msgspec.convert(table, EyeRendererSettings)
+    assert EyeRendererSettings().max_pages == 16
+
+
+def test_status_message_is_in_the_page_format() -> None:
+    assert wire.encode("status", wire.Status(bus=True)) == '{"topic":"status","msg":{"bus":true}}'
+
+
+def test_inbox_hands_the_loop_only_the_newest_per_slot() -> None:
+    """A flood from another thread reaches the loop as a few small batches with
+    the newest value of each slot, in arrival order; nothing queues per sample."""
+    from buddybot.eyes.renderer import Inbox
+
+    batches: list[list[m.Message]] = []
+
+    async def scenario() -> Inbox:
+        loop = asyncio.get_running_loop()
+        done = asyncio.Event()
+        inbox = Inbox(loop, lambda batch: (batches.append(batch), done.set()))
+
+        def flood() -> None:
+            for i in range(20_000):
+                inbox.put(m.EyesDirection(stamp_ns=i, yaw=i % 90, pitch=0.0))
+                if i % 1000 == 0:
+                    inbox.put(m.PupilControl(stamp_ns=i, dilation_percentage=i % 100))
+            inbox.put(m.EyesDirection(stamp_ns=99_999, yaw=1.0, pitch=2.0))
+
+        await loop.run_in_executor(None, flood)
+        while not batches or batches[-1][-1].stamp_ns != 99_999:
+            done.clear()
+            await asyncio.wait_for(done.wait(), 10)
+        return inbox
+
+    inbox = asyncio.run(scenario())
+    assert inbox.received == 20_000 + 20 + 1
+    assert sum(len(b) for b in batches) + inbox.coalesced == inbox.received
+    assert all(len(b) <= 2 for b in batches)          # one per slot, never a backlog
+    assert len(batches) < 2_000                      # not one wake-up per sample
+    assert batches[-1][-1] == m.EyesDirection(stamp_ns=99_999, yaw=1.0, pitch=2.0)

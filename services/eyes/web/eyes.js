@@ -5,12 +5,14 @@
 // names (DESIGN.md section 2): direction {yaw, pitch} degrees (+yaw = robot's
 // left), pupil {dilation_percentage}, lids {eye_id 0 L/1 R/2 both,
 // top_lid_position, bottom_lid_position}, expression {action}, plus
-// hello {iris_color, max_yaw_deg, max_pitch_deg}.
+// hello {iris_color, max_yaw_deg, max_pitch_deg}, status {bus}.
 //
 // Every value eases toward its target once per animation frame (exponential
 // approach, frame-rate independent), so a new target never makes a jump.
 // The page blinks and makes small saccades by itself, and reconnects by
-// itself when the server goes away.
+// itself when the server goes away. Until it is "ready" (its WebSocket is
+// open and the renderer is on the bus, so state can arrive) it shows a calm
+// "connecting" face: eyes half closed, looking ahead, dimmed.
 "use strict";
 
 (() => {
@@ -28,7 +30,9 @@
   const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30 };
 
   // Time constants (s) of the exponential approach toward targets.
-  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15 };
+  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15, calm: 0.3 };
+  const REST_LIDS = { top: 30, bottom: 16 };   // the connecting face: half closed
+  const REST_DIM = 0.55;                       // ... and dimmed toward the background
   const BLINK_CLOSE_MS = 60;     // closing: fast, like a real blink (~50-70 ms)
   const BLINK_OPEN_MS = 160;     // reopening: slower
   const now = () => performance.now();
@@ -42,11 +46,12 @@
     yaw: 0, pitch: 0, dilation: 50,
     lids: { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } },
     sad: 0, grin: 0, love: 0, star: 0,
+    calm: 1,                     // 1 = the connecting face, 0 = normal eyes
   };
 
   // Debug/benchmark surface (read by the tests and benchmarks/eyes.py).
   const eyes = {
-    which, target, cur, connected: false,
+    which, target, cur, connected: false, bus: false, ready: false,
     stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0 },
     blinkLog: [],                // last 50 blinks: {start_ms, close_ms, open_ms} as drawn
     frameIntervals: [],          // last 1200 requestAnimationFrame intervals, ms
@@ -89,6 +94,11 @@
         if (!Number.isInteger(msg.action) || msg.action < 0 || msg.action > 7) return false;
         target.expression = msg.action;
         return true;
+      case "status":
+        if (typeof msg.bus !== "boolean") return false;
+        eyes.bus = msg.bus;
+        updateReady();
+        return true;
       case "hello":
         if (typeof msg.iris_color === "string") cfg.iris = msg.iris_color;
         if (isNum(msg.max_yaw_deg) && msg.max_yaw_deg > 0) cfg.maxYaw = msg.max_yaw_deg;
@@ -119,6 +129,13 @@
   const statusDot = document.getElementById("status");
   let retryMs = 200;
 
+  function updateReady() {
+    eyes.ready = eyes.connected && eyes.bus;
+    statusDot.classList.toggle("offline", !eyes.ready);
+    statusDot.title = !eyes.connected ? "not connected to the eye renderer"
+      : (eyes.bus ? "connected" : "the eye renderer is waiting for the robot's bus");
+  }
+
   function connect() {
     const proto = location.protocol === "https:" ? "wss:" : "ws:";
     const ws = new WebSocket(`${proto}//${location.host}/ws?eye=${which}`);
@@ -126,12 +143,13 @@
       eyes.connected = true;
       eyes.stats.connects++;
       retryMs = 200;
-      statusDot.classList.remove("offline");
+      updateReady();             // still "connecting" until the renderer says it is on the bus
     };
     ws.onmessage = (ev) => onMessage(ev.data);
     ws.onclose = () => {
       eyes.connected = false;
-      statusDot.classList.add("offline");
+      eyes.bus = false;          // the next hello batch says again
+      updateReady();
       setTimeout(connect, retryMs);
       retryMs = Math.min(retryMs * 2, 2000);
     };
@@ -173,7 +191,7 @@
   function updateSaccade(t) {
     const lookRandom = target.expression === EXPR.LOOK_RANDOM;
     const idle = t - lastGazeMsg > 1500;
-    if (!(autoSaccade && (idle || lookRandom))) {
+    if (!(autoSaccade && eyes.ready && (idle || lookRandom))) {
       saccade = { yaw: 0, pitch: 0 };
       return;
     }
@@ -216,8 +234,10 @@
     lastFrame = t;
     const work0 = now();
     updateSaccade(t);
-    const yawGoal = target.yaw + saccade.yaw;
-    const pitchGoal = target.pitch + saccade.pitch;
+    // Connecting: look straight ahead (no stale gaze at someone who left).
+    const yawGoal = eyes.ready ? target.yaw + saccade.yaw : 0;
+    const pitchGoal = eyes.ready ? target.pitch + saccade.pitch : 0;
+    cur.calm = approach(cur.calm, eyes.ready ? 0 : 1, TAU.calm, dt);
     cur.yaw = approach(cur.yaw, yawGoal, TAU.gaze, dt);
     cur.pitch = approach(cur.pitch, pitchGoal, TAU.gaze, dt);
     cur.dilation = approach(cur.dilation, target.dilation, TAU.pupil, dt);
@@ -258,6 +278,12 @@
       drawEye("left", W / 2, 0, W / 2, H, t, blink);
     } else {
       drawEye(which, 0, 0, W, H, t, blink);
+    }
+    if (cur.calm > 0.001) {      // the connecting face is dimmed toward the background
+      ctx.globalAlpha = REST_DIM * cur.calm;
+      ctx.fillStyle = BG;
+      ctx.fillRect(0, 0, W, H);
+      ctx.globalAlpha = 1;
     }
   }
 
@@ -320,8 +346,12 @@
 
   function drawLids(side, cx, cy, R, blink) {
     const lids = cur.lids[side];
-    const top = lids.top + (50 - lids.top) * blink;
-    const bottom = lids.bottom + (50 - lids.bottom) * blink;
+    // Connecting: at least half closed (a closed eye stays closed).
+    const restTop = lids.top + (Math.max(lids.top, REST_LIDS.top) - lids.top) * cur.calm;
+    const restBottom = lids.bottom
+      + (Math.max(lids.bottom, REST_LIDS.bottom) - lids.bottom) * cur.calm;
+    const top = restTop + (50 - restTop) * blink;
+    const bottom = restBottom + (50 - restBottom) * blink;
     const span = R * 1.04;
     // Middles of the lid edges; closed lids overlap a little so no seam of
     // sclera shows through the anti-aliasing.
@@ -404,7 +434,7 @@
   function easeOut(p) { return 1 - (1 - p) * (1 - p); }
 
   window.addEventListener("resize", resize);
-  statusDot.classList.add("offline");
+  updateReady();
   connect();
   requestAnimationFrame(step);
 })();
