@@ -7,6 +7,14 @@ report frame at once, stamped with its arrival time. A sensor that
 disappears is retried with exponential backoff while the others go on;
 frames, bad frames, clamped energies and reconnects are counted in
 `diagnostics/radar-bridge`.
+
+At every connect the firmware version is asked for (0x00A0, inside
+enable/end configuration): only V2.x firmware defines the last two bytes
+of an engineering report as light level and OUT pin, so they are
+published for V2.x only. A sensor that does not answer is read all the
+same (fields empty). Any frame whose framing is intact (a report in an
+unusual state such as background-noise detection, an ACK) shows the line
+works: only a port with no intact frame at all is reopened.
 """
 
 from __future__ import annotations
@@ -25,11 +33,21 @@ import serial
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
+from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext
+from buddybot.radar import ld2410
+from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.convert import report_to_frame
-from buddybot.radar.ld2410 import Parser, Report
+from buddybot.radar.ld2410 import Parser, ProtocolError, Report
 from buddybot.radar.scenarios import SCENARIOS
+
+FIRMWARE_TIMEOUT_S = 0.5  # per ACK, two attempts: a mute sensor costs 1 s per connect
+NOISE_STATES = {
+    ld2410.STATE_NOISE_DETECTING: "in progress",
+    ld2410.STATE_NOISE_DETECTION_SUCCEEDED: "succeeded",
+    ld2410.STATE_NOISE_DETECTION_FAILED: "failed",
+}
 
 
 @dataclass
@@ -41,10 +59,16 @@ class SensorStatus:
     bad_frames: int = 0
     skipped_bytes: int = 0
     clamped: int = 0
+    bad_out_pin: int = 0
+    unusual_frames: int = 0
     reconnects: int = 0
     last_error: str = "connecting"
     ever_connected: bool = False
     last_frame: float = field(default=0.0)
+    firmware: str = "unknown"
+    # Whether this firmware's engineering reports end with light level and OUT pin.
+    light_and_out: bool = False
+    noise_detection: str = ""
 
 
 class SensorReader:
@@ -53,8 +77,9 @@ class SensorReader:
     def __init__(self, url: str, radar_id: int, baudrate: int,
                  publish: Callable[[int, Report, int], None], on_change: Callable[[], None],
                  stop: threading.Event, backoff: tuple[float, float], silence_s: float,
-                 log: Any) -> None:
+                 log: Any, query_firmware: bool = True) -> None:
         self.status = SensorStatus(url, radar_id)
+        self._query_firmware = query_firmware
         self._baud = baudrate
         self._publish = publish
         self._on_change = on_change
@@ -86,7 +111,7 @@ class SensorReader:
                 try:
                     port.close()
                 except Exception as exc:  # closing a dead port may fail too
-                    self._log.debug("close %s: %s", self.status.url, exc)
+                    self._log.debug("close %s: %s", clip(self.status.url), clip(str(exc)))
             self._stop.wait(delay)
 
     def _connected(self) -> None:
@@ -97,7 +122,7 @@ class SensorReader:
         st.connected = True
         st.last_error = ""
         self._parser.reset()
-        self._log.info("radar %d connected: %s", st.radar_id, st.url)
+        self._log.info("radar %d connected: %s", st.radar_id, clip(st.url))
         self._on_change()
 
     def _failed(self, why: str) -> None:
@@ -106,17 +131,47 @@ class SensorReader:
         st.connected = False
         st.last_error = why
         if changed:
-            self._log.warning("radar %d (%s) %s; retrying", st.radar_id, st.url, why)
+            self._log.warning("radar %d (%s) %s; retrying", st.radar_id, clip(st.url), clip(why))
             self._on_change()
+
+    def _firmware(self, port: Any) -> None:
+        """Ask the firmware version (enable configuration, 0x00A0, end configuration).
+
+        Serial errors propagate (the port is gone); a sensor that does not
+        answer or answers nonsense is read anyway, without light/OUT fields.
+        """
+        st = self.status
+        client = LD2410Client(port, timeout_s=FIRMWARE_TIMEOUT_S, attempts=2)
+        try:
+            with client.configuring():
+                version = client.read_firmware()
+        except (RadarError, ProtocolError) as exc:
+            if not client.enable_info:
+                # The enable ACK may be what got lost: never leave a sensor in
+                # configuration mode (it would stop reporting).
+                port.write(ld2410.end_config())
+            st.firmware = "unknown (no answer)"
+            st.light_and_out = False
+            self._log.info("radar %d (%s): firmware unknown (%s); light level and OUT pin "
+                           "not read", st.radar_id, clip(st.url), clip(str(exc)))
+            return
+        st.firmware = clip(version, 40)
+        st.light_and_out = ld2410.firmware_has_light_and_out(version)
+        self._log.info("radar %d firmware %s (light level and OUT pin: %s)", st.radar_id,
+                       st.firmware, "yes" if st.light_and_out else "no")
 
     def _read(self, port: Any) -> None:
         # Bytes buffered while nobody read (or before an unplug) are stale.
         with contextlib.suppress(AttributeError, NotImplementedError):
             port.reset_input_buffer()
         st = self.status
+        if self._query_firmware:
+            self._firmware(port)
         st.last_frame = time.monotonic()
         parser = self._parser
-        skipped_at_open = parser.stats.skipped_bytes
+        stats = parser.stats
+        skipped_at_open = stats.skipped_bytes
+        intact = stats.intact_frames
         while not self._stop.is_set():
             data = port.read(port.in_waiting or 1)
             now = time.monotonic()
@@ -124,11 +179,17 @@ class SensorReader:
                 stamp = time.time_ns()
                 for frame in parser.feed(data):
                     if isinstance(frame, Report):
-                        st.last_frame = now
                         st.frames += 1
+                        st.noise_detection = NOISE_STATES.get(frame.target_state,
+                                                              st.noise_detection)
                         self._publish(st.radar_id, frame, stamp)
-                st.bad_frames = parser.stats.bad_frames
-                st.skipped_bytes = parser.stats.skipped_bytes
+                if stats.intact_frames != intact:
+                    # Any intact frame (also one we could not use) shows the line works.
+                    intact = stats.intact_frames
+                    st.last_frame = now
+                st.bad_frames = stats.bad_frames
+                st.unusual_frames = stats.unusual_frames
+                st.skipped_bytes = stats.skipped_bytes
             if now - st.last_frame > self._silence_s:
                 hint = " (bytes arrive but never a frame: wrong baud rate?)" \
                     if parser.stats.skipped_bytes > skipped_at_open else ""
@@ -139,7 +200,8 @@ class Bridge:
     """The service body: readers + publisher + diagnostics."""
 
     def __init__(self, node: Node, urls: list[str], device_id: int, baudrate: int,
-                 backoff: tuple[float, float], silence_s: float) -> None:
+                 backoff: tuple[float, float], silence_s: float,
+                 query_firmware: bool = True) -> None:
         self.node = node
         self.device_id = device_id
         self._pub = node.publisher(keys.RADAR_FRAMES, device=str(device_id))
@@ -148,14 +210,17 @@ class Bridge:
         self.publish_errors = 0
         self.readers = [
             SensorReader(url, i, baudrate, self._publish, self._report, node.stop_event,
-                         backoff, silence_s, node.log)
+                         backoff, silence_s, node.log, query_firmware)
             for i, url in enumerate(urls)
         ]
 
     def _publish(self, radar_id: int, report: Report, stamp_ns: int) -> None:
-        frame, clamped = report_to_frame(report, radar_id)
+        st = self.readers[radar_id].status
+        frame, clamped, bad_out_pin = report_to_frame(report, radar_id, st.light_and_out)
         if clamped:
-            self.readers[radar_id].status.clamped += clamped
+            st.clamped += clamped
+        if bad_out_pin:
+            st.bad_out_pin += 1
         msg = m.LD2410TargetDataFrameArray(stamp_ns=stamp_ns, device_id=self.device_id,
                                            sensors=[frame])
         try:
@@ -163,7 +228,7 @@ class Bridge:
                 self._pub.put(msg)
         except Exception as exc:  # a Zenoh hiccup must not end the sensor's reader
             self.publish_errors += 1
-            self._warn.warning("put", "publishing frames failed: %r", exc)
+            self._warn.warning("put", "publishing frames failed: %s", clip(repr(exc)))
 
     def _report(self) -> None:
         """Diagnostics: level from the sensors' connection state, counters per sensor."""
@@ -171,10 +236,16 @@ class Bridge:
         down = [r.status for r in self.readers if not r.status.connected]
         values: dict[str, m.DiagnosticValue] = {"sensors": len(self.readers),
                                                 "connected": len(self.readers) - len(down)}
-        totals = {"frames": 0, "bad_frames": 0, "reconnects": 0, "clamped_energies": 0}
+        totals = {"frames": 0, "bad_frames": 0, "reconnects": 0, "clamped_energies": 0,
+                  "unusual_frames": 0, "bad_out_pin": 0}
         for r in self.readers:
             st = r.status
-            values[f"radar{st.radar_id}.url"] = st.url
+            values[f"radar{st.radar_id}.url"] = clip(st.url)
+            values[f"radar{st.radar_id}.firmware"] = st.firmware
+            values[f"radar{st.radar_id}.unusual_frames"] = st.unusual_frames
+            values[f"radar{st.radar_id}.bad_out_pin"] = st.bad_out_pin
+            if st.noise_detection:
+                values[f"radar{st.radar_id}.noise_detection"] = st.noise_detection
             values[f"radar{st.radar_id}.connected"] = st.connected
             values[f"radar{st.radar_id}.frames"] = st.frames
             values[f"radar{st.radar_id}.bad_frames"] = st.bad_frames
@@ -185,8 +256,10 @@ class Bridge:
             totals["bad_frames"] += st.bad_frames
             totals["reconnects"] += st.reconnects
             totals["clamped_energies"] += st.clamped
+            totals["unusual_frames"] += st.unusual_frames
+            totals["bad_out_pin"] += st.bad_out_pin
             if st.last_error:
-                values[f"radar{st.radar_id}.error"] = st.last_error
+                values[f"radar{st.radar_id}.error"] = clip(st.last_error)
         values.update(totals)
         values["publish_errors"] = self.publish_errors
         diag.values = values  # one reference swap: the publisher copies it
@@ -195,7 +268,8 @@ class Bridge:
         elif all(s.last_error == "connecting" for s in down):
             diag.set("WARN", f"connecting to {len(down)} sensor(s)")
         else:
-            text = "; ".join(f"radar {s.radar_id} ({s.url}) down: {s.last_error}" for s in down)
+            text = "; ".join(f"radar {s.radar_id} ({clip(s.url, 80)}) down: {clip(s.last_error)}"
+                             for s in down)
             diag.set("ERROR" if len(down) == len(self.readers) else "WARN", text)
         diag.publish()
 
@@ -253,7 +327,7 @@ def run(ctx: ServiceContext) -> int:
         return 2
     node = ctx.node()
     bridge = Bridge(node, urls, device_id, baud, (cfg.reconnect_initial_s, cfg.reconnect_max_s),
-                    cfg.silence_timeout_s)
+                    cfg.silence_timeout_s, cfg.query_firmware)
     try:
         bridge.start()
         node.spin()

@@ -115,3 +115,26 @@ class LD2410Client:
 
     def factory_reset(self) -> None:
         self.command(p.factory_reset(), p.CMD_FACTORY_RESET)
+
+    def set_baud_rate(self, baud: int) -> None:
+        """Takes effect after a restart: the reader must then open the port at `baud`."""
+        self.command(p.set_baud_rate(baud), p.CMD_SET_BAUD_RATE)
+
+    def set_bluetooth(self, on: bool) -> None:
+        """Takes effect after a restart."""
+        self.command(p.bluetooth(on), p.CMD_BLUETOOTH)
+
+    def start_auto_thresholds(self, duration_s: int) -> None:
+        """LD2410C: measure background noise for `duration_s` and set thresholds from it."""
+        self.command(p.start_auto_thresholds(duration_s), p.CMD_AUTO_THRESHOLDS)
+
+    def auto_thresholds_status(self) -> str:
+        ack = self.command(p.query_auto_thresholds(), p.CMD_AUTO_THRESHOLDS_STATUS)
+        return p.decode_auto_thresholds_status(ack.data)
+
+    def bluetooth_auth(self, password: str) -> None:
+        """LD2410C 0x00A8: obtain Bluetooth permissions (refused on a wrong password)."""
+        self.command(p.bluetooth_auth(password), p.CMD_BLUETOOTH_AUTH)
+
+    def set_bluetooth_password(self, password: str) -> None:
+        self.command(p.set_bluetooth_password(password), p.CMD_BLUETOOTH_PASSWORD)

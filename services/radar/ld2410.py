@@ -15,6 +15,9 @@ The parser never trusts a frame: head, declared length, data type, the
 bad frame is dropped and counted, and scanning restarts one byte after
 the rejected header, so a stray `F4 F3 F2 F1` inside data (or a partial
 frame after a reconnect) costs at most that frame, never the stream.
+It runs in time linear in its input, however the input is chunked: one
+`feed()` of megabytes of garbage and frames costs the same per byte as
+a live stream of 45-byte reads.
 """
 
 from __future__ import annotations
@@ -36,12 +39,23 @@ ENGINEERING_LENGTH = 0x0023
 MAX_GATE = 8
 ACK_FLAG = 0x0100
 
+# Target state byte: 0..3 = bit 0 moving, bit 1 still. LD2410C firmware
+# sends 4..6 while it measures the room's background noise (0x000B): no
+# target information in those frames, but they are valid frames.
+STATE_NOISE_DETECTING = 4
+STATE_NOISE_DETECTION_SUCCEEDED = 5
+STATE_NOISE_DETECTION_FAILED = 6
+MAX_TARGET_STATE = STATE_NOISE_DETECTION_FAILED
+
 # Longest payloads we accept; anything longer is a false header (the real
 # longest report is 35 bytes, the longest ACK, read parameters, 28 bytes).
 MAX_REPORT_LENGTH = 13 + 2 * (MAX_GATE + 1) + 2 + 2
 MAX_COMMAND_LENGTH = 64
 
-# Command words (DESIGN.md section 7).
+# Command words (DESIGN.md section 7; 0x000B/0x001B and 0x00A8/0x00A9 are
+# LD2410C additions).
+CMD_AUTO_THRESHOLDS = 0x000B
+CMD_AUTO_THRESHOLDS_STATUS = 0x001B
 CMD_SET_MAX_GATES = 0x0060
 CMD_READ_PARAMETERS = 0x0061
 CMD_ENGINEERING_ON = 0x0062
@@ -53,6 +67,8 @@ CMD_FACTORY_RESET = 0x00A2
 CMD_RESTART = 0x00A3
 CMD_BLUETOOTH = 0x00A4
 CMD_READ_MAC = 0x00A5
+CMD_BLUETOOTH_AUTH = 0x00A8
+CMD_BLUETOOTH_PASSWORD = 0x00A9
 CMD_SET_RESOLUTION = 0x00AA
 CMD_READ_RESOLUTION = 0x00AB
 CMD_SET_LIGHT_CONTROL = 0x00AD
@@ -61,6 +77,8 @@ CMD_END_CONFIG = 0x00FE
 CMD_ENABLE_CONFIG = 0x00FF
 
 COMMAND_NAMES: dict[int, str] = {
+    CMD_AUTO_THRESHOLDS: "start background noise detection (auto thresholds)",
+    CMD_AUTO_THRESHOLDS_STATUS: "query background noise detection",
     CMD_SET_MAX_GATES: "set max gates / no-one duration",
     CMD_READ_PARAMETERS: "read parameters",
     CMD_ENGINEERING_ON: "engineering mode on",
@@ -72,6 +90,8 @@ COMMAND_NAMES: dict[int, str] = {
     CMD_RESTART: "restart",
     CMD_BLUETOOTH: "bluetooth on/off",
     CMD_READ_MAC: "read MAC address",
+    CMD_BLUETOOTH_AUTH: "bluetooth authentication (get permissions)",
+    CMD_BLUETOOTH_PASSWORD: "set bluetooth password",
     CMD_SET_RESOLUTION: "set distance resolution",
     CMD_READ_RESOLUTION: "read distance resolution",
     CMD_SET_LIGHT_CONTROL: "set light / OUT control",
@@ -88,9 +108,19 @@ BAUD_RATES: dict[int, int] = {
 RESOLUTIONS: dict[int, float] = {0: 0.75, 1: 0.20}
 """Distance-resolution index (0x00AA/0x00AB) -> metres per gate."""
 
+NOISE_DETECTION_STATUS: dict[int, str] = {0: "not started", 1: "in progress", 2: "completed"}
+"""What 0x001B answers: the state of the background noise detection."""
+
+BLUETOOTH_PASSWORD_LENGTH = 6
+"""The Bluetooth password is exactly 6 ASCII characters (factory: "HiLink")."""
+
 
 class ProtocolError(ValueError):
     """Bytes that do not form what the protocol says they must."""
+
+
+class UnusualFrame(ProtocolError):
+    """A frame whose framing is intact but whose content we do not know."""
 
 
 # --- frames ------------------------------------------------------------------------
@@ -98,7 +128,13 @@ class ProtocolError(ValueError):
 
 @dataclass(frozen=True, slots=True)
 class Report:
-    """One report frame. Distances in cm (16-bit), energies as sent (0..255)."""
+    """One report frame. Distances in cm (16-bit), energies as sent (0..255).
+
+    `light_level`/`out_pin` are the two optional bytes after the gate
+    energies, as sent: only firmware V2.x defines them as light level and
+    OUT pin (V1.07 sends two other bytes there), so what they mean is for
+    the reader who knows the firmware to decide (`convert.py`).
+    """
 
     target_state: int
     moving_distance: int
@@ -240,6 +276,40 @@ def read_mac() -> bytes:
     return encode_command(CMD_READ_MAC, struct.pack("<H", 1))
 
 
+def start_auto_thresholds(duration_s: int) -> bytes:
+    """0x000B (LD2410C): measure the room's background noise for `duration_s`
+    seconds and set every gate's threshold from it. Reports carry target
+    states 4..6 while it runs and when it ends."""
+    if not 1 <= duration_s <= 0xFFFF:
+        raise ProtocolError(f"noise detection duration must be 1..65535 s, got {duration_s}")
+    return encode_command(CMD_AUTO_THRESHOLDS, struct.pack("<H", duration_s))
+
+
+def query_auto_thresholds() -> bytes:
+    """0x001B (LD2410C): the state of the background noise detection."""
+    return encode_command(CMD_AUTO_THRESHOLDS_STATUS)
+
+
+def _password(password: str) -> bytes:
+    raw = password.encode("ascii", "replace")
+    if (len(password) != BLUETOOTH_PASSWORD_LENGTH or not password.isascii()
+            or not password.isprintable()):
+        raise ProtocolError(f"bluetooth password must be {BLUETOOTH_PASSWORD_LENGTH} "
+                            "printable ASCII characters")
+    return raw
+
+
+def bluetooth_auth(password: str) -> bytes:
+    """0x00A8 (LD2410C): "obtain Bluetooth permissions" with the password.
+    The module accepts it over Bluetooth; over serial it may refuse it."""
+    return encode_command(CMD_BLUETOOTH_AUTH, _password(password))
+
+
+def set_bluetooth_password(password: str) -> bytes:
+    """0x00A9 (LD2410C): the new 6-character Bluetooth password (effective after restart)."""
+    return encode_command(CMD_BLUETOOTH_PASSWORD, _password(password))
+
+
 def resolution_index(metres_per_gate: float) -> int:
     for index, metres in RESOLUTIONS.items():
         if abs(metres - metres_per_gate) < 1e-6:
@@ -330,6 +400,32 @@ def decode_firmware(data: bytes) -> str:
     return f"V{major >> 8}.{major & 0xFF:02x}.{minor:08x}"
 
 
+def firmware_major(version: str) -> int | None:
+    """`V2.04.23022511` -> 2 (None for anything that is not such a version)."""
+    head = version[1:].split(".", 1)[0] if version.startswith("V") else ""
+    return int(head) if head.isdigit() else None
+
+
+def firmware_has_light_and_out(version: str | None) -> bool:
+    """Whether engineering reports of this firmware end with light level and OUT pin.
+
+    Only V2.x defines those two bytes; V1.07 sends two other bytes in their
+    place (one real module: "OUT pin" 33), and unknown firmware gets the
+    benefit of no doubt: the fields stay empty rather than wrong.
+    """
+    major = firmware_major(version) if version else None
+    return major is not None and major >= 2
+
+
+def decode_auto_thresholds_status(data: bytes) -> str:
+    """0x001B: "not started", "in progress" or "completed"."""
+    _need(data, 2, "query background noise detection")
+    (status,) = struct.unpack_from("<H", data)
+    if status not in NOISE_DETECTION_STATUS:
+        raise ProtocolError(f"query background noise detection: unknown status {status}")
+    return NOISE_DETECTION_STATUS[status]
+
+
 def decode_resolution(data: bytes) -> float:
     _need(data, 2, "read distance resolution")
     (index,) = struct.unpack_from("<H", data)
@@ -364,15 +460,30 @@ def decode_light_control(data: bytes) -> LightControl:
 
 @dataclass
 class ParserStats:
-    """Counters a driver reports in diagnostics."""
+    """Counters a driver reports in diagnostics.
+
+    `intact_frames` counts every frame whose framing was sound (reports,
+    ACKs, commands and `unusual_frames`: well-formed reports with content
+    we do not know, such as a future target state). A driver takes any of
+    them as a sign that the line works: a sensor in an unusual mode is not
+    a wedged adapter.
+    """
 
     reports: int = 0
     acks: int = 0
     commands: int = 0
     bad_frames: int = 0
+    unusual_frames: int = 0
+    intact_frames: int = 0
     skipped_bytes: int = 0
     last_error: str = ""
     errors: dict[str, int] = field(default_factory=dict)
+
+
+def _check_state(state: int) -> None:
+    """Called once the frame's whole structure has been checked."""
+    if state > MAX_TARGET_STATE:
+        raise UnusualFrame(f"unknown target state {state}")
 
 
 def _decode_report(payload: bytes) -> Report:
@@ -386,11 +497,10 @@ def _decode_report(payload: bytes) -> Report:
     if payload[-2:] != DATA_END:
         raise ProtocolError("bad 0x55 0x00 end")
     state, mdist, menergy, sdist, senergy, ddist = struct.unpack_from("<BHBHBH", payload, 2)
-    if state > 3:
-        raise ProtocolError("bad target state")
     if kind == TYPE_BASIC:
         if length != BASIC_LENGTH:
             raise ProtocolError("bad basic length")
+        _check_state(state)
         return Report(state, mdist, menergy, sdist, senergy, ddist)
     if kind != TYPE_ENGINEERING:
         raise ProtocolError("bad data type")
@@ -402,6 +512,7 @@ def _decode_report(payload: bytes) -> Report:
     extra = length - 2 - end_still
     if extra not in (0, 2):
         raise ProtocolError("bad engineering length")
+    _check_state(state)
     light = out = None
     if extra == 2:
         light, out = payload[end_still], payload[end_still + 1]
@@ -442,6 +553,11 @@ class Parser:
 
     The buffer never grows past one maximal frame plus a chunk: bytes that
     cannot start a frame are discarded (counted in `skipped_bytes`).
+
+    Linear time: the next header of each kind is searched once with
+    `bytearray.find` and remembered until the scan passes it, so a chunk
+    full of report frames never rescans its remainder for a command
+    header that is not there (which made one 4 MB `feed()` take minutes).
     """
 
     def __init__(self) -> None:
@@ -455,28 +571,33 @@ class Parser:
     def _bad(self, why: str) -> None:
         self.stats.bad_frames += 1
         self.stats.last_error = why
-        self.stats.errors[why] = self.stats.errors.get(why, 0) + 1
+        errors = self.stats.errors
+        if why in errors or len(errors) < 32:  # reasons are ours, but stay bounded
+            errors[why] = errors.get(why, 0) + 1
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[Frame]:
         buf = self._buf
         buf += chunk
         out: list[Frame] = []
+        stats = self.stats
         pos = 0
         end = len(buf)
+        r = c = -2  # next report/command header at or after pos (-1: none; -2: not searched)
         while True:
-            # The earliest header of either kind; both start with a distinctive byte.
-            r = buf.find(REPORT_HEAD, pos)
-            c = buf.find(COMMAND_HEAD, pos)
+            if r != -1 and r < pos:
+                r = buf.find(REPORT_HEAD, pos)
+            if c != -1 and c < pos:
+                c = buf.find(COMMAND_HEAD, pos)
             if r < 0 and c < 0:
                 # Keep a possible partial header (up to 3 bytes) for the next chunk.
                 keep = max(pos, end - 3)
                 while keep < end and buf[keep] not in (0xF4, 0xFD):
                     keep += 1
-                self.stats.skipped_bytes += keep - pos
+                stats.skipped_bytes += keep - pos
                 pos = keep
                 break
             start = r if c < 0 or (0 <= r < c) else c
-            self.stats.skipped_bytes += start - pos
+            stats.skipped_bytes += start - pos
             pos = start
             if end - start < 6:
                 break
@@ -506,16 +627,24 @@ class Parser:
             payload = bytes(buf[start + 6:frame_end - 4])
             try:
                 frame: Frame = _decode_report(payload) if is_report else _decode_command(payload)
+            except UnusualFrame as exc:
+                # Sound framing, content we do not know: skip the whole frame.
+                stats.unusual_frames += 1
+                stats.intact_frames += 1
+                stats.last_error = str(exc)
+                pos = frame_end
+                continue
             except ProtocolError as exc:
                 self._bad(str(exc))
                 pos = start + 1
                 continue
             if isinstance(frame, Report):
-                self.stats.reports += 1
+                stats.reports += 1
             elif isinstance(frame, Ack):
-                self.stats.acks += 1
+                stats.acks += 1
             else:
-                self.stats.commands += 1
+                stats.commands += 1
+            stats.intact_frames += 1
             out.append(frame)
             pos = frame_end
         del buf[:pos]

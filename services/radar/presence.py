@@ -21,13 +21,35 @@ else MOVING; publish on change. What a real LD2410 adds, and the answer:
   `stale_after_s` and reported; its last frame is not taken for "nobody
   here" nor for "still here". With no fresh sensor at all the verdict is
   kept (we do not know) and the service reports the outage.
+* An LD2410C measuring background noise sends target states 4..6: fresh
+  data saying "no target" (not silence).
+* Sensor names come from the network: the table keeps at most
+  `max_sensors`, so a flood of invented sensor ids costs bounded memory
+  and time. To make room it forgets, among the sensors not *established*
+  (heard for `ESTABLISHED_S` with at least `ESTABLISHED_FRAMES` frames),
+  the one with the fewest frames, the most recently heard of those
+  first; only when every sensor is established the one heard least
+  recently. So a flood of ids each sent once churns one slot and never
+  pushes out a sensor that was already there (and the person it sees),
+  not even one still becoming established. A sensor whose first frame
+  comes in the middle of such a flood is only tracked once it ends.
+* Stamps: a verdict carries the stamp of the frame that caused it, or of
+  the latest frame for a verdict that time caused. Never the largest
+  stamp ever seen: one frame stamped far in the future would otherwise be
+  the stamp of every later verdict.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from buddybot.core.limits import BoundedDict
 from buddybot.core.messages import PresenceState, PresenceTarget, TargetState
+
+TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
+MAX_SENSORS_LIMIT = 1024
+ESTABLISHED_S = 1.0  # a sensor heard this long ...
+ESTABLISHED_FRAMES = 5  # ... with this many frames is a real one (10 Hz: after ~1 s)
 
 
 @dataclass(frozen=True)
@@ -39,6 +61,7 @@ class PresenceRules:
     absence_hold_s: float = 3.0
     target_hold_s: float = 1.0
     stale_after_s: float = 1.5
+    max_sensors: int = 16
 
     def __post_init__(self) -> None:
         if self.range_m <= 0:
@@ -48,6 +71,9 @@ class PresenceRules:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.stale_after_s <= 0:
             raise ValueError(f"stale_after_s must be > 0, got {self.stale_after_s}")
+        if not 1 <= self.max_sensors <= MAX_SENSORS_LIMIT:
+            raise ValueError(f"max_sensors must be 1..{MAX_SENSORS_LIMIT}, "
+                             f"got {self.max_sensors}")
 
 
 @dataclass(frozen=True)
@@ -61,7 +87,9 @@ class Reading:
 
     @property
     def present(self) -> bool:
-        return self.target_state != TargetState.NO_TARGET
+        """A moving and/or still target; NO_TARGET and the background-noise
+        detection states (4..6) carry none."""
+        return self.target_state in TARGET_STATES
 
     @property
     def distance_m(self) -> float:
@@ -91,7 +119,12 @@ class _Sensor:
     reading: Reading
     seen_s: float
     stamp_ns: int
-    stale: bool = False
+    first_s: float
+    frames: int = 1
+
+    @property
+    def established(self) -> bool:
+        return self.frames >= ESTABLISHED_FRAMES and self.seen_s - self.first_s >= ESTABLISHED_S
 
 
 @dataclass
@@ -111,20 +144,54 @@ class PresenceTracker:
     rules: PresenceRules = field(default_factory=PresenceRules)
     presence: PresenceState | None = None
     target: PresenceTarget = PresenceTarget.MOVING
-    _sensors: dict[str, _Sensor] = field(default_factory=dict)
+    _sensors: BoundedDict[str, _Sensor] = field(init=False)
     _absent_since: float | None = None
     _pending_target: PresenceTarget | None = None
     _pending_since: float = 0.0
     _last_stamp: int = 0
     _distance_m: float = 0.0
 
+    def __post_init__(self) -> None:
+        self._sensors = BoundedDict(self.rules.max_sensors)
+        self._evicted = 0
+
+    @property
+    def evicted(self) -> int:
+        """Sensors forgotten to keep the table within `max_sensors`."""
+        return self._evicted + self._sensors.evicted
+
+    def established(self, sensor: str) -> bool:
+        """Whether `sensor` has been reporting steadily (see ESTABLISHED_S)."""
+        entry = self._sensors.get(sensor)
+        return entry is not None and entry.established
+
     # -- inputs --
 
     def update(self, sensor: str, reading: Reading, now_s: float, stamp_ns: int) -> Verdict | None:
         """A frame from `sensor` (any stable name, e.g. "0/1" = device/radar)."""
-        self._sensors[sensor] = _Sensor(reading, now_s, stamp_ns)
-        self._last_stamp = max(self._last_stamp, stamp_ns)
+        entry = self._sensors.get(sensor)
+        if entry is None:
+            self._make_room()
+            self._sensors[sensor] = _Sensor(reading, now_s, stamp_ns, first_s=now_s)
+        else:
+            entry.reading, entry.seen_s, entry.stamp_ns = reading, now_s, stamp_ns
+            entry.frames += 1
+            self._sensors.touch(sensor)
+        self._last_stamp = stamp_ns  # the latest frame's, never the largest seen
         return self._evaluate(now_s, stamp_ns)
+
+    def _make_room(self) -> None:
+        """Before a new sensor: forget the not established one with the fewest
+        frames, the most recently heard of those (if all are established: the
+        least recently heard)."""
+        if len(self._sensors) < self._sensors.max_items:
+            return
+        entries = self._sensors.items()  # least recently heard first
+        candidates = [(s.frames, -i, k) for i, (k, s) in enumerate(entries)
+                      if not s.established]
+        victim = min(candidates)[2] if candidates else entries[0][0]
+        self._sensors.pop(victim)
+        self._evicted += 1
 
     def tick(self, now_s: float) -> Verdict | None:
         """Time passes: holds expire, silent sensors go stale."""
@@ -139,6 +206,10 @@ class PresenceTracker:
     def fresh_sensors(self, now_s: float) -> list[str]:
         return sorted(k for k, s in self._sensors.items()
                       if now_s - s.seen_s <= self.rules.stale_after_s)
+
+    def _any_fresh(self, now_s: float) -> bool:
+        limit = self.rules.stale_after_s
+        return any(now_s - s.seen_s <= limit for s in self._sensors.values())
 
     def known_sensors(self) -> list[str]:
         return sorted(self._sensors)
@@ -155,7 +226,7 @@ class PresenceTracker:
         return best
 
     def _evaluate(self, now_s: float, stamp_ns: int) -> Verdict | None:
-        if not self.fresh_sensors(now_s):
+        if not self._any_fresh(now_s):
             # Nobody can tell: keep the verdict and restart the absence hold
             # when data returns, rather than inventing "nobody here".
             self._absent_since = None

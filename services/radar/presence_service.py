@@ -5,6 +5,16 @@ frames arrive from all devices (wildcard subscription), each sensor is
 known as "<device>/<radar_id>", a timer drives the hold and staleness
 rules, and a change is published at once, stamped with the frame that
 caused it. Stale sensors are reported in `diagnostics/radar-presence`.
+
+Everything here comes from the network, so everything is bounded: the
+sensor table (`max_sensors`), the frames taken from one message (a bridge
+sends one sensor per message; at most `max_sensors`), the diagnostics
+(counts and a few clipped names, at most one change report per second),
+and stamps (a frame stamped outside [now - 10 s, now + 1 s] is taken at
+its arrival time, and no verdict is published with an implausible
+stamp). Frames reach the rule through an `Intake`: keys carrying an
+established sensor are served first, so a flood on other keys can delay
+or drop only the flood.
 """
 
 from __future__ import annotations
@@ -16,18 +26,25 @@ import time
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import ConfigError
+from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import Node
 from buddybot.core.service import ServiceContext
+from buddybot.radar.intake import Intake
 from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
 from buddybot.radar.settings import RadarPresenceSettings
 
 TICK_S = 0.05  # hold/staleness resolution; costs nothing, keeps OUT_OF_RANGE on time
+REPORT_MIN_S = 1.0  # a changing sensor list is reported at most this often (level: at once)
+NAMES_SHOWN = 4  # sensor names listed in diagnostics; the rest are counted
+NAME_MAX = 60  # characters of a sensor name (the device part comes from the key)
+QUEUE_SIZE = 256  # frames from not (yet) established sensors waiting for the rule
+RULE_NAMES = ("range_m", "exit_margin_m", "absence_hold_s", "target_hold_s", "stale_after_s",
+              "max_sensors")
 
 
 def rules_from(cfg: RadarPresenceSettings, args: argparse.Namespace) -> PresenceRules:
     """Config table, then command-line overrides."""
-    values = {name: getattr(cfg, name) for name in (
-        "range_m", "exit_margin_m", "absence_hold_s", "target_hold_s", "stale_after_s")}
+    values = {name: getattr(cfg, name) for name in RULE_NAMES}
     for name in values:
         override = getattr(args, name, None)
         if override is not None:
@@ -46,20 +63,50 @@ class PresenceService:
         self._pub = node.publisher(keys.PRESENCE)
         self._stale: list[str] | None = None
         self._known: list[str] = []
+        self._level = ""
+        self._reported_at = 0.0
         self._published = 0
+        self.implausible_stamps = 0
+        self.ignored_frames = 0
+        self.intake: Intake[m.LD2410TargetDataFrameArray] = Intake(
+            self._take, general_size=QUEUE_SIZE, per_key=rules.max_sensors,
+            max_trusted=rules.max_sensors, on_error=self._handler_failed,
+            name="presence-intake")
+
+    def submit(self, msg: m.LD2410TargetDataFrameArray, key: str) -> None:
+        """In Zenoh's thread: only sorted into the intake."""
+        self.intake.submit(key, msg)
+
+    def _take(self, key: str, msg: m.LD2410TargetDataFrameArray) -> None:
+        self.on_frames(msg, key)
+
+    def _handler_failed(self, exc: BaseException) -> None:
+        self.node.diagnostics.increment("callback_errors")
+        self.node.log.warning("presence handler failed: %s", clip(repr(exc)))
 
     def on_frames(self, msg: m.LD2410TargetDataFrameArray, key: str) -> None:
         now = time.monotonic()
+        # A wrong clock (or an attacker) must not put its stamp on our verdicts.
+        stamp, replaced = plausible_stamp(msg.stamp_ns, m.now_ns())
         # The key names the bridge (the payload's device_id should agree; the key wins).
         device = (keys.RADAR_FRAMES.match(key) or {}).get("device", str(msg.device_id))
+        limit = self.tracker.rules.max_sensors
         with self._lock:
-            for frame in msg.sensors:
+            if replaced:
+                self.implausible_stamps += 1
+            if len(msg.sensors) > limit:
+                self.ignored_frames += len(msg.sensors) - limit
+            trusted = False
+            for frame in msg.sensors[:limit]:
                 reading = Reading(int(frame.target_state), frame.detection_distance,
                                   frame.movement_distance, frame.stationary_distance)
-                verdict = self.tracker.update(f"{device}/{frame.radar_id}", reading,
-                                              now, msg.stamp_ns)
+                name = clip(f"{device}/{frame.radar_id}", NAME_MAX)
+                verdict = self.tracker.update(name, reading, now, stamp)
                 if verdict is not None:
                     self._publish(verdict)
+                trusted = trusted or self.tracker.established(name)
+        if trusted:
+            self.intake.trust(key)
 
     def tick(self) -> None:
         now = time.monotonic()
@@ -69,32 +116,65 @@ class PresenceService:
                 self._publish(verdict)
             stale = self.tracker.stale_sensors(now)
             known = self.tracker.known_sensors()
-        if stale != self._stale or known != self._known:
-            self._stale, self._known = stale, known
-            self._report(known, stale)
+            values = self.node.diagnostics.values
+            values["evicted_sensors"] = self.tracker.evicted
+            values["implausible_stamps"] = self.implausible_stamps
+            values["ignored_frames"] = self.ignored_frames
+            values["dropped_frames"] = self.intake.dropped
+            values["dropped_established_frames"] = self.intake.dropped_trusted
+        if stale == self._stale and known == self._known:
+            return
+        level = _level(known, stale)
+        # Under a flood of sensor ids the lists change every tick: report a new
+        # level at once, a new list at most once per REPORT_MIN_S.
+        if level == self._level and now - self._reported_at < REPORT_MIN_S:
+            return
+        self._stale, self._known, self._level, self._reported_at = stale, known, level, now
+        self._report(known, stale, level)
 
     def _publish(self, v: Verdict) -> None:
         self._published += 1
-        self._pub.put(m.PresenceDetection(stamp_ns=v.stamp_ns, target_state=v.target,
+        # Frame stamps were checked on arrival; this is the last line of defence.
+        stamp, replaced = plausible_stamp(v.stamp_ns, m.now_ns())
+        if replaced:
+            self.implausible_stamps += 1
+        self._pub.put(m.PresenceDetection(stamp_ns=stamp, target_state=v.target,
                                           presence_state=v.presence, distance_m=v.distance_m))
         self.node.log.info("presence %s %s at %.2f m", v.presence.name, v.target.name,
                            v.distance_m)
         self.node.diagnostics.values["presence"] = v.presence.name
         self.node.diagnostics.values["changes"] = self._published
 
-    def _report(self, known: list[str], stale: list[str]) -> None:
+    def _report(self, known: list[str], stale: list[str], level: str) -> None:
         diag = self.node.diagnostics
         diag.values["sensors"] = len(known)
-        diag.values["stale"] = ",".join(stale)
-        if not known:
+        diag.values["stale_count"] = len(stale)
+        diag.values["stale"] = _names(stale)
+        if level == "WAIT":
             diag.set("WARN", "waiting for radar frames")
-        elif not stale:
+        elif level == "OK":
             diag.set("OK", f"{len(known)} sensor(s) fresh")
-        elif len(stale) == len(known):
-            diag.set("ERROR", f"no radar data: all sensors silent ({', '.join(stale)}); "
+        elif level == "ERROR":
+            diag.set("ERROR", f"no radar data: all sensors silent ({_names(stale)}); "
                               "keeping the last verdict")
         else:
-            diag.set("WARN", f"sensor(s) silent, excluded: {', '.join(stale)}")
+            diag.set("WARN", f"{len(stale)} of {len(known)} sensor(s) silent, excluded: "
+                             f"{_names(stale)}")
+
+
+def _level(known: list[str], stale: list[str]) -> str:
+    if not known:
+        return "WAIT"
+    if not stale:
+        return "OK"
+    return "ERROR" if len(stale) == len(known) else "WARN"
+
+
+def _names(names: list[str]) -> str:
+    """A few names and a count: diagnostics stay small whatever the network sends."""
+    shown = ", ".join(names[:NAMES_SHOWN])
+    more = len(names) - NAMES_SHOWN
+    return f"{shown} (+{more} more)" if more > 0 else shown
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -108,6 +188,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="MOVING/STANDING change must last this long (default 1.0)")
     parser.add_argument("--stale-after-s", dest="stale_after_s", type=float,
                         help="a sensor silent this long is excluded (default 1.5)")
+    parser.add_argument("--max-sensors", dest="max_sensors", type=int,
+                        help="sensors remembered at most, least recently heard forgotten "
+                             "(default 16)")
 
 
 def run(ctx: ServiceContext) -> int:
@@ -115,10 +198,15 @@ def run(ctx: ServiceContext) -> int:
     node = ctx.node()
     try:
         service = PresenceService(node, rules)
-        # Every device (wildcard); on a worker, never in Zenoh's thread.
-        node.subscribe(keys.RADAR_FRAMES, service.on_frames, delivery="queue", queue_size=256)
+        service.intake.start()
+        # Every device (wildcard). Zenoh's thread only sorts the frames into the
+        # intake; the rule runs on its worker, established sensors first.
+        node.subscribe(keys.RADAR_FRAMES, service.submit, delivery="inline")
         node.every(TICK_S, service.tick, name="presence-tick")
-        node.spin()
+        try:
+            node.spin()
+        finally:
+            service.intake.close()
     finally:
         node.close()
     return 0

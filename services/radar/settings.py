@@ -28,8 +28,11 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     # Reconnect backoff: first retry after reconnect_initial_s, doubling up to reconnect_max_s.
     reconnect_initial_s: Positive = 0.5
     reconnect_max_s: Positive = 5.0
-    # A port that delivers no valid frame for this long is reopened (the sensor sends ~10/s).
+    # A port that delivers no intact frame for this long is reopened (the sensor sends ~10/s).
     silence_timeout_s: Positive = 3.0
+    # Ask each sensor's firmware version at connect: only V2.x reports carry light
+    # level and OUT pin. Off for a link that cannot send to the sensor.
+    query_firmware: bool = True
 
 
 class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -42,3 +45,6 @@ class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=
     target_hold_s: NonNegative = 1.0
     # A sensor silent for this long is excluded and reported (frames come every ~0.1 s).
     stale_after_s: Positive = 1.5
+    # Sensors remembered at most (least recently heard forgotten first): a robot has a
+    # few; the bound keeps a flood of invented sensor ids from growing the table.
+    max_sensors: Annotated[int, msgspec.Meta(ge=1, le=1024)] = 16

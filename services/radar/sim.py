@@ -31,6 +31,8 @@ FRAME_PERIOD_S = 0.1  # the module reports about 10 times per second
 DEFAULT_MOVING_SENSITIVITY = (50, 50, 40, 30, 20, 15, 15, 15, 15)
 DEFAULT_STILL_SENSITIVITY = (0, 0, 40, 40, 30, 30, 20, 20, 20)
 FIRMWARE = (0x0100, 0x0107, 0x22091615)  # type, major (1.07), minor
+FIRMWARE_V2 = (0x0100, 0x0204, 0x23022511)  # an LD2410C with light level and OUT pin bytes
+NOISE_RESULT_S = 1.0  # how long reports say "noise detection succeeded/failed" afterwards
 
 
 def default_parameters() -> p.Parameters:
@@ -52,6 +54,14 @@ class SimulatedLD2410:
     light: bytes = b"\x00\x80\x00\x00"
     config_mode: bool = False
     mac: bytes = bytes.fromhex("8f27c6d91a3b")
+    firmware: tuple[int, int, int] = FIRMWARE
+    # The two bytes after the gate energies; None: a light level and the OUT pin.
+    aux_bytes: tuple[int, int] | None = None
+    bluetooth_password: str = "HiLink"
+    bluetooth_authorised: bool = False
+    noise_detection_fails: bool = False
+    _noise_start: float | None = None
+    _noise_end: float = 0.0
     restarts: int = 0
     factory_resets: int = 0
     commands: list[int] = field(default_factory=list)
@@ -67,11 +77,27 @@ class SimulatedLD2410:
         or rebooting)."""
         if self.config_mode or now < self._silent_until:
             return b""
-        target = self.scenario(t, self.rng)
+        target = self._noise_target(now) or self.scenario(t, self.rng)
         frame = p.encode_report(self._report(target))
         if target.corrupt:
             frame = frame[:-1] + b"\x00"
         return target.garbage + frame
+
+    def noise_status(self, now: float) -> int:
+        """0x001B's answer: 0 never started, 1 in progress, 2 completed."""
+        if self._noise_start is None:
+            return 0
+        return 1 if now < self._noise_end else 2
+
+    def _noise_target(self, now: float) -> Target | None:
+        """While measuring background noise (and shortly after) the module sends
+        target states 4..6 instead of targets (LD2410C auto thresholds)."""
+        if self._noise_start is None or now >= self._noise_end + NOISE_RESULT_S:
+            return None
+        if now < self._noise_end:
+            return Target(p.STATE_NOISE_DETECTING)
+        return Target(p.STATE_NOISE_DETECTION_FAILED if self.noise_detection_fails
+                      else p.STATE_NOISE_DETECTION_SUCCEEDED)
 
     def _report(self, target: Target) -> p.Report:
         if not self.engineering:
@@ -80,16 +106,16 @@ class SimulatedLD2410:
         gate_cm = 75 if self.resolution_index == 0 else 20
         moving = [self.rng.randint(0, 8) for _ in range(9)]
         still = [self.rng.randint(0, 8) for _ in range(9)]
-        if target.state & 1:
+        if target.state in (1, 3):
             moving[min(8, target.moving_cm // gate_cm)] = min(100, target.moving_energy)
-        if target.state & 2:
+        if target.state in (2, 3):
             still[min(8, target.still_cm // gate_cm)] = min(100, target.still_energy)
+        light, out = self.aux_bytes or (self.rng.randint(60, 80), int(target.state in (1, 2, 3)))
         return p.Report(
             target.state, target.moving_cm, target.moving_energy, target.still_cm,
             target.still_energy, target.detection_cm, engineering=True,
             max_moving_gate=8, max_still_gate=8, moving_gate_energy=tuple(moving),
-            still_gate_energy=tuple(still), light_level=self.rng.randint(60, 80),
-            out_pin=int(target.state != 0),
+            still_gate_energy=tuple(still), light_level=light, out_pin=out,
         )
 
     # -- commands --
@@ -137,7 +163,7 @@ class SimulatedLD2410:
             self.params = replace(self.params, moving_sensitivity=tuple(ms),
                                   still_sensitivity=tuple(ss))
         elif word == p.CMD_READ_FIRMWARE:
-            return p.encode_firmware(*FIRMWARE)
+            return p.encode_firmware(*self.firmware)
         elif word == p.CMD_SET_BAUD_RATE:
             (index,) = struct.unpack("<H", value)
             if index not in p.BAUD_RATES.values():
@@ -160,6 +186,22 @@ class SimulatedLD2410:
             self.bluetooth = bool(flag)
         elif word == p.CMD_READ_MAC:
             return self.mac
+        elif word == p.CMD_AUTO_THRESHOLDS:
+            (duration,) = struct.unpack("<H", value)
+            if duration == 0:
+                raise ValueError("bad duration")
+            self._noise_start, self._noise_end = now, now + duration
+        elif word == p.CMD_AUTO_THRESHOLDS_STATUS:
+            return struct.pack("<H", self.noise_status(now))
+        elif word == p.CMD_BLUETOOTH_AUTH:
+            self.bluetooth_authorised = value == self.bluetooth_password.encode("ascii")
+            if not self.bluetooth_authorised:
+                raise ValueError("wrong password")
+        elif word == p.CMD_BLUETOOTH_PASSWORD:
+            text = value.decode("ascii", "replace")
+            if len(value) != p.BLUETOOTH_PASSWORD_LENGTH or not text.isprintable():
+                raise ValueError("bad password")
+            self.bluetooth_password = text
         elif word == p.CMD_SET_RESOLUTION:
             (index,) = struct.unpack("<H", value)
             if index not in p.RESOLUTIONS:
@@ -196,10 +238,12 @@ class PtySensor:
 
     def __init__(self, scenario: str | Scenario = "visit", *, link: Path | None = None,
                  speed: float = 1.0, engineering: bool = True, seed: int = 1,
-                 answer_commands: bool = True) -> None:
+                 answer_commands: bool = True, firmware: tuple[int, int, int] = FIRMWARE,
+                 aux_bytes: tuple[int, int] | None = None) -> None:
         fn = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
         self.sim = SimulatedLD2410(fn, engineering=engineering, seed=seed,
-                                   answer_commands=answer_commands)
+                                   answer_commands=answer_commands, firmware=firmware,
+                                   aux_bytes=aux_bytes)
         self.speed = speed
         self.link = link
         self.frames_sent = 0

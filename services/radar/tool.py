@@ -6,6 +6,13 @@
     buddybot radar set-sensitivity --gate all --moving 40 --still 30 --port URL
     buddybot radar set-resolution 0.2 --port URL
     buddybot radar restart --port URL      (or factory-reset)
+    buddybot radar baud-rate 115200 --port URL
+    buddybot radar bluetooth off --port URL
+    buddybot radar mac --port URL
+    buddybot radar auto-thresholds --duration 10 --wait --port URL   (LD2410C)
+    buddybot radar noise-status --port URL                           (LD2410C)
+    buddybot radar bluetooth-auth --password HiLink --port URL       (LD2410C)
+    buddybot radar bluetooth-password NEWPW1 --port URL              (LD2410C)
 
 Every verb runs inside enable configuration ... end configuration. The
 port must not be read by a running radar bridge at the same time. Exit
@@ -17,12 +24,17 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 
 import serial
 
+from buddybot.core.limits import clip
 from buddybot.core.service import ServiceContext
+from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
+
+NOISE_POLL_S = 0.5
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -59,6 +71,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("metres", type=float, choices=[0.75, 0.2])
     action("restart", "restart the module")
     action("factory-reset", "restore factory settings (effective after restart)")
+    p = action("baud-rate", "serial speed of the module (effective after restart)")
+    p.add_argument("rate", type=int, choices=sorted(ld2410.BAUD_RATES))
+    p = action("bluetooth", "the module's Bluetooth on or off (effective after restart)")
+    p.add_argument("state", choices=["on", "off"])
+    action("mac", "the module's Bluetooth MAC address")
+    p = action("auto-thresholds",
+               "LD2410C: measure the empty room's background noise and set every "
+               "gate's threshold from it (leave the room first)")
+    p.add_argument("--duration", type=int, default=10, help="seconds to measure (default 10)")
+    p.add_argument("--wait", action="store_true", help="wait until the detection completed")
+    action("noise-status", "LD2410C: state of the background noise detection")
+    p = action("bluetooth-auth", "LD2410C: obtain Bluetooth permissions with the password")
+    p.add_argument("--password", required=True, help="6 ASCII characters (factory: HiLink)")
+    p = action("bluetooth-password", "LD2410C: set the Bluetooth password (after restart)")
+    p.add_argument("password", help="the new password: 6 printable ASCII characters")
 
 
 def _params_dict(params: Parameters) -> dict[str, object]:
@@ -107,7 +134,55 @@ def execute(client: LD2410Client, args: argparse.Namespace) -> dict[str, object]
             client.factory_reset()
             result["factory_reset"] = True
             result["note"] = "takes effect after a restart"
+        elif action == "baud-rate":
+            client.set_baud_rate(args.rate)
+            result["baud_rate"] = args.rate
+            result["note"] = ("takes effect after a restart; then read the sensor with "
+                              f"--baudrate {args.rate} ([radar_bridge] baudrate)")
+        elif action == "bluetooth":
+            client.set_bluetooth(args.state == "on")
+            result["bluetooth"] = args.state
+            result["note"] = "takes effect after a restart"
+        elif action == "mac":
+            result["mac"] = client.read_mac()
+        elif action == "auto-thresholds":
+            client.start_auto_thresholds(args.duration)
+            result["noise_detection"] = "started"
+            if args.wait:
+                result["noise_detection"] = _wait_noise_detection(client, args.duration)
+        elif action == "noise-status":
+            result["noise_detection"] = client.auto_thresholds_status()
+        elif action == "bluetooth-auth":
+            client.bluetooth_auth(args.password)
+            result["bluetooth_auth"] = "granted"
+        elif action == "bluetooth-password":
+            client.set_bluetooth_password(args.password)
+            result["bluetooth_password"] = "set"
+            result["note"] = "takes effect after a restart"
     return result
+
+
+def _wait_noise_detection(client: LD2410Client, duration_s: int) -> str:
+    """Poll 0x001B until the detection completed (or clearly never will)."""
+    deadline = time.monotonic() + duration_s + 10.0
+    status = client.auto_thresholds_status()
+    while status != "completed":
+        if time.monotonic() > deadline:
+            raise RadarError(f"background noise detection not completed after {duration_s} s "
+                             f"+ 10 s (status: {status})")
+        time.sleep(NOISE_POLL_S)  # the sensor's own pace: nothing to wait on but its answer
+        status = client.auto_thresholds_status()
+    return status
+
+
+def _check_values(args: argparse.Namespace) -> None:
+    """Refuse bad values before the port is opened (ProtocolError -> exit status 2)."""
+    if args.action == "auto-thresholds":
+        ld2410.start_auto_thresholds(args.duration)
+    elif args.action == "bluetooth-auth":
+        ld2410.bluetooth_auth(args.password)
+    elif args.action == "bluetooth-password":
+        ld2410.set_bluetooth_password(args.password)
 
 
 def _print(result: dict[str, object], as_json: bool) -> None:
@@ -134,9 +209,14 @@ def run(ctx: ServiceContext) -> int:
         print("buddybot radar: --gate must be 0..8 or 'all'", file=sys.stderr)
         return 2
     try:
+        _check_values(args)
+    except ProtocolError as exc:
+        print(f"buddybot radar: {exc}", file=sys.stderr)
+        return 2
+    try:
         port = serial.serial_for_url(url, baudrate=args.baudrate or cfg.baudrate, timeout=0.05)
     except (serial.SerialException, OSError, ValueError) as exc:
-        print(f"buddybot radar: cannot open {url}: {exc}", file=sys.stderr)
+        print(f"buddybot radar: cannot open {clip(url)}: {clip(str(exc))}", file=sys.stderr)
         return 1
     try:
         result = execute(LD2410Client(port, timeout_s=args.timeout), args)
@@ -144,7 +224,7 @@ def run(ctx: ServiceContext) -> int:
         print(f"buddybot radar: {exc}", file=sys.stderr)
         return 2 if args.action.startswith("set-") else 1
     except (RadarError, serial.SerialException, OSError) as exc:
-        print(f"buddybot radar: {url}: {exc}", file=sys.stderr)
+        print(f"buddybot radar: {clip(url)}: {clip(str(exc))}", file=sys.stderr)
         return 1
     finally:
         port.close()

@@ -323,6 +323,8 @@ def test_tcp_sensor_drop_is_retried(spawn: Spawn, probe: Node) -> None:
 def test_bad_command_line_values_are_clear_errors() -> None:
     for service, args, needle in (
         ("radar-presence", ["--range-m", "-1"], "range_m"),
+        ("radar-presence", ["--max-sensors", "0"], "max_sensors"),
+        ("radar-presence", ["--max-sensors", "5000"], "max_sensors"),
         ("radar-bridge", ["--sim", "--sim-speed", "-2"], "--sim-speed"),
         ("radar-bridge", [], "no sensor"),
     ):
@@ -336,6 +338,8 @@ def test_bad_command_line_values_are_clear_errors() -> None:
 @pytest.mark.parametrize(("toml", "needle"), [
     ("[radar_presence]\nrange_m = -1.0\n", "range_m"),
     ("[radar_presence]\nrange = 2.0\n", "range"),
+    ("[radar_presence]\nmax_sensors = 0\n", "max_sensors"),
+    ("[radar_bridge]\nquery_firmware = 'maybe'\n", "query_firmware"),
     ("[radar_bridge]\nsim_scenario = 'party'\nsim = true\n", "party"),
 ])
 def test_bad_config_is_a_clear_error(tmp_path: Path, toml: str, needle: str) -> None:
@@ -378,3 +382,247 @@ def test_a_line_of_pure_garbage_is_reported_with_a_hint(
     assert int(diag_value(d, "bad_frames")) > 0  # type: ignore[arg-type]
     assert frames.messages == []
     assert bridge.alive()
+
+
+class Phase:
+    """A scenario whose scene the test sets: `phase.target = Target(...)`."""
+
+    def __init__(self, target: Target) -> None:
+        self.target = target
+
+    def __call__(self, t: float, rng: random.Random) -> Target:
+        return self.target
+
+
+def test_noise_detection_and_unusual_frames_never_reopen_the_port(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """LD2410C background-noise detection sends target states 4-6 for as long as
+    it measures (here > silence_timeout_s): valid frames, published, "no target"
+    for presence, and no reopening of the port. Nor do well-formed frames with a
+    state nobody knows (9): the line works, the content is unusual."""
+    phase = Phase(standing(0.0, random.Random()))
+    sensor = sensors(phase)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    presence = Collector(probe, keys.PRESENCE)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    bridge = spawn("radar-bridge", "--sensor", sensor.path)
+    spawn("radar-presence", "--absence-hold-s", "0.5")
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+
+    phase.target = Target(p.STATE_NOISE_DETECTING)
+    measuring = m.now_ns()
+    presence.wait_for(lambda v: v.presence_state == OUT, 30, "OUT_OF_RANGE while measuring noise")
+    retry_until(lambda: sum(f.target_state == m.TargetState.NOISE_DETECTING
+                            for msg in frames.messages for f in msg.sensors) >= 40, 30,
+                what="4 s of NOISE_DETECTING frames published")
+    d = diag.wait_for(lambda d: d.values.get("radar0.noise_detection") == "in progress", 20,
+                      "noise detection in diagnostics")
+    # Fresh data saying "no target", not a silent sensor.
+    pd = pdiag.wait_for(lambda x: x.stamp_ns > measuring + 2e9, 20, "presence diagnostics")
+    assert pd.level == "OK", pd
+
+    phase.target = Target(9)  # framing intact, a state we do not know
+    d = diag.wait_for(lambda d: int(d.values.get("radar0.unusual_frames") or 0) >= 40, 30,
+                      "4 s of unusual frames counted")
+    phase.target = Target(p.STATE_NOISE_DETECTION_SUCCEEDED)
+    wait_more_frames(frames, 0, 5)
+    phase.target = standing(0.0, random.Random())
+    presence.wait_for(lambda v: v.presence_state == IN and v.stamp_ns > d.stamp_ns, 30,
+                      "IN_RANGE again")
+    last = diag.wait_for(lambda x: x.stamp_ns > d.stamp_ns, 20, "diagnostics after it all")
+    assert int(last.values["reconnects"]) == 0, last  # type: ignore[arg-type]
+    assert all(x.values.get("radar0.connected") is True for x in diag.messages
+               if x.stamp_ns > presence.messages[0].stamp_ns), "the port was reopened"
+    assert int(last.values["bad_frames"]) == 0  # type: ignore[arg-type]
+    states = {f.target_state for msg in frames.messages for f in msg.sensors}
+    assert {m.TargetState.NOISE_DETECTING, m.TargetState.NOISE_DETECTION_SUCCEEDED} <= states
+    assert bridge.alive()
+
+
+def test_light_level_and_out_pin_only_from_firmware_that_has_them(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """V1.07 sends two bytes where V2.x has light level and OUT pin (a real
+    module said "OUT pin 33"): the bridge asks the firmware at connect."""
+    from buddybot.radar.sim import FIRMWARE_V2
+
+    v1 = sensors("nobody", "ttyV1", aux_bytes=(120, 33))
+    v2 = sensors("nobody", "ttyV2", firmware=FIRMWARE_V2, aux_bytes=(130, 1))
+    odd = sensors("nobody", "ttyOdd", firmware=FIRMWARE_V2, aux_bytes=(140, 7))
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    spawn("radar-bridge", "--sensor", v1.path, "--sensor", v2.path, "--sensor", odd.path)
+    for radar_id in (0, 1, 2):
+        wait_more_frames(frames, radar_id, 5, 30)
+    by_id = {f.radar_id: f for msg in frames.messages for f in msg.sensors}
+    assert (by_id[0].light_level, by_id[0].out_pin) == (None, None)
+    assert (by_id[1].light_level, by_id[1].out_pin) == (130, 1)
+    assert (by_id[2].light_level, by_id[2].out_pin) == (140, None)
+    assert by_id[0].moving_gate_energy is not None  # still engineering frames
+    d = diag.wait_for(lambda d: int(d.values.get("radar2.bad_out_pin") or 0) >= 5, 20,
+                      "refused OUT pins counted")
+    assert d.values["radar0.firmware"] == "V1.07.22091615"
+    assert d.values["radar1.firmware"] == "V2.04.23022511"
+    assert d.values["radar0.bad_out_pin"] == 0 and d.values["radar1.bad_out_pin"] == 0
+    # The firmware query ran inside enable/end configuration, and reporting resumed.
+    for s in (v1, v2, odd):
+        assert s.sim.commands[:3] == [p.CMD_ENABLE_CONFIG, p.CMD_READ_FIRMWARE,
+                                      p.CMD_END_CONFIG]
+        assert not s.sim.config_mode
+
+
+def test_a_flood_of_fake_radar_ids_is_bounded_and_the_real_sensor_still_counts(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """Floods of 28k invented sensors saying "nobody" while a real one sees a person:
+    presence stays IN_RANGE, the table and the diagnostics stay small, memory
+    stops growing."""
+    import psutil
+
+    sensor = sensors(standing)
+    presence = Collector(probe, keys.PRESENCE)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    spawn("radar-bridge", "--sensor", sensor.path)
+    service = spawn("radar-presence", "--absence-hold-s", "1.0")
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+    pdiag.wait_for(lambda d: d.level == "OK", 30, "presence OK")
+    nobody = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.NO_TARGET,
+                                     movement_distance=0, movement_energy=0,
+                                     stationary_distance=0, stationary_energy=0,
+                                     detection_distance=0)
+    pubs = [probe.publisher(keys.RADAR_FRAMES, device=f"evil{d}") for d in range(4)]
+    rss: list[int] = []
+    next_id = 0
+
+    def evicted_now() -> int:
+        return int(pdiag.messages[-1].values.get("evicted_sensors") or 0)
+
+    def publish_batch() -> None:  # 2,800 new ids in 280 messages
+        nonlocal next_id
+        for batch in range(280):
+            pubs[batch % 4].put(m.LD2410TargetDataFrameArray(
+                stamp_ns=m.now_ns(), device_id=0,
+                sensors=[msgspec.structs.replace(nobody, radar_id=next_id + i)
+                         for i in range(10)]))
+            next_id += 10
+
+    for flood in range(4):  # each flood: new ids until 10,000 of them were taken
+        target = evicted_now() + 10_000
+        retry_until(lambda t=target: publish_batch() or evicted_now() >= t, 120, 0.5,
+                    f"flood {flood} taken")  # stream samples may be dropped: send more
+        # Processed (or dropped) once the count stops moving between two reports.
+        seen = [pdiag.messages[-1]]
+        done = pdiag.wait_for(
+            lambda d, seen=seen: d.stamp_ns > seen[-1].stamp_ns and (
+                d.values.get("evicted_sensors") == seen[-1].values.get("evicted_sensors")
+                or bool(seen.append(d))), 60, f"flood {flood} processed")
+        rss.append(psutil.Process(service.pid).memory_info().rss)
+    evicted = int(done.values["evicted_sensors"])  # type: ignore[arg-type]
+    print(f"flood: {evicted} invented sensors evicted, dropped "
+          f"{done.values.get('dropped_frames')} messages, "
+          f"established dropped {done.values.get('dropped_established_frames')}")
+    # Several absence holds after the last flood, the real sensor still counts.
+    pdiag.wait_for(lambda d: d.stamp_ns > done.stamp_ns + 3e9, 30, "time passing")
+    assert [v.presence_state for v in presence.messages] == [IN], presence.messages
+    worst = max(len(msgspec.json.encode(d)) for d in pdiag.messages)
+    assert worst < 2000, worst  # was 474 KB: one entry per invented sensor
+    last = pdiag.messages[-1]
+    assert int(last.values["sensors"]) <= 16  # type: ignore[arg-type]
+    stale = str(last.values.get("stale")).split(" (+")[0].split(", ")
+    assert "0/0" not in stale, stale  # the real sensor is not "silent"
+    # Memory: the first floods fill transport buffers and the delivery queue to their
+    # high-water mark; later floods of new ids must not add to it (an unbounded
+    # table grows by hundreds of bytes per id: > 20 MB for two floods).
+    print(f"RSS after each flood: {[round(r / 1e6, 1) for r in rss]} MB")
+    assert rss[3] - rss[1] < 10e6, rss
+    assert service.alive()
+
+
+def test_presence_never_publishes_an_implausible_stamp(spawn: Spawn, probe: Node) -> None:
+    """One frame stamped 2**63-1 (and one 15 s ahead) used to become the stamp
+    of every later verdict."""
+    presence = Collector(probe, keys.PRESENCE)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    service = spawn("radar-presence", "--absence-hold-s", "0.5")
+    pdiag.wait_for(timeout=30, what="presence up")
+    pub = probe.publisher(keys.RADAR_FRAMES, device="7")
+    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
+                                   movement_distance=120, movement_energy=50,
+                                   stationary_distance=0, stationary_energy=0,
+                                   detection_distance=120)
+    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
+                                    movement_distance=0, movement_energy=0,
+                                    detection_distance=0)
+    start = m.now_ns()
+
+    def frame(stamp: int, f: m.LD2410TargetDataFrame) -> m.LD2410TargetDataFrameArray:
+        return m.LD2410TargetDataFrameArray(stamp_ns=stamp, device_id=7, sensors=[f])
+
+    def send_poisoned() -> bool:
+        pub.put(frame(2**63 - 1, near))
+        pub.put(frame(m.now_ns() + 15 * 10**9, near))
+        return bool(presence.messages)
+
+    retry_until(send_poisoned, 30, 0.2, "IN_RANGE from the poisoned frames")
+    retry_until(lambda: pub.put(frame(m.now_ns(), empty)) or any(
+        v.presence_state == OUT for v in presence.messages), 30, 0.1, "OUT_OF_RANGE")
+    retry_until(lambda: pub.put(frame(m.now_ns(), near)) or [
+        v.presence_state for v in presence.messages].count(IN) >= 2, 30, 0.1, "IN_RANGE again")
+    end = m.now_ns()
+    stamps = [v.stamp_ns for v in presence.messages]
+    assert all(start - 10**9 <= s <= end + 10**9 for s in stamps), stamps
+    # Counted by the runtime (which now replaces such stamps before any handler)
+    # or, behind it, by radar-presence itself.
+    d = pdiag.wait_for(lambda d: int(d.values.get("implausible_stamps") or 0)
+                       + int(d.values.get("stamps replaced") or 0) >= 2, 20,
+                       "implausible stamps counted")
+    assert d.level in ("OK", "WARN", "ERROR")
+    assert service.alive()
+
+
+def test_presence_service_itself_replaces_implausible_stamps(
+        probe: Node, node_factory: Callable[..., Node]) -> None:
+    """The service's own defence, whatever the runtime does before it: frames
+    handed straight to its handler with stamps 2**63-1 and now+15 s; every
+    verdict it publishes (through the router) is stamped plausibly."""
+    from buddybot.radar.presence import PresenceRules
+    from buddybot.radar.presence_service import PresenceService
+
+    # Raw samples: a typed subscriber's runtime would itself replace a bad stamp.
+    raw: list[bytes] = []
+    lock = threading.Lock()
+
+    def on_sample(sample: object) -> None:
+        with lock:
+            raw.append(bytes(sample.payload.to_bytes()))  # type: ignore[attr-defined]
+
+    sub = probe.session.declare_subscriber(probe.key(keys.PRESENCE), on_sample)
+    node = node_factory("radar-presence-inproc")
+    service = PresenceService(node, PresenceRules(absence_hold_s=0.2))
+    key = node.key(keys.RADAR_FRAMES, device="5")
+    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
+                                   movement_distance=120, movement_energy=50,
+                                   stationary_distance=0, stationary_energy=0,
+                                   detection_distance=120)
+    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
+                                    movement_distance=0, movement_energy=0,
+                                    detection_distance=0)
+    start = m.now_ns()
+    for stamp in (2**63 - 1, m.now_ns() + 15 * 10**9):
+        service.on_frames(m.LD2410TargetDataFrameArray(stamp_ns=stamp, device_id=5,
+                                                       sensors=[near]), key)
+    service.on_frames(m.LD2410TargetDataFrameArray(stamp_ns=2**63 - 1, device_id=5,
+                                                   sensors=[empty]), key)
+
+    def absence_over() -> bool:
+        service.tick()
+        return bool(service.tracker.presence == OUT)
+
+    retry_until(absence_over, 10, 0.05, "OUT_OF_RANGE after the hold")
+    retry_until(lambda: len(raw) >= 2, 20, what="two verdicts")
+    end = m.now_ns()
+    with lock:
+        got = [keys.PRESENCE.codec.decode(b, m.PresenceDetection) for b in raw]
+    sub.undeclare()
+    assert [v.presence_state for v in got] == [IN, OUT]
+    assert all(start - 10**9 <= v.stamp_ns <= end + 10**9 for v in got), got
+    assert service.implausible_stamps >= 3

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import random
 import struct
 
 import pytest
@@ -88,6 +89,13 @@ def test_document_command_frames() -> None:
     assert p.read_resolution() == bytes.fromhex("FDFCFBFA0200AB0004030201")
     assert p.set_light_control(1, 0x80, 0) == bytes.fromhex("FDFCFBFA0600AD000180000004030201")
     assert p.read_light_control() == bytes.fromhex("FDFCFBFA0200AE0004030201")
+    # LD2410C additions: background noise detection and Bluetooth password.
+    assert p.start_auto_thresholds(10) == bytes.fromhex("FDFCFBFA04000B000A0004030201")
+    assert p.query_auto_thresholds() == bytes.fromhex("FDFCFBFA02001B0004030201")
+    assert p.bluetooth_auth("HiLink") == bytes.fromhex("FDFCFBFA0800A800" + b"HiLink".hex()
+                                                       + "04030201")
+    assert p.set_bluetooth_password("abc123") == bytes.fromhex(
+        "FDFCFBFA0800A900" + b"abc123".hex() + "04030201")
 
 
 @pytest.mark.parametrize("bad", [
@@ -95,6 +103,9 @@ def test_document_command_frames() -> None:
     lambda: p.set_max_gates(8, 8, 70000), lambda: p.set_gate_sensitivity(9, 10, 10),
     lambda: p.set_gate_sensitivity(0, 101, 10), lambda: p.set_baud_rate(12345),
     lambda: p.set_resolution(0.5), lambda: p.set_light_control(3, 0, 0),
+    lambda: p.start_auto_thresholds(0), lambda: p.start_auto_thresholds(70000),
+    lambda: p.set_bluetooth_password("short"), lambda: p.set_bluetooth_password("toolong7"),
+    lambda: p.bluetooth_auth("caf\u00e9!!"), lambda: p.set_bluetooth_password("ab\ncd1"),
 ])
 def test_encoders_refuse_out_of_range_values(bad) -> None:  # type: ignore[no-untyped-def]
     with pytest.raises(p.ProtocolError):
@@ -117,6 +128,20 @@ def test_ack_decoders_refuse_short_or_wrong_data() -> None:
     assert p.decode_light_control(b"\x01\x80\x01\x00") == p.LightControl(1, 0x80, 1)
     assert p.decode_resolution(b"\x01\x00") == 0.2
     assert p.decode_mac(bytes.fromhex("8f27c6d91a3b")) == "8f:27:c6:d9:1a:3b"
+    assert p.decode_auto_thresholds_status(b"\x01\x00") == "in progress"
+    assert p.decode_auto_thresholds_status(b"\x02\x00") == "completed"
+    with pytest.raises(p.ProtocolError):
+        p.decode_auto_thresholds_status(b"\x07\x00")
+
+
+@pytest.mark.parametrize(("version", "major", "aux"), [
+    ("V1.07.22091615", 1, False), ("V2.04.23022511", 2, True), ("V2.44.24073110", 2, True),
+    ("garbage", None, False), ("", None, False), ("Vx.07.1", None, False),
+])
+def test_firmware_with_light_and_out_bytes(version: str, major: int | None, aux: bool) -> None:
+    assert p.firmware_major(version) == major
+    assert p.firmware_has_light_and_out(version) is aux
+    assert p.firmware_has_light_and_out(None) is False
 
 
 def test_failure_ack_status() -> None:
@@ -224,7 +249,7 @@ BASIC = p.encode_report(report())
 @pytest.mark.parametrize(("offset", "value", "why"), [
     (4, 0x0E, "length"), (5, 0x01, "length too large"), (6, 0x07, "data type"),
     (6, 0x01, "engineering type on a basic frame"), (7, 0xAB, "0xAA head"),
-    (8, 0x04, "target state"), (17, 0x56, "0x55 end"), (18, 0x01, "0x00 end"),
+    (17, 0x56, "0x55 end"), (18, 0x01, "0x00 end"),
     (19, 0x00, "tail"), (22, 0xF4, "tail"), (0, 0x00, "head"),
 ])
 def test_corrupted_frames_are_dropped_and_counted(offset: int, value: int, why: str) -> None:
@@ -259,6 +284,56 @@ def test_commands_and_acks_interleaved_with_reports() -> None:
     assert isinstance(frames[2], p.Ack) and p.decode_firmware(frames[2].data) == "V1.07.22091615"
 
 
+@pytest.mark.parametrize("state", [4, 5, 6])
+@pytest.mark.parametrize("engineering", [False, True])
+def test_noise_detection_states_are_valid_frames(state: int, engineering: bool) -> None:
+    """LD2410C sends target states 4-6 while it measures background noise
+    (auto thresholds): they used to be dropped as bad frames."""
+    frame = report(state=state, engineering=engineering)
+    parser = p.Parser()
+    assert parser.feed(p.encode_report(frame) + STREAM) == [frame, *STREAM_FRAMES]
+    assert parser.stats.bad_frames == 0 and parser.stats.reports == 1 + len(STREAM_FRAMES)
+
+
+def test_unknown_target_state_is_unusual_not_bad_and_not_a_resync() -> None:
+    """A well-formed frame with a state we do not know (7..255) is skipped whole
+    and counted as unusual, but still as an intact frame (a sign of life)."""
+    parser = p.Parser()
+    for state in (7, 0x55, 255):
+        unknown = _corrupt(BASIC, 8, state)
+        assert parser.feed(unknown + STREAM) == STREAM_FRAMES
+    assert parser.stats.unusual_frames == 3 and parser.stats.bad_frames == 0
+    assert parser.stats.intact_frames == 3 + 3 * len(STREAM_FRAMES)
+    assert "unknown target state" in parser.stats.last_error
+
+
+@pytest.mark.timeout(60)  # a hang guard: ~1 s now, minutes when quadratic
+def test_many_megabytes_in_one_feed_take_linear_time_and_lose_nothing() -> None:
+    """One 4 MB `feed()` of garbage and frames: the old parser rescanned the
+    rest of the buffer for a command header after every report (4.35 MB took
+    138 s); now every frame comes out (checked), however the buffer is fed."""
+    rng = random.Random(3)
+    frames = [report(state=rng.randrange(7), md=rng.randrange(700), engineering=bool(i % 2))
+              for i in range(200)]
+    ack = p.encode_ack(p.CMD_READ_FIRMWARE, 0, p.encode_firmware(0x100, 0x204, 0x23022511))
+    garbage = bytes(b for b in rng.randbytes(60) if b not in (0xF4, 0xFD)) + b"\xf4\xf3\xf2"
+    blob = bytearray()
+    expected: list[p.Frame] = []
+    while len(blob) < 4_000_000:
+        for frame in frames:
+            blob += garbage[:rng.randrange(len(garbage))] + p.encode_report(frame)
+            expected.append(frame)
+    # One ACK at the very end: the search for a command header finds nothing
+    # for 4 MB, which is what the old parser repeated after every report.
+    blob += ack
+    expected.append(p.Ack(p.CMD_READ_FIRMWARE, 0, ack[10:-4]))
+    parser = p.Parser()
+    got = parser.feed(bytes(blob))
+    assert got == expected
+    assert (parser.stats.reports, parser.stats.acks) == (len(expected) - 1, 1)
+    assert len(parser._buf) <= 3  # only a possible partial header is kept
+
+
 # --- property-based ---------------------------------------------------------------------
 
 energies = st.integers(0, 100)
@@ -267,7 +342,7 @@ distances = st.integers(0, 1200)
 
 @st.composite
 def reports(draw: st.DrawFn) -> p.Report:
-    state = draw(st.integers(0, 3))
+    state = draw(st.integers(0, p.MAX_TARGET_STATE))
     values = [draw(distances), draw(energies), draw(distances), draw(energies), draw(distances)]
     if not draw(st.booleans()):
         return p.Report(state, *values)

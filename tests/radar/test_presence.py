@@ -185,10 +185,107 @@ def test_zero_detection_distance_falls_back_to_the_reported_kind() -> None:
 
 @pytest.mark.parametrize("bad", [
     {"range_m": 0}, {"exit_margin_m": -1}, {"absence_hold_s": -0.1}, {"stale_after_s": 0},
+    {"max_sensors": 0}, {"max_sensors": 100_000},
 ])
 def test_rules_refuse_nonsense(bad: dict[str, float]) -> None:
     with pytest.raises(ValueError):
         PresenceRules(**bad)
+
+
+@pytest.mark.parametrize("state", [4, 5, 6])
+def test_noise_detection_states_mean_no_target_not_silence(state: int) -> None:
+    """LD2410C background-noise detection (states 4-6): fresh frames without a
+    target, so the person leaves after the hold (a silent sensor would keep IN)."""
+    c = Clock(PresenceRules(absence_hold_s=1.0))
+    c.feed(at(100))
+    c.feed(Reading(state, 0), 1.5)
+    assert c.states == [(IN, MOVING), (OUT, MOVING)]
+    assert c.tracker.stale_sensors(c.t) == []
+    fresh = Clock(PresenceRules(absence_hold_s=1.0))
+    fresh.feed(Reading(state, 50, 50, 50), 1.5)  # distances in such frames mean nothing
+    assert fresh.states == [(OUT, MOVING)]
+
+
+def test_a_flood_of_invented_sensor_ids_is_bounded_and_changes_nothing() -> None:
+    """28k fake sensors saying "nobody" between the real sensor's frames (10 Hz):
+    the table stays at max_sensors, the real person stays present."""
+    c = Clock(PresenceRules(max_sensors=16))
+    fake = 0
+    for _ in range(100):  # 10 s of real frames
+        c.feed(at(120), 0.1, sensor="0/0")
+        for _ in range(280):
+            v = c.tracker.update(f"evil/{fake}", NOBODY, c.t, round(c.t * 1e9))
+            assert v is None
+            fake += 1
+        c.idle(0.05)
+    assert fake == 28_000
+    assert c.states == [(IN, MOVING)]
+    assert len(c.tracker.known_sensors()) <= 16
+    assert c.tracker.evicted >= 28_000 - 16
+    assert "0/0" not in c.tracker.stale_sensors(c.t)
+
+
+def test_room_is_made_from_the_newest_one_shot_ids() -> None:
+    tracker = PresenceTracker(PresenceRules(max_sensors=3))
+    tracker.update("real", at(100), 0.0, 1)
+    tracker.update("a", NOBODY, 0.0, 1)
+    tracker.update("b", NOBODY, 0.1, 2)
+    tracker.update("c", NOBODY, 0.1, 2)  # evicts "b": one frame, most recently heard
+    assert tracker.known_sensors() == ["a", "c", "real"]
+    tracker.update("real", at(100), 0.2, 3)  # 2 frames now
+    tracker.update("a", NOBODY, 0.2, 3)  # 2 frames now
+    tracker.update("d", NOBODY, 0.3, 4)  # evicts "c", the only one heard once
+    assert tracker.known_sensors() == ["a", "d", "real"]
+    tracker.update("e", NOBODY, 0.3, 4)  # evicts "d"
+    assert tracker.known_sensors() == ["a", "e", "real"]
+    assert tracker.evicted == 3
+
+
+def test_when_every_sensor_is_established_the_least_recently_heard_goes() -> None:
+    tracker = PresenceTracker(PresenceRules(max_sensors=2, stale_after_s=100.0))
+    for i in range(12):
+        tracker.update("old", NOBODY, i * 0.1, i)
+        tracker.update("real", at(100), i * 0.1 + 0.05, i)
+    assert tracker.established("old") and tracker.established("real")
+    tracker.update("new", NOBODY, 2.0, 20)
+    assert tracker.known_sensors() == ["new", "real"]
+
+
+def test_a_sensor_becomes_established_during_a_flood() -> None:
+    """From its very first frame, in the middle of a flood of one-shot ids."""
+    tracker = PresenceTracker(PresenceRules(max_sensors=4))
+    fake = 0
+    t = 0.0
+    for _ in range(15):
+        tracker.update("real", at(120), t, round(t * 1e9))
+        for _ in range(500):
+            tracker.update(f"evil/{fake}", NOBODY, t, round(t * 1e9))
+            fake += 1
+        t += 0.1
+    assert tracker.established("real")
+    assert "real" in tracker.known_sensors() and tracker.presence == IN
+    # Once established, even sensors sent twice cannot push it out.
+    for i in range(1000):
+        for _ in range(2):
+            tracker.update(f"twice/{i}", NOBODY, t, round(t * 1e9))
+    assert "real" in tracker.known_sensors()
+
+
+def test_one_frame_stamped_in_the_far_future_does_not_stamp_later_verdicts() -> None:
+    """The verdict a tick causes carries the latest frame's stamp, not the largest seen."""
+    tracker = PresenceTracker(PresenceRules(absence_hold_s=1.0))
+    poisoned = 2**63 - 1
+    v = tracker.update("0/0", at(100), 0.0, poisoned)
+    assert v is not None and v.stamp_ns == poisoned  # the frame that caused it (the
+    # service replaces such stamps on arrival; here the rule alone is tested)
+    t = 0.1
+    while t < 3.0:
+        v = tracker.update("0/0", NOBODY, t, round(t * 1e9)) or tracker.tick(t + 0.05)
+        if v is not None:
+            break
+        t += 0.1
+    assert v is not None and v.presence == OUT
+    assert v.stamp_ns < 10 * 10**9
 
 
 def _run_scenario(name: str, seconds: float, rules: PresenceRules | None = None) -> Clock:

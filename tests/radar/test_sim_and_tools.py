@@ -84,7 +84,7 @@ def test_energies_above_100_are_clamped_and_counted() -> None:
     report = p.Report(3, 120, 130, 140, 255, 125, engineering=True, max_moving_gate=8,
                       max_still_gate=8, moving_gate_energy=(101, *range(8)),
                       still_gate_energy=(*range(8), 200), light_level=80, out_pin=1)
-    frame, clamped = report_to_frame(report, 2)
+    frame, clamped, _ = report_to_frame(report, 2)
     assert clamped == 4
     assert frame.movement_energy == 100 and frame.stationary_energy == 100
     assert frame.moving_gate_energy is not None and frame.moving_gate_energy[0] == 100
@@ -96,9 +96,34 @@ def test_energies_above_100_are_clamped_and_counted() -> None:
 
 
 def test_basic_report_has_no_engineering_fields() -> None:
-    frame, clamped = report_to_frame(p.Report(2, 0, 0, 300, 60, 300), 0)
+    frame, clamped, _ = report_to_frame(p.Report(2, 0, 0, 300, 60, 300), 0)
     assert clamped == 0 and frame.target_state == m.TargetState.STATIONARY
     assert frame.moving_gate_energy is None and frame.light_level is None
+
+
+def _engineering(light: int, out: int, state: int = 1) -> p.Report:
+    return p.Report(state, 120, 50, 0, 0, 120, engineering=True, max_moving_gate=8,
+                    max_still_gate=8, moving_gate_energy=(1,) * 9, still_gate_energy=(2,) * 9,
+                    light_level=light, out_pin=out)
+
+
+def test_light_and_out_only_from_firmware_that_has_them() -> None:
+    """V1.07 sends two bytes there that are not light/OUT (a real module: OUT 33)."""
+    v1 = report_to_frame(_engineering(120, 33), 0, light_and_out=False)
+    assert (v1.frame.light_level, v1.frame.out_pin, v1.bad_out_pin) == (None, None, False)
+    v2 = report_to_frame(_engineering(120, 1), 0, light_and_out=True)
+    assert (v2.frame.light_level, v2.frame.out_pin, v2.bad_out_pin) == (120, 1, False)
+    odd = report_to_frame(_engineering(120, 33), 0, light_and_out=True)
+    assert (odd.frame.light_level, odd.frame.out_pin, odd.bad_out_pin) == (120, None, True)
+
+
+@pytest.mark.parametrize("state", [4, 5, 6])
+def test_noise_detection_states_convert_to_the_contract(state: int) -> None:
+    frame = report_to_frame(p.Report(state, 0, 0, 0, 0, 0), 0).frame
+    assert frame.target_state == m.TargetState(state)
+    codec = keys.RADAR_FRAMES.codec
+    msg = m.LD2410TargetDataFrameArray(stamp_ns=1, device_id=0, sensors=[frame])
+    assert codec.decode(codec.encode(msg), m.LD2410TargetDataFrameArray) == msg
 
 
 def test_out_of_contract_message_is_refused_at_decode() -> None:
@@ -250,3 +275,77 @@ def test_tool_reports_a_sensor_that_does_not_ack(tmp_path: Path) -> None:
         out = radar("info", "--port", mute.path, "--timeout", "0.3")
     assert out.returncode == 1
     assert "no ACK for 'enable configuration'" in out.stderr
+
+
+def test_sim_background_noise_detection_reports_states_4_to_6() -> None:
+    sim = SimulatedLD2410(SCENARIOS["walk-in"], engineering=False)
+    sim.handle(cmd(p.enable_config()), 0.0)
+    status = ack_of(sim.handle(cmd(p.query_auto_thresholds()), 0.0))
+    assert p.decode_auto_thresholds_status(status.data) == "not started"
+    assert ack_of(sim.handle(cmd(p.start_auto_thresholds(2)), 0.0)).ok
+    sim.handle(cmd(p.end_config()), 0.0)
+    states = []
+    for now in (0.5, 1.9, 2.1, 2.9):
+        [frame] = p.Parser().feed(sim.report(5.0, now))
+        assert isinstance(frame, p.Report)
+        states.append(frame.target_state)
+    assert states == [4, 4, 5, 5]
+    [after] = p.Parser().feed(sim.report(5.0, 3.5))
+    assert isinstance(after, p.Report) and after.target_state in (1, 2, 3)  # the person again
+    sim.handle(cmd(p.enable_config()), 4.0)
+    status = ack_of(sim.handle(cmd(p.query_auto_thresholds()), 4.0))
+    assert p.decode_auto_thresholds_status(status.data) == "completed"
+
+
+def test_tool_baud_rate_bluetooth_and_mac(sensor: PtySensor) -> None:
+    sim = sensor.sim
+    out = radar("baud-rate", "115200", "--port", sensor.path, "--json")
+    assert out.returncode == 0, out.stderr
+    assert sim.baud_index == p.BAUD_RATES[115200]
+    assert "--baudrate 115200" in json.loads(out.stdout)["note"]
+    assert radar("bluetooth", "off", "--port", sensor.path).returncode == 0
+    assert sim.bluetooth is False
+    assert radar("bluetooth", "on", "--port", sensor.path).returncode == 0
+    assert sim.bluetooth is True
+    out = radar("mac", "--port", sensor.path, "--json")
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout) == {"mac": "8f:27:c6:d9:1a:3b"}
+    assert p.CMD_SET_BAUD_RATE in sim.commands and p.CMD_BLUETOOTH in sim.commands
+    assert sim.commands[-1] == p.CMD_END_CONFIG and not sim.config_mode
+    out = radar("baud-rate", "12345", "--port", sensor.path)
+    assert out.returncode == 2 and "invalid choice" in out.stderr
+
+
+def test_tool_background_noise_detection(sensor: PtySensor) -> None:
+    sim = sensor.sim
+    out = radar("noise-status", "--port", sensor.path, "--json")
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout) == {"noise_detection": "not started"}
+    out = radar("auto-thresholds", "--duration", "1", "--wait", "--port", sensor.path, "--json")
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout) == {"noise_detection": "completed"}
+    assert p.CMD_AUTO_THRESHOLDS in sim.commands and p.CMD_AUTO_THRESHOLDS_STATUS in sim.commands
+    assert sim.commands[-1] == p.CMD_END_CONFIG and not sim.config_mode
+    out = radar("noise-status", "--port", sensor.path)
+    assert out.returncode == 0 and "noise_detection: completed" in out.stdout
+    before = len(sim.commands)
+    out = radar("auto-thresholds", "--duration", "0", "--port", sensor.path)
+    assert out.returncode == 2 and "1..65535" in out.stderr
+    assert len(sim.commands) == before  # refused before the port was touched
+
+
+def test_tool_bluetooth_password_and_permissions(sensor: PtySensor) -> None:
+    sim = sensor.sim
+    assert radar("bluetooth-auth", "--password", "HiLink", "--port", sensor.path).returncode == 0
+    assert sim.bluetooth_authorised
+    out = radar("bluetooth-auth", "--password", "wrong!", "--port", sensor.path)
+    assert out.returncode == 1 and "refused 'bluetooth authentication" in out.stderr
+    assert not sim.config_mode  # ended even though the command was refused
+    out = radar("bluetooth-password", "abc123", "--port", sensor.path, "--json")
+    assert out.returncode == 0, out.stderr
+    assert sim.bluetooth_password == "abc123"
+    assert radar("bluetooth-auth", "--password", "abc123", "--port", sensor.path).returncode == 0
+    for bad in ("short", "toolong7", "tab\tx12"):
+        out = radar("bluetooth-password", bad, "--port", sensor.path)
+        assert out.returncode == 2 and "6 printable ASCII" in out.stderr, bad
+    assert sim.bluetooth_password == "abc123"

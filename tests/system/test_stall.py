@@ -89,14 +89,15 @@ class Arrivals:
     def _on(self, sample: zenoh.Sample) -> None:
         with self._lock:
             self.times.append(time.monotonic())
-            if len(sample.payload) < 1024:
-                self.payloads.append(sample.payload.to_bytes())
+            # Kept aligned with `times`; only small payloads are worth keeping.
+            small = len(sample.payload) < 1024
+            self.payloads.append(sample.payload.to_bytes() if small else b"")
 
-    def first_containing(self, text: bytes) -> float | None:
-        """Arrival time of the first (small) sample whose payload contains `text`."""
+    def first_containing(self, text: bytes, since: float) -> float | None:
+        """Arrival time of the first (small) sample after `since` containing `text`."""
         with self._lock:
             return next((t for t, p in zip(self.times, self.payloads, strict=False)
-                         if text in p), None)
+                         if t >= since and text in p), None)
 
     def max_gap(self, start: float, end: float) -> float:
         """Longest time without an arrival within [start, end]."""
@@ -154,7 +155,8 @@ def test_a_stalled_service_never_stalls_the_other_streams(
             if victim not in ("audio", "audio-player") and goal is not None and goal.goal_id:
                 # The goal's status reaches a healthy subscriber at once, whoever is frozen.
                 status_at = retry_until(
-                    lambda goal=goal: statuses.first_containing(goal.goal_id.encode()), 20, 0.05,
+                    lambda goal=goal, asked=asked: statuses.first_containing(
+                        goal.goal_id.encode(), asked), 20, 0.05,
                     "the goal's status")
                 gaps["goal status"] = status_at - asked
             report.append(f"{victim:<14} " + "  ".join(
