@@ -25,10 +25,8 @@ Same host, same clock: the page uses performance.timeOrigin + now().
 from __future__ import annotations
 
 import argparse
-import base64
 import json
 import math
-import os
 import shutil
 import socket
 import statistics
@@ -44,7 +42,14 @@ from common import percentile
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Router, free_port, retry_until, run_service, wait_port
+from buddybot.core.testing import (
+    Router,
+    free_port,
+    retry_until,
+    run_service,
+    stuck_websocket,
+    wait_port,
+)
 
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update"]
@@ -81,27 +86,12 @@ def measure_latency(page: Any, count: int, rate_hz: float, send: Any) -> tuple[l
 
 
 def stuck_page(port: int) -> socket.socket | None:
-    """A WebSocket client that does the handshake and then never reads; None
-    when the server refused the connection outright."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.settimeout(30)
+    """A client that does the handshake and then never reads; None when the
+    server refused the connection outright."""
     try:
-        sock.connect(("127.0.0.1", port))
-        key = base64.b64encode(os.urandom(16)).decode()
-        sock.sendall(f"GET /ws?eye=both HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
-                     "Upgrade: websocket\r\nConnection: Upgrade\r\n"
-                     f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
-        head = b""
-        while b"\r\n\r\n" not in head:
-            byte = sock.recv(1)
-            if not byte:
-                raise ConnectionError("closed")
-            head += byte
+        return stuck_websocket(port)[0]
     except OSError:
-        sock.close()
         return None
-    return sock
 
 
 class Flood:

@@ -8,6 +8,7 @@ the router is `buddybot router` on a free loopback port, services are
 
 from __future__ import annotations
 
+import base64
 import os
 import signal
 import socket
@@ -144,6 +145,33 @@ def stop_and_report(processes: list[Process], tail: int = 4000) -> None:
     for proc in reversed(processes):
         proc.stop()
         print(f"--- {proc.name} (exit {proc.proc.returncode}) ---\n{proc.output()[-tail:]}")
+
+
+def stuck_websocket(port: int, path: str = "/ws?eye=both", timeout: float = 20.0
+                    ) -> tuple[socket.socket, bytes]:
+    """A WebSocket client that completes the handshake on 127.0.0.1:`port` and then
+    never reads again (a frozen tab, or an attacker), with a small receive buffer so
+    the server's sends back up quickly. Returns the socket and the response head;
+    raises ConnectionError when the server closes during the handshake."""
+    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.settimeout(timeout)
+    try:
+        sock.connect(("127.0.0.1", port))
+        key = base64.b64encode(os.urandom(16)).decode()
+        sock.sendall(f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
+                     "Upgrade: websocket\r\nConnection: Upgrade\r\n"
+                     f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
+        head = b""
+        while b"\r\n\r\n" not in head:  # the response head only, byte by byte
+            byte = sock.recv(1)
+            if not byte:
+                raise ConnectionError(f"closed during the handshake: {head!r}")
+            head += byte
+    except OSError:
+        sock.close()
+        raise
+    return sock, head
 
 
 def buddybot_argv(*args: str) -> list[str]:

@@ -7,7 +7,6 @@ here a plain aiohttp WebSocket client checks what the server pushes.
 from __future__ import annotations
 
 import asyncio
-import base64
 import json
 import os
 import shutil
@@ -28,7 +27,14 @@ import pytest
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until, wait_port
+from buddybot.core.testing import (
+    Process,
+    buddybot_argv,
+    free_port,
+    retry_until,
+    stuck_websocket,
+    wait_port,
+)
 
 pytestmark = pytest.mark.integration
 
@@ -247,22 +253,8 @@ def config_file(tmp_path: Path, text: str) -> str:
 
 
 def stuck_page(port: int, eye: str = "both") -> socket.socket:
-    """A WebSocket client that completes the handshake and then never reads
-    again (a frozen tab, or an attacker), with a small receive buffer so the
-    server's sends back up quickly."""
-    sock = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.settimeout(20)
-    sock.connect(("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    sock.sendall(f"GET /ws?eye={eye} HTTP/1.1\r\nHost: 127.0.0.1:{port}\r\n"
-                 "Upgrade: websocket\r\nConnection: Upgrade\r\n"
-                 f"Sec-WebSocket-Key: {key}\r\nSec-WebSocket-Version: 13\r\n\r\n".encode())
-    head = b""
-    while b"\r\n\r\n" not in head:   # the response head only, byte by byte
-        byte = sock.recv(1)
-        assert byte, f"connection closed during the handshake: {head!r}"
-        head += byte
+    """A page that completes the handshake, then never reads again."""
+    sock, head = stuck_websocket(port, f"/ws?eye={eye}")
     assert head.startswith(b"HTTP/1.1 101"), head
     return sock
 

@@ -537,6 +537,18 @@ def test_a_flood_of_fake_radar_ids_is_bounded_and_the_real_sensor_still_counts(
     assert service.alive()
 
 
+def _near_and_empty() -> tuple[m.LD2410TargetDataFrame, m.LD2410TargetDataFrame]:
+    """A moving target at 1.2 m, and the same sensor seeing nobody."""
+    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
+                                   movement_distance=120, movement_energy=50,
+                                   stationary_distance=0, stationary_energy=0,
+                                   detection_distance=120)
+    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
+                                    movement_distance=0, movement_energy=0,
+                                    detection_distance=0)
+    return near, empty
+
+
 def test_presence_never_publishes_an_implausible_stamp(spawn: Spawn, probe: Node) -> None:
     """One frame stamped 2**63-1 (and one 15 s ahead) used to become the stamp
     of every later verdict."""
@@ -545,13 +557,7 @@ def test_presence_never_publishes_an_implausible_stamp(spawn: Spawn, probe: Node
     service = spawn("radar-presence", "--absence-hold-s", "0.5")
     pdiag.wait_for(timeout=30, what="presence up")
     pub = probe.publisher(keys.RADAR_FRAMES, device="7")
-    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
-                                   movement_distance=120, movement_energy=50,
-                                   stationary_distance=0, stationary_energy=0,
-                                   detection_distance=120)
-    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
-                                    movement_distance=0, movement_energy=0,
-                                    detection_distance=0)
+    near, empty = _near_and_empty()
     start = m.now_ns()
 
     def frame(stamp: int, f: m.LD2410TargetDataFrame) -> m.LD2410TargetDataFrameArray:
@@ -599,13 +605,7 @@ def test_presence_service_itself_replaces_implausible_stamps(
     node = node_factory("radar-presence-inproc")
     service = PresenceService(node, PresenceRules(absence_hold_s=0.2))
     key = node.key(keys.RADAR_FRAMES, device="5")
-    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
-                                   movement_distance=120, movement_energy=50,
-                                   stationary_distance=0, stationary_energy=0,
-                                   detection_distance=120)
-    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
-                                    movement_distance=0, movement_energy=0,
-                                    detection_distance=0)
+    near, empty = _near_and_empty()
     start = m.now_ns()
     for stamp in (2**63 - 1, m.now_ns() + 15 * 10**9):
         service.on_frames(m.LD2410TargetDataFrameArray(stamp_ns=stamp, device_id=5,
