@@ -9,6 +9,7 @@
 #   router.pem / router.key      the router's server certificate
 #   robot.pem / robot.key        client certificate of the robot computer
 #   radar-board.pem / .key       client certificate of the board near the radars
+#   camera-host.pem / .key       client certificate of a separate camera computer
 #   eye-screen.pem / .key        client certificate of a remote eye screen
 #   operator.pem / .key          client certificate of an operator's laptop (read-only)
 #   rogue-ca.pem, rogue.pem/.key a second CA and a certificate it signed, which the
@@ -35,7 +36,7 @@ OUT=$1
 shift
 mkdir -p "$OUT"
 DAYS=825
-HOSTS="robot radar-board eye-screen operator"
+HOSTS="robot radar-board eye-screen camera-host operator"
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
 

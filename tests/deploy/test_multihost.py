@@ -4,11 +4,13 @@ A real `buddybot router` loads deploy/zenoh/router.json5 (certificates from
 scripts/make-test-certs.sh); clients use the shipped client files. Hosts are told
 apart only by their certificate, as on a real robot. "Nothing arrives" is always
 shown after a positive control: an allowed sample sent after the denied one, over
-the same path, has arrived, and then a bounded extra wait sees nothing more.
+the same path, has arrived, and then a bounded extra wait sees nothing more. The
+same holds for liveliness: no host can declare a token for a node it does not run.
 """
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +22,7 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError
+from buddybot.core.node import DuplicateNodeError, Node, ServiceError, live_instances
 from buddybot.core.testing import (
     LOOPBACK,
     Collector,
@@ -29,12 +31,13 @@ from buddybot.core.testing import (
     free_port,
     retry_until,
 )
-from tests.deploy.conftest import HOSTS, HostProfile, TlsRouter, open_client
+from tests.deploy.conftest import HOSTS, ZENOH_DIR, HostProfile, TlsRouter, open_client
 
 pytestmark = pytest.mark.integration
 
 QUIET_S = 1.5  # bounded wait after the positive control: a denied sample would be here by now
 STAMP = 1_700_000_000_000_000_000
+NODES_PREFIX = "buddybot/buddy/nodes"  # liveliness tokens: nodes/<node>/<zid>
 
 
 def frames(stamp: int) -> m.LD2410TargetDataFrameArray:
@@ -161,6 +164,18 @@ PUBLISH_CASES = {
         (keys.EYES_DIRECTION, {}, lambda s: m.EyesDirection(stamp_ns=s, yaw=30.0, pitch=0.0)),
         (keys.DIAGNOSTICS, {"node": "eye-renderer"}, lambda s: diagnostics(s, "eye-renderer")),
     ),
+    "camera-host-sets-the-expression": PublishCase(
+        "camera-host", "face-detector",
+        (keys.EXPRESSION, {}, lambda s: m.ScreenExpression(stamp_ns=s, action=3)),
+        (keys.FACE, {"camera": "front"}, lambda s: m.FacePosition(
+            stamp_ns=s, frame_id="front", point=m.Point(x=1.0, y=0.0, z=0.0), confidence=0.9)),
+    ),
+    "camera-host-fakes-radar-frames": PublishCase(
+        "camera-host", "camera",
+        (keys.RADAR_FRAMES, {"device": "0"}, frames),
+        (keys.CAMERA_IMAGE, {"camera": "front"}, lambda s: m.Image(
+            stamp_ns=s, frame_id="front", width=2, height=1, encoding="bgr8", data=bytes(6))),
+    ),
     "robot-fakes-radar-frames": PublishCase(
         "robot", "controller",
         (keys.RADAR_FRAMES, {"device": "0"}, frames),
@@ -193,7 +208,10 @@ def test_host_cannot_publish_on_a_key_its_acl_does_not_grant(
     denied_pub = publisher.publisher(d_topic, **d_params)
     control = host_node(case.control_host, "control") if case.control_host else publisher
     allowed_pub = control.publisher(a_topic, **a_params)
-    denied_stamp, allowed_stamp = STAMP + 1, STAMP + 2
+    # Fresh stamps: receivers replace a stamp far from the arrival time (limits.py),
+    # and the stamp is how the two samples are told apart.
+    base = m.now_ns()
+    denied_stamp, allowed_stamp = base + 1, base + 2
 
     def attempt() -> bool:
         # Denied first, then the control: both are repeated until the control shows up
@@ -353,6 +371,27 @@ def test_remote_eye_screen_renders_what_the_robot_sends(
     assert renderer.alive()
 
 
+def test_camera_host_services_work_through_the_profile(
+    host_process: Callable[..., Process], host_node: Callable[..., Node]
+) -> None:
+    """camera (--sim) and face-detector as the camera host: the robot computer gets
+    frames and faces, the operator sees both services alive, and the detector's
+    debug image flows only while someone watches it (matching status through the ACL)."""
+    robot = host_node("robot", "controller")
+    faces = Collector[m.FacePosition](robot, keys.FACE, camera="front")
+    host_process("camera-host", "run", "camera", "--sim", "--fps", "5", "--encoding", "jpeg")
+    host_process("camera-host", "run", "face-detector")
+    got = faces.wait_for(timeout=180, what="faces from the camera host")
+    assert 0.0 < got.confidence <= 1.0
+    watcher = host_node("operator", "watcher")
+    debug = Collector[m.Image](watcher, keys.DEBUG_IMAGE, camera="front")
+    debug.wait_for(timeout=60, what="the debug image, once watched")
+    alive = retry_until(lambda: {n for n in ("camera", "face-detector") if live_instances(
+        watcher.session, f"{NODES_PREFIX}/{n}/*", timeout=1.0)} == {"camera", "face-detector"},
+        30, 0.5, what="camera and face-detector tokens at the operator")
+    assert alive
+
+
 # --- a broken router profile -------------------------------------------------------------
 
 
@@ -386,3 +425,132 @@ def test_router_without_its_key_says_which_file(profile: HostProfile, tmp_path: 
     code, output = _router_exit(str(missing), tmp_path)
     assert code != 0, output
     assert "private key" in output
+
+
+# --- who may say a node is alive ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class TokenCase:
+    """`host` declares a token for `own` (allowed: the control) and for `fake`."""
+
+    host: str
+    own: str | None  # None: the host runs no node (operator); the robot is the control
+    fake: str
+
+
+TOKEN_CASES = {
+    "radar-board-fakes-the-controller": TokenCase("radar-board", "radar-bridge", "controller"),
+    "eye-screen-fakes-the-eyes-driver": TokenCase("eye-screen", "eye-renderer", "eyes"),
+    "camera-host-fakes-the-radar-bridge": TokenCase("camera-host", "camera", "radar-bridge"),
+    "camera-host-fakes-the-eye-renderer": TokenCase("camera-host", "face-detector",
+                                                    "eye-renderer"),
+    "robot-fakes-the-radar-bridge": TokenCase("robot", "controller", "radar-bridge"),
+    "operator-fakes-the-audio-player": TokenCase("operator", None, "audio-player"),
+    "radar-board-declares-a-wildcard-node": TokenCase("radar-board", "radar-bridge", "*"),
+}
+
+
+def test_liveliness_grants_name_the_nodes_of_each_host() -> None:
+    """Static: every `liveliness_token` grant under nodes/ is one node name's subtree,
+    never nodes/** (which would let the host fake any service)."""
+    acl = json.loads(zenoh.Config.from_file(str(ZENOH_DIR / "router.json5"))
+                     .get_json("access_control"))
+    services = {"radar-bridge", "radar-presence", "camera", "face-detector", "controller",
+                "eyes", "eye-renderer", "audio", "audio-player"}
+    granted: dict[str, set[str]] = {}
+    rules = {r["id"]: r for r in acl["rules"]}
+    for policy in acl["policies"]:
+        for rid in policy["rules"]:
+            rule = rules[rid]
+            if "ingress" not in rule["flows"] or "liveliness_token" not in rule["messages"]:
+                continue
+            for key in rule["key_exprs"]:
+                if key.startswith(f"{NODES_PREFIX}/"):
+                    node = key[len(NODES_PREFIX) + 1:]
+                    assert node.endswith("/**") and node[:-3] in services, f"{rid}: {key}"
+                    for subject in policy["subjects"]:
+                        granted.setdefault(subject, set()).add(node[:-3])
+                else:
+                    assert "/nodes" not in key and not key.endswith("buddy/**"), f"{rid}: {key}"
+    assert granted["radar-board"] == {"radar-bridge"}
+    assert granted["eye-screen"] == {"eye-renderer"}
+    assert granted["camera-host"] == {"camera", "face-detector"}
+    assert granted["robot"] == services - {"radar-bridge"}
+    assert "operator" not in granted
+
+
+class TokenWatch:
+    """Liveliness tokens under nodes/** as a full-read host sees them (puts only)."""
+
+    def __init__(self, session: zenoh.Session) -> None:
+        self.keys: list[str] = []
+        self._sub = session.liveliness().declare_subscriber(f"{NODES_PREFIX}/**", self._on)
+
+    def _on(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:
+            self.keys.append(str(sample.key_expr))
+
+
+@pytest.mark.parametrize("name", sorted(TOKEN_CASES))
+def test_host_declares_liveliness_only_for_the_nodes_it_runs(
+    profile: HostProfile, tls_router: TlsRouter, name: str
+) -> None:
+    """No host can make another host's service look alive: its token for a foreign
+    node name never reaches a watcher (neither as a live token nor in a liveliness
+    query), while its token for its own node, declared after it, does."""
+    case = TOKEN_CASES[name]
+    sessions: list[zenoh.Session] = []
+    try:
+        watcher = open_client(tls_router.endpoint, profile.zenoh_file("operator"))
+        sessions.append(watcher)
+        seen = TokenWatch(watcher)
+        host = open_client(tls_router.endpoint, profile.zenoh_file(case.host))
+        sessions.append(host)
+        zid = str(host.info.zid())
+        fake_key = f"{NODES_PREFIX}/{case.fake}/{zid}"
+        fake = host.liveliness().declare_token(fake_key)
+        if case.own is not None:
+            control_key = f"{NODES_PREFIX}/{case.own}/{zid}"
+            control_session = host  # the same session and path, declared later
+        else:
+            control_session = open_client(tls_router.endpoint, profile.zenoh_file("robot"))
+            sessions.append(control_session)
+            control_key = f"{NODES_PREFIX}/controller/{control_session.info.zid()}"
+        control = control_session.liveliness().declare_token(control_key)
+        retry_until(lambda: control_key in seen.keys, 20, 0.1,
+                    what=f"{name}: the allowed token at the watcher")
+        replies = list(watcher.liveliness().get(f"{NODES_PREFIX}/**", timeout=QUIET_S))
+        queried = {str(r.ok.key_expr) for r in replies if r.ok is not None}
+        assert control_key in queried, queried
+        with pytest.raises(TimeoutError):
+            retry_until(lambda: fake_key in seen.keys, QUIET_S, 0.1, what="the faked token")
+        assert fake_key not in queried, f"{fake_key} answered a liveliness query"
+        assert all(not k.startswith(f"{NODES_PREFIX}/{case.fake}/") or case.fake == case.own
+                   for k in seen.keys), seen.keys
+        fake.undeclare()
+        control.undeclare()
+    finally:
+        for session in reversed(sessions):
+            session.close()
+
+
+def test_duplicate_service_is_seen_through_the_acl(
+    profile: HostProfile, tls_router: TlsRouter, host_node: Callable[..., Node]
+) -> None:
+    """A host may watch and query its own node name: a second radar bridge on the
+    radar board is refused (the first one's token reached it), so the ACL that stops
+    fakes does not blind a host to a copy of itself."""
+    first = host_node("radar-board", "radar-bridge")
+    watcher = host_node("operator", "watcher")
+    retry_until(lambda: first.instance in live_instances(
+        watcher.session, f"{NODES_PREFIX}/radar-bridge/*", timeout=1.0), 20, 0.2,
+        what="the first radar bridge's token at the operator")
+    second: Node | None = None
+    try:
+        with pytest.raises(DuplicateNodeError, match="already running"):
+            second = Node("radar-bridge", connect=[tls_router.endpoint],
+                          zenoh_config_file=profile.zenoh_file("radar-board"), unique=True)
+    finally:
+        if second is not None:
+            second.close()

@@ -10,14 +10,10 @@ made (not root, no `ip`, a container without CAP_NET_ADMIN).
 
 from __future__ import annotations
 
-import os
-import random
-import shutil
 import socket
 import subprocess
 import sys
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -33,51 +29,15 @@ from buddybot.core.testing import (
     retry_until,
     wait_port,
 )
-from tests.deploy.conftest import HostProfile, make_certs
+from tests.deploy.conftest import HostProfile, Namespace, make_certs, veth_namespace
 
 pytestmark = pytest.mark.integration
 
 
-def ip(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(["ip", *args], capture_output=True, text=True, timeout=30, check=False)
-
-
-@dataclass
-class Namespace:
-    name: str
-    host_addr: str  # this side of the veth: where the router listens
-    board_addr: str  # the namespace's side
-
-
 @pytest.fixture
 def board_ns() -> Iterator[Namespace]:
-    if shutil.which("ip") is None or os.geteuid() != 0:
-        pytest.skip("needs root and iproute2 to make a network namespace")
-    tag = f"{os.getpid() % 10000}{random.randrange(100):02d}"
-    name, veth_host, veth_board = f"bbrb{tag}", f"bbh{tag}", f"bbb{tag}"
-    subnet = f"10.{random.randrange(200, 250)}.{random.randrange(256)}"
-    ns = Namespace(name, f"{subnet}.1", f"{subnet}.2")
-    made = ip("netns", "add", name)
-    if made.returncode != 0:
-        pytest.skip(f"cannot make a network namespace: {made.stderr.strip()}")
-    try:
-        steps = [
-            ("link", "add", veth_host, "type", "veth", "peer", "name", veth_board),
-            ("link", "set", veth_board, "netns", name),
-            ("addr", "add", f"{ns.host_addr}/30", "dev", veth_host),
-            ("link", "set", veth_host, "up"),
-            ("-n", name, "addr", "add", f"{ns.board_addr}/30", "dev", veth_board),
-            ("-n", name, "link", "set", veth_board, "up"),
-            ("-n", name, "link", "set", "lo", "up"),
-        ]
-        for step in steps:
-            done = ip(*step)
-            if done.returncode != 0:
-                pytest.skip(f"ip {' '.join(step)}: {done.stderr.strip()}")
+    with veth_namespace("bbrb") as ns:
         yield ns
-    finally:
-        ip("link", "del", veth_host)  # removes both ends
-        ip("netns", "del", name)
 
 
 @pytest.fixture
@@ -123,9 +83,9 @@ def test_radar_board_in_its_own_namespace(
     try:
         frames = Collector[m.LD2410TargetDataFrameArray](watcher, keys.RADAR_FRAMES, device="*")
         board_config = netns_profile.toml("radar-board", board_endpoint)
-        started(["ip", "netns", "exec", board_ns.name,
-                 *buddybot_argv("run", "radar-bridge", "--sim", "--device-id", "3",
-                                "--config", str(board_config))], "radar-board")
+        started(board_ns.exec_argv(
+                    *buddybot_argv("run", "radar-bridge", "--sim", "--device-id", "3",
+                                   "--config", str(board_config))), "radar-board")
         got = frames.wait_for(lambda f: f.device_id == 3, timeout=60,
                               what="frames from the namespaced radar board")
         assert got.sensors
