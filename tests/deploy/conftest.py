@@ -260,3 +260,18 @@ def host_process(profile: HostProfile, tls_router: TlsRouter,
 
     yield start
     stop_and_report(started, tail=3000)
+
+
+@pytest.fixture
+def started(tmp_path: Path) -> Iterator[Callable[..., Process]]:
+    """Start processes (logs in tmp_path/logs); all stopped, and their output shown,
+    at the end of the test."""
+    procs: list[Process] = []
+
+    def start(argv: list[str], name: str) -> Process:
+        proc = Process(argv, name, tmp_path / "logs")
+        procs.append(proc)
+        return proc
+
+    yield start
+    stop_and_report(procs, tail=3000)

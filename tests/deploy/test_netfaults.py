@@ -53,7 +53,6 @@ from buddybot.core.testing import (
     buddybot_argv,
     free_port,
     retry_until,
-    stop_and_report,
     wait_port,
 )
 from tests.deploy.conftest import (
@@ -108,18 +107,6 @@ def test_every_host_has_a_profile() -> None:
 
 # --- helpers: processes, a page probe, arrival times --------------------------------------
 
-
-@pytest.fixture
-def started(tmp_path: Path) -> Iterator[Callable[..., Process]]:
-    procs: list[Process] = []
-
-    def start(argv: list[str], name: str) -> Process:
-        proc = Process(argv, name, tmp_path / "logs")
-        procs.append(proc)
-        return proc
-
-    yield start
-    stop_and_report(procs, tail=2500)
 
 
 # Runs inside the eye screen's namespace: the eye page's WebSocket as a browser would

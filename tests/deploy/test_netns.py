@@ -51,20 +51,6 @@ def netns_profile(board_ns: Namespace, tmp_path: Path) -> HostProfile:
     return HostProfile(certs, work)
 
 
-@pytest.fixture
-def started(tmp_path: Path) -> Iterator[Callable[..., Process]]:
-    procs: list[Process] = []
-
-    def start(argv: list[str], name: str) -> Process:
-        proc = Process(argv, name, tmp_path / "logs")
-        procs.append(proc)
-        return proc
-
-    yield start
-    for proc in reversed(procs):
-        proc.stop()
-        print(f"--- {proc.name} (exit {proc.proc.returncode}) ---\n{proc.output()[-3000:]}")
-
 
 def test_radar_board_in_its_own_namespace(
     board_ns: Namespace, netns_profile: HostProfile, started: Callable[..., Process],
