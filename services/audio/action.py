@@ -32,6 +32,7 @@ from buddybot.audio.settings import AudioSettings
 from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
+from buddybot.core.config import ConfigError
 from buddybot.core.node import Node, ServiceError, error_text, new_goal_id
 from buddybot.core.service import ServiceContext
 
@@ -275,9 +276,12 @@ class ActionServer:
 
 def run(ctx: ServiceContext) -> int:
     settings = ctx.config.audio
-    if ctx.args.player:
+    if ctx.args.player is not None:
+        # An empty name used to be ignored silently (falsy): refuse it instead.
+        if not ctx.args.player:
+            raise ConfigError("--player must name the player node")
         settings = msgspec.structs.replace(settings, player=ctx.args.player)
-    policy = ctx.args.busy_policy or settings.busy_policy
+    policy = settings.busy_policy if ctx.args.busy_policy is None else ctx.args.busy_policy
     node = ctx.node()
     server = ActionServer(node, settings, policy)
     try:

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -24,7 +23,7 @@ from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.config import Config, ConfigError
+from buddybot.core.config import ConfigError, config_dir
 from buddybot.core.service import ServiceContext
 
 TEXT_MAX = 1000
@@ -54,13 +53,6 @@ def player_settings(ctx: ServiceContext) -> AudioPlayerSettings:
         return msgspec.convert(data, AudioPlayerSettings)
     except msgspec.ValidationError as exc:
         raise ConfigError(f"audio-player options: {exc}") from None
-
-
-def config_dir(config: Config) -> Path | None:
-    """The folder relative sound paths start from (None without a config file)."""
-    if config.source is None or config.source.startswith("<"):
-        return None
-    return Path(config.source).resolve().parent
 
 
 def run(ctx: ServiceContext) -> int:

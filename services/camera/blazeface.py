@@ -7,7 +7,7 @@ into `Detection`s in image pixels exactly the way MediaPipe's
 SsdAnchorsCalculator, TensorsToDetectionsCalculator and
 NonMaxSuppressionCalculator (WEIGHTED) do, with NumPy only, so it is
 unit-tested without a network or a process. Running the network lives in
-`detector_core.py`.
+`facenet.py`.
 """
 
 from __future__ import annotations
@@ -22,7 +22,6 @@ FloatArray = npt.NDArray[np.float32]
 # Keypoint order of the model (from the subject's point of view: the
 # subject's right eye appears on the left of a non-mirrored image).
 RIGHT_EYE, LEFT_EYE, NOSE_TIP, MOUTH, RIGHT_EAR, LEFT_EAR = range(6)
-KEYPOINT_NAMES = ("right_eye", "left_eye", "nose_tip", "mouth", "right_ear", "left_ear")
 
 
 @dataclass(frozen=True)

@@ -18,14 +18,15 @@ import cv2
 import numpy as np
 
 from buddybot.camera import frames
-from buddybot.camera.backoff import Backoff
 from buddybot.camera.settings import CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
+from buddybot.core.backoff import Backoff
+from buddybot.core.config import ConfigError, resolve_path
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, Publisher, RateLimitedLog
+from buddybot.core.rates import RateCounter
 from buddybot.core.service import ServiceContext
 
 DEFAULT_FPS = 30.0
@@ -92,7 +93,7 @@ class Capture:
         self.diag.values.update({"source": spec.kind, "frames": 0, "reopens": 0, "fps": 0.0,
                                  "bad_frames": 0, "too_large": 0})
         self.warn = RateLimitedLog(node.log)
-        self._frames_window: list[float] = []
+        self._frame_rate = RateCounter(window_s=2.0)
 
     def _size(self, frame: np.ndarray) -> np.ndarray:
         w, h = self.s.width, self.s.height
@@ -218,13 +219,9 @@ class Capture:
         return 0
 
     def _rate(self) -> None:
-        now = time.monotonic()
-        window = self._frames_window
-        window.append(now)
-        while window and now - window[0] > 2.0:
-            window.pop(0)
-        if len(window) > 1:
-            self.diag.values["fps"] = round((len(window) - 1) / (window[-1] - window[0]), 1)
+        fps = self._frame_rate.add(time.monotonic())
+        if fps is not None:
+            self.diag.values["fps"] = round(fps, 1)
 
 
 def run(ctx: ServiceContext) -> int:
@@ -234,7 +231,8 @@ def run(ctx: ServiceContext) -> int:
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     if spec.kind in ("file", "sequence") and not spec.target.startswith("/"):
-        spec = SourceSpec(spec.kind, str(_resolve(ctx, spec.target)))
+        spec = SourceSpec(spec.kind, str(resolve_path(
+            ctx.config, spec.target, from_command_line=ctx.args.source is not None)))
     cv2.setNumThreads(1)
     source = make_source(spec, settings.width, settings.height)
     node = ctx.node()
@@ -242,13 +240,3 @@ def run(ctx: ServiceContext) -> int:
         return Capture(node, settings, spec, source).run()
     finally:
         node.close()
-
-
-def _resolve(ctx: ServiceContext, value: str) -> str:
-    """A relative path given on the command line is relative to the working
-    directory; one from the config file is relative to that file."""
-    from buddybot.core.config import resolve_path
-
-    if ctx.args.source is not None:
-        return value
-    return str(resolve_path(ctx.config, value))

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -112,8 +111,8 @@ def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, Fa
 def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
     explicit = None
     if s.model_path:
-        explicit = (resolve_path(ctx.config, s.model_path) if ctx.args.model_path is None
-                    else Path(s.model_path))
+        explicit = resolve_path(ctx.config, s.model_path,
+                                from_command_line=ctx.args.model_path is not None)
     try:
         path = models.locate(s.model, explicit)
         return FaceNet(path, bf.SPECS[s.model], s.min_score)

@@ -74,10 +74,6 @@ class Gaze:
     distance_cm: float
 
 
-CENTRE_YAW = 0.0
-CENTRE_PITCH = 0.0
-
-
 def gaze_angles(point: Vector) -> Gaze:
     """Yaw, pitch and distance of a point in the eyes frame (x forward, y left, z up).
 

@@ -116,12 +116,30 @@ def load_config(explicit: str | None = None) -> Config:
     return parse_config(data, str(path))
 
 
-def resolve_path(config: Config, value: str) -> Path:
-    """A path from the config: absolute as is, relative to the config file's folder."""
+def config_dir(config: Config) -> Path | None:
+    """The folder relative paths in the config start from (None without a config file).
+
+    Written once so every service reads `sounds/a.wav` or `models/x.tflite` in
+    robot.toml the same way, whatever its working directory (systemd, `up`).
+    """
+    if config.source is None or config.source.startswith("<"):
+        return None
+    return Path(config.source).resolve().parent
+
+
+def resolve_path(config: Config, value: str, *, from_command_line: bool = False) -> Path:
+    """A path from the config: absolute as is, relative to the config file's folder.
+
+    `from_command_line`: the value was an option instead, and a relative path
+    typed in a shell means the working directory, as for every other command.
+    """
+    if from_command_line:
+        return Path(value)
     path = Path(value).expanduser()
-    if path.is_absolute() or config.source is None or config.source.startswith("<"):
+    base = config_dir(config)
+    if path.is_absolute() or base is None:
         return path
-    return Path(config.source).resolve().parent / path
+    return base / path
 
 
 def to_toml_dict(config: Config) -> dict[str, object]:

@@ -7,6 +7,8 @@ robot wants to see bad traffic too.
 
 from __future__ import annotations
 
+import json
+
 import msgspec
 
 from buddybot.core import keys
@@ -14,13 +16,18 @@ from buddybot.core import messages as m
 
 
 def summarize(msg: m.Message) -> str:
-    """JSON for control messages; a one-line summary for images."""
+    """JSON for control messages; a one-line summary for images.
+
+    The image summary is built by a JSON encoder, never by string
+    formatting: `frame_id` is free text from the wire, and a quote,
+    backslash or newline in it must not turn `echo` output into invalid JSON.
+    """
     if isinstance(msg, m.Image):
-        return (
-            f'{{"type": "Image", "stamp_ns": {msg.stamp_ns}, "frame_id": "{msg.frame_id}", '
-            f'"width": {msg.width}, "height": {msg.height}, "encoding": "{msg.encoding}", '
-            f'"data": "<{len(msg.data)} bytes>"}}'
-        )
+        return json.dumps({
+            "type": "Image", "stamp_ns": msg.stamp_ns, "frame_id": msg.frame_id,
+            "width": msg.width, "height": msg.height, "encoding": msg.encoding,
+            "data": f"<{len(msg.data)} bytes>",
+        })
     return msgspec.json.encode(msg).decode()
 
 

@@ -32,6 +32,7 @@ from typing import IO
 import zenoh
 
 from buddybot.core import registry
+from buddybot.core.backoff import Backoff
 from buddybot.core.node import open_session, zenoh_config
 from buddybot.core.service import ServiceContext
 from buddybot.core.status import StatusMonitor
@@ -68,20 +69,16 @@ class RestartPolicy:
     max_s: float = BACKOFF_MAX_S
     stable_s: float = STABLE_S
     no_restart: frozenset[int] = NO_RESTART_STATUS
-    backoff: float = field(init=False)
+    backoff: Backoff = field(init=False)
 
     def __post_init__(self) -> None:
-        self.backoff = self.min_s
+        self.backoff = Backoff(self.min_s, self.max_s, stable_s=self.stable_s)
 
     def after_exit(self, status: int | None, ran_s: float) -> float | None:
         """Seconds to wait before the restart, or None: do not restart."""
         if status in self.no_restart:
             return None
-        if ran_s >= self.stable_s:
-            self.backoff = self.min_s
-        delay = self.backoff
-        self.backoff = min(self.backoff * 2, self.max_s)
-        return delay
+        return self.backoff.after_run(ran_s)
 
 
 def die_with_supervisor(env: MutableMapping[str, str]) -> bool:

@@ -82,8 +82,11 @@ class ServiceContext:
 def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
     """Load config (ConfigError on bad input) and merge the common options."""
     config = load_config(getattr(args, "config", None))
-    robot = getattr(args, "robot", None) or config.robot.id
-    connect = getattr(args, "connect", None) or list(config.zenoh.connect)
+    # `is None`, not `or`: `--robot ""` must be refused below, not replaced by the config's id.
+    robot = getattr(args, "robot", None)
+    robot = config.robot.id if robot is None else robot
+    connect = getattr(args, "connect", None)  # append: None or a non-empty list
+    connect = list(config.zenoh.connect) if connect is None else connect
     from buddybot.core.keys import valid_robot_id
 
     if not valid_robot_id(robot):

@@ -19,6 +19,7 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.rates import rate_hz
 from buddybot.core.tools import list_node_instances
 
 
@@ -35,12 +36,6 @@ class RobotStatus:
     expression: m.ExpressionAction | None = None
     camera_fps: float | None = None
     restarts: int = 0
-
-
-def rate_hz(arrivals: deque[float] | list[float], now: float, window_s: float = 3.0) -> float:
-    """Messages per second over the last `window_s` seconds."""
-    recent = [t for t in arrivals if now - t <= window_s]
-    return len(recent) / window_s
 
 
 def format_status(status: RobotStatus, now: float) -> str:

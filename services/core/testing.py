@@ -23,10 +23,9 @@ from pathlib import Path
 from typing import Any, Generic, TypeVar
 
 import numpy as np
-import zenoh
 
 from buddybot.core import keys
-from buddybot.core.node import Node, zenoh_config
+from buddybot.core.node import Node
 
 T = TypeVar("T")
 LOOPBACK = "127.0.0.1"
@@ -195,13 +194,6 @@ def run_service(service: str, endpoint: str, *args: str, robot: str = "buddy",
     """Start `buddybot run SERVICE --connect ENDPOINT ...` as a child process."""
     argv = buddybot_argv("run", service, "--connect", endpoint, "--robot", robot, *args)
     return Process(argv, f"{service}-{time.monotonic_ns()}", log_dir, env)
-
-
-def probe_session(endpoint: str) -> zenoh.Session:
-    """A plain client session for tests (scouting off, loopback only)."""
-    config = zenoh_config(connect=[endpoint])
-    config.insert_json5("connect/timeout_ms", "10000")
-    return zenoh.open(config)
 
 
 class Collector(Generic[T]):

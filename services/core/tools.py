@@ -25,6 +25,7 @@ from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.describe import describe
 from buddybot.core.node import ServiceError, call_service, open_session, zenoh_config
+from buddybot.core.rates import span_hz
 from buddybot.core.service import ServiceContext
 
 
@@ -114,8 +115,7 @@ def rate_report(stamps: list[float]) -> str | None:
     if len(stamps) < 2:
         return None
     gaps = [b - a for a, b in itertools.pairwise(stamps)]
-    mean = statistics.fmean(gaps)
-    rate = 1.0 / mean if mean > 0 else float("inf")
+    rate = span_hz(stamps)
     std = statistics.pstdev(gaps)
     return (f"average rate: {rate:.3f} Hz\n\tmin: {min(gaps):.4f}s max: {max(gaps):.4f}s "
             f"std dev: {std:.5f}s window: {len(stamps)}")

@@ -17,6 +17,7 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
+from buddybot.core.backoff import Backoff
 from buddybot.eyes.placement import Window
 
 log = logging.getLogger("buddybot.eye-renderer.kiosk")
@@ -89,7 +90,8 @@ class KioskWindow:
         self.proc: subprocess.Popen[bytes] | None = None
         self.starts = 0
         self._next_start = 0.0
-        self._backoff = 1.0
+        # 1 s doubling to 30 s; a window that stayed open a minute starts over.
+        self._backoff = Backoff(1.0, 30.0, stable_s=60.0)
 
     def start(self) -> None:
         self.starts += 1
@@ -108,12 +110,10 @@ class KioskWindow:
             return
         now = time.monotonic()
         if self._next_start == 0.0:
-            if now - self._started_at > 60:
-                self._backoff = 1.0
+            delay = self._backoff.after_run(now - self._started_at)
             log.warning("%s window exited (status %s); reopening in %.0f s",
-                        self.name, self.proc.returncode, self._backoff)
-            self._next_start = now + self._backoff
-            self._backoff = min(self._backoff * 2, 30.0)
+                        self.name, self.proc.returncode, delay)
+            self._next_start = now + delay
         elif now >= self._next_start:
             self._next_start = 0.0
             self.start()

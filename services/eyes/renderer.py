@@ -552,7 +552,8 @@ async def serve(ctx: ServiceContext, host: str, port: int,
 def run(ctx: ServiceContext) -> int:
     s = ctx.config.eye_renderer
     args = ctx.args
-    host = args.host or s.host
+    # `--host ""` (every interface) is a real choice: only an absent flag takes the config.
+    host = s.host if args.host is None else args.host
     port = s.port if args.port is None else args.port
     if not 0 <= port <= 65535:
         print(f"buddybot eye-renderer: --port {port} is not a TCP port", file=sys.stderr)
@@ -561,7 +562,8 @@ def run(ctx: ServiceContext) -> int:
         windows = plan_windows(args, s)
         browser = None
         if windows:
-            browser = kiosk.find_browser(args.browser or s.browser_path)
+            browser = kiosk.find_browser(
+                s.browser_path if args.browser is None else args.browser)
             if browser is None:
                 raise StartupError(
                     "no Chromium found for the kiosk windows: install it (scripts/chromium.sh), "

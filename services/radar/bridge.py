@@ -32,6 +32,7 @@ import serial
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.backoff import Backoff
 from buddybot.core.config import ConfigError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
@@ -41,6 +42,7 @@ from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.convert import report_to_frame
 from buddybot.radar.ld2410 import Parser, ProtocolError, Report
 from buddybot.radar.scenarios import SCENARIOS
+from buddybot.radar.settings import RadarBridgeSettings
 
 FIRMWARE_TIMEOUT_S = 0.5  # per ACK, two attempts: a mute sensor costs 1 s per connect
 NOISE_STATES = {
@@ -84,35 +86,34 @@ class SensorReader:
         self._publish = publish
         self._on_change = on_change
         self._stop = stop
-        self._backoff = backoff
+        self._backoff = Backoff(*backoff)  # (initial, maximum): this sensor's own series
         self._silence_s = silence_s
         self._log = log
         self._parser = Parser()
         self.thread = threading.Thread(target=self._run, name=f"radar-{radar_id}", daemon=True)
 
     def _run(self) -> None:
-        delay = self._backoff[0]
         while not self._stop.is_set():
             try:
                 port = serial.serial_for_url(self.status.url, baudrate=self._baud, timeout=0.2)
             except (serial.SerialException, OSError, ValueError) as exc:
                 self._failed(f"cannot open: {exc}")
-                self._stop.wait(delay)
-                delay = min(delay * 2, self._backoff[1])
+                self._stop.wait(self._backoff.next())
                 continue
             try:
                 self._connected()
                 self._read(port)
-                delay = self._backoff[0]
+                self._backoff.reset()
             except (serial.SerialException, OSError) as exc:
-                delay = self._backoff[0] if self.status.frames else delay
+                if self.status.frames:  # frames came: the link worked, start the series again
+                    self._backoff.reset()
                 self._failed(f"lost: {exc}")
             finally:
                 try:
                     port.close()
                 except Exception as exc:  # closing a dead port may fail too
                     self._log.debug("close %s: %s", clip(self.status.url), clip(str(exc)))
-            self._stop.wait(delay)
+            self._stop.wait(self._backoff.delay)  # a lost link waits without growing the delay
 
     def _connected(self) -> None:
         st = self.status
@@ -297,36 +298,65 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim-speed", type=float, help="scenario time scale (default 1.0)")
 
 
+@dataclass(frozen=True)
+class BridgeOptions:
+    """What `run` starts: command line merged over `[radar_bridge]`."""
+
+    urls: list[str]
+    device_id: int
+    baudrate: int
+    sim_scenario: str | None  # None: no simulated sensor
+    sim_speed: float
+
+
+def resolve_options(args: argparse.Namespace, cfg: RadarBridgeSettings) -> BridgeOptions:
+    """Merge the command line over the config, refusing values no sensor can use.
+
+    A flag overrides the config whenever it was given (`is None`, never
+    `or`): `--sim-speed 0` or `--baudrate 0` must reach the checks below and
+    be refused naming the flag, not be silently replaced by the config value.
+    The config's own values were already range-checked when it was loaded.
+    """
+    sim_on = bool(args.sim or cfg.sim)
+    # --sim means "the simulated sensor": configured hardware is left alone
+    # (sensors given explicitly with --sensor are still read alongside it).
+    urls = list(args.sensor if args.sensor is not None else ([] if sim_on else cfg.sensors))
+    device_id = cfg.device_id if args.device_id is None else args.device_id
+    if device_id < 0:
+        raise ConfigError("--device-id must be >= 0")
+    baud = cfg.baudrate if args.baudrate is None else args.baudrate
+    if baud <= 0:
+        raise ConfigError(f"--baudrate must be > 0 (got {baud})")
+    scenario = (cfg.sim_scenario if args.sim_scenario is None else args.sim_scenario) \
+        if sim_on else None
+    if scenario is not None and scenario not in SCENARIOS:
+        raise ConfigError(f"radar_bridge.sim_scenario: unknown {scenario!r}; "
+                          f"one of {sorted(SCENARIOS)}")
+    # Scenario time is wall time x speed: 0 would freeze the visitor forever
+    # and a negative speed would run the script backwards, so both are refused.
+    speed = cfg.sim_speed if args.sim_speed is None else args.sim_speed
+    if sim_on and not speed > 0:
+        raise ConfigError(f"--sim-speed must be > 0 (got {speed:g})")
+    return BridgeOptions(urls, device_id, baud, scenario, speed)
+
+
 def run(ctx: ServiceContext) -> int:
     from buddybot.radar.sim import PtySensor
 
     cfg = ctx.config.radar_bridge
-    args = ctx.args
-    sim_on = bool(args.sim or cfg.sim)
-    # --sim means "the simulated sensor": configured hardware is left alone
-    # (sensors given explicitly with --sensor are still read alongside it).
-    urls = list(args.sensor or ([] if sim_on else cfg.sensors))
-    device_id = args.device_id if args.device_id is not None else cfg.device_id
-    if device_id < 0:
-        raise ConfigError("--device-id must be >= 0")
-    baud = args.baudrate or cfg.baudrate
+    opts = resolve_options(ctx.args, cfg)
+    urls = list(opts.urls)
     sims: list[PtySensor] = []
-    if sim_on:
-        scenario = args.sim_scenario or cfg.sim_scenario
-        if scenario not in SCENARIOS:
-            raise ConfigError(f"radar_bridge.sim_scenario: unknown {scenario!r}; "
-                              f"one of {sorted(SCENARIOS)}")
-        speed = args.sim_speed or cfg.sim_speed
-        if speed <= 0:
-            raise ConfigError("--sim-speed must be > 0")
-        sims.append(PtySensor(scenario, speed=speed).start())
+    if opts.sim_scenario is not None:
+        sims.append(PtySensor(opts.sim_scenario, speed=opts.sim_speed).start())
         urls.append(sims[-1].path)
     if not urls:
         print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim",
               file=sys.stderr)
         return 2
     node = ctx.node()
-    bridge = Bridge(node, urls, device_id, baud, (cfg.reconnect_initial_s, cfg.reconnect_max_s),
+    bridge = Bridge(node, urls, opts.device_id, opts.baudrate,
+                    (cfg.reconnect_initial_s, cfg.reconnect_max_s),
                     cfg.silence_timeout_s, cfg.query_firmware)
     try:
         bridge.start()

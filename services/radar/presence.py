@@ -203,10 +203,6 @@ class PresenceTracker:
         limit = self.rules.stale_after_s
         return sorted(k for k, s in self._sensors.items() if now_s - s.seen_s > limit)
 
-    def fresh_sensors(self, now_s: float) -> list[str]:
-        return sorted(k for k, s in self._sensors.items()
-                      if now_s - s.seen_s <= self.rules.stale_after_s)
-
     def _any_fresh(self, now_s: float) -> bool:
         limit = self.rules.stale_after_s
         return any(now_s - s.seen_s <= limit for s in self._sensors.values())

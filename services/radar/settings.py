@@ -22,7 +22,7 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     # LD2410 factory default; a pty or socket:// URL ignores it.
     baudrate: Annotated[int, msgspec.Meta(gt=0)] = 256000
     sim: bool = False
-    # Simulated sensor: scenario name (see buddybot.radar.sim.SCENARIOS) and time scale.
+    # Simulated sensor: scenario name (see buddybot.radar.scenarios.SCENARIOS) and time scale.
     sim_scenario: str = "visit"
     sim_speed: Positive = 1.0
     # Reconnect backoff: first retry after reconnect_initial_s, doubling up to reconnect_max_s.

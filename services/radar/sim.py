@@ -266,9 +266,6 @@ class PtySensor:
     def scenario_time(self) -> float:
         return (time.monotonic() - self._t0) * self.speed
 
-    def restart_scenario(self) -> None:
-        self._t0 = time.monotonic()
-
     # -- lifetime --
 
     def start(self) -> PtySensor:

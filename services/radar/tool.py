@@ -201,12 +201,17 @@ def _print(result: dict[str, object], as_json: bool) -> None:
 def run(ctx: ServiceContext) -> int:
     args = ctx.args
     cfg = ctx.config.radar_bridge
-    url = args.port or (cfg.sensors[0] if cfg.sensors else None)
+    url = args.port if args.port is not None else (cfg.sensors[0] if cfg.sensors else None)
     if not url:
         print("buddybot radar: no port: give --port URL", file=sys.stderr)
         return 2
     if args.action == "set-sensitivity" and args.gate != "all" and not args.gate.isdigit():
         print("buddybot radar: --gate must be 0..8 or 'all'", file=sys.stderr)
+        return 2
+    # A given --baudrate 0 is refused, not silently replaced by the config value.
+    baudrate = cfg.baudrate if args.baudrate is None else args.baudrate
+    if baudrate <= 0:
+        print(f"buddybot radar: --baudrate must be > 0 (got {baudrate})", file=sys.stderr)
         return 2
     try:
         _check_values(args)
@@ -214,7 +219,7 @@ def run(ctx: ServiceContext) -> int:
         print(f"buddybot radar: {exc}", file=sys.stderr)
         return 2
     try:
-        port = serial.serial_for_url(url, baudrate=args.baudrate or cfg.baudrate, timeout=0.05)
+        port = serial.serial_for_url(url, baudrate=baudrate, timeout=0.05)
     except (serial.SerialException, OSError, ValueError) as exc:
         print(f"buddybot radar: cannot open {clip(url)}: {clip(str(exc))}", file=sys.stderr)
         return 1

@@ -7,8 +7,8 @@ from pathlib import Path
 import pytest
 
 from buddybot.camera import models
-from buddybot.camera.backoff import Backoff
 from buddybot.camera.sources import parse_source
+from buddybot.core.backoff import Backoff
 
 
 @pytest.mark.parametrize(("text", "kind"), [

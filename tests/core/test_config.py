@@ -8,7 +8,13 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core.config import ConfigError, load_config, parse_config, resolve_path
+from buddybot.core.config import (
+    ConfigError,
+    config_dir,
+    load_config,
+    parse_config,
+    resolve_path,
+)
 
 DESIGN_EXAMPLE = """
 [robot]
@@ -72,6 +78,15 @@ def test_env_variable_and_relative_paths(tmp_path: Path, monkeypatch: pytest.Mon
     assert config.robot.id == "r7"
     assert resolve_path(config, "sounds/a.wav") == tmp_path / "sounds/a.wav"
     assert resolve_path(config, "/abs/a.wav") == Path("/abs/a.wav")
+    assert config_dir(config) == tmp_path.resolve()
+    # Typed as an option instead: relative to the working directory, like any command.
+    assert resolve_path(config, "clip.mp4", from_command_line=True) == Path("clip.mp4")
+
+
+def test_without_a_config_file_paths_stay_relative() -> None:
+    config = parse_config(b"", "<defaults>")
+    assert config_dir(config) is None
+    assert resolve_path(config, "sounds/a.wav") == Path("sounds/a.wav")
 
 
 def test_missing_file_is_a_config_error(tmp_path: Path) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import msgspec
 import pytest
+import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
@@ -81,8 +82,9 @@ def test_malformed_payloads_are_dropped_counted_and_survived(
         garbage = [b"", b"\xff\x00garbage", b"{}", b'{"stamp_ns": -5}', b"[1,2,3]" * 1000]
         for topic in keys.TOPICS:
             key = probe.key(topic, **_params(topic))
-            for payload in garbage:
-                probe.session.put(key, payload)
+            for payload in garbage:  # BLOCK: none lost on the way, so the count is exact
+                probe.session.put(key, payload,
+                                  congestion_control=zenoh.CongestionControl.BLOCK)
         # Still alive and still working: a valid message is received after the garbage.
         good = probe.publisher(keys.PUPIL)
         retry_until(lambda: good.put(m.PupilControl(stamp_ns=1, dilation_percentage=5))

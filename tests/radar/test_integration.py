@@ -326,6 +326,8 @@ def test_bad_command_line_values_are_clear_errors() -> None:
         ("radar-presence", ["--max-sensors", "0"], "max_sensors"),
         ("radar-presence", ["--max-sensors", "5000"], "max_sensors"),
         ("radar-bridge", ["--sim", "--sim-speed", "-2"], "--sim-speed"),
+        ("radar-bridge", ["--sim", "--sim-speed", "0"], "--sim-speed"),
+        ("radar-bridge", ["--sim", "--baudrate", "0"], "--baudrate"),
         ("radar-bridge", [], "no sensor"),
     ):
         out = subprocess.run(

@@ -268,6 +268,10 @@ def test_tool_errors_are_clear(sensor: PtySensor, tmp_path: Path) -> None:
     assert out.returncode == 1 and "cannot open" in out.stderr
     out = radar("info")
     assert out.returncode == 2 and "--port" in out.stderr
+    # 0 is no serial speed: refused, not silently replaced by the config's 256000
+    # (a pty ignores the speed, so the old behaviour "worked" and hid the mistake).
+    out = radar("info", "--port", sensor.path, "--baudrate", "0")
+    assert out.returncode == 2 and "--baudrate" in out.stderr
 
 
 def test_tool_reports_a_sensor_that_does_not_ack(tmp_path: Path) -> None:

@@ -1,0 +1,47 @@
+"""Message and frame rates, written once (pure: the caller passes the clock).
+
+Two estimates, because the places that show a rate want different things:
+`rate_hz` counts arrivals in a fixed window (a sensor that stopped drops to
+0 Hz once the window passes, which the `up` status line must show), while
+`span_hz` measures from the first to the last arrival (steady and exact for a
+stream that is running: the camera's `fps`, `buddybot hz`). `RateCounter`
+keeps the sliding window for the latter.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Iterable, Sequence
+
+
+def rate_hz(arrivals: Iterable[float], now: float, window_s: float = 3.0) -> float:
+    """Messages per second over the last `window_s` seconds (0 when none arrived)."""
+    return sum(1 for t in arrivals if now - t <= window_s) / window_s
+
+
+def span_hz(stamps: Sequence[float]) -> float | None:
+    """Arrivals per second from the first stamp to the last (None with fewer than 2).
+
+    Equal to one over the mean gap; infinite when all stamps are the same
+    (a coarse clock must not raise ZeroDivisionError in a capture loop).
+    """
+    if len(stamps) < 2:
+        return None
+    span = stamps[-1] - stamps[0]
+    return (len(stamps) - 1) / span if span > 0 else float("inf")
+
+
+class RateCounter:
+    """Arrival times over the last `window_s` seconds, and their rate (`span_hz`)."""
+
+    def __init__(self, window_s: float) -> None:
+        self.window_s = window_s
+        self.stamps: deque[float] = deque()
+
+    def add(self, now: float) -> float | None:
+        """Record an arrival at `now`, forget those older than the window; the rate."""
+        stamps = self.stamps
+        stamps.append(now)
+        while stamps and now - stamps[0] > self.window_s:
+            stamps.popleft()
+        return span_hz(stamps)

@@ -1,0 +1,43 @@
+"""The one rate module (core/rates.py): fixed-window counts and first-to-last spans."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+import pytest
+
+from buddybot.core.rates import RateCounter, rate_hz, span_hz
+
+
+def test_rate_counts_only_the_window() -> None:
+    arrivals = deque([0.0, 7.1, 7.5, 8.0, 9.0, 9.9])
+    assert rate_hz(arrivals, now=10.0, window_s=3.0) == 5 / 3.0
+    assert rate_hz([7.0, 9.0], now=10.0, window_s=3.0) == 2 / 3.0  # the edge counts
+
+
+def test_rate_drops_to_zero_when_the_sender_stops() -> None:
+    assert rate_hz([1.0, 1.1, 1.2], now=10.0, window_s=3.0) == 0.0
+    assert rate_hz([], now=10.0) == 0.0
+
+
+def test_span_is_one_over_the_mean_gap() -> None:
+    assert span_hz([]) is None and span_hz([5.0]) is None
+    assert span_hz([0.0, 0.1, 0.2, 0.3, 0.4]) == pytest.approx(10.0)
+    assert span_hz([1.0, 1.5, 3.0]) == pytest.approx(1.0)
+
+
+def test_span_of_equal_stamps_is_infinite_not_an_error() -> None:
+    assert math.isinf(span_hz([2.0, 2.0]) or 0.0)
+
+
+def test_counter_forgets_arrivals_older_than_the_window() -> None:
+    c = RateCounter(window_s=2.0)
+    assert c.add(0.0) is None
+    for i in range(1, 31):  # 30 fps for one second
+        rate = c.add(i / 30)
+    assert rate == pytest.approx(30.0)
+    for i in range(1, 11):  # then 10 fps for three seconds
+        rate = c.add(1.0 + i * 0.3)
+    assert rate == pytest.approx(1 / 0.3)
+    assert all(4.0 - t <= 2.0 for t in c.stamps)
