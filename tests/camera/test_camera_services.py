@@ -107,7 +107,8 @@ def test_simulated_camera_to_face_position(probe: Node, spawn: Spawn) -> None:
     face = faces.wait_for(timeout=60, what="a face position from the simulated camera")
     assert face.frame_id == "camera_front"
     assert 0.3 < face.point.x < 3.0 and 0.5 < face.confidence <= 1.0
-    first = images.messages[0]
+    # The probe's copy of an image may arrive after the face derived from it.
+    first = images.wait_for(timeout=30, what="an image from the simulated camera")
     assert (first.width, first.height, first.encoding) == (640, 480, "bgr8")
     # the face moves: lateral positions spread over time
     faces.wait_count(60, timeout=60)
