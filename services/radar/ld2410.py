@@ -2,8 +2,8 @@
 
 No I/O here: bytes in, typed frames out (and the reverse for commands), so
 every rule of the protocol is unit-tested without a serial port. Offsets
-and words follow the HLK-LD2410 serial protocol document (DESIGN.md
-section 7). All multi-byte fields are little-endian.
+and words follow HiLink's HLK-LD2410 serial communication protocol
+document (summarised in docs/radar.md). All multi-byte fields are little-endian.
 
 Why our own parser: the Arduino library the seed used reads distances as
 one byte, drops frames containing `0x0A` and swaps moving/still fields.
@@ -51,8 +51,8 @@ MAX_TARGET_STATE = STATE_NOISE_DETECTION_FAILED
 MAX_REPORT_LENGTH = 13 + 2 * (MAX_GATE + 1) + 2 + 2
 MAX_COMMAND_LENGTH = 64
 
-# Command words (DESIGN.md section 7; 0x000B/0x001B and 0x00A8/0x00A9 are
-# LD2410C additions).
+# Command words (HiLink's protocol document; 0x000B/0x001B and 0x00A8/0x00A9
+# are LD2410C additions).
 CMD_AUTO_THRESHOLDS = 0x000B
 CMD_AUTO_THRESHOLDS_STATUS = 0x001B
 CMD_SET_MAX_GATES = 0x0060
