@@ -31,7 +31,8 @@ from buddybot.audio.player import decode_file
 from buddybot.audio.sounds import resolve_file
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError
+from buddybot.core.errors import ServiceError
+from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Router, retry_until, run_service, write_tone
 
 MB = 1024 * 1024

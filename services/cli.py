@@ -21,7 +21,8 @@ from typing import Any
 
 from buddybot import __version__
 from buddybot.core import registry
-from buddybot.core.config import DEFAULT_ENDPOINT, ConfigError, to_toml_dict
+from buddybot.core.config import DEFAULT_ENDPOINT, to_toml_dict
+from buddybot.core.errors import ConfigError
 from buddybot.core.service import ServiceContext, add_common_arguments, resolve, run_main
 
 Handler = Callable[[ServiceContext], int]

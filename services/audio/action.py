@@ -32,8 +32,8 @@ from buddybot.audio.settings import AudioSettings
 from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
-from buddybot.core.node import Node, ServiceError, error_text, new_goal_id
+from buddybot.core.errors import ConfigError, ServiceError
+from buddybot.core.node import Node, error_text, new_goal_id
 from buddybot.core.service import ServiceContext
 
 RETRY_S = 0.05

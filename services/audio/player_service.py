@@ -23,7 +23,8 @@ from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError, config_dir
+from buddybot.core.config import config_dir
+from buddybot.core.errors import ConfigError
 from buddybot.core.service import ServiceContext
 
 TEXT_MAX = 1000

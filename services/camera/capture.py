@@ -23,7 +23,8 @@ from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.backoff import Backoff
-from buddybot.core.config import ConfigError, resolve_path
+from buddybot.core.config import resolve_path
+from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, Publisher, RateLimitedLog
 from buddybot.core.rates import RateCounter

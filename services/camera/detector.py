@@ -23,7 +23,8 @@ from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError, resolve_path
+from buddybot.core.config import resolve_path
+from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import RateLimitedLog
 from buddybot.core.service import ServiceContext

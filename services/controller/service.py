@@ -37,7 +37,7 @@ from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext
 

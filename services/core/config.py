@@ -18,16 +18,13 @@ import msgspec
 from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.camera.settings import CameraSettings, FaceDetectorSettings
 from buddybot.controller.settings import ControllerSettings
+from buddybot.core.errors import ConfigError
 from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
 from buddybot.eyes.settings import EyeRendererSettings, EyesSettings
 from buddybot.radar.settings import RadarBridgeSettings, RadarPresenceSettings
 
 CONFIG_ENV = "BUDDYBOT_CONFIG"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
-
-
-class ConfigError(Exception):
-    """A configuration that cannot be used; the message names file and key."""
 
 
 class RobotSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

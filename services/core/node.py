@@ -44,7 +44,7 @@ import zenoh.ext
 
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError, DuplicateNodeError, ServiceError
 
 log = logging.getLogger("buddybot.node")
 
@@ -66,11 +66,6 @@ WAIT_BEFORE_CLOSE_US = 100_000
 """Zenoh's `wait_before_close` (microseconds) for router and clients."""
 MAX_MESSAGE_BYTES = keys.IMAGE_MESSAGE_BYTES
 """Zenoh's `max_message_size`: nothing larger than the largest image we accept."""
-
-
-class DuplicateNodeError(ConfigError):
-    """Another process already runs a node of this name on this robot (exit 2:
-    restarting would only collide again)."""
 
 
 def zenoh_config(
@@ -685,10 +680,6 @@ class Node:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-class ServiceError(Exception):
-    """A service call that failed: no answer, an error reply, or a bad reply."""
 
 
 def _error_payload(text: str) -> bytes:

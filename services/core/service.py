@@ -18,7 +18,8 @@ import sys
 import threading
 from dataclasses import dataclass, field
 
-from buddybot.core.config import Config, ConfigError, load_config, resolve_path
+from buddybot.core.config import Config, load_config, resolve_path
+from buddybot.core.errors import ConfigError
 from buddybot.core.node import Node, install_signal_handlers
 from buddybot.core.sdnotify import Notifier
 

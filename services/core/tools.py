@@ -24,7 +24,8 @@ import zenoh.ext
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.describe import describe
-from buddybot.core.node import ServiceError, call_service, open_session, zenoh_config
+from buddybot.core.errors import ServiceError
+from buddybot.core.node import call_service, open_session, zenoh_config
 from buddybot.core.rates import span_hz
 from buddybot.core.service import ServiceContext
 

@@ -14,7 +14,7 @@ import argparse
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError
 from buddybot.core.service import ServiceContext
 from buddybot.eyes import driver
 

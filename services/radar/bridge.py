@@ -33,7 +33,7 @@ import serial
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.backoff import Backoff
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.service import ServiceContext

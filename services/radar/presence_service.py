@@ -25,7 +25,7 @@ import time
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import Node
 from buddybot.core.service import ServiceContext

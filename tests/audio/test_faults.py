@@ -18,7 +18,8 @@ import pytest
 from buddybot.audio.access import REFUSAL
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError, error_text
+from buddybot.core.errors import ServiceError
+from buddybot.core.node import Node, error_text
 from buddybot.core.testing import (
     Collector,
     Process,

@@ -14,7 +14,7 @@ import pytest
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import ServiceError
+from buddybot.core.errors import ServiceError
 from buddybot.core.testing import retry_until
 
 from .conftest import RATE, beep_config, final, send_goal, tone, write_wav

@@ -7,7 +7,8 @@ import argparse
 import pytest
 
 from buddybot.camera import capture, detector
-from buddybot.core.config import ConfigError, parse_config
+from buddybot.core.config import parse_config
+from buddybot.core.errors import ConfigError
 from buddybot.core.service import ServiceContext
 
 

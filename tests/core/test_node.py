@@ -13,7 +13,8 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import Node, ServiceError
+from buddybot.core.errors import ServiceError
+from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Process, Router, free_port, retry_until
 from buddybot.core.tools import list_nodes
 

@@ -13,7 +13,8 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import DuplicateNodeError, Node, ServiceError
+from buddybot.core.errors import DuplicateNodeError, ServiceError
+from buddybot.core.node import Node
 from buddybot.core.testing import Collector, buddybot_argv, retry_until
 
 S = 1_000_000_000

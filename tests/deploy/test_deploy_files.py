@@ -19,7 +19,8 @@ import pytest
 import zenoh
 
 from buddybot.core import keys, registry
-from buddybot.core.config import ConfigError, load_config, parse_config
+from buddybot.core.config import load_config, parse_config
+from buddybot.core.errors import ConfigError
 from tests.deploy.conftest import DEPLOY, HOSTS, INSTALLED_CERTS, SYSTEMD_DIR, ZENOH_DIR
 
 INSTALLED_BIN = "/opt/buddybot/.venv/bin/buddybot"

@@ -22,7 +22,8 @@ import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.node import DuplicateNodeError, Node, ServiceError, live_instances
+from buddybot.core.errors import DuplicateNodeError, ServiceError
+from buddybot.core.node import Node, live_instances
 from buddybot.core.testing import (
     LOOPBACK,
     Collector,

@@ -6,7 +6,7 @@ import argparse
 
 import pytest
 
-from buddybot.core.config import ConfigError
+from buddybot.core.errors import ConfigError
 from buddybot.radar import bridge
 from buddybot.radar.settings import RadarBridgeSettings
 
