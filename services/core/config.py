@@ -4,24 +4,24 @@ The file is decoded straight into typed msgspec structs, so an unknown
 key or a wrong type is found at start-up and reported with the key's
 path and the file's name (`ConfigError`, exit status 2), never discovered
 later as a silently ignored setting. Each service owns its table's
-struct in its own `settings.py`; this module only assembles them.
+struct in its own `settings.py` and names it in `buddybot.core.registry`;
+this module only assembles them, on first use (`Config`), so importing
+the runtime imports no area.
 """
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 
-from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
-from buddybot.camera.settings import CameraSettings, FaceDetectorSettings
-from buddybot.controller.settings import ControllerSettings
+from buddybot.core import registry
 from buddybot.core.errors import ConfigError
 from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
-from buddybot.eyes.settings import EyeRendererSettings, EyesSettings
-from buddybot.radar.settings import RadarBridgeSettings, RadarPresenceSettings
 
 CONFIG_ENV = "BUDDYBOT_CONFIG"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -49,20 +49,56 @@ class ZenohSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     config_file: str | None = None
 
 
-class Config(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+S = TypeVar("S")
+
+
+class ConfigBase(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """The tables every process shares; `Config` adds one per registered service."""
+
     robot: RobotSettings = msgspec.field(default_factory=RobotSettings)
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
-    radar_bridge: RadarBridgeSettings = msgspec.field(default_factory=RadarBridgeSettings)
-    radar_presence: RadarPresenceSettings = msgspec.field(default_factory=RadarPresenceSettings)
-    camera: CameraSettings = msgspec.field(default_factory=CameraSettings)
-    face_detector: FaceDetectorSettings = msgspec.field(default_factory=FaceDetectorSettings)
-    controller: ControllerSettings = msgspec.field(default_factory=ControllerSettings)
-    eyes: EyesSettings = msgspec.field(default_factory=EyesSettings)
-    eye_renderer: EyeRendererSettings = msgspec.field(default_factory=EyeRendererSettings)
-    audio: AudioSettings = msgspec.field(default_factory=AudioSettings)
-    audio_player: AudioPlayerSettings = msgspec.field(default_factory=AudioPlayerSettings)
     # Where the file came from (not a TOML key); relative paths in it resolve here.
     source: str | None = None
+
+    def section(self, kind: type[S]) -> S:
+        """The table whose struct is `kind`, typed (`config.section(CameraSettings)`)."""
+        for name in self.__struct_fields__:
+            value = getattr(self, name)
+            if type(value) is kind:
+                return value  # type: ignore[no-any-return]
+        raise LookupError(f"no config table of type {kind.__name__}")
+
+    if TYPE_CHECKING:  # service tables are added at run time (`config_type`)
+        def __getattr__(self, name: str) -> Any: ...
+
+
+@functools.cache
+def config_type() -> type[ConfigBase]:
+    """The full config struct: the shared tables plus every registered service's.
+
+    Built once, on first use: this is where the areas' settings modules are
+    imported (pure msgspec structs, nothing else).
+    """
+    fields: list[tuple[str, type[Any], Any]] = []
+    for entry in registry.SERVICES:
+        if entry.table is not None:
+            kind = entry.settings_type()
+            fields.append((entry.table, kind, msgspec.field(default_factory=kind)))
+    return msgspec.defstruct(
+        "Config", fields, bases=(ConfigBase,), module=__name__,
+        forbid_unknown_fields=True, kw_only=True,
+    )
+
+
+def __getattr__(name: str) -> Any:
+    """`Config` (the assembled struct) is made when first asked for."""
+    if name == "Config":
+        return config_type()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+if TYPE_CHECKING:
+    Config = ConfigBase
 
 
 _AT = re.compile(r" - at `\$\.?(.*)`$")
@@ -81,10 +117,15 @@ def _readable(error: Exception) -> str:
     return text
 
 
-def parse_config(data: bytes | str, source: str = "<config>") -> Config:
+def default_config() -> ConfigBase:
+    """Every table at its defaults (no config file)."""
+    return config_type()()
+
+
+def parse_config(data: bytes | str, source: str = "<config>") -> ConfigBase:
     """Decode TOML text into a validated Config, or raise ConfigError."""
     try:
-        config = msgspec.toml.decode(data, type=Config)
+        config = msgspec.toml.decode(data, type=config_type())
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
         raise ConfigError(f"{source}: {_readable(exc)}") from None
     if config.source is not None:
@@ -101,11 +142,11 @@ def config_path(explicit: str | None) -> Path | None:
     return Path(chosen) if chosen else None
 
 
-def load_config(explicit: str | None = None) -> Config:
+def load_config(explicit: str | None = None) -> ConfigBase:
     """Load the effective configuration file (or defaults when there is none)."""
     path = config_path(explicit)
     if path is None:
-        return Config()
+        return default_config()
     try:
         data = path.read_bytes()
     except OSError as exc:
@@ -113,7 +154,7 @@ def load_config(explicit: str | None = None) -> Config:
     return parse_config(data, str(path))
 
 
-def config_dir(config: Config) -> Path | None:
+def config_dir(config: ConfigBase) -> Path | None:
     """The folder relative paths in the config start from (None without a config file).
 
     Written once so every service reads `sounds/a.wav` or `models/x.tflite` in
@@ -124,7 +165,7 @@ def config_dir(config: Config) -> Path | None:
     return Path(config.source).resolve().parent
 
 
-def resolve_path(config: Config, value: str, *, from_command_line: bool = False) -> Path:
+def resolve_path(config: ConfigBase, value: str, *, from_command_line: bool = False) -> Path:
     """A path from the config: absolute as is, relative to the config file's folder.
 
     `from_command_line`: the value was an option instead, and a relative path
@@ -139,7 +180,7 @@ def resolve_path(config: Config, value: str, *, from_command_line: bool = False)
     return base / path
 
 
-def to_toml_dict(config: Config) -> dict[str, object]:
+def to_toml_dict(config: ConfigBase) -> dict[str, object]:
     """The effective configuration as plain data (what `buddybot config` prints)."""
     data = msgspec.to_builtins(config)
     data.pop("source", None)

@@ -1,9 +1,12 @@
 """Which services and tool verbs exist: adding one is one line here.
 
 A service module provides `add_arguments(parser)` and `run(ctx) -> int`
-(see `buddybot.core.service.ServiceContext`). Modules are imported only
-when used, so `buddybot --help` stays fast and a service whose optional
-dependency is missing does not break the others.
+(see `buddybot.core.service.ServiceContext`), and names its config table
+and the msgspec struct that table decodes into: the configuration is
+assembled from these entries (`buddybot.core.config`), so the runtime in
+`core/` never imports an area. Modules are imported only when used, so
+`buddybot --help` stays fast and a service whose optional dependency is
+missing does not break the others.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ import importlib
 import importlib.util
 from dataclasses import dataclass
 from types import ModuleType
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -19,6 +23,10 @@ class Entry:
     name: str
     module: str
     help: str
+    table: str | None = None
+    """The service's config table (`[radar_bridge]`), None for a tool."""
+    settings: str | None = None
+    """`module:Struct` the table decodes into (imported when a config is read)."""
 
     def exists(self) -> bool:
         """Whether the module is present in this installation."""
@@ -30,17 +38,35 @@ class Entry:
     def load(self) -> ModuleType:
         return importlib.import_module(self.module)
 
+    def settings_type(self) -> type[Any]:
+        """The msgspec struct of this service's config table."""
+        if self.settings is None:
+            raise LookupError(f"{self.name} has no config table")
+        module, _, name = self.settings.partition(":")
+        kind: type[Any] = getattr(importlib.import_module(module), name)
+        return kind
+
 
 SERVICES: tuple[Entry, ...] = (
-    Entry("radar-bridge", "buddybot.radar.bridge", "LD2410 radars over serial -> frames"),
-    Entry("radar-presence", "buddybot.radar.presence_service", "radar frames -> presence"),
-    Entry("camera", "buddybot.camera.capture", "capture camera frames and publish them"),
-    Entry("face-detector", "buddybot.camera.detector", "BlazeFace face detection -> face position"),
-    Entry("controller", "buddybot.controller.service", "social behaviour: eyes, gaze, greetings"),
-    Entry("eyes", "buddybot.eyes.driver_service", "eye control -> direction, pupil, lids"),
-    Entry("eye-renderer", "buddybot.eyes.renderer", "web page drawing the eyes, one per display"),
-    Entry("audio", "buddybot.audio.action", "play_sound action server"),
-    Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)"),
+    Entry("radar-bridge", "buddybot.radar.bridge", "LD2410 radars over serial -> frames",
+          "radar_bridge", "buddybot.radar.settings:RadarBridgeSettings"),
+    Entry("radar-presence", "buddybot.radar.presence_service", "radar frames -> presence",
+          "radar_presence", "buddybot.radar.settings:RadarPresenceSettings"),
+    Entry("camera", "buddybot.camera.capture", "capture camera frames and publish them",
+          "camera", "buddybot.camera.settings:CameraSettings"),
+    Entry("face-detector", "buddybot.camera.detector",
+          "BlazeFace face detection -> face position",
+          "face_detector", "buddybot.camera.settings:FaceDetectorSettings"),
+    Entry("controller", "buddybot.controller.service", "social behaviour: eyes, gaze, greetings",
+          "controller", "buddybot.controller.settings:ControllerSettings"),
+    Entry("eyes", "buddybot.eyes.driver_service", "eye control -> direction, pupil, lids",
+          "eyes", "buddybot.eyes.settings:EyesSettings"),
+    Entry("eye-renderer", "buddybot.eyes.renderer", "web page drawing the eyes, one per display",
+          "eye_renderer", "buddybot.eyes.settings:EyeRendererSettings"),
+    Entry("audio", "buddybot.audio.action", "play_sound action server",
+          "audio", "buddybot.audio.settings:AudioSettings"),
+    Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)",
+          "audio_player", "buddybot.audio.settings:AudioPlayerSettings"),
 )
 
 TOOLS: tuple[Entry, ...] = (

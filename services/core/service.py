@@ -18,7 +18,7 @@ import sys
 import threading
 from dataclasses import dataclass, field
 
-from buddybot.core.config import Config, load_config, resolve_path
+from buddybot.core.config import ConfigBase, load_config, resolve_path
 from buddybot.core.errors import ConfigError
 from buddybot.core.node import Node, install_signal_handlers
 from buddybot.core.sdnotify import Notifier
@@ -53,7 +53,7 @@ class ServiceContext:
 
     name: str
     args: argparse.Namespace
-    config: Config
+    config: ConfigBase
     robot: str
     connect: list[str]
     stop: threading.Event = field(default_factory=threading.Event)
