@@ -85,13 +85,13 @@ def burst_figures(node: Node, status: Collector, goals: int = 200) -> None:
     payload = msgspec.json.encode(m.PlaySound(sound="blip"))
     key = node.key(keys.PLAY_SOUND)
     t0 = time.perf_counter()
-    pending = [node.session.get(key, payload=payload, timeout=30) for _ in range(goals)]
+    pending = [node.query(key, payload, timeout=30) for _ in range(goals)]  # all sent at once
     answers = [list(replies) for replies in pending]
     elapsed = (time.perf_counter() - t0) * 1e3
-    ok = [a[0] for a in answers if len(a) == 1 and a[0].ok is not None]
-    accepted = [r for r in (msgspec.json.decode(a.ok.payload.to_bytes(), type=m.PlaySoundReply)
+    ok = [a[0] for a in answers if len(a) == 1 and a[0].ok]
+    accepted = [r for r in (msgspec.json.decode(a.payload, type=m.PlaySoundReply)
                             for a in ok) if r.accepted]
-    errors = sum(1 for a in answers if len(a) == 1 and a[0].err is not None)
+    errors = sum(1 for a in answers if len(a) == 1 and not a[0].ok)
     silent = sum(1 for a in answers if not a)
     print(f"{goals} concurrent goals: all answered in {elapsed:.0f} ms: {len(accepted)} "
           f"accepted, {len(ok) - len(accepted)} refused, {errors} busy errors, "

@@ -29,7 +29,6 @@ from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Process, Router, free_port, retry_until, run_service
-from buddybot.core.tools import list_nodes
 
 
 def main() -> None:
@@ -59,7 +58,7 @@ def main() -> None:
         common = ("--config", args.config) if args.config else ()
         for name, extra in services.items():
             procs[name] = run_service(name, router.endpoint, *common, *extra, log_dir=log_dir)
-        retry_until(lambda: set(services) <= set(list_nodes(probe.session, "buddy")), 90, 0.5,
+        retry_until(lambda: set(services) <= set(probe.node_instances()), 90, 0.5,
                     "all nodes up")
         gaze_ms: list[float] = []
         awake_ms: list[float] = []

@@ -42,13 +42,14 @@ def echo_main(endpoint: str, mode: str, kind: str) -> None:
     node = Node(f"echo-{mode}-{kind}", robot=f"{ROBOT}-{mode}", connect=[endpoint],
                 stop_event=stop)
     if mode == "bare":
-        out = node.session.declare_publisher(node.key(pong, **pong_p))
+        # Bare zenoh-python on purpose (the node's private session): the baseline.
+        out = node._session.declare_publisher(node.key(pong, **pong_p))
+        node._own(out)
 
         def on_sample(sample: zenoh.Sample) -> None:
             out.put(sample.payload)
 
-        node._declared.append(node.session.declare_subscriber(node.key(ping, **ping_p),
-                                                              on_sample))
+        node._own(node._session.declare_subscriber(node.key(ping, **ping_p), on_sample))
     else:
         pub = node.publisher(pong, **pong_p)
         node.subscribe(ping, lambda msg, _k: pub.put(reply_for(msg)), **ping_p)
@@ -74,16 +75,15 @@ class Pinger:
         self.got = got = threading.Event()
         self.samples: list[float] = []
         if mode == "bare":
-            out = node.session.declare_publisher(node.key(ping, **ping_p))
-            node._declared.append(out)
+            out = node._session.declare_publisher(node.key(ping, **ping_p))
+            node._own(out)
             payload = ping.codec.encode(make_message(kind, 1))
             self.send = lambda: out.put(payload)
 
             def on_sample(_sample: zenoh.Sample) -> None:
                 got.set()
 
-            node._declared.append(node.session.declare_subscriber(node.key(pong, **pong_p),
-                                                                  on_sample))
+            node._own(node._session.declare_subscriber(node.key(pong, **pong_p), on_sample))
         else:
             pub = node.publisher(ping, **ping_p)
             message = make_message(kind, 1)
@@ -138,11 +138,11 @@ def throughput(endpoint: str, mode: str, kind: str, seconds: float) -> float:
             def on_sample(_sample: zenoh.Sample) -> None:
                 count[0] += 1
 
-            receiver._declared.append(receiver.session.declare_subscriber(
+            receiver._own(receiver._session.declare_subscriber(
                 receiver.key(ping, **ping_p), on_sample))
-            out = sender.session.declare_publisher(
+            out = sender._session.declare_publisher(
                 sender.key(ping, **ping_p), congestion_control=zenoh.CongestionControl.BLOCK)
-            sender._declared.append(out)
+            sender._own(out)
             payload = ping.codec.encode(make_message(kind, 1))
 
             def send() -> None:

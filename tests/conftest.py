@@ -1,10 +1,23 @@
-"""Shared fixtures: a real router on a free loopback port, processes cleaned up."""
+"""Shared fixtures: a real router on a free loopback port, processes cleaned up.
+
+Also the marker rules, enforced rather than hoped for, so that
+`pytest -m "not integration and not browser"` really is the fast unit suite:
+
+* a test that uses a router or process fixture must be marked `integration`,
+  and one that uses the `browser` fixture must be marked `browser`
+  (checked from its fixture closure, before it runs);
+* an unmarked test that starts a process itself (`subprocess`, directly or via
+  `buddybot.core.testing`) fails at that call, naming the marker it lacks.
+"""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import traceback
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -12,6 +25,67 @@ from buddybot.core.node import Node
 from buddybot.core.testing import Process, Router, run_service, stop_and_report
 
 ARTIFACTS = Path(os.environ.get("BUDDYBOT_ARTIFACTS", "test-artifacts"))
+
+# Fixtures that start a router or processes (what the others build on; a test's
+# fixture closure contains these whenever it uses anything derived from them).
+INTEGRATION_FIXTURES = frozenset({
+    "router", "endpoint", "node_factory", "probe", "spawn",  # this file
+    "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
+})
+BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
+TESTS = Path(__file__).resolve().parent
+TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "core" / "testing.py"
+
+
+def missing_markers(item: pytest.Item) -> list[str]:
+    """The markers `item` needs for the fixtures it uses but does not carry."""
+    used = set(getattr(item, "fixturenames", ()))
+    need = []
+    if used & INTEGRATION_FIXTURES and item.get_closest_marker("integration") is None:
+        need.append(f"integration (it uses {', '.join(sorted(used & INTEGRATION_FIXTURES))})")
+    if used & BROWSER_FIXTURES and item.get_closest_marker("browser") is None:
+        need.append("browser (it uses the browser fixture)")
+    return need
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_runtest_setup(item: pytest.Item) -> None:
+    """Fail, before any fixture starts anything, a test whose markers do not say
+    what it needs: a `-m "not integration"` run would otherwise be slow or hang."""
+    need = missing_markers(item)
+    if need:
+        pytest.fail(f"{item.nodeid} must be marked {' and '.join(need)}", pytrace=False)
+
+
+def _started_by_test_code() -> bool:
+    """True if the innermost caller outside the subprocess module is test code
+    (a test, a conftest, `buddybot.core.testing`), not a library that happens to
+    run a helper program (ctypes looking for a library, say)."""
+    for frame in reversed(traceback.extract_stack()[:-2]):
+        path = Path(frame.filename)
+        if path.name == "subprocess.py" or path == Path(__file__).resolve():
+            continue
+        resolved = path.resolve()
+        return resolved == TESTING_MODULE or TESTS in resolved.parents
+    return False
+
+
+@pytest.fixture(autouse=True)
+def _processes_need_the_integration_marker(request: pytest.FixtureRequest,
+                                           monkeypatch: pytest.MonkeyPatch) -> None:
+    """In a test not marked `integration`, starting a process from test code fails."""
+    if request.node.get_closest_marker("integration") is not None:
+        return
+    original = subprocess.Popen.__init__
+
+    def guarded(self: subprocess.Popen[Any], *args: Any, **kwargs: Any) -> None:
+        if _started_by_test_code():
+            argv = args[0] if args else kwargs.get("args")
+            pytest.fail(f"{request.node.nodeid} starts a process ({argv!r:.120}): "
+                        "mark it integration", pytrace=False)
+        original(self, *args, **kwargs)
+
+    monkeypatch.setattr(subprocess.Popen, "__init__", guarded)
 
 
 @pytest.fixture

@@ -23,17 +23,15 @@ import threading
 import time
 from collections.abc import Callable
 
-import msgspec
-import zenoh
-
 from buddybot.audio import protocol
 from buddybot.audio.goals import GoalBook
 from buddybot.audio.settings import AudioSettings
 from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
-from buddybot.core.errors import ConfigError, ServiceError
-from buddybot.core.node import Node, error_text, new_goal_id
+from buddybot.core.errors import ServiceError
+from buddybot.core.node import CallError, Node, NoReplyError, new_goal_id
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 
 RETRY_S = 0.05
@@ -45,11 +43,15 @@ files, whose paths may be long, but never a client's whole request)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--busy-policy", choices=["preempt", "refuse"],
-                        help="what a goal does while another plays (default from config, "
-                        "else preempt)")
-    parser.add_argument("--player", metavar="NODE",
-                        help="node name of the audio player (default audio-player)")
+    """Every option overrides an `[audio]` key (defaults and ranges: settings.py)."""
+    settings_option(parser, "--busy-policy", struct=AudioSettings, field="busy_policy")
+    settings_option(parser, "--player", struct=AudioSettings, field="player", metavar="NODE")
+
+
+def settings_from(ctx: ServiceContext) -> AudioSettings:
+    """`[audio]` with the command line on top: what `run` serves with (`--player ""`
+    is refused by `merge`, not ignored as it once was)."""
+    return merge(ctx.config.section(AudioSettings), ctx.args)
 
 
 class ActionServer:
@@ -250,38 +252,27 @@ class ActionServer:
         are not declared yet (it is starting, or reconnecting after a router
         restart): asked again until `player_timeout_s` is spent.
         """
-        service = keys.PLAY_FILE
-        codec = service.codec
-        key = self.node.key(service)
-        payload = codec.encode(request)
-        encoding = zenoh.Encoding(codec.encoding(service.request))
         timeout = self.settings.player_timeout_s
         deadline = time.monotonic() + timeout
         while True:
             left = max(0.01, deadline - time.monotonic())
-            for answer in self.node.session.get(key, payload=payload, encoding=encoding,
-                                                timeout=left):
-                source = answer.replier_id  # the queryable's entity: zid = its process
-                replier = None if source is None else str(source.zid)
-                if answer.ok is None:
-                    raise ServiceError(error_text(answer.err.payload.to_bytes()))
-                try:
-                    return codec.decode(answer.ok.payload.to_bytes(), service.reply), replier
-                except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-                    raise ServiceError(f"malformed reply: {exc}") from None
+            try:
+                # with_replier: the instance (zid) whose queryable answered
+                answer = self.node.call(keys.PLAY_FILE, request, timeout=left,
+                                        with_replier=True)
+                return answer.value, answer.replier
+            except NoReplyError:
+                pass
+            except CallError as exc:  # the goal's message names the player already
+                raise ServiceError(exc.reason) from None
             if time.monotonic() + RETRY_S >= deadline or not still_wanted():
                 raise ServiceError(f"no reply within {timeout:g} s (is it running?)")
             time.sleep(RETRY_S)
 
 
 def run(ctx: ServiceContext) -> int:
-    settings = ctx.config.audio
-    if ctx.args.player is not None:
-        # An empty name used to be ignored silently (falsy): refuse it instead.
-        if not ctx.args.player:
-            raise ConfigError("--player must name the player node")
-        settings = msgspec.structs.replace(settings, player=ctx.args.player)
-    policy = settings.busy_policy if ctx.args.busy_policy is None else ctx.args.busy_policy
+    settings = settings_from(ctx)
+    policy = settings.busy_policy
     node = ctx.node()
     server = ActionServer(node, settings, policy)
     try:

@@ -40,7 +40,8 @@ def apply_volume(samples: np.ndarray, volume: float) -> np.ndarray:
     if volume == 1.0:
         return samples
     scaled = np.rint(samples.astype(np.float32) * volume)
-    return np.clip(scaled, -32768, 32767).astype(np.int16)
+    clipped: np.ndarray = np.clip(scaled, -32768, 32767).astype(np.int16)
+    return clipped
 
 
 @dataclass

@@ -13,9 +13,8 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-from typing import Any
-
-import msgspec
+from collections.abc import Callable
+from typing import Any, BinaryIO
 
 from buddybot.audio import protocol
 from buddybot.audio.player import AudioError, Player
@@ -24,7 +23,7 @@ from buddybot.audio.sounds import effective_sounds
 from buddybot.core import keys, limits
 from buddybot.core import messages as m
 from buddybot.core.config import config_dir
-from buddybot.core.errors import ConfigError
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 
 TEXT_MAX = 1000
@@ -33,31 +32,25 @@ long file path, never a whole hostile request)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--backend", choices=["auto", "null", "alsa", "pulseaudio"],
-                        help="audio backend (default from config, else auto: hardware, "
-                        "falling back to the silent null device)")
-    parser.add_argument("--device", metavar="NAME", help="playback device name (substring)")
-    parser.add_argument("--volume", type=float, metavar="GAIN", help="linear gain 0..2")
-    parser.add_argument("--sample-rate", type=int, metavar="HZ", help="device sample rate")
+    """Options overriding `[audio_player]` keys (defaults and ranges: settings.py), then
+    `--tap`, which only exists on the command line."""
+    struct = AudioPlayerSettings
+    settings_option(parser, "--backend", struct=struct, field="backend")
+    settings_option(parser, "--device", struct=struct, field="device", metavar="NAME")
+    settings_option(parser, "--volume", struct=struct, field="volume", metavar="GAIN")
+    settings_option(parser, "--sample-rate", struct=struct, field="sample_rate", metavar="HZ")
     parser.add_argument("--tap", metavar="FILE",
                         help="also write every sample handed to the device to FILE "
                         "(raw interleaved int16 little-endian, for tests)")
 
 
-def player_settings(ctx: ServiceContext) -> AudioPlayerSettings:
-    """Config table with the command line on top, validated like the config file."""
-    data: dict[str, Any] = msgspec.to_builtins(ctx.config.audio_player)
-    overrides = {"backend": ctx.args.backend, "device": ctx.args.device,
-                 "volume": ctx.args.volume, "sample_rate": ctx.args.sample_rate}
-    data.update({k: v for k, v in overrides.items() if v is not None})
-    try:
-        return msgspec.convert(data, AudioPlayerSettings)
-    except msgspec.ValidationError as exc:
-        raise ConfigError(f"audio-player options: {exc}") from None
+def settings_from(ctx: ServiceContext) -> AudioPlayerSettings:
+    """`[audio_player]` with the command line on top, validated like the config file."""
+    return merge(ctx.config.section(AudioPlayerSettings), ctx.args)
 
 
 def run(ctx: ServiceContext) -> int:
-    settings = player_settings(ctx)
+    settings = settings_from(ctx)
     sounds = effective_sounds(ctx.config.audio.sounds, AudioSettings().sounds)
     tap_file = open(ctx.args.tap, "wb", buffering=0) if ctx.args.tap else None  # noqa: SIM115
     node = ctx.node()
@@ -80,7 +73,7 @@ def run(ctx: ServiceContext) -> int:
         diag.publish()
 
     player = Player(settings, sounds, config_dir(ctx.config), on_busy=on_busy,
-                    on_started=on_started, tap=tap_file.write if tap_file else None)
+                    on_started=on_started, tap=_writer(tap_file) if tap_file else None)
     try:
         opened = player.open()
         if opened is None:
@@ -140,3 +133,12 @@ def _serve(node: Any, player: Player) -> None:
     node.serve(keys.AUDIO_STOP, stop)
     node.serve(keys.AUDIO_PAUSE, pause)
     node.serve(keys.AUDIO_RESUME, resume)
+
+
+def _writer(file: BinaryIO) -> Callable[[bytes], None]:
+    """The tap callback: every played chunk appended to the tap file."""
+
+    def write(data: bytes) -> None:
+        file.write(data)
+
+    return write

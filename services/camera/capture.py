@@ -27,6 +27,7 @@ from buddybot.core.config import resolve_path
 from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, Publisher, RateLimitedLog
+from buddybot.core.overrides import given, merge, settings_option
 from buddybot.core.rates import RateCounter
 from buddybot.core.service import ServiceContext
 
@@ -36,46 +37,32 @@ MESSAGE_OVERHEAD = 256
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--source", help="device index, video file, URL or image-sequence "
-                        "pattern such as frames/%%04d.png")
-    parser.add_argument("--sim", action="store_true", default=None,
-                        help="simulated camera: a face photo moving over a background")
-    parser.add_argument("--camera", help="camera name in keys (default 'front')")
-    parser.add_argument("--fps", type=float, help="pace files, sequences and the simulation")
-    parser.add_argument("--width", type=int, help="frame width (pixels)")
-    parser.add_argument("--height", type=int, help="frame height (pixels)")
-    parser.add_argument("--encoding", choices=["bgr8", "jpeg"], help="wire encoding")
-    parser.add_argument("--jpeg-quality", type=int, help="JPEG quality 1..100")
-    parser.add_argument("--loop", action="store_true", default=None,
-                        help="start a file or sequence over at its end")
+    """Every option overrides a `[camera]` key (defaults and ranges: settings.py)."""
+    def option(flag: str, field: str,
+               action: type[argparse.Action] | None = None) -> None:
+        settings_option(parser, flag, struct=CameraSettings, field=field, action=action)
+
+    option("--source", "source")
+    option("--sim", "sim", action=argparse.BooleanOptionalAction)
+    option("--camera", "name")
+    option("--fps", "fps")
+    option("--width", "width")
+    option("--height", "height")
+    option("--encoding", "encoding")
+    option("--jpeg-quality", "jpeg_quality")
+    option("--loop", "loop", action=argparse.BooleanOptionalAction)
 
 
-def effective_settings(ctx: ServiceContext) -> CameraSettings:
-    """Config values overridden by the command line, validated."""
-    s = ctx.config.camera
-    a = ctx.args
-    merged = CameraSettings(
-        name=a.camera or s.name,
-        source=a.source if a.source is not None else s.source,
-        sim=bool(a.sim) if a.sim is not None else s.sim,
-        fps=a.fps if a.fps is not None else s.fps,
-        width=a.width if a.width is not None else s.width,
-        height=a.height if a.height is not None else s.height,
-        encoding=a.encoding or s.encoding,
-        jpeg_quality=a.jpeg_quality if a.jpeg_quality is not None else s.jpeg_quality,
-        loop=bool(a.loop) if a.loop is not None else s.loop,
-        frame_id=s.frame_id, reopen_initial_s=s.reopen_initial_s, reopen_max_s=s.reopen_max_s,
-    )
+def settings_from(ctx: ServiceContext) -> CameraSettings:
+    """`[camera]` with the command line on top (ranges checked by `merge`): what `run`
+    captures with. The name becomes a key chunk, so it is checked here too."""
+    merged = merge(ctx.config.section(CameraSettings), ctx.args)
     if not keys.valid_robot_id(merged.name):
         raise ConfigError(f"camera name {merged.name!r}: use letters, digits, '-' or '_'")
-    if merged.fps is not None and not 0 < merged.fps <= 1000:
-        raise ConfigError(f"camera fps must be in (0, 1000], got {merged.fps}")
-    for label, value in (("width", merged.width), ("height", merged.height)):
-        if value is not None and not 0 < value <= 16384:
-            raise ConfigError(f"camera {label} must be in 1..16384, got {value}")
-    if not 1 <= merged.jpeg_quality <= 100:
-        raise ConfigError(f"camera jpeg_quality must be in 1..100, got {merged.jpeg_quality}")
     return merged
+
+
+effective_settings = settings_from  # the name tests and older callers use
 
 
 class Capture:
@@ -226,14 +213,15 @@ class Capture:
 
 
 def run(ctx: ServiceContext) -> int:
-    settings = effective_settings(ctx)
+    settings = settings_from(ctx)
     try:
         spec = parse_source(settings.source, settings.sim)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     if spec.kind in ("file", "sequence") and not spec.target.startswith("/"):
         spec = SourceSpec(spec.kind, str(resolve_path(
-            ctx.config, spec.target, from_command_line=ctx.args.source is not None)))
+            ctx.config, spec.target,
+            from_command_line=given(ctx.args, CameraSettings, "source"))))
     cv2.setNumThreads(1)
     source = make_source(spec, settings.width, settings.height)
     node = ctx.node()

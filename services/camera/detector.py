@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import time
-from typing import Any
 
 import cv2
 
@@ -27,73 +26,45 @@ from buddybot.core.config import resolve_path
 from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import RateLimitedLog
+from buddybot.core.overrides import given, merge, settings_option
 from buddybot.core.service import ServiceContext
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--camera", help="camera name (default 'front')")
-    parser.add_argument("--model", choices=["full", "short"],
-                        help="BlazeFace full range (to ~4 m, default) or short range (to ~2 m)")
-    parser.add_argument("--model-path", help="explicit .tflite file")
-    parser.add_argument("--fx", type=float, help="focal length x (pixels)")
-    parser.add_argument("--fy", type=float, help="focal length y (pixels)")
-    parser.add_argument("--cx", type=float, help="principal point x (default image centre)")
-    parser.add_argument("--cy", type=float, help="principal point y (default image centre)")
-    parser.add_argument("--hfov-deg", type=float, help="horizontal field of view (sets fx)")
-    parser.add_argument("--face-width-m", type=float, help="real face width (m)")
-    parser.add_argument("--min-score", type=float, help="detection threshold 0..1")
-    parser.add_argument("--no-smoothing", action="store_true", help="publish raw positions")
-    parser.add_argument("--no-refine", action="store_true",
-                        help="measure the face on the whole-frame detection only")
-    parser.add_argument("--max-pixels", type=int,
-                        help="refuse larger frames, before decoding (default 3840*2160)")
+    """Every option overrides a `[face_detector]` key (defaults and ranges: settings.py)."""
+    def option(flag: str, field: str,
+               action: type[argparse.Action] | None = None) -> None:
+        settings_option(parser, flag, struct=FaceDetectorSettings, field=field, action=action)
+
+    option("--camera", "camera")
+    option("--model", "model")
+    option("--model-path", "model_path")
+    for name in ("fx", "fy", "cx", "cy", "hfov_deg", "face_width_m", "min_score"):
+        option("--" + name.replace("_", "-"), name)
+    # `--no-smoothing` and `--no-refine` as before, and now `--smoothing`/`--refine` too.
+    option("--smoothing", "smoothing", action=argparse.BooleanOptionalAction)
+    option("--refine", "refine", action=argparse.BooleanOptionalAction)
+    option("--max-pixels", "max_pixels")
 
 
-def pick(cli: object, cfg: object) -> Any:
-    """The command-line value when given, else the config's."""
-    return cfg if cli is None else cli
+def settings_from(ctx: ServiceContext) -> FaceDetectorSettings:
+    """`[face_detector]` with the command line on top: what `run` detects with.
 
-
-def effective_settings(ctx: ServiceContext) -> FaceDetectorSettings:
-    s = ctx.config.face_detector
-    a = ctx.args
-    merged = FaceDetectorSettings(
-        camera=a.camera or s.camera, face_width_m=pick(a.face_width_m, s.face_width_m),
-        fx=pick(a.fx, s.fx), fy=pick(a.fy, s.fy), cx=pick(a.cx, s.cx), cy=pick(a.cy, s.cy),
-        hfov_deg=pick(a.hfov_deg, s.hfov_deg), model=a.model or s.model,
-        model_path=pick(a.model_path, s.model_path), min_score=pick(a.min_score, s.min_score),
-        eye_distance_m=s.eye_distance_m, smoothing=s.smoothing and not a.no_smoothing,
-        refine=s.refine and not a.no_refine, min_cutoff_hz=s.min_cutoff_hz, beta=s.beta,
-        switch_after_s=s.switch_after_s, full_every_s=s.full_every_s,
-        debug_jpeg_quality=s.debug_jpeg_quality, threads=s.threads,
-        max_pixels=pick(a.max_pixels, s.max_pixels),
-    )
+    Ranges are checked by `merge` (and the file by `parse_config`); what is
+    left here are the rules that span fields or keys.
+    """
+    merged = merge(ctx.config.section(FaceDetectorSettings), ctx.args)
     problems = []
     if not keys.valid_robot_id(merged.camera):
         problems.append(f"camera {merged.camera!r} is not a valid name")
-    if merged.face_width_m <= 0:
-        problems.append("face_width_m must be positive")
-    if merged.hfov_deg is None and (merged.fx is None or merged.fx <= 0):
-        problems.append("fx must be positive (or set hfov_deg)")
-    if merged.min_score is not None and not 0 < merged.min_score < 1:
-        problems.append("min_score must be in (0, 1)")
-    if merged.eye_distance_m < 0:
-        problems.append("eye_distance_m must be >= 0")
-    if merged.min_cutoff_hz <= 0 or merged.beta < 0:
-        problems.append("min_cutoff_hz must be > 0 and beta >= 0")
-    if not 1 <= merged.threads <= 64:
-        problems.append("threads must be in 1..64")
-    if merged.switch_after_s < 0:
-        problems.append("switch_after_s must be >= 0")
-    if not 1 <= merged.debug_jpeg_quality <= 100:
-        problems.append("debug_jpeg_quality must be in 1..100")
-    if merged.full_every_s < 0:
-        problems.append("full_every_s must be >= 0")
-    if not 1 <= merged.max_pixels <= frames.MAX_SIDE ** 2:
-        problems.append(f"max_pixels must be in 1..{frames.MAX_SIDE ** 2}")
+    if merged.hfov_deg is None and merged.fx is None:
+        problems.append("fx must be set (or set hfov_deg)")
     if problems:
         raise ConfigError("face_detector: " + "; ".join(problems))
     return merged
+
+
+effective_settings = settings_from  # the name tests and older callers use
 
 
 def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, FaceNet | None]:
@@ -113,7 +84,8 @@ def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
     explicit = None
     if s.model_path:
         explicit = resolve_path(ctx.config, s.model_path,
-                                from_command_line=ctx.args.model_path is not None)
+                                from_command_line=given(ctx.args, FaceDetectorSettings,
+                                                        "model_path"))
     try:
         path = models.locate(s.model, explicit)
         return FaceNet(path, bf.SPECS[s.model], s.min_score)
@@ -122,7 +94,7 @@ def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
 
 
 def run(ctx: ServiceContext) -> int:
-    settings = effective_settings(ctx)
+    settings = settings_from(ctx)
     cv2.setNumThreads(settings.threads)
     net, refiner = load_nets(ctx, settings)
     pipeline = FacePipeline(net, settings, refiner)

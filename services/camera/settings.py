@@ -6,73 +6,130 @@ command-line options override these values. See docs/camera.md.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import Annotated, Literal
 
 import msgspec
 
+MAX_SIDE = 16384
+"""Largest image side the Image message carries (mirrors buddybot.camera.frames.MAX_SIDE;
+kept import-free here)."""
+
 
 class CameraSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    name: str = "front"
-    """Key parameter: frames go to camera/<name>/image."""
-    source: str = ""
-    """Device index, video file, URL or image-sequence pattern; empty = simulation under `up`."""
-    sim: bool = False
-    fps: float | None = None
+    name: Annotated[str, msgspec.Meta(
+        min_length=1, max_length=64,
+        description="camera name in keys: frames go to camera/<name>/image")] = "front"
+    source: Annotated[str, msgspec.Meta(
+        description="device index, video file, URL or image-sequence pattern such as "
+        "frames/%04d.png; empty = simulation under `up`")] = ""
+    sim: Annotated[bool, msgspec.Meta(
+        description="simulated camera: a face photo moving over a background")] = False
+    fps: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1000.0,
+        description="frames per second of files, sequences and the simulation")] | None = None
     """Pacing of files, sequences and the simulation (default: the file's own fps, else 30)."""
-    width: int | None = None
+    width: Annotated[int, msgspec.Meta(
+        ge=1, le=MAX_SIDE,
+        description="frame width in pixels")] | None = None
     """Requested resolution (devices) / resize target (other sources); sim default 640x480."""
-    height: int | None = None
-    encoding: Literal["bgr8", "jpeg"] = "bgr8"
+    height: Annotated[int, msgspec.Meta(
+        ge=1, le=MAX_SIDE,
+        description="frame height in pixels")] | None = None
+    encoding: Annotated[Literal["bgr8", "jpeg"], msgspec.Meta(
+        description="wire encoding of the frames")] = "bgr8"
     """bgr8 for same-host consumers (no codec cost); jpeg for remote hosts (~20x smaller)."""
-    jpeg_quality: int = 85
-    loop: bool = False
+    jpeg_quality: Annotated[int, msgspec.Meta(
+        ge=1, le=100,
+        description="JPEG quality of `encoding = jpeg` frames (higher: bigger, sharper)")] = 85
+    loop: Annotated[bool, msgspec.Meta(
+        description="start a file or sequence over at its end")] = False
     """Restart a file or sequence at its end instead of ending the service."""
     frame_id: str = ""
     """Coordinate frame name in messages; empty = camera_<name>."""
-    reopen_initial_s: float = 0.5
-    """First retry delay after the camera failed; doubles up to reopen_max_s."""
-    reopen_max_s: float = 10.0
+    reopen_initial_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="seconds before the first reopen after the camera failed; doubles up to "
+        "reopen_max_s")] = 0.5
+    reopen_max_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="longest wait between reopen attempts, seconds")] = 10.0
 
 
 class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    camera: str = "front"
-    face_width_m: float = 0.15
+    camera: Annotated[str, msgspec.Meta(
+        min_length=1, max_length=64, description="camera name whose images are read")] = "front"
+    face_width_m: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1.0,
+        description="real face width in metres: the main distance cue")] = 0.15
     """Real width of the face box on an average adult (seed: face width); calibrated for
     short-range boxes, which `refine` measures with."""
-    fx: float | None = 600.0
-    fy: float | None = 600.0
-    cx: float | None = None
-    cy: float | None = None
-    hfov_deg: float | None = None
+    fx: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1e6,
+        description="focal length x, pixels")] | None = 600.0
+    fy: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1e6,
+        description="focal length y, pixels")] | None = 600.0
+    cx: Annotated[float, msgspec.Meta(
+        ge=0.0, le=MAX_SIDE,
+        description="principal point x, pixels (default: image centre)")] | None = None
+    cy: Annotated[float, msgspec.Meta(
+        ge=0.0, le=MAX_SIDE,
+        description="principal point y, pixels (default: image centre)")] | None = None
+    hfov_deg: Annotated[float, msgspec.Meta(
+        gt=0.0, lt=180.0,
+        description="horizontal field of view in degrees; when set it defines fx")] | None = None
     """Horizontal field of view; when set it defines fx (and fy unless given)."""
-    model: Literal["full", "short"] = "full"
-    model_path: str | None = None
-    refine: bool = True
+    model: Annotated[Literal["full", "short"], msgspec.Meta(
+        description="BlazeFace full range (to ~4 m) or short range (to ~2 m)")] = "full"
+    model_path: Annotated[str, msgspec.Meta(
+        description="explicit .tflite model file (empty: the packaged one)")] | None = None
+    refine: Annotated[bool, msgspec.Meta(
+        description="measure the followed face again with the short-range model")] = True
     """Re-detect the followed face with the short-range model in a crop 3 face-widths
     wide: far faces get a precise size and eye keypoints (+~3 ms per frame)."""
-    min_score: float | None = None
+    min_score: Annotated[float, msgspec.Meta(
+        gt=0.0, lt=1.0,
+        description="detection score threshold (default: the model's own)")] | None = None
     """Detection threshold; default the model's MediaPipe value (full 0.6, short 0.5)."""
-    eye_distance_m: float = 0.063
+    eye_distance_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=0.2,
+        description="inter-pupillary distance in metres: second distance cue, "
+        "0 disables it")] = 0.063
     """Adult mean inter-pupillary distance: second distance cue; 0 disables it."""
-    smoothing: bool = True
-    min_cutoff_hz: float = 1.0
+    smoothing: Annotated[bool, msgspec.Meta(
+        description="smooth positions with a One-Euro filter (off: raw positions)")] = True
+    min_cutoff_hz: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1000.0,
+        description="One-Euro filter cut-off in Hz for a still face")] = 1.0
     """One-Euro filter: cut-off for a still face (lower = steadier, more lag)."""
-    beta: float = 2.0
+    beta: Annotated[float, msgspec.Meta(
+        ge=0.0, le=1000.0,
+        description="One-Euro filter speed coefficient, per m/s")] = 2.0
     """One-Euro filter: how fast the cut-off rises with speed (per m/s)."""
-    switch_after_s: float = 0.5
+    switch_after_s: Annotated[float, msgspec.Meta(
+        ge=0.0, le=3600.0,
+        description="seconds the followed face must be gone before another is taken")] = 0.5
     """How long the followed face must be gone before another face is taken."""
-    full_every_s: float = 0.25
+    full_every_s: Annotated[float, msgspec.Meta(
+        ge=0.0, le=3600.0,
+        description="seconds between whole-frame detections (0: every frame)")] = 0.25
     """Between whole-frame detections, follow the tracked face by re-detecting it only in
     its crop (the refiner, ~4 ms instead of ~17 ms a frame): gaze latency drops to a third.
     A new or larger face is still noticed at the next whole-frame pass, at most this late.
     0: the whole frame every time. Needs `refine`."""
-    debug_jpeg_quality: int = 80
-    max_pixels: int = 3840 * 2160
+    debug_jpeg_quality: Annotated[int, msgspec.Meta(
+        ge=1, le=100,
+        description="JPEG quality of the debug image")] = 80
+    max_pixels: Annotated[int, msgspec.Meta(
+        ge=1, le=MAX_SIDE * MAX_SIDE,
+        description="largest frame accepted, pixels (width*height)")] = 3840 * 2160
     """Largest frame accepted (width*height, checked on the JPEG header before decoding).
     4K UHD, the largest mode of common USB and IP cameras: decoding one raised peak memory
     by 54 MB (baseline) / 73 MB (progressive, 4:4:4), measured. The network sees 192x192, so
     bigger frames only cost memory and time; a forged header claiming 20000x20000 took
     2.4 GB. Range 1..16384*16384 (the Image message's own limit)."""
-    threads: int = 1
+    threads: Annotated[int, msgspec.Meta(
+        ge=1, le=64,
+        description="OpenCV inference threads (1 leaves a core to the rest)")] = 1
     """OpenCV threads for inference: 1 leaves the other core to capture and the rest of
     the robot on a 2-core computer (and is what the benchmark measures)."""

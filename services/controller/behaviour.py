@@ -45,8 +45,14 @@ face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
 Expressions are emitted only on change, never the same action twice in a
 row. After a start, `recover_s` is spent listening to the latched inputs
 (presence, sound status, device free): a sound still playing blocks new
-sounds, and a sound less than a cooldown old counts as this visit's
-greeting, so a restarted controller does not greet twice. The first
+sounds, and a sound less than a cooldown old blocks greetings until the
+cooldown ends, so a restarted controller does not greet twice. That sound
+counts as this visit's greeting (a goodbye is owed) only if the visitor
+was in range when the controller started: someone who arrived later came
+after an empty room, so the sound was most likely the farewell of their
+last visit. The status does not say which sound it was, so a visitor who
+came back after a farewell and is still there at the restart may get a
+second goodbye (the property tests state this exception). The first
 expression after the recovery is always published, even if the previous
 process showed the same one: the latched value lived in the dead
 process's publisher cache, and without a new publication an eyes driver
@@ -151,7 +157,7 @@ class Behaviour:
 
     def __init__(self, settings: ControllerSettings, now: float) -> None:
         self.s = settings
-        self._recover_until = now + settings.recover_s
+        self._recover_until: float | None = now + settings.recover_s
         # inputs
         self._in_range: bool | None = None
         self._out_since: float | None = None
@@ -172,6 +178,7 @@ class Behaviour:
         self._next_request = 1
         self._orphan_status: dict[str, str] = {}
         self._recovered_sound_at: float | None = None
+        self._in_range_at_start: bool | None = None  # the latched presence replayed to us
         self.counters: dict[str, int] = {
             "greetings": 0, "farewells": 0, "cancels": 0, "farewells_dropped": 0,
             "sounds_lost": 0, "sounds_refused": 0,
@@ -208,6 +215,8 @@ class Behaviour:
 
     def presence(self, now: float, in_range: bool) -> list[Command]:
         """Radar presence (latched, on change): IN_RANGE or OUT_OF_RANGE."""
+        if self.recovering and self._in_range_at_start is None:
+            self._in_range_at_start = in_range  # the first one is the replayed latched value
         if in_range != self._in_range:
             self._out_since = None if in_range else now
         self._in_range = in_range
@@ -297,9 +306,14 @@ class Behaviour:
         self._recover_until = None
         sound_at = self._recovered_sound_at
         if sound_at is not None:
-            # A sound less than a cooldown ago: assume it was this visit's greeting.
+            # A sound less than a cooldown ago: no greeting before the cooldown ends.
             self._last_greet = sound_at
-            if self._present:
+            # Assume it was this visit's greeting (a goodbye is owed) only if the
+            # visitor was already there when we started. Someone who arrived during
+            # the recovery came after an empty room, so that sound was most likely
+            # the farewell of their previous visit: owing another one would say
+            # goodbye twice after a single greeting.
+            if self._present and self._in_range_at_start:
                 self._visit.greeted = True
 
     def _step(self, now: float) -> list[Command]:

@@ -23,7 +23,7 @@ import queue
 import threading
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import assert_never
 
 from buddybot.controller.behaviour import (
     Behaviour,
@@ -33,22 +33,36 @@ from buddybot.controller.behaviour import (
     PlaySound,
     SetExpression,
 )
+from buddybot.controller.events import (
+    CancelReply,
+    DeviceFree,
+    Event,
+    GoalReply,
+    PresenceChanged,
+    SoundStatus,
+)
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import ConfigError
 from buddybot.core.node import Node, RateLimitedLog
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
 
-Event = tuple[str, tuple[Any, ...]]
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--camera", metavar="NAME",
-                        help="camera whose faces to follow (default: [controller] camera, 'front')")
+    """The option overrides its `[controller]` key (default: settings.py)."""
+    settings_option(parser, "--camera", struct=ControllerSettings, field="camera",
+                    metavar="NAME")
+
+
+def settings_from(ctx: ServiceContext) -> ControllerSettings:
+    """`[controller]` with the command line on top: what `run` builds the Controller
+    (and its Behaviour) from."""
+    return merge(ctx.config.section(ControllerSettings), ctx.args)
 
 
 def camera_transform(settings: ControllerSettings) -> RigidTransform:
@@ -105,20 +119,22 @@ class Controller:
 
     # -- Zenoh callbacks: enqueue only --
 
-    def _post(self, kind: str, *args: Any) -> None:
+    def _post(self, event: Event) -> None:
+        """Hand an event to the decision thread (any thread; never blocks)."""
         with self._cond:
-            self._inbox.append((kind, args))
+            self._inbox.append(event)
             self._cond.notify()
 
     def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
-        self._post("presence", msg.presence_state == m.PresenceState.IN_RANGE)
+        self._post(PresenceChanged(msg.presence_state == m.PresenceState.IN_RANGE))
 
     def _on_device_free(self, msg: m.Bool, _key: str) -> None:
-        self._post("device_free", msg.data)
+        self._post(DeviceFree(msg.data))
 
     def _on_status(self, msg: m.PlaySoundStatus, _key: str) -> None:
+        # The age lets a restarted controller tell a fresh latched status from an old one.
         age = (m.now_ns() - msg.stamp_ns) / 1e9 if msg.stamp_ns > 0 else None
-        self._post("status", msg.goal_id, msg.state, age)
+        self._post(SoundStatus(msg.goal_id, msg.state, age))
 
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
         with self._cond:
@@ -154,18 +170,24 @@ class Controller:
 
     def _handle(self, events: list[Event], face: tuple[m.FacePosition, float] | None) -> None:
         b = self.behaviour
-        for kind, args in events:
+        for event in events:
             now = self.clock()
-            if kind == "presence":
-                self._execute(b.presence(now, *args))
-            elif kind == "device_free":
-                self._execute(b.device_free(now, *args))
-            elif kind == "status":
-                self._execute(b.sound_status(now, *args))
-            elif kind == "reply":
-                self._execute(b.sound_reply(now, *args))
-            elif kind == "cancel_reply":
-                self._execute(b.cancel_reply(now, *args))
+            # Exhaustive: an Event member without a case fails type checking at
+            # assert_never, and at run time it raises instead of being dropped.
+            match event:
+                case PresenceChanged(in_range=in_range):
+                    commands = b.presence(now, in_range)
+                case DeviceFree(free=free):
+                    commands = b.device_free(now, free)
+                case SoundStatus(goal_id=goal_id, state=state, age_s=age_s):
+                    commands = b.sound_status(now, goal_id, state, age_s)
+                case GoalReply(request=request, accepted=accepted, goal_id=goal_id):
+                    commands = b.sound_reply(now, request, accepted, goal_id)
+                case CancelReply(goal_id=goal_id, success=success):
+                    commands = b.cancel_reply(now, goal_id, success)
+                case _:
+                    assert_never(event)
+            self._execute(commands)
         if face is not None:
             msg, arrived = face
             p = msg.point
@@ -225,20 +247,20 @@ class Controller:
                                            timeout=timeout)
                     if not reply.accepted:
                         log.warning("play_sound %r refused: %s", cmd.sound, reply.message)
-                    self._post("reply", cmd.request, reply.accepted, reply.goal_id)
+                    self._post(GoalReply(cmd.request, reply.accepted, reply.goal_id))
                 except Exception as exc:  # ServiceError, or Zenoh failing: always answer
                     self.node.diagnostics.increment("sound_call_failures")
                     log.warning("play_sound %r failed: %s", cmd.sound, exc)
-                    self._post("reply", cmd.request, False, "")
+                    self._post(GoalReply(cmd.request, False, ""))
             elif isinstance(cmd, CancelSound):
                 log.info("cancel goal %s", cmd.goal_id)
                 try:
                     answer = self.node.call(keys.PLAY_SOUND_CANCEL,
                                             m.CancelGoal(goal_id=cmd.goal_id), timeout=timeout)
-                    self._post("cancel_reply", cmd.goal_id, answer.success)
+                    self._post(CancelReply(cmd.goal_id, answer.success))
                 except Exception as exc:
                     log.warning("cancel of %s failed: %s", cmd.goal_id, exc)
-                    self._post("cancel_reply", cmd.goal_id, False)
+                    self._post(CancelReply(cmd.goal_id, False))
 
 
 def _clamp(value: float, limit: float) -> float:
@@ -246,11 +268,7 @@ def _clamp(value: float, limit: float) -> float:
 
 
 def run(ctx: ServiceContext) -> int:
-    settings = ctx.config.controller
-    if ctx.args.camera:
-        import msgspec
-
-        settings = msgspec.structs.replace(settings, camera=ctx.args.camera)
+    settings = settings_from(ctx)
     camera_transform(settings)  # refuse a bad config before connecting
     node = ctx.node()
     controller: Controller | None = None

@@ -11,19 +11,32 @@ refused when the file is read (the `ge=0` constraints).
 
 from __future__ import annotations
 
+import math
 from typing import Annotated
 
 import msgspec
 
-Seconds = Annotated[float, msgspec.Meta(ge=0.0, le=3600.0)]
-PositiveSeconds = Annotated[float, msgspec.Meta(gt=0.0, le=3600.0)]
+
+def _s(description: str, *, positive: bool = False) -> msgspec.Meta:
+    """A timing's range (0..1 h, or >0 when 0 would never end) and its description."""
+    if positive:
+        return msgspec.Meta(gt=0.0, le=3600.0, description=f"seconds: {description}")
+    return msgspec.Meta(ge=0.0, le=3600.0, description=f"seconds: {description}")
+
+
+Metres = Annotated[float, msgspec.Meta(
+    ge=-10.0, le=10.0, description="metres (a camera on the robot is well within 10 m)")]
+Radians = Annotated[float, msgspec.Meta(
+    ge=-math.tau, le=math.tau, description="radians, within one turn either way")]
 
 
 class CameraToEyes(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Static transform: camera origin and orientation in the eyes-centre frame."""
 
-    translation_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    rpy_rad: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    translation_m: tuple[Metres, Metres, Metres] = (0.0, 0.0, 0.0)
+    """x, y, z of the camera in the eyes-centre frame, metres."""
+    rpy_rad: tuple[Radians, Radians, Radians] = (0.0, 0.0, 0.0)
+    """Roll, pitch, yaw of the camera, radians."""
 
 
 class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -60,21 +73,32 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     * `tick_s` 0.05: the decision loop's period for timers.
     """
 
-    camera: str = "front"
+    camera: Annotated[str, msgspec.Meta(
+        min_length=1, max_length=64, description="camera whose faces the eyes follow")] = "front"
     camera_to_eyes: CameraToEyes = msgspec.field(default_factory=CameraToEyes)
     greeting_sound: Annotated[str, msgspec.Meta(min_length=1)] = "greeting"
     farewell_sound: Annotated[str, msgspec.Meta(min_length=1)] = "farewell"
-    centre_distance_cm: Annotated[float, msgspec.Meta(ge=0.0)] = 100.0
+    centre_distance_cm: Annotated[float, msgspec.Meta(
+        ge=0.0, le=10000.0,
+        description="cm: gaze distance sent when the eyes return to centre")] = 100.0
     look_around: bool = True
-    absence_hold_s: Seconds = 0.5
-    face_timeout_s: Seconds = 0.5
-    gaze_hold_s: Seconds = 1.0
-    look_around_after_s: Seconds = 2.0
-    greet_dwell_s: Seconds = 1.0
-    regreet_cooldown_s: Seconds = 6.0
-    sleepy_s: Seconds = 2.0
-    farewell_max_delay_s: Seconds = 5.0
-    sound_timeout_s: PositiveSeconds = 30.0
-    recover_s: Seconds = 0.5
-    tick_s: Annotated[float, msgspec.Meta(ge=0.005, le=1.0)] = 0.05
-    call_timeout_s: PositiveSeconds = 3.0
+    absence_hold_s: Annotated[float, _s("radar absence lasts this long before the visitor "
+                                        "is gone (a dropout is no farewell)")] = 0.5
+    face_timeout_s: Annotated[float, _s("a face older than this is not seen")] = 0.5
+    gaze_hold_s: Annotated[float, _s("eyes keep looking where the last face was")] = 1.0
+    look_around_after_s: Annotated[float, _s("in range with no face this long: search")] = 2.0
+    greet_dwell_s: Annotated[float, _s("in range with a face this long before the "
+                                       "greeting (no passer-by greeted)")] = 1.0
+    regreet_cooldown_s: Annotated[float, _s("coming back within this is the same visit")] = 6.0
+    sleepy_s: Annotated[float, _s("EYE_SLEEPY shown this long before EYE_SLEEP")] = 2.0
+    farewell_max_delay_s: Annotated[float, _s("a farewell not started within this after the "
+                                              "departure is dropped")] = 5.0
+    sound_timeout_s: Annotated[float, _s("a sound goal with no final status is lost after "
+                                         "this (a dead audio service cannot block)",
+                                         positive=True)] = 30.0
+    recover_s: Annotated[float, _s("listen to latched topics this long after start before "
+                                   "deciding (no repeated greeting)")] = 0.5
+    tick_s: Annotated[float, msgspec.Meta(
+        ge=0.005, le=1.0, description="seconds: period of the decision loop's timers")] = 0.05
+    call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",
+                                        positive=True)] = 3.0

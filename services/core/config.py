@@ -65,7 +65,7 @@ class ConfigBase(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         for name in self.__struct_fields__:
             value = getattr(self, name)
             if type(value) is kind:
-                return value  # type: ignore[no-any-return]
+                return value
         raise LookupError(f"no config table of type {kind.__name__}")
 
     if TYPE_CHECKING:  # service tables are added at run time (`config_type`)
@@ -84,10 +84,11 @@ def config_type() -> type[ConfigBase]:
         if entry.table is not None:
             kind = entry.settings_type()
             fields.append((entry.table, kind, msgspec.field(default_factory=kind)))
-    return msgspec.defstruct(
+    assembled: type[ConfigBase] = msgspec.defstruct(  # type: ignore[assignment]
         "Config", fields, bases=(ConfigBase,), module=__name__,
         forbid_unknown_fields=True, kw_only=True,
     )
+    return assembled
 
 
 def __getattr__(name: str) -> Any:
@@ -182,6 +183,6 @@ def resolve_path(config: ConfigBase, value: str, *, from_command_line: bool = Fa
 
 def to_toml_dict(config: ConfigBase) -> dict[str, object]:
     """The effective configuration as plain data (what `buddybot config` prints)."""
-    data = msgspec.to_builtins(config)
+    data: dict[str, object] = msgspec.to_builtins(config)
     data.pop("source", None)
     return data

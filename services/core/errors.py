@@ -40,6 +40,11 @@ class ServiceError(BuddyBotError):
     """A service call that failed: no answer, an error reply, or a bad reply."""
 
 
+class DeviceError(BuddyBotError):
+    """A device that cannot be opened, or that answered wrongly (exit 1: it may
+    work when plugged in again)."""
+
+
 def exit_status(error: BaseException) -> int:
     """The process exit status for an error that ended a command or service."""
     if isinstance(error, UsageError):

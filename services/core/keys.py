@@ -73,7 +73,8 @@ class Codec:
 
     def decode(self, data: bytes | bytearray | memoryview, msg_type: type[Any]) -> Any:
         """Decode and validate; raises msgspec.DecodeError/ValidationError."""
-        return _decoder(self.name, msg_type).decode(data)
+        kind: Any = msg_type  # a struct class: hashable, the decoder cache's key
+        return _decoder(self.name, kind).decode(data)
 
 
 @cache
@@ -82,7 +83,9 @@ def _encoder(name: str) -> msgspec.json.Encoder | msgspec.msgpack.Encoder:
 
 
 @cache
-def _decoder(name: str, msg_type: type) -> msgspec.json.Decoder | msgspec.msgpack.Decoder:
+def _decoder(
+    name: str, msg_type: Any
+) -> msgspec.json.Decoder[Any] | msgspec.msgpack.Decoder[Any]:
     if name == "json":
         return msgspec.json.Decoder(msg_type)
     return msgspec.msgpack.Decoder(msg_type)
@@ -284,7 +287,8 @@ SERVICES: tuple[Service, ...] = (
 def lookup(relative_key: str) -> Topic | Service | None:
     """The catalogue entry a concrete relative key belongs to."""
     relative_key = relative_key.strip("/")
-    for entry in (*TOPICS, *SERVICES):
+    entries: tuple[Topic | Service, ...] = (*TOPICS, *SERVICES)
+    for entry in entries:
         if entry.match(relative_key) is not None:
             return entry
     return None

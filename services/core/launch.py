@@ -29,14 +29,11 @@ from collections.abc import Mapping, MutableMapping
 from dataclasses import dataclass, field
 from typing import IO
 
-import zenoh
-
 from buddybot.core import registry
 from buddybot.core.backoff import Backoff
-from buddybot.core.node import open_session, zenoh_config
+from buddybot.core.node import Node, zenoh_config
 from buddybot.core.service import ServiceContext
 from buddybot.core.status import StatusMonitor
-from buddybot.core.tools import list_nodes
 
 log = logging.getLogger("buddybot.up")
 
@@ -157,13 +154,12 @@ def probe_nodes(endpoint: str, timeout_s: float = 3.0) -> list[str] | None:
     config = zenoh_config(connect=[endpoint])
     config.insert_json5("connect/timeout_ms", str(int(timeout_s * 1000)))
     try:
-        session = zenoh.open(config)
-    except Exception:  # ZError: not a Zenoh router, or it would not talk to us (TLS)
+        # A probe: it must not show up in the very list it asks for.
+        probe = Node("up-probe", connect=[endpoint], config=config, probe=True)
+    except Exception:  # ConnectionError: not a Zenoh router, or it would not talk to us (TLS)
         return None
-    try:
-        return list_nodes(session, None, timeout=timeout_s)
-    finally:
-        session.close()
+    with probe:
+        return sorted(probe.node_instances(all_robots=True, timeout=timeout_s))
 
 
 def busy_message(listen: str, nodes: list[str] | None) -> str:
@@ -293,20 +289,29 @@ def up(ctx: ServiceContext) -> int:
 
 
 class _Monitor(StatusMonitor):
+    """The status monitor of `up`, owning its probe node."""
+
     def session_close(self) -> None:
-        self._session.close()
+        """Close the probe node (after `close()`, which ends the subscriptions)."""
+        self.node.close()
 
 
 def _monitor(ctx: ServiceContext, connect: str, expected: list[str]) -> _Monitor | None:
-    """A status session on our own router; None if it cannot be had (status is optional)."""
+    """A status probe on our own router; None if it cannot be had (status is optional).
+
+    The probe shares `ctx.stop`, so Ctrl-C still interrupts its wait for the
+    router (closing it sets `ctx.stop`, which `up` has set by then anyway)."""
     if ctx.args.status_period <= 0:
         return None
     try:
-        session = open_session(zenoh_config(connect=[connect]), ctx.stop)
+        node = Node("up-status", robot=ctx.robot, connect=[connect], stop_event=ctx.stop,
+                    probe=True)
     except ConnectionError as exc:
         log.warning("no status line: %s", exc)
         return None
-    return None if session is None else _Monitor(session, ctx.robot, expected)
+    except KeyboardInterrupt:  # stopped while waiting for the router
+        return None
+    return _Monitor(node, expected)
 
 
 def _supervise(children: list[Child], stop: threading.Event, out: IO[str],

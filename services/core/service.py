@@ -16,10 +16,18 @@ import logging
 import os
 import sys
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from buddybot.core.config import ConfigBase, load_config, resolve_path
-from buddybot.core.errors import ConfigError
+from buddybot.core.config import ConfigBase, default_config, load_config, resolve_path
+from buddybot.core.errors import (
+    EXIT_FAILURE,
+    EXIT_OK,
+    BuddyBotError,
+    ConfigError,
+    exit_status,
+)
+from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
 from buddybot.core.node import Node, install_signal_handlers
 from buddybot.core.sdnotify import Notifier
 
@@ -88,8 +96,6 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
     robot = config.robot.id if robot is None else robot
     connect = getattr(args, "connect", None)  # append: None or a non-empty list
     connect = list(config.zenoh.connect) if connect is None else connect
-    from buddybot.core.keys import valid_robot_id
-
     if not valid_robot_id(robot):
         raise ConfigError(f"--robot: {robot!r} is not a valid id (letters, digits, '-', '_')")
     if config.zenoh.config_file:  # relative to the TOML file, like every path in it
@@ -97,25 +103,37 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
     return ServiceContext(name=name, args=args, config=config, robot=robot, connect=connect)
 
 
-def run_main(name: str, args: argparse.Namespace, main: object) -> int:
-    """Run a service's `run(ctx)` with logging, signals and config errors handled."""
+def run_main(
+    name: str, args: argparse.Namespace, main: Callable[[ServiceContext], int | None],
+    *, uses_config: bool = True,
+) -> int:
+    """Run a service's `run(ctx)` or a verb's `main(ctx)`: logging, signals, and
+    the one exit policy (`buddybot.core.errors.exit_status`).
+
+    A usage or config error prints one line and exits 2; any other of our
+    errors (a failed call, no router) prints one line and exits 1; Ctrl-C and
+    SIGTERM stop quietly with 0. Anything else is a bug and keeps its traceback.
+    `uses_config=False`: the verb never reads the robot's configuration (`keys`,
+    `schemas`), so a broken config file cannot stop it.
+    """
     from buddybot.core.launch import die_with_supervisor  # launch imports this module
 
     if not die_with_supervisor(os.environ):
         print(f"buddybot {name}: the `buddybot up` that started it is gone; not starting",
               file=sys.stderr)
-        return 1
+        return EXIT_FAILURE
     setup_logging(getattr(args, "log_level", "INFO"))
     try:
-        ctx = resolve(args, name)
-    except ConfigError as exc:
-        print(f"buddybot: config error: {exc}", file=sys.stderr)
-        return 2
-    install_signal_handlers(ctx.stop)
-    try:
-        return int(main(ctx) or 0)  # type: ignore[operator]
-    except ConfigError as exc:
-        print(f"buddybot: config error: {exc}", file=sys.stderr)
-        return 2
+        if uses_config:
+            ctx = resolve(args, name)
+        else:
+            ctx = ServiceContext(name=name, args=args, config=default_config(),
+                                 robot=DEFAULT_ROBOT, connect=[])
+        install_signal_handlers(ctx.stop)
+        return int(main(ctx) or 0)
+    except BuddyBotError as exc:
+        prefix = "buddybot: config error" if isinstance(exc, ConfigError) else f"buddybot {name}"
+        print(f"{prefix}: {exc}", file=sys.stderr)
+        return exit_status(exc)
     except KeyboardInterrupt:
-        return 0
+        return EXIT_OK

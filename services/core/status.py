@@ -1,10 +1,12 @@
 """The live status line of `buddybot up`: what an operator wants at a glance.
 
-`RobotStatus` is fed by a small monitor session (liveliness, presence,
+`RobotStatus` is fed by a small probe node (liveliness, presence,
 face, radar frame rate, expression) and formatted by a pure function, so
 the wording is tested without a robot. Images are deliberately not
 subscribed to: the camera's rate comes from its diagnostics, which costs
 nothing, instead of pulling 30 raw frames a second into the launcher.
+The probe declares no liveliness token, so it is not one of the nodes it
+counts.
 """
 
 from __future__ import annotations
@@ -13,14 +15,14 @@ import math
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
-
-import zenoh
+from typing import Any
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.node import Node, Subscription
 from buddybot.core.rates import rate_hz
-from buddybot.core.tools import list_node_instances
 
 
 @dataclass
@@ -65,33 +67,38 @@ def format_status(status: RobotStatus, now: float) -> str:
 
 
 class StatusMonitor:
-    """Keeps a RobotStatus up to date from the robot's own traffic."""
+    """Keeps a RobotStatus up to date from the robot's own traffic.
 
-    def __init__(self, session: zenoh.Session, robot: str, expected: list[str]) -> None:
+    `node` should be a probe (`Node(..., probe=True)`) of the robot to watch;
+    the monitor closes its own subscriptions, the caller the node.
+    """
+
+    def __init__(self, node: Node, expected: list[str]) -> None:
         self.status = RobotStatus(expected=expected)
-        self._session = session
-        self._robot = robot
+        self.node = node
         self._lock = threading.Lock()
-        self._subs: list[object] = []
+        self._subs: list[Subscription] = []
         self._watch(keys.RADAR_FRAMES, self._on_frames)
         self._watch(keys.PRESENCE, self._on_presence)
         self._watch(keys.FACE, self._on_face)
         self._watch(keys.EXPRESSION, self._on_expression)
         self._watch(keys.DIAGNOSTICS, self._on_diagnostics)
 
-    def _watch(self, topic: keys.Topic, handler: object) -> None:
-        key = keys.absolute(self._robot, topic.wildcard())
+    def _watch(self, topic: keys.Topic, handler: Callable[[Any], None]) -> None:
+        # Raw, decoded here: bad traffic is the services' business, not the
+        # launcher's (no warnings, no counters). Latched values come at once.
+        key = self.node.key(topic)
         codec, msg_type = topic.codec, topic.type
 
-        def on_sample(sample: zenoh.Sample) -> None:
+        def on_sample(_key: str, payload: bytes, _encoding: str) -> None:
             try:
-                msg = codec.decode(sample.payload.to_bytes(), msg_type)
-            except Exception:  # bad traffic is the services' business, not the launcher's
+                msg = codec.decode(payload, msg_type)
+            except Exception:
                 return
             with self._lock:
-                handler(msg)  # type: ignore[operator]
+                handler(msg)
 
-        self._subs.append(self._session.declare_subscriber(key, on_sample))
+        self._subs.append(self.node.subscribe_raw(key, on_sample, history=topic.latched))
 
     def _on_frames(self, _msg: m.LD2410TargetDataFrameArray) -> None:
         self.status.radar_arrivals.append(time.monotonic())
@@ -114,7 +121,7 @@ class StatusMonitor:
                 self.status.camera_fps = float(fps)
 
     def line(self, restarts: int) -> str:
-        found = list_node_instances(self._session, self._robot, timeout=1.0)
+        found = self.node.node_instances(timeout=1.0)
         with self._lock:
             self.status.up = sorted(found)
             self.status.duplicates = sorted(n for n, ids in found.items() if len(ids) > 1)
@@ -122,5 +129,6 @@ class StatusMonitor:
             return format_status(self.status, time.monotonic())
 
     def close(self) -> None:
+        """Stop watching (the node stays open: it belongs to the caller)."""
         for sub in self._subs:
-            sub.undeclare()  # type: ignore[attr-defined]
+            sub.close()

@@ -121,8 +121,11 @@ class Process:
         return self.proc.returncode
 
     def wait_for_output(self, text: str, timeout: float = 15.0) -> str:
-        return retry_until(lambda: text in self.output() and self.output(), timeout,
-                           what=f"{self.name} printing {text!r}")
+        def printed() -> str:
+            output = self.output()
+            return output if text in output else ""
+
+        return retry_until(printed, timeout, what=f"{self.name} printing {text!r}")
 
 
 def write_tone(path: Path, seconds: float, hz: float = 440.0, rate: int = 48000,
@@ -202,7 +205,8 @@ class Collector(Generic[T]):
     def __init__(self, node: Node, topic: keys.Topic, /, **params: str) -> None:
         self.items: list[tuple[Any, str]] = []
         self._cond = threading.Condition()
-        node.subscribe(topic, self._on, **params)
+        key_params: dict[str, Any] = params  # key parameters only (camera=..., device=...)
+        node.subscribe(topic, self._on, **key_params)
 
     def _on(self, msg: Any, key: str) -> None:
         with self._cond:

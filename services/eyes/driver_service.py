@@ -15,20 +15,27 @@ import argparse
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import ConfigError
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 from buddybot.eyes import driver
+from buddybot.eyes.settings import EyesSettings
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument(
-        "--unknown-distance-percent", type=float, metavar="PCT",
-        help="pupil dilation when eye control carries no distance (default from config, 50)",
-    )
+    """The option overrides its `[eyes]` key (default and range: settings.py)."""
+    settings_option(parser, "--unknown-distance-percent", struct=EyesSettings,
+                    field="unknown_distance_percent", metavar="PCT")
+
+
+def settings_from(ctx: ServiceContext) -> EyesSettings:
+    """`[eyes]` with the command line on top (range checked by `merge`)."""
+    return merge(ctx.config.section(EyesSettings), ctx.args)
 
 
 def build(ctx: ServiceContext) -> tuple[driver.PupilCurve, float, dict]:
-    """Validate `[eyes]` into the driver's pure objects (ConfigError naming the key)."""
-    settings = ctx.config.eyes
+    """Validate the merged `[eyes]` into the driver's pure objects (ConfigError naming
+    the key)."""
+    settings = settings_from(ctx)
     try:
         curve = driver.PupilCurve.from_points(settings.pupil_curve)
     except ValueError as exc:
@@ -37,12 +44,7 @@ def build(ctx: ServiceContext) -> tuple[driver.PupilCurve, float, dict]:
         table = driver.lid_table(settings.lids)
     except ValueError as exc:
         raise ConfigError(f"key 'eyes.lids': {exc}") from None
-    unknown = ctx.args.unknown_distance_percent
-    if unknown is None:
-        unknown = settings.unknown_distance_percent
-    if not 0.0 <= unknown <= 100.0:
-        raise ConfigError(f"--unknown-distance-percent: {unknown} is not within 0..100")
-    return curve, unknown, table
+    return curve, settings.unknown_distance_percent, table
 
 
 def run(ctx: ServiceContext) -> int:

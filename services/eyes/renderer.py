@@ -32,7 +32,6 @@ import contextlib
 import importlib.resources
 import logging
 import socket
-import sys
 import tempfile
 import threading
 import uuid
@@ -44,8 +43,10 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.errors import UsageError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 from buddybot.eyes import kiosk, placement, wire
 from buddybot.eyes.settings import EyeRendererSettings
@@ -57,23 +58,29 @@ PAGE_EYES = ("left", "right", "both")
 STATIC = {"eyes.js": "application/javascript", "eyes.css": "text/css"}
 
 
+def _eye_list(choice: str) -> list[str]:
+    """`--eyes both` is the list of both eyes; `left`/`right` is a list of one."""
+    return list(placement.EYES) if choice == "both" else [choice]
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--host", help="address to serve on (default from config, 127.0.0.1; "
-                        "0.0.0.0 lets a tablet or phone be an eye)")
-    parser.add_argument("--port", type=int, help="HTTP port (default from config, 8080; "
-                        "0 = any free port)")
-    parser.add_argument("--no-browser", action="store_true",
-                        help="only serve the pages, open no kiosk windows")
-    parser.add_argument("--browser", metavar="PATH",
-                        help="browser executable (default: chromium on PATH)")
+    """Options overriding `[eye_renderer]` keys (defaults and ranges: settings.py), then
+    the ones that only exist on the command line (browser flags, forced displays)."""
+    struct = EyeRendererSettings
+    settings_option(parser, "--host", struct=struct, field="host")
+    settings_option(parser, "--port", struct=struct, field="port")
+    settings_option(parser, "--no-browser", struct=struct, field="browser",
+                    action="store_false", help="only serve the pages, open no kiosk windows")
+    settings_option(parser, "--browser", struct=struct, field="browser_path", metavar="PATH")
+    settings_option(parser, "--eyes", struct=struct, field="eyes",
+                    choices=["left", "right", "both"], convert=_eye_list,
+                    help="which eyes to show (empty list: both)")
+    settings_option(parser, "--left-display", struct=struct, field="left_display",
+                    metavar="N")
+    settings_option(parser, "--right-display", struct=struct, field="right_display",
+                    metavar="N")
     parser.add_argument("--browser-arg", action="append", default=[], metavar="ARG",
                         help="extra browser flag (repeatable), e.g. --browser-arg=--disable-gpu")
-    parser.add_argument("--eyes", choices=["left", "right", "both"],
-                        help="which eyes to show (default both)")
-    parser.add_argument("--left-display", type=int, metavar="N",
-                        help="display number (1 = leftmost) for the robot's left eye")
-    parser.add_argument("--right-display", type=int, metavar="N",
-                        help="display number (1 = leftmost) for the robot's right eye")
     parser.add_argument("--display", action="append", default=[], metavar="WxH+X+Y",
                         help="use these displays instead of detecting them (repeatable)")
 
@@ -94,27 +101,26 @@ def detect_displays() -> list[placement.Display]:
             for mon in monitors]
 
 
-def placement_request(args: argparse.Namespace, s: EyeRendererSettings) -> placement.Request:
-    """Command line wins over config; 0/empty in config means 'not configured'."""
-    eyes: tuple[placement.EyeName, ...] = tuple(s.eyes)
-    if args.eyes:
-        eyes = placement.EYES if args.eyes == "both" else (args.eyes,)
-    left = args.left_display if args.left_display is not None else (s.left_display or None)
-    right = args.right_display if args.right_display is not None else (s.right_display or None)
-    return placement.Request(eyes=eyes, left_display=left, right_display=right)
+def placement_request(s: EyeRendererSettings) -> placement.Request:
+    """The eye placement the merged settings ask for (0 means 'not configured')."""
+    return placement.Request(eyes=tuple(s.eyes), left_display=s.left_display or None,
+                             right_display=s.right_display or None)
 
 
-class StartupError(Exception):
-    """The renderer cannot start as configured (printed, exit status 2)."""
+class StartupError(UsageError):
+    """The renderer cannot start as configured (exit status 2: not restarted)."""
 
 
-def plan_windows(args: argparse.Namespace, s: EyeRendererSettings) -> list[placement.Window]:
-    """The kiosk windows to open (empty when serving pages only)."""
-    if args.no_browser or not s.browser:
+def plan_windows(s: EyeRendererSettings, geometries: list[str]) -> list[placement.Window]:
+    """The kiosk windows to open (empty when serving pages only).
+
+    `geometries`: `--display WxH+X+Y` values, which replace the detected displays.
+    """
+    if not s.browser:
         return []
-    request = placement_request(args, s)
+    request = placement_request(s)
     try:
-        displays = [placement.parse_geometry(g) for g in args.display]
+        displays = [placement.parse_geometry(g) for g in geometries]
     except ValueError as exc:
         raise StartupError(f"--display: {exc}") from None
     if not displays:
@@ -456,11 +462,7 @@ def _subscribe(node: Node, inbox: Inbox) -> None:
 
 def _on_bus(node: Node) -> bool:
     """Whether the node has a router right now (pages show "connecting" otherwise)."""
-    try:
-        return bool(node.session.info.routers_zid())
-    except Exception as exc:  # a closing session
-        log.debug("router check failed: %r", exc)
-        return False
+    return node.connected()  # False as well while the node closes
 
 
 async def _open_node(ctx: ServiceContext) -> Node | None:
@@ -483,7 +485,7 @@ async def serve(ctx: ServiceContext, host: str, port: int,
     (or still starting) the pages load and show their "connecting" face
     instead of a browser error, and kiosk windows open at once.
     """
-    s = ctx.config.eye_renderer
+    s = settings_from(ctx)
     hub = Hub(wire.Hello(iris_color=s.iris_color, max_yaw_deg=s.max_yaw_deg,
                          max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]),
               s.max_pages)
@@ -549,31 +551,24 @@ async def serve(ctx: ServiceContext, host: str, port: int,
             node.close()
 
 
+def settings_from(ctx: ServiceContext) -> EyeRendererSettings:
+    """`[eye_renderer]` with the command line on top: what `run` and `serve` use.
+
+    `--host ""` (every interface) is a value like any other, and `--port`
+    out of 0..65535 is refused by `merge` naming the flag.
+    """
+    return merge(ctx.config.section(EyeRendererSettings), ctx.args)
+
+
 def run(ctx: ServiceContext) -> int:
-    s = ctx.config.eye_renderer
-    args = ctx.args
-    # `--host ""` (every interface) is a real choice: only an absent flag takes the config.
-    host = s.host if args.host is None else args.host
-    port = s.port if args.port is None else args.port
-    if not 0 <= port <= 65535:
-        print(f"buddybot eye-renderer: --port {port} is not a TCP port", file=sys.stderr)
-        return 2
-    try:
-        windows = plan_windows(args, s)
-        browser = None
-        if windows:
-            browser = kiosk.find_browser(
-                s.browser_path if args.browser is None else args.browser)
-            if browser is None:
-                raise StartupError(
-                    "no Chromium found for the kiosk windows: install it (scripts/chromium.sh), "
-                    "set eye_renderer.browser_path, or run with --no-browser")
-    except StartupError as exc:
-        print(f"buddybot eye-renderer: {exc}", file=sys.stderr)
-        return 2
-    try:
-        asyncio.run(serve(ctx, host, port, windows, browser))
-    except StartupError as exc:
-        print(f"buddybot eye-renderer: {exc}", file=sys.stderr)
-        return 2
+    s = settings_from(ctx)
+    windows = plan_windows(s, ctx.args.display)  # StartupError: exit 2 (run_main)
+    browser = None
+    if windows:
+        browser = kiosk.find_browser(s.browser_path)
+        if browser is None:
+            raise StartupError(
+                "no Chromium found for the kiosk windows: install it (scripts/chromium.sh), "
+                "set eye_renderer.browser_path, or run with --no-browser")
+    asyncio.run(serve(ctx, s.host, s.port, windows, browser))
     return 0

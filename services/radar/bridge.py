@@ -21,21 +21,22 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import sys
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+import msgspec
 import serial
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.backoff import Backoff
-from buddybot.core.errors import ConfigError
+from buddybot.core.errors import ConfigError, UsageError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
+from buddybot.core.overrides import given, merge, settings_option
 from buddybot.core.service import ServiceContext
 from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
@@ -286,16 +287,19 @@ class Bridge:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--sensor", action="append", metavar="URL",
-                        help="pyserial URL of a sensor, repeatable; radar_id = order "
-                             "(e.g. /dev/ttyUSB0, socket://esp32.local:8881, rfc2217://h:p)")
-    parser.add_argument("--device-id", type=int, help="device id in the key (default 0)")
-    parser.add_argument("--baudrate", type=int, help="serial speed (default 256000)")
-    parser.add_argument("--sim", action="store_true",
-                        help="add a built-in simulated LD2410 on a pseudo-terminal")
-    parser.add_argument("--sim-scenario", choices=sorted(SCENARIOS),
-                        help="what the simulated sensor sees (default: visit, a loop)")
-    parser.add_argument("--sim-speed", type=float, help="scenario time scale (default 1.0)")
+    """Every option overrides a `[radar_bridge]` key (defaults and ranges: settings.py)."""
+    option = RadarBridgeSettings
+    settings_option(parser, "--sensor", struct=option, field="sensors", metavar="URL",
+                    help="pyserial URL of a sensor, repeatable, replacing the configured "
+                         "list; radar_id = order (e.g. /dev/ttyUSB0, "
+                         "socket://esp32.local:8881, rfc2217://h:p)")
+    settings_option(parser, "--device-id", struct=option, field="device_id")
+    settings_option(parser, "--baudrate", struct=option, field="baudrate")
+    settings_option(parser, "--sim", struct=option, field="sim",
+                    action=argparse.BooleanOptionalAction)
+    settings_option(parser, "--sim-scenario", struct=option, field="sim_scenario",
+                    choices=sorted(SCENARIOS))
+    settings_option(parser, "--sim-speed", struct=option, field="sim_speed")
 
 
 @dataclass(frozen=True)
@@ -309,51 +313,51 @@ class BridgeOptions:
     sim_speed: float
 
 
-def resolve_options(args: argparse.Namespace, cfg: RadarBridgeSettings) -> BridgeOptions:
-    """Merge the command line over the config, refusing values no sensor can use.
+def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> RadarBridgeSettings:
+    """`[radar_bridge]` with the command line on top: what the bridge runs with.
 
-    A flag overrides the config whenever it was given (`is None`, never
-    `or`): `--sim-speed 0` or `--baudrate 0` must reach the checks below and
-    be refused naming the flag, not be silently replaced by the config value.
-    The config's own values were already range-checked when it was loaded.
+    Ranges (`--baudrate 0`, `--sim-speed 0`) are refused by `merge` naming
+    the flag. One rule is more than a field set: with the simulated sensor on
+    (flag or config), configured hardware is left alone, unless sensors were
+    given explicitly with `--sensor` (those are read alongside it).
     """
-    sim_on = bool(args.sim or cfg.sim)
-    # --sim means "the simulated sensor": configured hardware is left alone
-    # (sensors given explicitly with --sensor are still read alongside it).
-    urls = list(args.sensor if args.sensor is not None else ([] if sim_on else cfg.sensors))
-    device_id = cfg.device_id if args.device_id is None else args.device_id
-    if device_id < 0:
-        raise ConfigError("--device-id must be >= 0")
-    baud = cfg.baudrate if args.baudrate is None else args.baudrate
-    if baud <= 0:
-        raise ConfigError(f"--baudrate must be > 0 (got {baud})")
-    scenario = (cfg.sim_scenario if args.sim_scenario is None else args.sim_scenario) \
-        if sim_on else None
-    if scenario is not None and scenario not in SCENARIOS:
-        raise ConfigError(f"radar_bridge.sim_scenario: unknown {scenario!r}; "
+    s = merge(cfg, args)
+    if s.sim and not given(args, RadarBridgeSettings, "sensors"):
+        s = msgspec.structs.replace(s, sensors=[])
+    if s.sim and s.sim_scenario not in SCENARIOS:
+        raise ConfigError(f"radar_bridge.sim_scenario: unknown {s.sim_scenario!r}; "
                           f"one of {sorted(SCENARIOS)}")
-    # Scenario time is wall time x speed: 0 would freeze the visitor forever
-    # and a negative speed would run the script backwards, so both are refused.
-    speed = cfg.sim_speed if args.sim_speed is None else args.sim_speed
-    if sim_on and not speed > 0:
-        raise ConfigError(f"--sim-speed must be > 0 (got {speed:g})")
-    return BridgeOptions(urls, device_id, baud, scenario, speed)
+    return s
+
+
+def settings_from(ctx: ServiceContext) -> RadarBridgeSettings:
+    """The settings `run` starts the bridge with (tests check they reach it)."""
+    return merged_settings(ctx.args, ctx.config.section(RadarBridgeSettings))
+
+
+def options_from(s: RadarBridgeSettings) -> BridgeOptions:
+    """What to open: the sensors, plus the simulated one when `sim` is on."""
+    return BridgeOptions(list(s.sensors), s.device_id, s.baudrate,
+                         s.sim_scenario if s.sim else None, s.sim_speed)
+
+
+def resolve_options(args: argparse.Namespace, cfg: RadarBridgeSettings) -> BridgeOptions:
+    """Command line merged over the config, as the sensors to open (pure, for tests)."""
+    return options_from(merged_settings(args, cfg))
 
 
 def run(ctx: ServiceContext) -> int:
     from buddybot.radar.sim import PtySensor
 
-    cfg = ctx.config.radar_bridge
-    opts = resolve_options(ctx.args, cfg)
+    cfg = settings_from(ctx)
+    opts = options_from(cfg)
     urls = list(opts.urls)
     sims: list[PtySensor] = []
     if opts.sim_scenario is not None:
         sims.append(PtySensor(opts.sim_scenario, speed=opts.sim_speed).start())
         urls.append(sims[-1].path)
     if not urls:
-        print("buddybot run radar-bridge: no sensor: give --sensor URL (repeatable) or --sim",
-              file=sys.stderr)
-        return 2
+        raise UsageError("no sensor: give --sensor URL (repeatable) or --sim")
     node = ctx.node()
     bridge = Bridge(node, urls, opts.device_id, opts.baudrate,
                     (cfg.reconnect_initial_s, cfg.reconnect_max_s),

@@ -45,35 +45,17 @@ from dataclasses import dataclass, field
 
 from buddybot.core.limits import BoundedDict
 from buddybot.core.messages import PresenceState, PresenceTarget, TargetState
+from buddybot.radar.settings import RadarPresenceSettings
 
 TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
-MAX_SENSORS_LIMIT = 1024
 ESTABLISHED_S = 1.0  # a sensor heard this long ...
 ESTABLISHED_FRAMES = 5  # ... with this many frames is a real one (10 Hz: after ~1 s)
 
 
-@dataclass(frozen=True)
-class PresenceRules:
-    """Tuning of the rule; defaults documented in docs/radar.md."""
-
-    range_m: float = 2.0
-    exit_margin_m: float = 0.3
-    absence_hold_s: float = 3.0
-    target_hold_s: float = 1.0
-    stale_after_s: float = 1.5
-    max_sensors: int = 16
-
-    def __post_init__(self) -> None:
-        if self.range_m <= 0:
-            raise ValueError(f"range_m must be > 0, got {self.range_m}")
-        for name in ("exit_margin_m", "absence_hold_s", "target_hold_s"):
-            if getattr(self, name) < 0:
-                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
-        if self.stale_after_s <= 0:
-            raise ValueError(f"stale_after_s must be > 0, got {self.stale_after_s}")
-        if not 1 <= self.max_sensors <= MAX_SENSORS_LIMIT:
-            raise ValueError(f"max_sensors must be 1..{MAX_SENSORS_LIMIT}, "
-                             f"got {self.max_sensors}")
+PresenceRules = RadarPresenceSettings
+"""The rule's tuning is the `[radar_presence]` table itself: one struct, whose
+defaults and ranges (checked when a config or an option is read) live in
+settings.py; the reasons for each default are in docs/radar.md."""
 
 
 @dataclass(frozen=True)

@@ -25,9 +25,9 @@ import time
 
 from buddybot.core import keys
 from buddybot.core import messages as m
-from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import Node
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 from buddybot.radar.intake import Intake
 from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
@@ -42,17 +42,9 @@ RULE_NAMES = ("range_m", "exit_margin_m", "absence_hold_s", "target_hold_s", "st
               "max_sensors")
 
 
-def rules_from(cfg: RadarPresenceSettings, args: argparse.Namespace) -> PresenceRules:
-    """Config table, then command-line overrides."""
-    values = {name: getattr(cfg, name) for name in RULE_NAMES}
-    for name in values:
-        override = getattr(args, name, None)
-        if override is not None:
-            values[name] = override
-    try:
-        return PresenceRules(**values)
-    except ValueError as exc:
-        raise ConfigError(f"radar_presence: {exc}") from None
+def settings_from(ctx: ServiceContext) -> RadarPresenceSettings:
+    """`[radar_presence]` with the command line on top: what `run` builds the rules from."""
+    return merge(ctx.config.section(RadarPresenceSettings), ctx.args)
 
 
 class PresenceService:
@@ -178,26 +170,17 @@ def _names(names: list[str]) -> str:
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--range-m", dest="range_m", type=float,
-                        help="IN_RANGE within this distance (default 2.0)")
-    parser.add_argument("--exit-margin-m", dest="exit_margin_m", type=float,
-                        help="leave only beyond range + margin (default 0.3)")
-    parser.add_argument("--absence-hold-s", dest="absence_hold_s", type=float,
-                        help="nobody in range this long before OUT_OF_RANGE (default 3.0)")
-    parser.add_argument("--target-hold-s", dest="target_hold_s", type=float,
-                        help="MOVING/STANDING change must last this long (default 1.0)")
-    parser.add_argument("--stale-after-s", dest="stale_after_s", type=float,
-                        help="a sensor silent this long is excluded (default 1.5)")
-    parser.add_argument("--max-sensors", dest="max_sensors", type=int,
-                        help="sensors remembered at most, least recently heard forgotten "
-                             "(default 16)")
+    """One option per rule, each overriding its `[radar_presence]` key."""
+    for name in RULE_NAMES:
+        settings_option(parser, "--" + name.replace("_", "-"), struct=RadarPresenceSettings,
+                        field=name)
 
 
 def run(ctx: ServiceContext) -> int:
-    rules = rules_from(ctx.config.radar_presence, ctx.args)
+    settings = settings_from(ctx)
     node = ctx.node()
     try:
-        service = PresenceService(node, rules)
+        service = PresenceService(node, settings)
         service.intake.start()
         # Every device (wildcard). Zenoh's thread only sorts the frames into the
         # intake; the rule runs on its worker, established sensors first.

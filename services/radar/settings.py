@@ -1,7 +1,9 @@
 """Config tables `[radar_bridge]` and `[radar_presence]` (pure msgspec structs).
 
 Every default is chosen for a real LD2410 at its factory settings; the
-reasons are in docs/radar.md.
+reasons are in docs/radar.md. Each number carries its range and a
+description (unit, why): the config file, the command-line options
+(`buddybot.core.overrides`) and their help all take them from here.
 """
 
 from __future__ import annotations
@@ -10,41 +12,72 @@ from typing import Annotated
 
 import msgspec
 
-Positive = Annotated[float, msgspec.Meta(gt=0.0)]
-NonNegative = Annotated[float, msgspec.Meta(ge=0.0)]
-
 
 class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Sensors are pyserial URLs; `radar_id` is their index in this list."""
 
-    sensors: list[str] = msgspec.field(default_factory=list)
-    device_id: Annotated[int, msgspec.Meta(ge=0)] = 0
-    # LD2410 factory default; a pty or socket:// URL ignores it.
-    baudrate: Annotated[int, msgspec.Meta(gt=0)] = 256000
-    sim: bool = False
-    # Simulated sensor: scenario name (see buddybot.radar.scenarios.SCENARIOS) and time scale.
-    sim_scenario: str = "visit"
-    sim_speed: Positive = 1.0
-    # Reconnect backoff: first retry after reconnect_initial_s, doubling up to reconnect_max_s.
-    reconnect_initial_s: Positive = 0.5
-    reconnect_max_s: Positive = 5.0
-    # A port that delivers no intact frame for this long is reopened (the sensor sends ~10/s).
-    silence_timeout_s: Positive = 3.0
-    # Ask each sensor's firmware version at connect: only V2.x reports carry light
-    # level and OUT pin. Off for a link that cannot send to the sensor.
-    query_firmware: bool = True
+    sensors: Annotated[list[Annotated[str, msgspec.Meta(min_length=1)]], msgspec.Meta(
+        description="pyserial URLs of the sensors; radar_id = order")] = msgspec.field(
+        default_factory=list)
+    device_id: Annotated[int, msgspec.Meta(
+        ge=0, le=65535,
+        description="device id in the keys (radar/<device_id>/...): tells several "
+        "bridges apart")] = 0
+    baudrate: Annotated[int, msgspec.Meta(
+        ge=1200, le=4_000_000,
+        description="serial speed in bit/s; 256000 is the LD2410 factory default, "
+        "a pty or socket:// URL ignores it")] = 256000
+    sim: Annotated[bool, msgspec.Meta(
+        description="add a built-in simulated LD2410 on a pseudo-terminal (configured "
+        "sensors are then left alone unless given with --sensor)")] = False
+    sim_scenario: Annotated[str, msgspec.Meta(
+        min_length=1,
+        description="what the simulated sensor sees (a name in "
+        "buddybot.radar.scenarios.SCENARIOS)")] = "visit"
+    sim_speed: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1000.0,
+        description="scenario time scale (x wall time): 0 would freeze the visitor, "
+        "a negative speed would run the script backwards")] = 1.0
+    reconnect_initial_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="seconds before the first reopen of a failed port; doubles up to "
+        "reconnect_max_s")] = 0.5
+    reconnect_max_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="longest wait between reopen attempts, seconds")] = 5.0
+    silence_timeout_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="seconds without an intact frame before the port is reopened "
+        "(the sensor sends ~10 frames/s)")] = 3.0
+    query_firmware: Annotated[bool, msgspec.Meta(
+        description="ask each sensor's firmware version at connect: only V2.x reports "
+        "carry light level and OUT pin; off for a link that cannot send to the "
+        "sensor")] = True
 
 
 class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    range_m: Positive = 2.0
-    # Leaving needs every target beyond range_m + exit_margin_m (LD2410 jitter is ~0.2 m).
-    exit_margin_m: NonNegative = 0.3
-    # Nobody within the exit range for this long before OUT_OF_RANGE (NO_TARGET blips).
-    absence_hold_s: NonNegative = 3.0
-    # A new MOVING/STANDING kind must last this long before it is published.
-    target_hold_s: NonNegative = 1.0
-    # A sensor silent for this long is excluded and reported (frames come every ~0.1 s).
-    stale_after_s: Positive = 1.5
-    # Sensors remembered at most (least recently heard forgotten first): a robot has a
-    # few; the bound keeps a flood of invented sensor ids from growing the table.
-    max_sensors: Annotated[int, msgspec.Meta(ge=1, le=1024)] = 16
+    range_m: Annotated[float, msgspec.Meta(
+        gt=0.0, le=10.0,
+        description="metres: IN_RANGE when a target is this close (the LD2410 sees "
+        "to ~6 m)")] = 2.0
+    exit_margin_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=10.0,
+        description="metres beyond range_m every target must be to leave (LD2410 "
+        "jitter is ~0.2 m)")] = 0.3
+    absence_hold_s: Annotated[float, msgspec.Meta(
+        ge=0.0, le=3600.0,
+        description="seconds nobody is within the exit range before OUT_OF_RANGE "
+        "(NO_TARGET blips)")] = 3.0
+    target_hold_s: Annotated[float, msgspec.Meta(
+        ge=0.0, le=3600.0,
+        description="seconds a new MOVING/STANDING kind must last before it is "
+        "published")] = 1.0
+    stale_after_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="seconds of silence before a sensor is excluded and reported "
+        "(frames come every ~0.1 s)")] = 1.5
+    max_sensors: Annotated[int, msgspec.Meta(
+        ge=1, le=1024,
+        description="sensors remembered at most, least recently heard forgotten "
+        "first: a robot has a few; the bound keeps a flood of invented sensor ids "
+        "from growing the table")] = 16

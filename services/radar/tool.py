@@ -23,16 +23,18 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 
 import serial
 
+from buddybot.core.errors import DeviceError, UsageError
 from buddybot.core.limits import clip
+from buddybot.core.overrides import merge, settings_option
 from buddybot.core.service import ServiceContext
 from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
+from buddybot.radar.settings import RadarBridgeSettings
 
 NOISE_POLL_S = 0.5
 
@@ -45,7 +47,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--port", metavar="URL",
                         help="pyserial URL of the sensor (default: first [radar_bridge] sensor)")
-    common.add_argument("--baudrate", type=int, help="serial speed (default 256000)")
+    settings_option(common, "--baudrate", struct=RadarBridgeSettings, field="baudrate")
     common.add_argument("--timeout", type=float, default=1.0,
                         help="seconds to wait for each ACK (default 1.0)")
     common.add_argument("--json", action="store_true", help="print results as JSON")
@@ -200,37 +202,27 @@ def _print(result: dict[str, object], as_json: bool) -> None:
 
 def run(ctx: ServiceContext) -> int:
     args = ctx.args
-    cfg = ctx.config.radar_bridge
+    # The sensor's speed is the bridge's setting: one merge, one range check.
+    cfg = merge(ctx.config.section(RadarBridgeSettings), args)
     url = args.port if args.port is not None else (cfg.sensors[0] if cfg.sensors else None)
     if not url:
-        print("buddybot radar: no port: give --port URL", file=sys.stderr)
-        return 2
+        raise UsageError("no port: give --port URL")
     if args.action == "set-sensitivity" and args.gate != "all" and not args.gate.isdigit():
-        print("buddybot radar: --gate must be 0..8 or 'all'", file=sys.stderr)
-        return 2
-    # A given --baudrate 0 is refused, not silently replaced by the config value.
-    baudrate = cfg.baudrate if args.baudrate is None else args.baudrate
-    if baudrate <= 0:
-        print(f"buddybot radar: --baudrate must be > 0 (got {baudrate})", file=sys.stderr)
-        return 2
+        raise UsageError("--gate must be 0..8 or 'all'")
     try:
         _check_values(args)
     except ProtocolError as exc:
-        print(f"buddybot radar: {exc}", file=sys.stderr)
-        return 2
+        raise UsageError(str(exc)) from None
     try:
-        port = serial.serial_for_url(url, baudrate=baudrate, timeout=0.05)
+        port = serial.serial_for_url(url, baudrate=cfg.baudrate, timeout=0.05)
     except (serial.SerialException, OSError, ValueError) as exc:
-        print(f"buddybot radar: cannot open {clip(url)}: {clip(str(exc))}", file=sys.stderr)
-        return 1
+        raise DeviceError(f"cannot open {clip(url)}: {clip(str(exc))}") from None
     try:
         result = execute(LD2410Client(port, timeout_s=args.timeout), args)
-    except ProtocolError as exc:
-        print(f"buddybot radar: {exc}", file=sys.stderr)
-        return 2 if args.action.startswith("set-") else 1
+    except ProtocolError as exc:  # a value the sensor refuses is a usage error
+        raise (UsageError if args.action.startswith("set-") else DeviceError)(str(exc)) from None
     except (RadarError, serial.SerialException, OSError) as exc:
-        print(f"buddybot radar: {clip(url)}: {clip(str(exc))}", file=sys.stderr)
-        return 1
+        raise DeviceError(f"{clip(url)}: {clip(str(exc))}") from None
     finally:
         port.close()
     _print(result, args.json)

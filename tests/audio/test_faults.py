@@ -183,20 +183,20 @@ def test_a_burst_of_200_goals_gets_exactly_one_answer_each(
     send_goal(probe, "beep")
     payload = msgspec.json.encode(m.PlaySound(sound="beep"))
     key = probe.key(keys.PLAY_SOUND)
-    pending = [probe.session.get(key, payload=payload, timeout=30) for _ in range(200)]
+    pending = [probe.query(key, payload, timeout=30) for _ in range(200)]  # all sent at once
     answers = [list(replies) for replies in pending]
     assert [len(x) for x in answers] == [1] * 200
     accepted: list[str] = []
     refusals: list[str] = []
     for [answer] in answers:
-        if answer.ok is not None:
-            reply = msgspec.json.decode(answer.ok.payload.to_bytes(), type=m.PlaySoundReply)
+        if answer.ok:
+            reply = msgspec.json.decode(answer.payload, type=m.PlaySoundReply)
             if reply.accepted:
                 accepted.append(reply.goal_id)
             else:
                 refusals.append(reply.message)
         else:
-            refusals.append(error_text(answer.err.payload.to_bytes()))
+            refusals.append(error_text(answer.payload))
     print(f"{len(accepted)} accepted, {len(refusals)} refused: {sorted(set(refusals))[:3]}")
     assert accepted and all(r.startswith("busy") for r in refusals), refusals[:3]
     mine = set(accepted)  # the newest accepted one plays to its end
@@ -254,7 +254,7 @@ def test_a_fake_player_token_is_reported_and_cannot_hide_the_players_death(
     diag = Collector(probe, keys.DIAGNOSTICS, node="audio")
     first = send_goal(probe, "beep")
     a.status.wait_for(lambda s: s.goal_id == first.goal_id and s.state == "PLAYING")
-    fake = probe.session.liveliness().declare_token(
+    fake = probe.declare_token(
         probe.key(keys.NODES, node="audio-player", instance="f00dfeed"))
     try:
         warn = diag.wait_for(lambda d: d.level == "WARN" and "2 instances of audio-player"
@@ -271,4 +271,4 @@ def test_a_fake_player_token_is_reported_and_cannot_hide_the_players_death(
             assert "not running" in reply.message, reply
         assert a.action.alive()
     finally:
-        fake.undeclare()
+        fake.close()

@@ -416,6 +416,23 @@ def test_recovery_recent_sound_means_already_greeted() -> None:
     assert r.sounds() == ["farewell"]
 
 
+def test_recovery_arrival_after_an_empty_room_is_owed_no_farewell() -> None:
+    """Nobody there at the restart, a recent sound (the last visit's farewell), and
+    the visitor back during the recovery: no greeting within the cooldown, and no
+    second goodbye (found by the property test once its farewell invariant held
+    across restarts)."""
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r.presence(False)
+    r.status("old", "SUCCEEDED", age=2.0)
+    r.at(0.1)
+    r.presence(True)
+    r.faces(3.0)
+    assert r.sounds() == []
+    r.presence(False)
+    r.at(0.1)
+    assert r.sounds() == []
+
+
 def test_recovery_old_sound_allows_greeting() -> None:
     r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0)
     r.presence(True)

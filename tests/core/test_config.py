@@ -94,6 +94,7 @@ def test_missing_file_is_a_config_error(tmp_path: Path) -> None:
         load_config(str(tmp_path / "absent.toml"))
 
 
+@pytest.mark.integration
 def test_cli_exits_2_naming_key_and_file(tmp_path: Path) -> None:
     path = tmp_path / "bad.toml"
     path.write_text("[radar_presence]\nrange_m = 'x'\n")
@@ -105,6 +106,7 @@ def test_cli_exits_2_naming_key_and_file(tmp_path: Path) -> None:
     assert "radar_presence.range_m" in result.stderr and str(path) in result.stderr
 
 
+@pytest.mark.integration
 def test_cli_config_prints_effective_config(tmp_path: Path) -> None:
     path = tmp_path / "ok.toml"
     path.write_text("[radar_presence]\nrange_m = 3.5\n")
@@ -117,6 +119,7 @@ def test_cli_config_prints_effective_config(tmp_path: Path) -> None:
     assert 'id = "zz"' in result.stdout
 
 
+@pytest.mark.integration
 def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
     """`[zenoh] config_file` resolves next to the TOML file; one Zenoh cannot parse stops
     the service with status 2 (the systemd units do not restart on it)."""

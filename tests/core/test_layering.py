@@ -57,6 +57,7 @@ def test_node_imports_neither_the_config_nor_the_cli() -> None:
     assert not {n for n in names if n.startswith(("buddybot.core.config", "buddybot.cli"))}
 
 
+@pytest.mark.integration
 def test_loading_the_runtime_loads_no_area() -> None:
     probe = (
         "import sys, buddybot.core.node, buddybot.core.service, buddybot.core.config\n"
@@ -68,6 +69,7 @@ def test_loading_the_runtime_loads_no_area() -> None:
     assert [name for name in out if area_of(name)] == []
 
 
+@pytest.mark.integration
 def test_reading_a_config_loads_only_the_settings_modules() -> None:
     probe = (
         "import sys\n"
@@ -80,3 +82,17 @@ def test_reading_a_config_loads_only_the_settings_modules() -> None:
     loaded = {name for name in out if area_of(name)}
     assert {f"buddybot.{a}.settings" for a in AREAS} <= loaded
     assert {n for n in loaded if not n.endswith((".settings", *(f".{a}" for a in AREAS)))} == set()
+
+
+def test_node_is_the_only_door_to_zenoh() -> None:
+    """Services and tools use `Node` handles; only the runtime and the router
+    process itself speak Zenoh directly."""
+    users = set()
+    for path in SERVICES.rglob("*.py"):
+        tree = ast.parse(path.read_text(), str(path))
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n == "zenoh" or n.startswith("zenoh.") for n in names):
+                users.add(path.relative_to(SERVICES).as_posix())
+    assert users == {"core/node.py", "core/router.py"}

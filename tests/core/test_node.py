@@ -16,9 +16,10 @@ from buddybot.core import messages as m
 from buddybot.core.errors import ServiceError
 from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Process, Router, free_port, retry_until
-from buddybot.core.tools import list_nodes
 
 from .test_messages import sample_messages
+
+pytestmark = pytest.mark.integration  # every test here talks through a real router
 
 HERE = Path(__file__).parent
 
@@ -84,8 +85,9 @@ def test_malformed_payloads_are_dropped_counted_and_survived(
         for topic in keys.TOPICS:
             key = probe.key(topic, **_params(topic))
             for payload in garbage:  # BLOCK: none lost on the way, so the count is exact
-                probe.session.put(key, payload,
-                                  congestion_control=zenoh.CongestionControl.BLOCK)
+                # (the raw session on purpose: no publisher of the node may BLOCK)
+                probe._session.put(key, payload,
+                                   congestion_control=zenoh.CongestionControl.BLOCK)
         # Still alive and still working: a valid message is received after the garbage.
         good = probe.publisher(keys.PUPIL)
         retry_until(lambda: good.put(m.PupilControl(stamp_ns=1, dilation_percentage=5))
@@ -111,9 +113,9 @@ def test_liveliness_token_disappears_when_process_is_killed(
                    "doomed", log_dir)
     try:
         proc.wait_for_output("READY", 30)
-        retry_until(lambda: "doomed" in list_nodes(probe.session, "buddy"), 10)
+        retry_until(lambda: "doomed" in probe.node_instances(), 10)
         proc.kill()
-        retry_until(lambda: "doomed" not in list_nodes(probe.session, "buddy"), 10,
+        retry_until(lambda: "doomed" not in probe.node_instances(), 10,
                     what="token gone")
     finally:
         proc.stop()
@@ -132,7 +134,7 @@ def test_node_waits_for_a_router_that_is_not_up_yet(log_dir: Path) -> None:
         proc.wait_for_output("READY", 30)
         probe = Node("probe", connect=[endpoint])
         try:
-            retry_until(lambda: "early" in list_nodes(probe.session, "buddy"), 10)
+            retry_until(lambda: "early" in probe.node_instances(), 10)
         finally:
             probe.close()
     finally:
@@ -191,11 +193,10 @@ def test_service_call_replies_and_errors(node_factory: Callable[..., Node]) -> N
     with pytest.raises(ServiceError, match="exploded"):
         client.call(keys.PLAY_FILE, m.PlayAudioFile(path="boom"))
     # A malformed request gets an error reply naming the problem, not silence.
-    replies = list(client.session.get(client.key(keys.PLAY_FILE), payload=b'{"pth": 1}',
-                                      timeout=5))
-    assert replies and replies[0].err is not None
-    assert "pth" in replies[0].err.payload.to_bytes().decode()
-    assert msgspec.json.decode(replies[0].err.payload.to_bytes())["error"]
+    replies = list(client.query(client.key(keys.PLAY_FILE), b'{"pth": 1}', timeout=5))
+    assert replies and not replies[0].ok
+    assert "pth" in replies[0].payload.decode()
+    assert msgspec.json.decode(replies[0].payload)["error"]
     with pytest.raises(ServiceError, match="no reply"):
         client.call(keys.AUDIO_PAUSE, m.Trigger(), timeout=0.5)
     assert {c.path for c in calls} == {"a.wav"}  # retries may repeat it; "boom" never lands

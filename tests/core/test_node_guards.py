@@ -9,13 +9,14 @@ from collections.abc import Callable
 
 import msgspec
 import pytest
-import zenoh
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import DuplicateNodeError, ServiceError
-from buddybot.core.node import Node
+from buddybot.core.node import Node, RawReply
 from buddybot.core.testing import Collector, buddybot_argv, retry_until
+
+pytestmark = pytest.mark.integration  # every test here talks through a real router
 
 S = 1_000_000_000
 
@@ -72,8 +73,9 @@ def test_oversized_samples_are_dropped_unread(node_factory: Callable[..., Node])
     # Valid JSON, padded past the 64 KiB bound of a small key.
     big = b'{"stamp_ns": %d, "dilation_percentage": 7}' % m.now_ns() + b" " * 70_000
     small = keys.PUPIL.codec.encode(_pupil(m.now_ns(), 8))
-    retry_until(lambda: probe.session.put(key, big) or probe.session.put(key, small)
-                or got.messages, 10, 0.1, "the small sample")
+    raw = probe.raw_publisher(key, keys.PUPIL.encoding)
+    retry_until(lambda: raw.put(big) or raw.put(small) or got.messages, 10, 0.1,
+                "the small sample")
     assert all(x.dilation_percentage == 8 for x in got.messages)
     diag.wait_for(lambda s: int(s.values.get("oversized", 0)) >= 1, 10, what="oversized count")
 
@@ -93,30 +95,29 @@ def test_every_query_is_answered_even_when_the_handler_is_swamped(
     server.serve(keys.AUDIO_STOP, slow, queue_size=4)
     client = node_factory("client")
     key = client.key(keys.AUDIO_STOP)
-    retry_until(lambda: list(client.session.liveliness().get(
-        client.key(keys.NODES, node="server"), timeout=2)), 10)
-    answers: list[list[zenoh.Reply]] = []
+    retry_until(lambda: client.live_instances(client.key(keys.NODES, node="server")), 10)
+    answers: list[list[RawReply]] = []
     lock = threading.Lock()
 
     def ask() -> None:
-        replies = list(client.session.get(key, payload=b"{}", timeout=30))
+        replies = list(client.query(key, b"{}", timeout=30))
         with lock:
             answers.append(replies)
 
     threads = [threading.Thread(target=ask) for _ in range(200)]
     for thread in threads:
         thread.start()
-    retry_until(lambda: sum(1 for a in answers if a and a[0].err is not None) >= 150, 30, 0.05,
+    retry_until(lambda: sum(1 for a in answers if a and not a[0].ok) >= 150, 30, 0.05,
                 "most requests refused as busy while the handler is stuck")
     release.set()
     for thread in threads:
         thread.join(60)
     assert len(answers) == 200
     assert all(len(a) == 1 for a in answers), "a request got no reply (or several)"
-    served = [a[0] for a in answers if a[0].ok is not None]
-    busy = [a[0] for a in answers if a[0].err is not None]
+    served = [a[0] for a in answers if a[0].ok]
+    busy = [a[0] for a in answers if not a[0].ok]
     assert served and busy
-    assert all(b"busy" in r.err.payload.to_bytes() for r in busy)
+    assert all(b"busy" in r.payload for r in busy)
 
 
 def test_a_too_large_request_is_refused_unread(node_factory: Callable[..., Node]) -> None:
@@ -155,14 +156,14 @@ def test_a_duplicate_is_reported_by_its_diagnostics_and_by_nodes(
                                          node="audio-player")
     # A fake token from another session, as an attacker would declare it.
     fake_key = first.key(keys.NODES, node="audio-player", instance="f00d")
-    token = node_factory("attacker").session.liveliness().declare_token(fake_key)
+    token = node_factory("attacker").declare_token(fake_key)
     try:
         diag.wait_for(lambda s: s.level == "WARN" and "f00d" in s.message, 10,
                       what="duplicate warning")
         out = retry_until(lambda: _nodes_output(endpoint), 20, 0.2)
         assert "audio-player  DUPLICATE: 2 instances" in out and "f00d" in out
     finally:
-        token.undeclare()
+        token.close()
     diag.wait_for(lambda s: s.level == "OK", 10, what="duplicate warning cleared")
 
 
@@ -193,6 +194,6 @@ def test_encoded_values_are_bounded(node_factory: Callable[..., Node]) -> None:
            b'"confidence": 0.5}' % m.now_ns())
     ok = msgspec.json.encode(m.FacePosition(stamp_ns=m.now_ns(), frame_id="ok",
                                             point=m.Point(x=1.0, y=0, z=0), confidence=0.5))
-    retry_until(lambda: probe.session.put(key, far) or probe.session.put(key, ok)
-                or got.messages, 10, 0.1)
+    raw = probe.raw_publisher(key, keys.FACE.encoding)
+    retry_until(lambda: raw.put(far) or raw.put(ok) or got.messages, 10, 0.1)
     assert {x.frame_id for x in got.messages} == {"ok"}

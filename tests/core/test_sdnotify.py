@@ -124,6 +124,7 @@ def test_without_systemd_nothing_is_sent_and_nothing_fails(tmp_path: Path) -> No
 # --- real processes ------------------------------------------------------------------
 
 
+@pytest.mark.integration
 def test_service_is_ready_once_on_the_bus_and_pings_only_while_running(
     notify_socket: tuple[socket.socket, str], tmp_path: Path
 ) -> None:
@@ -159,6 +160,7 @@ def test_service_is_ready_once_on_the_bus_and_pings_only_while_running(
         stop_and_report(procs)
 
 
+@pytest.mark.integration
 @pytest.mark.skipif("sdnotify" not in Path(router_module.__file__).read_text(),
                     reason="services/core/router.py does not call sdnotify yet")
 def test_router_is_ready_once_listening_and_pings(

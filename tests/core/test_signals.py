@@ -14,6 +14,8 @@ import sys
 
 import pytest
 
+pytestmark = pytest.mark.integration  # each case signals a child process
+
 # The main thread takes the stop event's lock all the time, as `spin()` does.
 BUSY_WAITER = """
 import threading, sys

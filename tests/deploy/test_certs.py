@@ -9,6 +9,8 @@ import pytest
 
 from tests.deploy.conftest import CERT_SCRIPT, HOSTS, make_certs
 
+pytestmark = pytest.mark.integration  # runs the certificate script and openssl
+
 
 def openssl(*args: str) -> subprocess.CompletedProcess[str]:
     return subprocess.run(["openssl", *args], capture_output=True, text=True, timeout=60,

@@ -147,6 +147,7 @@ def test_target_is_wanted_at_boot() -> None:
     assert unit(SYSTEMD_DIR / "buddybot.target")["Install"]["WantedBy"] == "multi-user.target"
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None, reason="no systemd-analyze")
 def test_systemd_analyze_verify(tmp_path: Path) -> None:
     """systemd's own checker, with ExecStart pointed at this checkout's buddybot."""
@@ -175,6 +176,7 @@ def exposure(path: Path) -> float:
     return float(found.group(1))
 
 
+@pytest.mark.integration
 @pytest.mark.skipif(shutil.which("systemd-analyze") is None,
                     reason="systemd-analyze is not installed (systemd's own rating is the check)")
 @pytest.mark.parametrize("path", service_units(), ids=lambda p: p.stem)

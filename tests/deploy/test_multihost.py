@@ -23,7 +23,7 @@ import zenoh
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import DuplicateNodeError, ServiceError
-from buddybot.core.node import Node, live_instances
+from buddybot.core.node import Node
 from buddybot.core.testing import (
     LOOPBACK,
     Collector,
@@ -387,8 +387,8 @@ def test_camera_host_services_work_through_the_profile(
     watcher = host_node("operator", "watcher")
     debug = Collector[m.Image](watcher, keys.DEBUG_IMAGE, camera="front")
     debug.wait_for(timeout=60, what="the debug image, once watched")
-    alive = retry_until(lambda: {n for n in ("camera", "face-detector") if live_instances(
-        watcher.session, f"{NODES_PREFIX}/{n}/*", timeout=1.0)} == {"camera", "face-detector"},
+    alive = retry_until(lambda: {n for n in ("camera", "face-detector") if watcher.live_instances(
+        f"{NODES_PREFIX}/{n}/*", timeout=1.0)} == {"camera", "face-detector"},
         30, 0.5, what="camera and face-detector tokens at the operator")
     assert alive
 
@@ -544,8 +544,8 @@ def test_duplicate_service_is_seen_through_the_acl(
     fakes does not blind a host to a copy of itself."""
     first = host_node("radar-board", "radar-bridge")
     watcher = host_node("operator", "watcher")
-    retry_until(lambda: first.instance in live_instances(
-        watcher.session, f"{NODES_PREFIX}/radar-bridge/*", timeout=1.0), 20, 0.2,
+    retry_until(lambda: first.instance in watcher.live_instances(
+        f"{NODES_PREFIX}/radar-bridge/*", timeout=1.0), 20, 0.2,
         what="the first radar bridge's token at the operator")
     second: Node | None = None
     try:

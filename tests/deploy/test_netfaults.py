@@ -316,6 +316,7 @@ def camera_ns() -> Iterator[Namespace]:
         yield ns
 
 
+@pytest.mark.integration
 def test_eye_screen_shows_the_newest_state_within_a_second_of_a_cut_link_coming_back(
     eye_ns: Namespace, started: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -394,6 +395,7 @@ def eye_screen_cut(started: Callable[..., Process], tmp_path: Path, host_addr: s
         robot.close()
 
 
+@pytest.mark.integration
 def test_camera_host_images_and_faces_flow_within_a_second_of_a_cut_link_coming_back(
     camera_ns: Namespace, started: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -596,6 +598,7 @@ def slow_eye_host() -> Iterator[TapHost]:
         yield host
 
 
+@pytest.mark.integration
 def test_gaze_keeps_flowing_over_a_slow_lossy_link(
     slow_eye_host: TapHost, started: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -656,6 +659,7 @@ def test_gaze_keeps_flowing_over_a_slow_lossy_link(
         robot.close()
 
 
+@pytest.mark.integration
 def test_eye_screen_recovers_from_a_silent_black_hole(
     slow_eye_host: TapHost, started: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -676,6 +680,7 @@ def slow_camera_host() -> Iterator[TapHost]:
         yield host
 
 
+@pytest.mark.integration
 def test_camera_host_recovers_from_a_silent_black_hole(
     slow_camera_host: TapHost, started: Callable[..., Process], tmp_path: Path
 ) -> None:

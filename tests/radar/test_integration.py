@@ -210,7 +210,8 @@ def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:
     pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
     service = spawn("radar-presence")
     pdiag.wait_for(timeout=30, what="presence up")
-    raw = probe.session.declare_publisher(probe.key(keys.RADAR_FRAMES, device="7"))
+    raw = probe.raw_publisher(probe.key(keys.RADAR_FRAMES, device="7"),
+                              keys.RADAR_FRAMES.encoding)
     good = probe.publisher(keys.RADAR_FRAMES, device="7")
     other = probe.publisher(keys.RADAR_FRAMES, device="8")  # a second bridge: nobody there
     empty = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.NO_TARGET,
@@ -237,7 +238,7 @@ def test_presence_survives_malformed_frames(spawn: Spawn, probe: Node) -> None:
                        and d.values.get("sensors") == 2, 20, "malformed counted, 2 devices")
     assert d.level in ("OK", "WARN")
     assert [v.distance_m for v in presence.messages][:1] == [1.2]
-    raw.undeclare()
+    raw.close()
     assert service.alive()
 
 
@@ -599,11 +600,11 @@ def test_presence_service_itself_replaces_implausible_stamps(
     raw: list[bytes] = []
     lock = threading.Lock()
 
-    def on_sample(sample: object) -> None:
+    def on_sample(_key: str, payload: bytes, _encoding: str) -> None:
         with lock:
-            raw.append(bytes(sample.payload.to_bytes()))  # type: ignore[attr-defined]
+            raw.append(payload)
 
-    sub = probe.session.declare_subscriber(probe.key(keys.PRESENCE), on_sample)
+    sub = probe.subscribe_raw(probe.key(keys.PRESENCE), on_sample)
     node = node_factory("radar-presence-inproc")
     service = PresenceService(node, PresenceRules(absence_hold_s=0.2))
     key = node.key(keys.RADAR_FRAMES, device="5")
@@ -624,7 +625,7 @@ def test_presence_service_itself_replaces_implausible_stamps(
     end = m.now_ns()
     with lock:
         got = [keys.PRESENCE.codec.decode(b, m.PresenceDetection) for b in raw]
-    sub.undeclare()
+    sub.close()
     assert [v.presence_state for v in got] == [IN, OUT]
     assert all(start - 10**9 <= v.stamp_ns <= end + 10**9 for v in got), got
     assert service.implausible_stamps >= 3

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import random
 
+import msgspec
 import pytest
 
 from buddybot.core.messages import PresenceState, PresenceTarget
@@ -188,8 +189,9 @@ def test_zero_detection_distance_falls_back_to_the_reported_kind() -> None:
     {"max_sensors": 0}, {"max_sensors": 100_000},
 ])
 def test_rules_refuse_nonsense(bad: dict[str, float]) -> None:
-    with pytest.raises(ValueError):
-        PresenceRules(**bad)
+    """The rules are the `[radar_presence]` struct: its ranges refuse these at decode."""
+    with pytest.raises(msgspec.ValidationError):
+        msgspec.convert(bad, PresenceRules)
 
 
 @pytest.mark.parametrize("state", [4, 5, 6])

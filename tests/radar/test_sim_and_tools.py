@@ -216,6 +216,7 @@ def radar(*args: str) -> subprocess.CompletedProcess[str]:
                           capture_output=True, text=True, timeout=60)
 
 
+@pytest.mark.integration
 def test_tool_info(sensor: PtySensor) -> None:
     out = radar("info", "--port", sensor.path, "--json")
     assert out.returncode == 0, out.stderr
@@ -230,6 +231,7 @@ def test_tool_info(sensor: PtySensor) -> None:
     assert "firmware: V1.07.22091615" in text.stdout
 
 
+@pytest.mark.integration
 def test_tool_settings_change_the_sensor(sensor: PtySensor) -> None:
     sim = sensor.sim
     assert radar("engineering", "off", "--port", sensor.path).returncode == 0
@@ -257,6 +259,7 @@ def test_tool_settings_change_the_sensor(sensor: PtySensor) -> None:
     assert sim.restarts == 1
 
 
+@pytest.mark.integration
 def test_tool_errors_are_clear(sensor: PtySensor, tmp_path: Path) -> None:
     out = radar("set-gates", "--moving", "9", "--port", sensor.path)
     assert out.returncode == 2 and "max gates must be 2..8" in out.stderr
@@ -274,6 +277,7 @@ def test_tool_errors_are_clear(sensor: PtySensor, tmp_path: Path) -> None:
     assert out.returncode == 2 and "--baudrate" in out.stderr
 
 
+@pytest.mark.integration
 def test_tool_reports_a_sensor_that_does_not_ack(tmp_path: Path) -> None:
     with PtySensor("nobody", link=tmp_path / "mute", answer_commands=False) as mute:
         out = radar("info", "--port", mute.path, "--timeout", "0.3")
@@ -301,6 +305,7 @@ def test_sim_background_noise_detection_reports_states_4_to_6() -> None:
     assert p.decode_auto_thresholds_status(status.data) == "completed"
 
 
+@pytest.mark.integration
 def test_tool_baud_rate_bluetooth_and_mac(sensor: PtySensor) -> None:
     sim = sensor.sim
     out = radar("baud-rate", "115200", "--port", sensor.path, "--json")
@@ -320,6 +325,7 @@ def test_tool_baud_rate_bluetooth_and_mac(sensor: PtySensor) -> None:
     assert out.returncode == 2 and "invalid choice" in out.stderr
 
 
+@pytest.mark.integration
 def test_tool_background_noise_detection(sensor: PtySensor) -> None:
     sim = sensor.sim
     out = radar("noise-status", "--port", sensor.path, "--json")
@@ -338,6 +344,7 @@ def test_tool_background_noise_detection(sensor: PtySensor) -> None:
     assert len(sim.commands) == before  # refused before the port was touched
 
 
+@pytest.mark.integration
 def test_tool_bluetooth_password_and_permissions(sensor: PtySensor) -> None:
     sim = sensor.sim
     assert radar("bluetooth-auth", "--password", "HiLink", "--port", sensor.path).returncode == 0

@@ -17,7 +17,6 @@ import numpy as np
 from buddybot.camera.sim import compose, face_path
 from buddybot.core.node import Node
 from buddybot.core.testing import Process, free_port, retry_until, write_tone
-from buddybot.core.tools import list_nodes
 
 Spawn = Callable[..., Process]
 
@@ -80,8 +79,11 @@ def start_robot(spawn: Spawn, tmp_path: Path, *, robot: str = "buddy", fps: int 
 
 def wait_nodes(probe: Node, names: list[str], robot: str = "buddy",
                timeout: float = 60.0) -> None:
-    retry_until(lambda: set(names) <= set(list_nodes(probe.session, robot)), timeout, 0.3,
-                f"nodes {names} up")
+    def all_up() -> bool:
+        live = probe.node_instances(all_robots=True)
+        return all(f"{robot}/{name}" in live for name in names)
+
+    retry_until(all_up, timeout, 0.3, f"nodes {names} up")
 
 
 def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",

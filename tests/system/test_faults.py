@@ -7,15 +7,17 @@ import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Collector, Process, Router, retry_until, run_service
-from buddybot.core.tools import list_nodes
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
+
+pytestmark = pytest.mark.integration  # a router and the robot's processes in every test
 
 A = m.ExpressionAction
 
@@ -52,7 +54,7 @@ def test_router_restart_every_service_reconnects(tmp_path: Path) -> None:
         restarted = time.monotonic()
         frames.clear()
         gaze.clear()
-        retry_until(lambda: set(names) <= set(list_nodes(probe.session, "buddy", 1.0)),
+        retry_until(lambda: set(names) <= set(probe.node_instances(timeout=1.0)),
                     10, 0.2, "every node back within 10 s")
         frames.wait_for(timeout=max(0.1, 10 - (time.monotonic() - restarted)))
         gaze.wait_for(timeout=max(0.1, 10 - (time.monotonic() - restarted)))
@@ -87,7 +89,7 @@ def test_killed_service_state_is_right_again_within_2s(
     lids.wait_for(lambda x: x.top_lid_position == 0, 30, "open lids before the kill")
 
     awake_robot[victim].kill()
-    retry_until(lambda: victim not in list_nodes(probe.session, "buddy", 1.0), 10)
+    retry_until(lambda: victim not in probe.node_instances(timeout=1.0), 10)
     lids.clear(), expression.clear(), free.clear()
     since = m.now_ns()
     spawned = time.monotonic()
@@ -110,6 +112,32 @@ def test_killed_service_state_is_right_again_within_2s(
         assert proc.alive(), name
 
 
+def check_service_answers_garbage(probe: Node, service: keys.Service,
+                                  garbage: list[bytes]) -> None:
+    """Every request gets exactly the answer `Node.serve` promises: an error reply
+    naming the request type for anything that is not a valid request, and a real
+    reply only for a valid one. The only valid requests among the garbage are an
+    empty object, and an empty payload (read as `{}`), to an empty-request (Trigger)
+    service; every other request type has a required field. A Trigger service
+    must also refuse an unknown field and an oversized request."""
+    oversized = b'{"pad": "' + b"x" * service.max_bytes + b'"}'
+    for payload in [*garbage, b'{"unknown_field": 1}', oversized]:
+        replies = list(probe.query(probe.key(service), payload, timeout=5))
+        what = f"{service.pattern} <- {payload[:40]!r} ({len(payload)} bytes)"
+        assert len(replies) == 1, f"{what}: {len(replies)} replies"
+        reply = replies[0]
+        valid = service.request is m.Trigger and payload in (b"", b"{}")
+        if valid:
+            assert reply.ok, f"{what}: refused a valid request: {reply.payload!r}"
+            msgspec.json.decode(reply.payload, type=service.reply)  # a real reply
+            continue
+        assert not reply.ok, f"{what}: accepted: {reply.payload!r}"
+        error = msgspec.json.decode(reply.payload, type=m.ErrorReply).error
+        expected = "request too large" if payload is oversized else (
+            f"bad {service.request.__name__}")
+        assert error.startswith(expected), f"{what}: {error!r}"
+
+
 def test_garbage_on_every_key_kills_nothing(probe: Node, spawn: Spawn, tmp_path: Path) -> None:
     procs = start_robot(spawn, tmp_path, renderer=True)
     procs["radar-bridge"] = start_radar(spawn, "visit")
@@ -121,13 +149,11 @@ def test_garbage_on_every_key_kills_nothing(probe: Node, spawn: Spawn, tmp_path:
     params = {"device": "0", "camera": "front", "node": "controller"}
     for topic in keys.TOPICS:
         key = probe.key(topic, **{p: params[p] for p in topic.params})
-        for payload in garbage:
-            probe.session.put(key, payload)
+        with probe.raw_publisher(key, topic.encoding) as raw:
+            for payload in garbage:
+                raw.put(payload)
     for service in keys.SERVICES:
-        for payload in garbage:
-            replies = list(probe.session.get(probe.key(service), payload=payload, timeout=5))
-            assert replies, f"{service.pattern}: no reply to garbage"
-            assert replies[0].err is not None or payload == b"{}" or service.request is m.Trigger
+        check_service_answers_garbage(probe, service, garbage)
     gaze.clear()
     gaze.wait_for(timeout=30)  # still following the face
     for name, proc in procs.items():

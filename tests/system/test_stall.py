@@ -22,15 +22,16 @@ import time
 from pathlib import Path
 
 import msgspec
-import zenoh
+import pytest
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Process, retry_until
-from buddybot.core.tools import list_nodes
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
+
+pytestmark = pytest.mark.integration  # a router and the robot's processes
 
 MAX_GAP_S = 1.0
 """The bound asserted here. The target is 200 ms (met on a quiet machine, see
@@ -80,18 +81,17 @@ with zenoh.open(conf) as session:
 class Arrivals:
     """Arrival times of one key, recorded without decoding (cheap, in Zenoh's thread)."""
 
-    def __init__(self, session: zenoh.Session, key: str) -> None:
+    def __init__(self, node: Node, key: str) -> None:
         self.times: list[float] = []
         self.payloads: list[bytes] = []
         self._lock = threading.Lock()
-        self._sub = session.declare_subscriber(key, self._on)
+        self._sub = node.subscribe_raw(key, self._on)
 
-    def _on(self, sample: zenoh.Sample) -> None:
+    def _on(self, _key: str, payload: bytes, _encoding: str) -> None:
         with self._lock:
             self.times.append(time.monotonic())
             # Kept aligned with `times`; only small payloads are worth keeping.
-            small = len(sample.payload) < 1024
-            self.payloads.append(sample.payload.to_bytes() if small else b"")
+            self.payloads.append(payload if len(payload) < 1024 else b"")
 
     def first_containing(self, text: bytes, since: float) -> float | None:
         """Arrival time of the first (small) sample after `since` containing `text`."""
@@ -107,7 +107,7 @@ class Arrivals:
         return max(b - a for a, b in itertools.pairwise(points))
 
     def close(self) -> None:
-        self._sub.undeclare()
+        self._sub.close()
 
 
 def test_a_stalled_service_never_stalls_the_other_streams(
@@ -118,12 +118,12 @@ def test_a_stalled_service_never_stalls_the_other_streams(
     names = [*BASE_SERVICES, "camera", "radar-bridge", "eye-renderer"]
     wait_nodes(probe, names)
     streams = {
-        "radar-bridge": Arrivals(probe.session, probe.key(keys.RADAR_FRAMES, device="0")),
-        "camera": Arrivals(probe.session, probe.key(keys.CAMERA_IMAGE, camera="front")),
+        "radar-bridge": Arrivals(probe, probe.key(keys.RADAR_FRAMES, device="0")),
+        "camera": Arrivals(probe, probe.key(keys.CAMERA_IMAGE, camera="front")),
     }
     retry_until(lambda: all(len(s.times) > 5 for s in streams.values()), 60, 0.2,
                 "radar frames and camera images flowing")
-    statuses = Arrivals(probe.session, probe.key(keys.PLAY_SOUND_STATUS))
+    statuses = Arrivals(probe, probe.key(keys.PLAY_SOUND_STATUS))
     report: list[str] = []
     failures: list[str] = []
     try:
@@ -139,8 +139,8 @@ def test_a_stalled_service_never_stalls_the_other_streams(
                 # (goal statuses, device_free): what used to block the router.
                 burster.wait_for_output("half", timeout=BURST_S + 30)
                 asked = time.monotonic()
-                replies = list(probe.session.get(
-                    probe.key(keys.PLAY_SOUND), payload=b'{"sound": "greeting"}', timeout=5))
+                replies = list(probe.query(
+                    probe.key(keys.PLAY_SOUND), b'{"sound": "greeting"}', timeout=5))
                 burster.wait_for_output("sent", timeout=BURST_S + 30)
             finally:
                 burster.stop()
@@ -150,8 +150,8 @@ def test_a_stalled_service_never_stalls_the_other_streams(
             gaps = {name: s.max_gap(start, end) for name, s in streams.items()
                     if name != victim}
             goal = None
-            if replies and replies[0].ok is not None:
-                goal = msgspec.json.decode(replies[0].ok.payload.to_bytes(), type=m.PlaySoundReply)
+            if replies and replies[0].ok:
+                goal = msgspec.json.decode(replies[0].payload, type=m.PlaySoundReply)
             if victim not in ("audio", "audio-player") and goal is not None and goal.goal_id:
                 # The goal's status reaches a healthy subscriber at once, whoever is frozen.
                 status_at = retry_until(
@@ -165,7 +165,7 @@ def test_a_stalled_service_never_stalls_the_other_streams(
             failures += [f"{victim} frozen: {name} stopped for {gap * 1000:.0f} ms"
                          for name, gap in gaps.items() if gap > MAX_GAP_S]
             # The frozen service comes back (its link may have been closed meanwhile).
-            retry_until(lambda victim=victim: victim in list_nodes(probe.session, "buddy", 1.0),
+            retry_until(lambda victim=victim: victim in probe.node_instances(timeout=1.0),
                         30, 0.3, f"{victim} back after SIGCONT")
         print("\n".join(report))
         assert not failures, "\n".join([*failures, *report])

@@ -30,6 +30,7 @@ from buddybot.core.testing import (
 )
 
 
+@pytest.mark.integration
 def test_up_sim_runs_restarts_a_crashed_service_and_stops_cleanly(tmp_path: Path) -> None:
     port = free_port()
     up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", f"tcp/127.0.0.1:{port}",
@@ -155,6 +156,7 @@ def run_up_to_exit(tmp_path: Path, *args: str, timeout: float = 60.0) -> tuple[i
     return up.proc.returncode if not left else None, up.output()
 
 
+@pytest.mark.integration
 def test_children_die_with_a_killed_up(tmp_path: Path) -> None:
     """kill -9 of `up`: the router and every service are gone within seconds."""
     port = free_port()
@@ -180,6 +182,7 @@ def test_children_die_with_a_killed_up(tmp_path: Path) -> None:
             up.stop()
 
 
+@pytest.mark.integration
 def test_child_whose_supervisor_is_already_gone_does_not_start(tmp_path: Path) -> None:
     """The window between exec and PR_SET_PDEATHSIG: a child that finds another parent
     than the `up` named in its environment exits at once instead of running orphaned."""
@@ -194,6 +197,7 @@ def test_child_whose_supervisor_is_already_gone_does_not_start(tmp_path: Path) -
         child.stop()
 
 
+@pytest.mark.integration
 def test_second_up_on_a_busy_port_refuses_and_starts_nothing(tmp_path: Path) -> None:
     router = Router(log_dir=tmp_path)
     procs: list[Process] = [router]
@@ -214,6 +218,7 @@ def test_second_up_on_a_busy_port_refuses_and_starts_nothing(tmp_path: Path) -> 
         stop_and_report(procs)
 
 
+@pytest.mark.integration
 def test_up_refuses_a_port_held_by_something_else(tmp_path: Path) -> None:
     with socket.socket() as holder:
         holder.bind(("127.0.0.1", 0))
@@ -234,6 +239,7 @@ def bad_eyes_config(tmp_path: Path) -> Path:
     return path
 
 
+@pytest.mark.integration
 def test_child_exiting_with_status_two_is_reported_once_and_not_restarted(
     tmp_path: Path, bad_eyes_config: Path
 ) -> None:

@@ -12,6 +12,8 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+import pytest
+
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
@@ -26,6 +28,8 @@ from .robot import (
     start_robot,
     wait_nodes,
 )
+
+pytestmark = pytest.mark.integration  # a router and the robot's processes
 
 A = m.ExpressionAction
 

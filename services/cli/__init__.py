@@ -1,0 +1,98 @@
+"""The `buddybot` command: the verbs robot people know from `ros2`.
+
+    buddybot up [--sim] [--no-browser]     the whole robot on this machine
+    buddybot router [--listen ENDPOINT]     a Zenoh router
+    buddybot run SERVICE [options]          one service
+    buddybot echo|hz|pub|call KEY ...       probe the robot
+    buddybot nodes | keys | config          what runs, what exists, what is set
+    buddybot schemas [--check]              regenerate / check schemas/
+    buddybot radar ...                      LD2410 configuration tools
+
+Exit status: 0 success, 1 failure at run time, 2 bad usage or config.
+"""
+
+from __future__ import annotations
+
+# Each verb is a small module of this package (the ros2cli pattern): `HELP`,
+# `add_arguments(parser)` and `main(ctx) -> int`, optionally `USES_CONFIG =
+# False` for verbs that never read the robot's configuration. `run SERVICE`
+# and the registry's tools bring their own parser (`buddybot run camera
+# --help` lists the camera's options). Every path ends in one place,
+# `buddybot.core.service.run_main`, which maps errors to exit statuses.
+import argparse
+import importlib
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+from buddybot import __version__
+from buddybot.core import registry
+from buddybot.core.errors import EXIT_USAGE
+from buddybot.core.service import add_common_arguments, run_main
+
+VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas")
+"""Verb modules of this package, in the order `buddybot --help` lists them."""
+
+
+def verb_module(name: str) -> ModuleType:
+    return importlib.import_module(f"{__name__}.{name}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="buddybot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--version", action="version", version=f"buddybot {__version__}")
+    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    for name in VERBS:
+        module = verb_module(name)
+        sub = verbs.add_parser(name, help=module.HELP, description=module.HELP)
+        if getattr(module, "USES_CONFIG", True):
+            add_common_arguments(sub)
+        module.add_arguments(sub)
+        sub.set_defaults(module=module)
+
+    run = verbs.add_parser(
+        "run", help="run one service", description="Run one service as this process. "
+        "`buddybot run SERVICE --help` lists its options.\n\nservices:\n" + "\n".join(
+            f"  {e.name:<16}{e.help}" for e in registry.SERVICES),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    run.add_argument("service", choices=[e.name for e in registry.SERVICES], metavar="SERVICE")
+    run.add_argument("service_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+
+    for tool in registry.TOOLS:  # their own parser sees everything, `--help` included
+        sub = verbs.add_parser(tool.name, help=tool.help, add_help=False)
+        sub.add_argument("tool_args", nargs=argparse.REMAINDER)
+    return parser
+
+
+def _extension(entry: registry.Entry, prog: str, argv: list[str]) -> int:
+    """Run a registered service or tool module: its own parser, the shared options."""
+    if not entry.exists():
+        print(f"{prog}: not installed", file=sys.stderr)
+        return EXIT_USAGE
+    module = entry.load()
+    parser = argparse.ArgumentParser(prog=prog, description=entry.help)
+    add_common_arguments(parser)
+    module.add_arguments(parser)
+    return run_main(entry.name, parser.parse_args(argv), module.run)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    tool = next((t for t in registry.TOOLS if argv and argv[0] == t.name), None)
+    if tool is not None:
+        return _extension(tool, f"buddybot {tool.name}", argv[1:])
+    args = build_parser().parse_args(argv)
+    if args.verb == "run":
+        entry = registry.service(args.service)
+        assert entry is not None  # argparse checked the choice
+        return _extension(entry, f"buddybot run {entry.name}", args.service_args)
+    module = args.module
+    return run_main(args.verb, args, module.main,
+                    uses_config=getattr(module, "USES_CONFIG", True))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

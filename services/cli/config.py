@@ -1,0 +1,32 @@
+"""`buddybot config`: the effective configuration, as TOML that `--config` accepts."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from buddybot.core.config import to_toml_dict
+from buddybot.core.service import ServiceContext
+
+HELP = "print the effective configuration"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Only the common options (`--config`, `--robot`, `--connect`) apply."""
+
+
+def main(ctx: ServiceContext) -> int:
+    import tomli_w
+
+    data = to_toml_dict(ctx.config)
+    data["robot"]["id"] = ctx.robot  # type: ignore[index]
+    data["zenoh"]["connect"] = ctx.connect  # type: ignore[index]
+    print(tomli_w.dumps(_drop_none(data)), end="")
+    return 0
+
+
+def _drop_none(value: Any) -> Any:
+    """TOML has no null: an unset optional key is left out."""
+    if isinstance(value, dict):
+        return {k: _drop_none(v) for k, v in value.items() if v is not None}
+    return value

@@ -1,0 +1,24 @@
+"""`buddybot router`: a Zenoh router (the robot's own, or one per host)."""
+
+from __future__ import annotations
+
+import argparse
+
+from buddybot.core.config import DEFAULT_ENDPOINT
+from buddybot.core.service import ServiceContext
+
+HELP = "run a Zenoh router"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--listen", action="append", metavar="ENDPOINT",
+                        help=f"listen endpoint (repeatable; default {DEFAULT_ENDPOINT})")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="Zenoh JSON5 config to start from (TLS, access control)")
+
+
+def main(ctx: ServiceContext) -> int:
+    from buddybot.core.router import run_router
+
+    run_router(ctx.args.listen or [DEFAULT_ENDPOINT], ctx.stop, ctx.args.zenoh_config)
+    return 0

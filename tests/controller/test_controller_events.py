@@ -1,0 +1,138 @@
+"""The controller's typed inbox: each callback posts its event, and the decision
+step hands every event to the right `Behaviour` method. A fake node stands in
+for Zenoh, so this runs without a router."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgspec
+import pytest
+
+from buddybot.controller.behaviour import CancelSound, PlaySound
+from buddybot.controller.events import (
+    CancelReply,
+    DeviceFree,
+    GoalReply,
+    PresenceChanged,
+    SoundStatus,
+)
+from buddybot.controller.service import Controller
+from buddybot.controller.settings import ControllerSettings
+from buddybot.core import messages as m
+
+A = m.ExpressionAction
+
+
+@dataclass
+class FakePublisher:
+    sent: list[Any] = field(default_factory=list)
+
+    def put(self, msg: Any) -> None:
+        self.sent.append(msg)
+
+
+@dataclass
+class FakeDiagnostics:
+    values: dict[str, Any] = field(default_factory=dict)
+
+    def increment(self, name: str) -> None:
+        self.values[name] = self.values.get(name, 0) + 1
+
+
+class FakeNode:
+    """Just what `Controller` uses before `start()`: publishers and diagnostics."""
+
+    def __init__(self) -> None:
+        self.publishers: dict[str, FakePublisher] = {}
+        self.diagnostics = FakeDiagnostics()
+
+    def publisher(self, topic: Any, **_params: str) -> FakePublisher:
+        return self.publishers.setdefault(topic.pattern, FakePublisher())
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+@pytest.fixture
+def rig() -> tuple[Controller, FakeNode, Clock]:
+    settings = msgspec.convert({"recover_s": 0.0, "greet_dwell_s": 0.0, "absence_hold_s": 0.0,
+                                "sleepy_s": 0.0}, ControllerSettings)
+    node, clock = FakeNode(), Clock()
+    return Controller(node, settings, clock=clock), node, clock  # type: ignore[arg-type]
+
+
+def drain(controller: Controller) -> list[Any]:
+    """One decision step's worth of events, handled as `_decide` does."""
+    events = list(controller._inbox)
+    controller._inbox.clear()
+    controller._handle(events, None)
+    return events
+
+
+def expressions(node: FakeNode) -> list[A]:
+    return [msg.action for msg in node.publishers["eyes/expression"].sent]
+
+
+def commanded(controller: Controller) -> list[Any]:
+    out = []
+    while not controller._sounds.empty():
+        out.append(controller._sounds.get_nowait())
+    return out
+
+
+def test_callbacks_post_typed_events(rig: tuple[Controller, FakeNode, Clock]) -> None:
+    controller, _node, _clock = rig
+    controller._on_presence(m.PresenceDetection(
+        stamp_ns=1, target_state=m.PresenceTarget.STANDING,
+        presence_state=m.PresenceState.IN_RANGE, distance_m=1.0), "k")
+    controller._on_device_free(m.Bool(stamp_ns=1, data=False), "k")
+    controller._on_status(m.PlaySoundStatus(goal_id="g", state="PLAYING", stamp_ns=0), "k")
+    assert drain(controller) == [PresenceChanged(True), DeviceFree(False),
+                                 SoundStatus("g", "PLAYING", None)]
+
+
+def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Clock]) -> None:
+    controller, node, clock = rig
+    controller._post(PresenceChanged(True))
+    drain(controller)
+    assert expressions(node) == [A.EYE_AWAKE]
+    # A face makes the greeting; the goal's reply and status then end it.
+    controller._on_face(m.FacePosition(stamp_ns=1, frame_id="front",
+                                       point=m.Point(x=1.0, y=0.0, z=0.0), confidence=0.9), "k")
+    face = controller._face
+    controller._face = None
+    controller._handle([], face)
+    [play] = commanded(controller)
+    assert isinstance(play, PlaySound) and play.sound == "greeting"
+    assert expressions(node)[-1] == A.EYE_GRIN
+    controller._post(GoalReply(play.request, True, "g1"))
+    controller._post(SoundStatus("g1", "PLAYING", 0.0))
+    drain(controller)
+    assert controller.behaviour.sound_busy()
+    # The visitor leaves while it plays: the greeting is cancelled for the farewell.
+    clock.t += 1.0
+    controller._post(PresenceChanged(False))
+    drain(controller)
+    [cancel] = commanded(controller)
+    assert cancel == CancelSound("g1")
+    controller._post(CancelReply("g1", True))
+    controller._post(SoundStatus("g1", "CANCELED", 0.0))
+    controller._post(DeviceFree(True))
+    drain(controller)
+    [farewell] = commanded(controller)
+    assert isinstance(farewell, PlaySound) and farewell.sound == "farewell"
+
+
+def test_an_unknown_event_is_an_error_not_ignored(
+    rig: tuple[Controller, FakeNode, Clock],
+) -> None:
+    controller, _node, _clock = rig
+    with pytest.raises(AssertionError):
+        controller._handle([("presence", (True,))], None)  # type: ignore[list-item]
