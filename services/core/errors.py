@@ -40,6 +40,21 @@ class ServiceError(BuddyBotError):
     """A service call that failed: no answer, an error reply, or a bad reply."""
 
 
+class CallError(ServiceError):
+    """A failed call: `reason` is the text without the key (for messages that
+    already say which service they called)."""
+
+    def __init__(self, key: str, reason: str) -> None:
+        super().__init__(f"{key}: {reason}")
+        self.key = key
+        self.reason = reason
+
+
+class NoReplyError(CallError):
+    """Nobody answered in time: the service is not (yet) declared, or is gone.
+    Callers that wait for a starting service retry on this one only."""
+
+
 class DeviceError(BuddyBotError):
     """A device that cannot be opened, or that answered wrongly (exit 1: it may
     work when plugged in again)."""
