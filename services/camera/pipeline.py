@@ -1,4 +1,23 @@
-"""One frame in, at most one face out: detection, target choice, geometry, smoothing.
+"""One frame in, at most one face out, through stages visited once each, in order.
+
+    check -> detect -> choose -> measure -> geometry -> smooth (-> iris, later)
+
+* check: the frame becomes HxWx3 uint8 BGR (grey and BGRA converted) or is
+  refused with a reason that is counted (`refused`); never an exception;
+* detect: either the crop track (the followed face re-found in its crop,
+  accepted only through `gate.TrackGate`) or a whole-frame search
+  (`facenet.FaceNet`: prepare -> infer -> decode);
+* choose: which face is followed (`tracking.TargetTracker`);
+* measure: the chosen face detected again in its crop with the short-range
+  model for a precise size and eyes (the crop track already is that);
+* geometry: distance cues and the 3-D point (`geometry.locate`);
+* smooth: One-Euro filters (`tracking.PointSmoother`);
+* iris (optional, `iris.IrisNet`): when the followed face is big enough and
+  the last measurement is `iris_every_s` old, its irises are measured and
+  the person's iris-to-eye ratio is held (`fusion.IrisCalibration`); the
+  geometry stage of every later frame uses it as a cue. It costs ~6 ms, so
+  it runs after the face is published (`iris_if_due`) unless the caller
+  does not defer (in-process use: it then runs at the end of `process`).
 
 No Zenoh here (the service wires it to keys), so the whole chain is tested
 on real images in-process: `FacePipeline.process(bgr, stamp_ns)`.
@@ -6,16 +25,32 @@ on real images in-process: `FacePipeline.process(bgr, stamp_ns)`.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 
 import numpy as np
 
 from buddybot.camera import blazeface as bf
+from buddybot.camera import frames
 from buddybot.camera.facenet import FaceNet
-from buddybot.camera.geometry import DistanceEstimate, Intrinsics, back_project, estimate_distance
+from buddybot.camera.fusion import IrisCalibration
+from buddybot.camera.gate import TrackGate
+from buddybot.camera.geometry import (
+    DistanceEstimate,
+    Intrinsics,
+    Location,
+    eye_distance_px,
+    head_yaw,
+    locate,
+)
+from buddybot.camera.iris import IrisNet, IrisSchedule
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.tracking import PointSmoother, TargetTracker
 from buddybot.core.limits import BoundedDict
+
+MEASURE_MAX_RATIO = 1.5
+"""A crop re-detection whose width differs from the whole-frame box by more than this
+factor is another (partial) face in the crop, not a better measure of this one."""
 
 
 @dataclass(frozen=True)
@@ -29,27 +64,48 @@ class FaceResult:
     raw_point: tuple[float, float, float] | None
     measured: bf.Detection | None
     """The followed face as measured (refined when a refiner is set)."""
+    tracked: bool = False
+    """True when the face came from the crop track (no whole-frame pass this frame)."""
+    refused: str | None = None
+    """Why the frame was not processed ("bad_frames", "too_large"), else None."""
 
 
 class FacePipeline:
     """Detector `net` on the whole frame; optional `refiner` (the short-range
-    model) re-detects the followed face in a crop for a precise size and eyes."""
+    model) re-detects the followed face in a crop for a precise size and eyes,
+    and tracks it there between whole-frame passes (`full_every_s`)."""
 
     def __init__(self, net: FaceNet, settings: FaceDetectorSettings,
-                 refiner: FaceNet | None = None) -> None:
+                 refiner: FaceNet | None = None, gate: TrackGate | None = None,
+                 irises: IrisNet | None = None) -> None:
         self.net = net
         self.refiner = refiner
-        self.refined = 0
+        self.irises = irises
+        self.iris_schedule = IrisSchedule(settings.iris_every_s, settings.iris_min_px)
+        self.iris_held = IrisCalibration()
+        """What the iris measurements of the followed person say (reset for a new one)."""
+        self._iris_owed: tuple[bf.Detection, float] | None = None
+        self.iris_measurements = 0
+        self.iris_accepted = 0
         self.s = settings
+        self.gate = gate or TrackGate()
         self.tracker = TargetTracker(switch_after_s=settings.switch_after_s)
         self.smoother = PointSmoother(settings.min_cutoff_hz, settings.beta)
         # Per frame size; bounded because the sizes come from the bus (a sender
         # changing the size every frame must not grow it without end).
         self._intrinsics: BoundedDict[tuple[int, int], Intrinsics] = BoundedDict(8)
         self._last: bf.Detection | None = None  # the followed face as last measured
+        self._last_t = 0.0
         self._full_t = -np.inf  # when the whole frame was last searched
         self._search_due = False  # a deferred whole-frame pass is owed
+        self._jumped = False  # the gate refused this frame's crop result
         self.tracked = 0
+        self.refined = 0
+        self.searches = 0
+        self.refused: Counter[str] = Counter()
+        """Frames refused by the check stage, by reason."""
+        self.gate_rejections: Counter[str] = Counter()
+        """Crop results the gate refused, by reason ("size", "position", "keypoints")."""
 
     def intrinsics(self, width: int, height: int) -> Intrinsics:
         key = (width, height)
@@ -60,44 +116,143 @@ class FacePipeline:
             self._intrinsics[key] = found
         return found
 
+    # -- stages ---------------------------------------------------------------
+
+    def _check(self, frame: np.ndarray) -> np.ndarray | FaceResult:
+        """Stage 1: HxWx3 uint8 BGR, or a refusal result (counted)."""
+        try:
+            return frames.to_bgr8(np.asarray(frame), max_side=None)
+        except frames.FrameRefused as refused:
+            self.refused[refused.reason] += 1
+            return FaceResult([], None, None, None, None, None, refused=refused.reason)
+
     def _track(self, bgr: np.ndarray, t: float) -> bf.Detection | None:
-        """The followed face re-found in its own crop (the refiner only)."""
+        """Stage 2a: the followed face re-found in its own crop, if the gate agrees."""
         if (self.refiner is None or self._last is None or self.s.full_every_s <= 0
                 or t <= self._full_t):
             return None
         found = self.refiner.refine(bgr, self._last)
         if found is None:
             return None
-        same, _new = self.tracker.select([found], t)
-        return same
+        k = self.intrinsics(bgr.shape[1], bgr.shape[0])
+        why = self.gate.check(self._last, found, t - self._last_t, k.fx, self.s.face_width_m)
+        if why is not None:
+            self.gate_rejections[why] += 1
+            self._jumped = True
+            return None
+        return found
 
-    def process(self, bgr: np.ndarray, stamp_ns: int, *,
+    def _search(self, bgr: np.ndarray, t: float) -> list[bf.Detection]:
+        """Stage 2b: every face in the whole frame."""
+        self._full_t = t
+        self._search_due = False
+        self.searches += 1
+        return self.net.detect(bgr)
+
+    def _measure(self, bgr: np.ndarray, target: bf.Detection) -> bf.Detection:
+        """Stage 4: the chosen face re-detected in its crop, when that agrees in size."""
+        if self.refiner is None:
+            return target
+        better = self.refiner.refine(bgr, target)
+        if better is None:
+            return target
+        ratio = better.width / max(target.width, 1e-6)
+        if not 1 / MEASURE_MAX_RATIO < ratio < MEASURE_MAX_RATIO:
+            return target
+        self.refined += 1
+        return better
+
+    def _geometry(self, bgr: np.ndarray, measured: bf.Detection) -> Location:
+        """Stage 5: distance cues (the held iris one too) and the 3-D point."""
+        k = self.intrinsics(bgr.shape[1], bgr.shape[0])
+        eye_m = self.s.eye_distance_m if self.s.eye_distance_m > 0 else None
+        held = self.iris_held if self.irises is not None else None
+        return locate(measured, k, self.s.face_width_m, eye_m, held)
+
+    def _iris(self, bgr: np.ndarray, measured: bf.Detection, t: float) -> None:
+        """Stage 7: measure the irises; a plausible measurement updates the held ratio."""
+        assert self.irises is not None
+        self.iris_schedule.ran(t)
+        self.iris_measurements += 1
+        found = self.irises.measure(bgr, measured)
+        if found is not None and found.plausible():
+            accepted = self.iris_held.update(found.diameter_px, eye_distance_px(
+                measured.keypoints), head_yaw(measured.keypoints))
+            self.iris_accepted += bool(accepted)
+
+    def _smooth(self, point: tuple[float, float, float], t: float,
+                new_person: bool) -> tuple[float, float, float]:
+        """Stage 6: One-Euro smoothing (restarted for a new person)."""
+        if not self.s.smoothing:
+            return point
+        if new_person:
+            self.smoother.reset()
+        return self.smoother(point, t)
+
+    # -- entry points ---------------------------------------------------------
+
+    def process(self, frame: np.ndarray, stamp_ns: int, *,
                 defer_search: bool = False) -> FaceResult:
         """The face to follow in this frame.
 
         Between whole-frame passes (`full_every_s`) the followed face is tracked in
         its crop. When a pass is due it runs first, unless `defer_search`: then the
         frame is answered from the crop and `search_if_due()` does the pass after
-        the caller has published, off the latency path.
+        the caller has published, off the latency path. A crop result the gate does
+        not accept gets a whole-frame pass at once, before anything is published.
         """
+        checked = self._check(frame)
+        if isinstance(checked, FaceResult):
+            return checked
+        bgr = checked
         t = stamp_ns * 1e-9
         due = not 0 < t - self._full_t < self.s.full_every_s
-        if not due or defer_search:
-            tracked = self._track(bgr, t)
-            if tracked is not None:
-                self.tracked += 1
-                self._search_due = due
-                return self._locate(bgr, [tracked], tracked, False, t, tracked)
-        faces = self.net.detect(bgr)
-        self._full_t = t
-        self._search_due = False
-        target, new_person = self.tracker.select(faces, t)
-        if target is None:
-            self._last = None
-            return FaceResult(faces, None, None, None, None, None)
-        return self._locate(bgr, faces, target, new_person, t, None)
+        self._jumped = False
+        tracked = self._track(bgr, t) if not due or defer_search else None
+        if tracked is not None:
+            self.tracked += 1
+            self._search_due = due
+            self.tracker.follow(tracked, t)
+            faces, target, measured, new_person = [tracked], tracked, tracked, False
+        else:
+            faces = self._search(bgr, t)
+            chosen, new_person = self.tracker.select(faces, t)
+            if chosen is None:
+                self._last = None
+                return FaceResult(faces, None, None, None, None, None)
+            target = chosen
+            measured = self._measure(bgr, target)
+            # After a jump no head could make, smoothing across it would only publish
+            # points between the old face and this one: start afresh.
+            new_person = new_person or self._jumped
+        self._last, self._last_t = measured, t
+        if new_person:  # what the iris said was about somebody else
+            self.iris_schedule.reset()
+            self.iris_held.reset()
+        where = self._geometry(bgr, measured)
+        point = self._smooth(where.point, t, new_person)
+        self._iris_owed = None
+        if self.irises is not None and self.iris_schedule.due(measured, t):
+            if defer_search:
+                self._iris_owed = (measured, t)
+            else:
+                self._iris(bgr, measured, t)
+        return FaceResult(faces, target, where.estimate, point, where.point, measured,
+                          tracked=tracked is not None)
 
-    def search_if_due(self, bgr: np.ndarray, stamp_ns: int) -> list[bf.Detection] | None:
+    def iris_if_due(self, frame: np.ndarray) -> bool:
+        """The iris measurement a deferred `process` put off (same frame); whether it ran."""
+        owed, self._iris_owed = self._iris_owed, None
+        if owed is None or self.irises is None:
+            return False
+        try:
+            bgr = frames.to_bgr8(np.asarray(frame), max_side=None)
+        except frames.FrameRefused:
+            return False
+        self._iris(bgr, *owed)
+        return True
+
+    def search_if_due(self, frame: np.ndarray, stamp_ns: int) -> list[bf.Detection] | None:
         """The whole-frame pass a deferred `process` put off; None when none was due.
 
         Target choice stays with the followed person while they are seen, so the
@@ -106,31 +261,13 @@ class FacePipeline:
         """
         if not self._search_due:
             return None
-        self._search_due = False
-        faces = self.net.detect(bgr)
-        self._full_t = stamp_ns * 1e-9
-        if not self.tracker.confirms(faces):
+        try:  # the frame `process` was given: a refusal was counted there already
+            bgr = frames.to_bgr8(np.asarray(frame), max_side=None)
+        except frames.FrameRefused:
+            self._search_due = False
+            return None
+        t = stamp_ns * 1e-9
+        faces = self._search(bgr, t)
+        if not self.tracker.observe(faces, t):
             self._last = None
         return faces
-
-    def _locate(self, bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection,
-                new_person: bool, t: float, measured: bf.Detection | None) -> FaceResult:
-        """Distance, back-projection and smoothing of the followed face."""
-        k = self.intrinsics(bgr.shape[1], bgr.shape[0])
-        eye_m = self.s.eye_distance_m if self.s.eye_distance_m > 0 else None
-        if measured is None:
-            measured = target
-            if self.refiner is not None:
-                better = self.refiner.refine(bgr, target)
-                if better is not None:
-                    measured = better
-                    self.refined += 1
-        self._last = measured
-        est = estimate_distance(measured, k.fx, self.s.face_width_m, eye_m)
-        u, v = measured.centre
-        raw = back_project(u, v, est.z_m, k)
-        if not self.s.smoothing:
-            return FaceResult(faces, target, est, raw, raw, measured)
-        if new_person:
-            self.smoother.reset()
-        return FaceResult(faces, target, est, self.smoother(raw, t), raw, measured)

@@ -79,8 +79,12 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
         gt=0.0, lt=180.0,
         description="horizontal field of view in degrees; when set it defines fx")] | None = None
     """Horizontal field of view; when set it defines fx (and fy unless given)."""
-    model: Annotated[Literal["full", "short"], msgspec.Meta(
-        description="BlazeFace full range (to ~4 m) or short range (to ~2 m)")] = "full"
+    model: Annotated[Literal["full_sparse", "full", "short"], msgspec.Meta(
+        description="BlazeFace model: full_sparse (to ~4 m, MediaPipe's own choice: "
+        "fastest, best on small faces), full (dense, to ~4 m) or short (to ~2 m)")] = (
+        "full_sparse")
+    """Whole-frame detector. The sparse full-range network finds faces down to ~30 px
+    (3.5 m) where the dense one stops at ~40 px, and runs a little faster on LiteRT."""
     model_path: Annotated[str, msgspec.Meta(
         description="explicit .tflite model file (empty: the packaged one)")] | None = None
     refine: Annotated[bool, msgspec.Meta(
@@ -114,9 +118,11 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
         ge=0.0, le=3600.0,
         description="seconds between whole-frame detections (0: every frame)")] = 0.25
     """Between whole-frame detections, follow the tracked face by re-detecting it only in
-    its crop (the refiner, ~4 ms instead of ~17 ms a frame): gaze latency drops to a third.
-    A new or larger face is still noticed at the next whole-frame pass, at most this late.
-    0: the whole frame every time. Needs `refine`."""
+    its crop (the short-range refiner: one ~1.8 ms detection instead of a whole-frame one
+    plus the refinement, on LiteRT). A crop result that no head movement could explain is
+    refused by the tracking gate and the frame searched whole. A new or larger face is
+    still noticed at the next whole-frame pass, at most this late. 0: the whole frame
+    every time. Needs `refine`."""
     debug_jpeg_quality: Annotated[int, msgspec.Meta(
         ge=1, le=100,
         description="JPEG quality of the debug image")] = 80
@@ -128,8 +134,21 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     by 54 MB (baseline) / 73 MB (progressive, 4:4:4), measured. The network sees 192x192, so
     bigger frames only cost memory and time; a forged header claiming 20000x20000 took
     2.4 GB. Range 1..16384*16384 (the Image message's own limit)."""
+    iris: Annotated[bool, msgspec.Meta(
+        description="measure the iris close up (face mesh + iris models) as a third "
+        "distance cue")] = True
+    """The iris stage (~6 ms, three inferences) runs after the face is published, only
+    for a face big enough and at most every `iris_every_s`; what it learns about the
+    person is held in between (see docs/camera.md, "Iris distance")."""
+    iris_every_s: Annotated[float, msgspec.Meta(
+        ge=0.05, le=60.0,
+        description="seconds between iris measurements of the followed face")] = 0.5
+    iris_min_px: Annotated[float, msgspec.Meta(
+        ge=2.0, le=100.0,
+        description="smallest expected iris diameter, pixels, worth measuring and using "
+        "(below ~6 px the model reads it 4-13% small)")] = 6.0
     threads: Annotated[int, msgspec.Meta(
         ge=1, le=64,
-        description="OpenCV inference threads (1 leaves a core to the rest)")] = 1
-    """OpenCV threads for inference: 1 leaves the other core to capture and the rest of
-    the robot on a 2-core computer (and is what the benchmark measures)."""
+        description="LiteRT and OpenCV threads (1 leaves a core to the rest)")] = 1
+    """Threads for LiteRT inference and OpenCV resizing: 1 leaves the other core to
+    capture and the rest of the robot on a 2-core computer (what the benchmark measures)."""

@@ -5,7 +5,14 @@ largest face (the nearest one); then stay with that person while they
 remain in view, matching them frame to frame by overlap / nearness, even
 when someone else is momentarily bigger. Only when the tracked face has
 been missing for `switch_after_s` is another face taken; a detector miss
-of a frame or two therefore never makes the eyes jump.
+of a frame or two therefore never makes the eyes jump to a bystander. The
+hold is for bystanders only, faces already seen next to the followed one:
+a face that appears where none was while the followed one vanishes (the
+person stepped in quickly and the track could not follow, or the only
+person left and another arrived) is taken at once, since holding would
+publish nothing for half a second when there is nobody else to confuse.
+Whether a crop-tracking result may continue the track at all is decided
+before this, by `gate.TrackGate`.
 
 Smoothing: a One-Euro filter (Casiez, Roussel, Vogel, CHI 2012) per
 coordinate. Its cut-off frequency rises with speed, so a still face is
@@ -93,57 +100,88 @@ def _iou(a: tuple[float, float, float, float], b: tuple[float, float, float, flo
     return inter / union if union > 0 else 0.0
 
 
+def _near(box: tuple[float, float, float, float], det: bf.Detection, min_iou: float,
+          max_jump: float) -> float | None:
+    """How well `det` continues `box` (higher is better), or None when it cannot."""
+    cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+    width = max(box[2] - box[0], 1.0)
+    overlap = _iou(box, det.box)
+    jump = math.hypot(det.centre[0] - cx, det.centre[1] - cy) / width
+    size_ratio = det.width / width
+    if overlap < min_iou and (jump > max_jump or not 0.5 < size_ratio < 2.0):
+        return None
+    return overlap - jump
+
+
 @dataclass
 class TargetTracker:
     """Keeps following one face across frames.
 
-    `select(detections, t)` returns the face to follow now (or None) and
-    whether it is a newly chosen person (so smoothing restarts).
+    `select(detections, t)` (a whole-frame pass) returns the face to follow
+    now (or None) and whether it is a newly chosen person (so smoothing
+    restarts); `follow(det, t)` continues the track with a crop result the
+    gate accepted; `observe(detections, t)` is a whole-frame pass that only
+    confirms (it never changes the person).
     """
 
     switch_after_s: float = 0.5
     min_iou: float = 0.2
     max_jump: float = 1.0
     """A face whose centre moved less than `max_jump` box widths is the same person."""
+    bystander_jump: float = 2.0
+    """A face within this many box widths of a bystander seen at the last whole-frame
+    pass is that bystander (they had up to `full_every_s` to move)."""
     _box: tuple[float, float, float, float] | None = None
     _seen_t: float = -math.inf
+    _others: list[tuple[float, float, float, float]] = field(default_factory=list)
     target_changes: int = 0
 
     def _match(self, dets: list[bf.Detection]) -> bf.Detection | None:
         if self._box is None:
             return None
-        box = self._box
-        cx, cy = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
-        width = max(box[2] - box[0], 1.0)
         best: tuple[float, bf.Detection] | None = None
         for det in dets:
-            overlap = _iou(box, det.box)
-            dx, dy = det.centre[0] - cx, det.centre[1] - cy
-            jump = math.hypot(dx, dy) / width
-            size_ratio = det.width / width
-            if overlap < self.min_iou and (jump > self.max_jump or not 0.5 < size_ratio < 2.0):
-                continue
-            rank = overlap - jump
-            if best is None or rank > best[0]:
+            rank = _near(self._box, det, self.min_iou, self.max_jump)
+            if rank is not None and (best is None or rank > best[0]):
                 best = (rank, det)
         return None if best is None else best[1]
 
-    def confirms(self, dets: list[bf.Detection]) -> bool:
-        """Whether the followed face is among `dets` (nothing is changed)."""
-        return self._match(dets) is not None
+    def _bystander(self, det: bf.Detection) -> bool:
+        return any(_near(box, det, self.min_iou, self.bystander_jump) is not None
+                   for box in self._others)
+
+    def observe(self, dets: list[bf.Detection], t: float) -> bool:
+        """A whole-frame pass that only confirms: refreshes the followed face and the
+        bystanders; returns whether the followed face was among `dets`."""
+        same = self._match(dets)
+        self._others = [d.box for d in dets if d is not same]
+        if same is None:
+            return False
+        self._box, self._seen_t = same.box, t
+        return True
+
+    def follow(self, det: bf.Detection, t: float) -> None:
+        """Continue the track with `det` (a crop result the gate accepted)."""
+        self._box, self._seen_t = det.box, t
 
     def select(self, dets: list[bf.Detection], t: float) -> tuple[bf.Detection | None, bool]:
         same = self._match(dets)
         if same is not None:
+            self._others = [d.box for d in dets if d is not same]
             self._box, self._seen_t = same.box, t
             return same, False
         if not dets:
             return None, False
-        # Our person may be back next frame: do not jump yet. Measured both ways, so a
-        # sighting with a stamp from the future cannot hold the choice forever.
+        candidates = dets
+        # Our person may be back next frame: do not jump to a bystander yet. Measured both
+        # ways, so a sighting with a stamp from the future cannot hold the choice forever.
         if self._box is not None and abs(t - self._seen_t) < self.switch_after_s:
-            return None, False
-        chosen = max(dets, key=lambda d: d.area)
+            candidates = [d for d in dets if not self._bystander(d)]
+            if not candidates:
+                self._others = [d.box for d in dets]
+                return None, False
+        chosen = max(candidates, key=lambda d: d.area)
+        self._others = [d.box for d in dets if d is not chosen]
         self._box, self._seen_t = chosen.box, t
         self.target_changes += 1
         return chosen, True

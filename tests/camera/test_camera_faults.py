@@ -312,3 +312,32 @@ def test_capture_refuses_unusable_frames_and_keeps_publishing(
     assert int(status.values["bad_frames"]) == 3 and int(status.values["too_large"]) == 2
     assert not runner.is_alive()
     assert {(msg.width, msg.height) for msg in images.messages} <= {(64, 48), (1500, 1500)}
+
+
+def test_a_face_jump_is_never_published_at_a_wrong_distance(probe: Node, spawn: Spawn) -> None:
+    """Issue 12 item 3 through a running detector (crop tracking and smoothing as in
+    service): a face 90 px wide at the upper left (1.0 m), then 150 px at the lower right
+    (0.6 m). Every published distance within 15% of the truth, and the new face published
+    for the first two frames after the jump (before the fix it was held back ~15 frames)."""
+    pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
+    faces = Collector(probe, keys.FACE, camera="test")
+    proc = spawn("face-detector", "--camera", "test")
+    before, _ = scenes.scene(scenes.astronaut(), 1.0, 130, 120)
+    after, placed = scenes.scene(scenes.astronaut(), 0.6, 470, 330)
+    answer(pub, faces, image(before, m.now_ns(), "warm-up"))
+    base = m.now_ns()  # camera stamps 33 ms apart from here (plausible: behind arrival)
+    for i in range(8):
+        face = answer(pub, faces, image(before, base + i * 33_333_333, f"before-{i}"))
+        assert face.point.x == pytest.approx(1.0, rel=0.15)
+    published: list[float | None] = []
+    for i in range(8, 16):
+        pub.put(image(after, base + i * 33_333_333, f"after-{i}"))
+        try:
+            face = faces.wait_for(lambda f, i=i: f.frame_id == f"after-{i}", timeout=5.0)
+            published.append(face.point.x)
+        except TimeoutError:
+            published.append(None)
+    print(f"published after the jump (true {placed.z_m} m): {published}")
+    assert published[0] is not None and published[1] is not None, published
+    assert all(abs(x - placed.z_m) <= 0.15 * placed.z_m for x in published if x is not None)
+    assert proc.alive()

@@ -1,4 +1,4 @@
-"""Real OpenCV inference on real face photos composed at known places (no processes).
+"""Real LiteRT inference on real face photos composed at known places (no processes).
 
 astronaut was used to tune; grace_hopper is held out (see scenes.py).
 """
@@ -15,7 +15,8 @@ from skimage import data
 
 from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, models
-from buddybot.camera.facenet import FaceNet, ModelLoadError
+from buddybot.camera.facenet import FaceNet
+from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.sim import SimCamera
@@ -28,7 +29,13 @@ PHOTOS: dict[str, Callable[[], scenes.Photo]] = {
 
 @pytest.fixture(scope="module")
 def full() -> FaceNet:
+    """The default whole-frame model: sparse full range."""
     cv2.setNumThreads(1)
+    return FaceNet(models.locate("full_sparse"), bf.FULL_SPARSE)
+
+
+@pytest.fixture(scope="module")
+def dense() -> FaceNet:
     return FaceNet(models.locate("full"), bf.FULL_RANGE)
 
 
@@ -188,8 +195,28 @@ def test_a_file_that_is_not_a_model_is_refused(tmp_path: Path) -> None:
 
 
 def test_the_wrong_model_for_the_spec_is_refused() -> None:
-    with pytest.raises(ModelLoadError, match="anchors"):
+    with pytest.raises(ModelLoadError, match=r"wrong tensor layout.*expected input 1x192x192x3"):
         FaceNet(models.locate("short"), bf.FULL_RANGE)
+
+
+@pytest.mark.parametrize("name", PHOTOS)
+@pytest.mark.parametrize("z", [0.6, 1.0, 1.8])
+def test_dense_full_range_model_still_selectable(dense: FaceNet, short: FaceNet, name: str,
+                                                 z: float) -> None:
+    img, _ = scenes.scene(PHOTOS[name](), z)
+    result = FacePipeline(dense, FaceDetectorSettings(smoothing=False, model="full"),
+                          short).process(img, 1)
+    assert result.point is not None and result.point[0] == pytest.approx(z, rel=0.10)
+
+
+def test_sparse_and_dense_decode_to_the_same_place(full: FaceNet, dense: FaceNet) -> None:
+    """Same anchors and decoding for both full-range networks: the boxes agree."""
+    img, placed = scenes.scene(scenes.grace_hopper(), 1.0, 250, 200)
+    a, b = full.detect(img), dense.detect(img)
+    assert len(a) == len(b) == 1
+    assert np.allclose(a[0].centre, b[0].centre, atol=0.1 * b[0].width)
+    assert a[0].width == pytest.approx(b[0].width, rel=0.15)
+    assert abs(a[0].centre[0] - placed.u) < 0.1 * a[0].width
 
 
 @pytest.mark.parametrize("bad", [np.zeros((10, 10), np.uint8), np.zeros((4, 4, 3), np.float32)])

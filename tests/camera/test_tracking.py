@@ -118,3 +118,42 @@ def test_a_sighting_stamped_in_the_future_does_not_hold_the_choice_forever() -> 
         if chosen is not None:
             break
     assert chosen is not None and chosen.centre[0] == 400 and new
+
+
+def test_a_new_face_is_taken_at_once_when_the_followed_one_vanishes() -> None:
+    """Nobody else was in view: holding would only publish nothing (the person
+    stepped in faster than the track could follow, or someone else arrived)."""
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(130, 120, 90)], 0.0)
+    chosen, new = tr.select([face(470, 330, 150)], 0.033)
+    assert chosen is not None and chosen.centre == (470, 330) and new
+    assert tr.target_changes == 2
+
+
+def test_a_bystander_is_held_back_but_a_newcomer_next_to_them_is_not() -> None:
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(100, 100, 100), face(400, 100, 80)], 0.0)
+    # The followed face is missed; the bystander moved a little: hold.
+    assert tr.select([face(420, 100, 80)], 0.033) == (None, False)
+    # A face where nobody was before, while the followed one is still missing: taken.
+    chosen, new = tr.select([face(420, 100, 80), face(250, 350, 120)], 0.066)
+    assert chosen is not None and chosen.centre == (250, 350) and new
+
+
+def test_observe_confirms_without_changing_the_person() -> None:
+    tr = TargetTracker(switch_after_s=0.5)
+    tr.select([face(100, 100, 100)], 0.0)
+    assert not tr.observe([face(400, 100, 150)], 0.1)  # someone else only
+    assert tr.target_changes == 1
+    assert tr.observe([face(400, 100, 150), face(104, 100, 100)], 0.2)
+    # The other face is now a known bystander: a missed frame does not switch to it.
+    assert tr.select([face(400, 100, 150)], 0.233) == (None, False)
+
+
+def test_follow_moves_the_track_for_the_next_match() -> None:
+    tr = TargetTracker()
+    tr.select([face(100, 100, 100)], 0.0)
+    for i in range(1, 10):
+        tr.follow(face(100 + 40 * i, 100, 100), i / 30)  # crop results, 0.4 widths a frame
+    chosen, new = tr.select([face(480, 100, 100)], 0.4)
+    assert chosen is not None and not new and tr.target_changes == 1

@@ -1,0 +1,86 @@
+"""Frames of any size and kind given to the pipeline: processed or refused with a
+counted reason, never an exception (real LiteRT inference, no processes)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from buddybot.camera import blazeface as bf
+from buddybot.camera import models
+from buddybot.camera.facenet import FaceNet
+from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.settings import FaceDetectorSettings
+from tests.camera import scenes
+
+
+@pytest.fixture(scope="module")
+def nets() -> tuple[FaceNet, FaceNet]:
+    return (FaceNet(models.locate("full_sparse"), bf.FULL_SPARSE),
+            FaceNet(models.locate("short"), bf.SHORT_RANGE))
+
+
+def pipeline(nets: tuple[FaceNet, FaceNet]) -> FacePipeline:
+    return FacePipeline(nets[0], FaceDetectorSettings(smoothing=False), nets[1])
+
+
+def face_frame() -> np.ndarray:
+    return scenes.scene(scenes.grace_hopper(), 1.0)[0]
+
+
+@pytest.mark.parametrize("convert", [
+    lambda bgr: cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY),
+    lambda bgr: cv2.cvtColor(bgr, cv2.COLOR_BGR2GRAY)[:, :, None],
+    lambda bgr: cv2.cvtColor(bgr, cv2.COLOR_BGR2BGRA),
+    lambda bgr: bgr.astype(np.uint16) * 257,
+    lambda bgr: np.ascontiguousarray(bgr[:, ::-1]),  # a non-default stride order too
+], ids=["grey", "grey-1-channel", "bgra", "16-bit", "mirrored"])
+def test_grey_four_channel_and_16_bit_frames_are_processed(nets: tuple[FaceNet, FaceNet],
+                                                           convert: object) -> None:
+    pipe = pipeline(nets)
+    result = pipe.process(convert(face_frame()), 1)  # type: ignore[operator]
+    assert result.refused is None and result.point is not None
+    assert result.point[0] == pytest.approx(1.0, rel=0.12)
+    assert not pipe.refused
+
+
+@pytest.mark.parametrize("frame", [
+    np.zeros((0, 0, 3), np.uint8), np.zeros((0, 640, 3), np.uint8), np.zeros((0, 0), np.uint8),
+    np.zeros((48, 64, 2), np.uint8), np.zeros((48, 64, 5), np.uint8),
+    np.zeros((48, 64, 3), np.float32), np.zeros((2, 48, 64, 3), np.uint8),
+    np.zeros((64,), np.uint8),
+], ids=["0x0", "0x640", "0x0-grey", "2-channel", "5-channel", "float", "4-d", "1-d"])
+def test_unusable_frames_are_refused_and_counted(nets: tuple[FaceNet, FaceNet],
+                                                 frame: np.ndarray) -> None:
+    pipe = pipeline(nets)
+    result = pipe.process(frame, 1)
+    assert result.refused == "bad_frames" and result.point is None and result.faces == []
+    assert pipe.refused["bad_frames"] == 1
+    assert pipe.search_if_due(frame, 1) is None  # and the deferred pass does not count it twice
+    assert pipe.refused["bad_frames"] == 1
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 5000), (5000, 1), (3, 7), (2161, 3841)])
+def test_any_size_is_processed(nets: tuple[FaceNet, FaceNet], shape: tuple[int, int]) -> None:
+    pipe = pipeline(nets)
+    frame = np.full((*shape, 3), 90, np.uint8)
+    result = pipe.process(frame, 1, defer_search=True)
+    assert result.refused is None and result.point is None
+
+
+def test_a_bad_frame_between_good_ones_does_not_disturb_tracking(
+    nets: tuple[FaceNet, FaceNet]
+) -> None:
+    pipe = FacePipeline(nets[0], FaceDetectorSettings(), nets[1])
+    good = face_frame()
+    points = []
+    for i in range(12):
+        frame = np.zeros((0, 0, 3), np.uint8) if i == 5 else good
+        result = pipe.process(frame, (i + 1) * 33_333_333, defer_search=True)
+        pipe.search_if_due(frame, (i + 1) * 33_333_333)
+        if i != 5:
+            assert result.point is not None
+            points.append(result.point)
+    assert pipe.refused["bad_frames"] == 1 and pipe.tracked >= 9
+    assert np.allclose(points[-1], points[0], atol=0.03)
