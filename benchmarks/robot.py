@@ -5,7 +5,9 @@ simulated radar with a visitor who comes and goes) as separate processes,
 then for `--seconds`:
 
 * gaze latency: time from an image's capture (`stamp_ns`, kept by the face,
-  eye control and direction) to the `eyes/direction` sample arriving here;
+  eye control and direction) to the `eyes/direction` sample arriving here,
+  and to each hop on the way (face position, eye control), so the total
+  can be split between the detector, the controller and the eyes;
 * presence latency: time from the radar frame (`stamp_ns` kept by presence
   and expression) to `eyes/expression` EYE_AWAKE arriving here; entering
   needs no hold, so this is the pipeline's own latency;
@@ -19,8 +21,10 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Callable
 from pathlib import Path
 from tempfile import mkdtemp
+from typing import Any
 
 import psutil
 from common import percentile
@@ -62,9 +66,15 @@ def main() -> None:
                     "all nodes up")
         gaze_ms: list[float] = []
         awake_ms: list[float] = []
+        hops: dict[str, list[float]] = {"camera/front/face": [], "eyes/control": []}
 
         def on_direction(msg: m.EyesDirection, _key: str) -> None:
             gaze_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
+
+        def hop(name: str) -> Callable[[Any, str], None]:
+            def on(msg: Any, _key: str) -> None:
+                hops[name].append((time.time_ns() - msg.stamp_ns) / 1e6)
+            return on
 
         def on_expression(msg: m.ScreenExpression, _key: str) -> None:
             if msg.action == m.ExpressionAction.EYE_AWAKE:
@@ -73,6 +83,8 @@ def main() -> None:
         Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
         time.sleep(3.0)  # warm-up: detector models loaded, caches filled
         probe.subscribe(keys.EYES_DIRECTION, on_direction)
+        probe.subscribe(keys.FACE, hop("camera/front/face"), camera="front")
+        probe.subscribe(keys.EYE_CONTROL, hop("eyes/control"))
         probe.subscribe(keys.EXPRESSION, on_expression, history=False)
 
         ps = {name: psutil.Process(p.pid) for name, p in procs.items()}
@@ -98,6 +110,10 @@ def main() -> None:
         print(f"gaze latency capture -> eyes/direction: median {statistics.median(gaze_ms):.1f} ms,"
               f" p95 {percentile(gaze_ms, 0.95):.1f} ms, n={len(gaze_ms)} "
               f"({len(gaze_ms) / args.seconds:.1f}/s)")
+        for name, values in hops.items():
+            if values:
+                print(f"  capture -> {name}: median {statistics.median(values):.1f} ms, "
+                      f"p95 {percentile(values, 0.95):.1f} ms, n={len(values)}")
     else:
         print("gaze latency: no eyes/direction received")
     if awake_ms:
