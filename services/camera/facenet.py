@@ -42,10 +42,13 @@ def shrink(bgr: np.ndarray, width: int, height: int) -> np.ndarray:
 
 def crop_square(bgr: np.ndarray, cx: float, cy: float, side: float) -> tuple[np.ndarray, int, int]:
     """A `side`-pixel square centred at (cx, cy), padded with black where it leaves
-    the image; returns it with its top-left corner in image pixels."""
+    the image; returns it with its top-left corner in image pixels. A square
+    inside the image is a view of it (read-only use: the caller only resizes it)."""
     s = max(round(side), 2)
     x0, y0 = round(cx - s / 2), round(cy - s / 2)
     h, w = bgr.shape[:2]
+    if x0 >= 0 and y0 >= 0 and x0 + s <= w and y0 + s <= h:
+        return bgr[y0:y0 + s, x0:x0 + s], x0, y0  # inside: a view, no copy
     ix0, iy0, ix1, iy1 = max(x0, 0), max(y0, 0), min(x0 + s, w), min(y0 + s, h)
     if ix1 <= ix0 or iy1 <= iy0:
         return np.zeros((s, s, 3), np.uint8), x0, y0
