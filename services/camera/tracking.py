@@ -128,6 +128,9 @@ class TargetTracker:
     min_iou: float = 0.2
     max_jump: float = 1.0
     """A face whose centre moved less than `max_jump` box widths is the same person."""
+    forget_after_s: float = 3.0
+    """A face unseen this long is forgotten: whoever appears next, even at the same
+    place, is a new person (smoothing and what the iris learnt start afresh)."""
     bystander_jump: float = 2.0
     """A face within this many box widths of a bystander seen at the last whole-frame
     pass is that bystander (they had up to `full_every_s` to move)."""
@@ -165,6 +168,8 @@ class TargetTracker:
         self._box, self._seen_t = det.box, t
 
     def select(self, dets: list[bf.Detection], t: float) -> tuple[bf.Detection | None, bool]:
+        if self._box is not None and abs(t - self._seen_t) > self.forget_after_s:
+            self._box = None  # measured both ways, like the switch hold
         same = self._match(dets)
         if same is not None:
             self._others = [d.box for d in dets if d is not same]

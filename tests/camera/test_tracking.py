@@ -157,3 +157,16 @@ def test_follow_moves_the_track_for_the_next_match() -> None:
         tr.follow(face(100 + 40 * i, 100, 100), i / 30)  # crop results, 0.4 widths a frame
     chosen, new = tr.select([face(480, 100, 100)], 0.4)
     assert chosen is not None and not new and tr.target_changes == 1
+
+
+def test_a_face_back_after_forget_after_s_is_a_new_person() -> None:
+    """Same place, but the room was empty for longer than `forget_after_s`: new person
+    (the pipeline then restarts smoothing and forgets the iris it learnt)."""
+    tr = TargetTracker(forget_after_s=3.0)
+    here = face(100, 100, 60)
+    assert tr.select([here], 0.0) == (here, True)
+    assert tr.select([here], 1.0) == (here, False)  # seen again soon: the same person
+    assert tr.select([], 2.0) == (None, False)
+    assert tr.select([here], 3.9) == (here, False)  # 2.9 s unseen: still them
+    assert tr.select([], 5.0) == (None, False)
+    assert tr.select([here], 7.5) == (here, True)  # 3.6 s unseen: somebody new
