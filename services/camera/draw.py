@@ -39,8 +39,11 @@ def render(bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection | No
                     cv2.LINE_AA)
     elif estimate is not None and estimate.fusion is not None:
         # Which distance cues were used, with their weights (`0.52 m iris_held 47% ...`).
-        cv2.putText(out, estimate.fusion.summary(), (10, out.shape[0] - 10),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TARGET, 1, cv2.LINE_AA)
+        # Outlined, so it reads on any background.
+        where = (10, out.shape[0] - 10)
+        text = estimate.fusion.summary()
+        cv2.putText(out, text, where, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
+        cv2.putText(out, text, where, cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TARGET, 1, cv2.LINE_AA)
     return out
 
 
