@@ -39,11 +39,13 @@ def render(bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection | No
                     cv2.LINE_AA)
     elif estimate is not None and estimate.fusion is not None:
         # Which distance cues were used, with their weights (`0.52 m iris_held 47% ...`).
-        # Outlined, so it reads on any background.
-        where = (10, out.shape[0] - 10)
+        # On a dark strip, so it reads on any background.
         text = estimate.fusion.summary()
-        cv2.putText(out, text, where, cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 3, cv2.LINE_AA)
-        cv2.putText(out, text, where, cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TARGET, 1, cv2.LINE_AA)
+        (tw, th), _base = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        h = out.shape[0]
+        cv2.rectangle(out, (4, h - 16 - th), (16 + tw, h - 4), (0, 0, 0), -1)
+        cv2.putText(out, text, (10, h - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TARGET, 1,
+                    cv2.LINE_AA)
     return out
 
 
