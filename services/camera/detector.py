@@ -72,12 +72,20 @@ effective_settings = settings_from  # the name tests and older callers use
 def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, FaceNet | None]:
     """The detector model, and the short-range refiner (None when refine is off)."""
     net = load_net(ctx, s)
+    return net, load_refiner(net, s)
+
+
+def load_refiner(net: FaceNet, s: FaceDetectorSettings) -> FaceNet | None:
+    """The short-range network at `refine_input_px` for the followed face's crop (the
+    whole-frame `net` itself when that is the short model at that size), or None
+    when refine is off."""
     if not s.refine:
-        return net, None
-    if s.model == "short":
-        return net, net
+        return None
+    if net.spec.name == "short" and net.spec.input_size == s.refine_input_px:
+        return net
     try:
-        return net, FaceNet(models.locate("short"), bf.SHORT_RANGE, num_threads=s.threads)
+        return FaceNet(models.locate("short"), bf.SHORT_RANGE, num_threads=s.threads,
+                       input_size=s.refine_input_px)
     except (models.ModelNotFound, ModelLoadError) as exc:
         raise ConfigError(f"refine needs the short-range model: {exc}") from None
 

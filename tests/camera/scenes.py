@@ -35,6 +35,7 @@ from skimage import data
 
 from buddybot.camera import blazeface as bf
 from buddybot.camera import models
+from buddybot.camera.detector import load_refiner
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.pipeline import FacePipeline, FaceResult
 from buddybot.camera.settings import FaceDetectorSettings
@@ -524,10 +525,7 @@ def service_pipeline(settings: FaceDetectorSettings | None = None) -> FacePipeli
     model at its threshold, and the short-range refiner when refinement is on."""
     s = settings or FaceDetectorSettings()
     net = FaceNet(models.locate(s.model), bf.SPECS[s.model], s.min_score)
-    refiner = None
-    if s.refine:
-        refiner = net if s.model == "short" else FaceNet(models.locate("short"), bf.SHORT_RANGE)
-    return FacePipeline(net, s, refiner)
+    return FacePipeline(net, s, load_refiner(net, s))
 
 
 def published_box(r: FaceResult) -> Box | None:

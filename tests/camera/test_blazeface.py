@@ -114,3 +114,50 @@ def test_postprocess_returns_image_pixels() -> None:
     assert cx == pytest.approx(anchor[idx][0] * 192 / 0.3, abs=1e-3)
     assert cy == pytest.approx((anchor[idx][1] * 192 - 24) / 0.3, abs=1e-3)
     assert faces[0].width == pytest.approx(19.2 / 0.3, rel=1e-5)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_small_and_array_nms_give_the_same_faces(seed: int) -> None:
+    """The Python-float NMS (few candidates) and the array one (many) are one rule:
+    on random overlapping candidates, the same clusters, scores and means."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 40))
+    centres = rng.uniform(0, 3, (n, 2)).astype(np.float32)
+    sizes = rng.uniform(0.3, 1.5, (n, 1)).astype(np.float32)
+    boxes = np.concatenate([centres - sizes / 2, centres + sizes / 2], axis=1)
+    scores = rng.uniform(0.5, 1.0, n).astype(np.float32)
+    rows = np.concatenate([boxes, rng.normal(size=(n, 12)).astype(np.float32)], axis=1)
+    small = bf._clusters_small(scores, boxes.tolist(), rows, 0.3, 16)
+    array = bf._clusters(scores, boxes, rows, 0.3, 16)
+    assert len(small) == len(array) > 0
+    for (s1, m1), (s2, m2) in zip(small, array, strict=True):
+        assert s1 == pytest.approx(s2)
+        assert m1 == pytest.approx(m2, abs=1e-5)
+
+
+def test_many_candidates_take_the_array_path_with_the_same_result() -> None:
+    """Above SMALL_NMS candidates `weighted_nms` switches path; a cluster of
+    identical boxes gives the same single face either way."""
+    n = bf.SMALL_NMS + 5
+    boxes = np.tile(np.array([[0.0, 0.0, 1.0, 1.0]], np.float32), (n, 1))
+    scores = np.linspace(0.9, 0.6, n).astype(np.float32)
+    kps = np.zeros((n, 6, 2), np.float32)
+    many = bf.weighted_nms(scores, boxes, kps, 0.3)
+    few = bf.weighted_nms(scores[:3], boxes[:3], kps[:3], 0.3)
+    assert len(many) == len(few) == 1
+    assert many[0][0] == pytest.approx(0.9) and many[0][1] == pytest.approx(boxes[0])
+
+
+def test_a_moved_letterbox_maps_a_crop_into_the_frame() -> None:
+    """A crop at (100, 40) of a frame: decoding through `moved` gives frame pixels,
+    the crop's own pixels plus the offset."""
+    lb = bf.Letterbox.fit(300, 300, 128)
+    pts = np.array([[0.25, 0.5], [1.0, 0.0]], np.float32)
+    assert lb.moved(100, 40).to_image(pts) == pytest.approx(lb.to_image(pts) + np.array([100, 40]))
+    spec = bf.SHORT_RANGE
+    scores, boxes = _raw(spec, 40, 3.0, [0.0, 0.0, 12.8, 12.8] + [0.0] * 12)
+    anchor = bf.anchors(spec)
+    in_crop = bf.postprocess(scores, boxes, anchor, spec, lb)[0]
+    in_frame = bf.postprocess(scores, boxes, anchor, spec, lb.moved(100, 40))[0]
+    assert in_frame.box == pytest.approx(np.add(in_crop.box, [100, 40, 100, 40]))
+    assert in_frame.keypoints == pytest.approx(in_crop.keypoints + np.array([100, 40]))

@@ -95,3 +95,14 @@ def test_an_ambiguous_output_match_is_refused() -> None:
     with pytest.raises(ModelLoadError, match="output"):
         LiteModel(models.locate("full_sparse"), BLAZE_FULL_IN,
                   [Tensor((1, 2304, ANY)), Tensor((1, 2304, 1))])
+
+
+def test_a_resize_the_outputs_do_not_follow_is_refused_naming_the_file() -> None:
+    model = LiteModel(models.locate("short"), Tensor((1, 128, 128, 3)),
+                      [Tensor((1, 896, 1)), Tensor((1, 896, 16))])
+    with pytest.raises(ModelLoadError, match=r"face_detection_short_range\.tflite"):
+        # 96 px gives 504 anchors, not 896: the expected outputs cannot match.
+        model.resize_input(Tensor((1, 96, 96, 3)), [Tensor((1, 896, 1)), Tensor((1, 896, 16))])
+    model.resize_input(Tensor((1, 96, 96, 3)), [Tensor((1, 504, 1)), Tensor((1, 504, 16))])
+    scores, boxes = model.run(np.zeros((1, 96, 96, 3), np.float32))
+    assert scores.shape == (1, 504, 1) and boxes.shape == (1, 504, 16)

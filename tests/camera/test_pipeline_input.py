@@ -84,3 +84,59 @@ def test_a_bad_frame_between_good_ones_does_not_disturb_tracking(
             points.append(result.point)
     assert pipe.refused["bad_frames"] == 1 and pipe.tracked >= 9
     assert np.allclose(points[-1], points[0], atol=0.03)
+
+
+def _expected_input(bgr: np.ndarray, size: int) -> np.ndarray:
+    """The network input by the plain rule: bilinear resize, BGR -> RGB, [-1, 1],
+    black (-1) letterbox border."""
+    lb = bf.Letterbox.fit(bgr.shape[1], bgr.shape[0], size)
+    rw, rh = lb.resized_shape(bgr.shape[1], bgr.shape[0])
+    rgb = cv2.resize(bgr, (rw, rh), interpolation=cv2.INTER_LINEAR)[:, :, ::-1]
+    out = np.full((size, size, 3), -1.0, np.float32)
+    px, py = int(lb.pad_x), int(lb.pad_y)
+    out[py:py + rh, px:px + rw] = rgb / 127.5 - 1.0
+    return out
+
+
+def test_the_input_tensor_is_the_letterboxed_picture_whatever_the_order_of_shapes(
+        nets: tuple[FaceNet, FaceNet]) -> None:
+    """Landscape (border above/below: the OpenCV path), portrait (border left/right:
+    the NumPy path) and square (no border, not refilled) frames in turn: each time
+    the whole tensor is that frame's letterbox, with no rows left from the last."""
+    net = nets[0]
+    rng = np.random.default_rng(3)
+    shapes = [(480, 640), (640, 480), (300, 300), (480, 640), (300, 300), (640, 480)]
+    for h, w in shapes:
+        bgr = rng.integers(0, 256, (h, w, 3), np.uint8)
+        net.detect(bgr)
+        assert net.input_tensor() == pytest.approx(_expected_input(bgr, 192), abs=1e-5), (w, h)
+
+
+def test_a_crop_reaches_the_refiner_as_a_resized_crop_with_black_outside(
+        nets: tuple[FaceNet, FaceNet]) -> None:
+    """The refiner's one-warp crop is the crop `cv2.resize` would give (within one grey
+    level), and black (-1) where the square leaves the frame; a whole-frame pass in
+    between does not leave its letterbox border in the crop's tensor or vice versa."""
+    short = nets[1]
+    frame = face_frame()
+    det = nets[0].detect(frame)[0]
+    cx, cy = det.centre
+    side = 3 * max(det.width, det.height)
+    s = round(side)
+    x0, y0 = round(cx - s / 2), round(cy - s / 2)
+    assert x0 >= 0 and y0 >= 0 and x0 + s <= frame.shape[1] and y0 + s <= frame.shape[0]
+    short.refine(frame, det)
+    want = cv2.resize(frame[y0:y0 + s, x0:x0 + s], (128, 128),
+                      interpolation=cv2.INTER_LINEAR)[:, :, ::-1] / 127.5 - 1.0
+    assert np.abs(short.input_tensor() - want).max() <= 1.01 / 127.5
+    short.detect(frame)  # letterboxed whole frame: border rows of -1
+    assert short.input_tensor()[0] == pytest.approx(-1.0)
+    # The same face at the left edge: the crop's left part lies outside the frame.
+    shifted = np.zeros_like(frame)
+    dx = int(det.box[0]) - 2
+    shifted[:, :frame.shape[1] - dx] = frame[:, dx:]
+    edge = nets[0].detect(shifted)[0]
+    short.refine(shifted, edge)
+    tensor = short.input_tensor()
+    assert tensor[:, :10] == pytest.approx(-1.0)  # outside: black
+    assert tensor[40:90, 60:100].std() > 0.05  # the face: a picture, not a border

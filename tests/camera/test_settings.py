@@ -186,3 +186,18 @@ def test_switch_after_s_and_threads_and_camera_reach_the_parts() -> None:
 def test_debug_jpeg_quality_and_max_pixels_are_kept() -> None:
     s, _pipe = built("debug_jpeg_quality = 20\nmax_pixels = 1000")
     assert (s.debug_jpeg_quality, s.max_pixels) == (20, 1000)  # type: ignore[attr-defined]
+
+
+def test_refine_input_px_sizes_the_crop_network() -> None:
+    """The crop network runs at `refine_input_px` (its anchors and tensors with it); the
+    short whole-frame model is shared only when it runs at that same size."""
+    _s, pipe = built("refine_input_px = 80")
+    assert pipe.refiner is not None and pipe.refiner.spec.input_size == 80
+    assert pipe.refiner.model.input.shape == (1, 80, 80, 3)
+    assert pipe.refiner.spec.anchor_count == 10 * 10 * 2 + 5 * 5 * 6
+    img, _ = scenes.scene(scenes.astronaut(), 1.0)
+    assert pipe.process(img, FRAME_NS).point is not None and pipe.refined == 1
+    _s, same = built("model = 'short'\nrefine_input_px = 128")
+    assert same.refiner is same.net
+    _s, other = built("model = 'short'")
+    assert other.refiner is not other.net and other.net.spec.input_size == 128
