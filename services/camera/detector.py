@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Callable
 
 import cv2
+import numpy as np
 
 from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, frames, models
@@ -126,6 +128,24 @@ def load_irises(s: FaceDetectorSettings) -> IrisNet | None:
         raise ConfigError(f"iris (set iris = false to run without): {exc}") from None
 
 
+def deferred_work(pipeline: FacePipeline, bgr: np.ndarray, stamp_ns: int, delay_s: float,
+                  wait: Callable[[float], object]) -> list[bf.Detection] | None:
+    """What `process(defer_search=True)` put off, done after the face is published:
+    the whole-frame pass and the iris, when due (the pass's faces, or None).
+
+    It first waits `delay_s` (`wait`: the node's stop event, so shutdown is not held
+    up): started at once, this work took a core while the face was still on its way
+    to the eyes (see `defer_after_ms`).
+    """
+    if not pipeline.deferred_due():
+        return None
+    if delay_s > 0:
+        wait(delay_s)
+    searched = pipeline.search_if_due(bgr, stamp_ns)
+    pipeline.iris_if_due(bgr)
+    return searched
+
+
 def run(ctx: ServiceContext) -> int:
     settings, pipeline = build(ctx)
     net = pipeline.net
@@ -178,10 +198,8 @@ def run(ctx: ServiceContext) -> int:
         diag.values["target_changes"] = pipeline.tracker.target_changes
         if pipeline.gate_rejections:
             diag.values["track_rejected"] = sum(pipeline.gate_rejections.values())
-        # The whole-frame pass and the iris, when due, run after the face is out
-        # (off the latency path).
-        searched = pipeline.search_if_due(bgr, stamp_ns)
-        pipeline.iris_if_due(bgr)
+        searched = deferred_work(pipeline, bgr, stamp_ns, settings.defer_after_ms / 1000.0,
+                                 node.stop_event.wait)
         if result.estimate is not None and result.estimate.fusion is not None:
             diag.values.update(result.estimate.fusion.as_dict())  # type: ignore[arg-type]
         if pipeline.irises is not None:

@@ -240,6 +240,10 @@ class FacePipeline:
         return FaceResult(faces, target, where.estimate, point, where.point, measured,
                           tracked=tracked is not None)
 
+    def deferred_due(self) -> bool:
+        """Whether the last deferred `process` left work for after publishing."""
+        return self._search_due or self._iris_owed is not None
+
     def iris_if_due(self, frame: np.ndarray) -> bool:
         """The iris measurement a deferred `process` put off (same frame); whether it ran."""
         owed, self._iris_owed = self._iris_owed, None

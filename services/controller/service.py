@@ -2,15 +2,20 @@
 
 Threads, and why:
 
-* Zenoh callbacks only decode (done by the node) and append an event to
-  the loop's inbox; faces go to a latest-value slot so a fast camera can
-  never grow the inbox.
-* One decision thread owns the `Behaviour` (single-threaded, no locks in
-  the pure code): it drains the inbox, runs `tick()` every `tick_s`, and
-  publishes expressions and eye control itself (non-blocking puts).
+* A face is the latency path (camera -> eyes): it is decided in Zenoh's
+  callback thread itself, under the lock that guards the `Behaviour`
+  (the pure code has no locks of its own), and the eye control it gives
+  is put from there. A face takes tens of microseconds, so the callback
+  never blocks for long; handing it to another thread cost a thread wake-up
+  per frame on the way to the eyes.
+* Every other callback only appends an event to the decision thread's
+  inbox. That thread drains the inbox and runs `tick()` every `tick_s`,
+  under the same lock, and publishes expressions and eye control itself
+  (non-blocking puts).
 * One sound thread makes the blocking `audio/play_sound` and cancel
-  calls (DESIGN.md section 6: never block in a callback) and posts their
-  replies back to the inbox, so gaze keeps flowing while a call waits.
+  calls (a callback must never block: one stuck callback starves every
+  other key of the session) and posts their replies back to the inbox,
+  so gaze keeps flowing while a call waits.
 """
 
 from __future__ import annotations
@@ -87,8 +92,10 @@ class Controller:
         self.clock = clock
         self.behaviour = Behaviour(settings, clock())
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
-        self._face: tuple[m.FacePosition, float] | None = None
         self._cond = threading.Condition()
+        self._lock = threading.Lock()
+        """Guards `behaviour` and the publishers' order: the decision thread and the
+        face callback both decide."""
         self._sounds: queue.Queue[Command | None] = queue.Queue()
         self._warn = RateLimitedLog(log)
         self._expression_pub = node.publisher(keys.EXPRESSION)
@@ -137,9 +144,8 @@ class Controller:
         self._post(SoundStatus(msg.goal_id, msg.state, age))
 
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
-        with self._cond:
-            self._face = (msg, self.clock())
-            self._cond.notify()
+        with self._lock:
+            self._handle_face(msg, self.clock())
 
     # -- decision thread --
 
@@ -149,26 +155,26 @@ class Controller:
         next_tick = self.clock() + tick
         while not stop.is_set():
             with self._cond:
-                while not self._inbox and self._face is None and not stop.is_set():
+                while not self._inbox and not stop.is_set():
                     left = next_tick - self.clock()
                     if left <= 0:
                         break
                     self._cond.wait(left)
                 events = list(self._inbox)
                 self._inbox.clear()
-                face, self._face = self._face, None
             try:
-                self._handle(events, face)
-                now = self.clock()
-                if now >= next_tick:
-                    next_tick = now + tick
-                    self._execute(self.behaviour.tick(now))
-                    self._publish_diagnostics(now)
+                with self._lock:
+                    self._handle(events)
+                    now = self.clock()
+                    if now >= next_tick:
+                        next_tick = now + tick
+                        self._execute(self.behaviour.tick(now))
+                        self._publish_diagnostics(now)
             except Exception as exc:  # a bug must not stop the robot's behaviour
                 self.node.diagnostics.increment("decision_errors")
                 self._warn.warning("decide", "decision step failed: %r", exc)
 
-    def _handle(self, events: list[Event], face: tuple[m.FacePosition, float] | None) -> None:
+    def _handle(self, events: list[Event]) -> None:
         b = self.behaviour
         for event in events:
             now = self.clock()
@@ -188,16 +194,16 @@ class Controller:
                 case _:
                     assert_never(event)
             self._execute(commands)
-        if face is not None:
-            msg, arrived = face
-            p = msg.point
-            try:
-                gaze = face_gaze(self.transform, (p.x, p.y, p.z))
-            except ValueError as exc:
-                self.node.diagnostics.increment("bad_faces")
-                self._warn.warning("face", "ignored face: %s", exc)
-                return
-            self._execute(b.face(arrived, gaze, msg.stamp_ns))
+
+    def _handle_face(self, msg: m.FacePosition, arrived: float) -> None:
+        p = msg.point
+        try:
+            gaze = face_gaze(self.transform, (p.x, p.y, p.z))
+        except ValueError as exc:
+            self.node.diagnostics.increment("bad_faces")
+            self._warn.warning("face", "ignored face: %s", exc)
+            return
+        self._execute(self.behaviour.face(arrived, gaze, msg.stamp_ns))
 
     def _execute(self, commands: list[Command]) -> None:
         for cmd in commands:

@@ -67,9 +67,11 @@ def run(ctx: ServiceContext) -> int:
             diag.increment("expressions")
             diag.values["expression"] = expression.action.name
 
-        # "latest": under a flood the driver converts only the newest gaze instead of
-        # working through a backlog (a page once got gaze seconds late).
-        node.subscribe(keys.EYE_CONTROL, on_control, delivery="latest")
+        # Inline: the conversion is two small puts (tens of microseconds), and gaze is
+        # the latency path (camera -> eyes); a worker thread cost a wake-up per frame.
+        # A flood cannot build a backlog here: a handler this fast keeps up with any
+        # rate the link delivers, and the renderer keeps only the newest gaze itself.
+        node.subscribe(keys.EYE_CONTROL, on_control, delivery="inline")
         node.subscribe(keys.EXPRESSION, on_expression, delivery="inline")
         node.log.info("eyes driver ready")
         node.spin()

@@ -201,3 +201,24 @@ def test_refine_input_px_sizes_the_crop_network() -> None:
     assert same.refiner is same.net
     _s, other = built("model = 'short'")
     assert other.refiner is not other.net and other.net.spec.input_size == 128
+
+
+def test_defer_after_ms_is_waited_before_the_deferred_work_and_only_then() -> None:
+    """`defer_after_ms` reaches `deferred_work`: with a whole-frame pass owed, the wait
+    comes first and then the pass runs; with nothing owed there is no wait at all."""
+    s, pipe = built("defer_after_ms = 7.5\nfull_every_s = 0.5\niris = false")
+    img, _ = scenes.scene(scenes.astronaut(), 1.0)
+    waits: list[float] = []
+    pipe.process(img, FRAME_NS, defer_search=True)  # first frame: searched inline
+    assert not pipe.deferred_due()
+    assert detector.deferred_work(pipe, img, FRAME_NS, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
+                                  waits.append) is None
+    assert waits == []
+    t = 20 * FRAME_NS  # past full_every_s: a pass is due, answered from the crop
+    r = pipe.process(img, t, defer_search=True)
+    assert r.tracked and pipe.deferred_due()
+    searches = pipe.searches
+    faces = detector.deferred_work(pipe, img, t, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
+                                   waits.append)
+    assert waits == [0.0075] and pipe.searches == searches + 1 and faces
+    assert not pipe.deferred_due()

@@ -72,7 +72,7 @@ def drain(controller: Controller) -> list[Any]:
     """One decision step's worth of events, handled as `_decide` does."""
     events = list(controller._inbox)
     controller._inbox.clear()
-    controller._handle(events, None)
+    controller._handle(events)
     return events
 
 
@@ -103,12 +103,11 @@ def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Cloc
     controller._post(PresenceChanged(True))
     drain(controller)
     assert expressions(node) == [A.EYE_AWAKE]
-    # A face makes the greeting; the goal's reply and status then end it.
+    # A face, decided in the callback itself, makes the greeting (and gaze at once);
+    # the goal's reply and status then end it.
     controller._on_face(m.FacePosition(stamp_ns=1, frame_id="front",
                                        point=m.Point(x=1.0, y=0.0, z=0.0), confidence=0.9), "k")
-    face = controller._face
-    controller._face = None
-    controller._handle([], face)
+    assert node.publishers["eyes/control"].sent[-1].stamp_ns == 1
     [play] = commanded(controller)
     assert isinstance(play, PlaySound) and play.sound == "greeting"
     assert expressions(node)[-1] == A.EYE_GRIN
@@ -135,4 +134,4 @@ def test_an_unknown_event_is_an_error_not_ignored(
 ) -> None:
     controller, _node, _clock = rig
     with pytest.raises(AssertionError):
-        controller._handle([("presence", (True,))], None)  # type: ignore[list-item]
+        controller._handle([("presence", (True,))])  # type: ignore[list-item]
