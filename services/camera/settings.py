@@ -131,10 +131,10 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
         description="seconds between whole-frame detections (0: every frame)")] = 0.25
     """Between whole-frame detections, follow the tracked face by re-detecting it only in
     its crop (the short-range refiner: ~1.4 ms for the whole tracked frame instead of a
-    ~4.5 ms whole-frame pass plus the refinement, on LiteRT). A crop result that no head movement could explain is
-    refused by the tracking gate and the frame searched whole. A new or larger face is
-    still noticed at the next whole-frame pass, at most this late. 0: the whole frame
-    every time. Needs `refine`."""
+    ~4.5 ms whole-frame pass plus the refinement, on LiteRT). A crop result that no
+    head movement could explain is refused by the tracking gate and the frame searched
+    whole. A new or larger face is still noticed at the next whole-frame pass, at most
+    this late. 0: the whole frame every time. Needs `refine`."""
     defer_after_ms: Annotated[float, msgspec.Meta(
         ge=0.0, le=100.0,
         description="milliseconds between publishing a face and starting the work put "
