@@ -3,5 +3,5 @@
 # no hardware is configured). Extra arguments go to `buddybot up`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-scripts/setup.sh
+scripts/setup.sh runtime  # the runtime only: no test tools
 exec .venv/bin/buddybot up "$@"

@@ -32,6 +32,7 @@ from buddybot.core import messages as m
 from buddybot.core.errors import ServiceError
 from buddybot.core.node import CallError, Node, NoReplyError, new_goal_id
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 
 RETRY_S = 0.05
@@ -80,6 +81,14 @@ class ActionServer:
         """The newest accepted goal (id, sound) not yet handed to the player."""
         self._players_changed = False
         self._closed = False
+
+    def apply_settings(self, settings: AudioSettings) -> None:
+        """A live parameter change: the busy policy decides the next goal, the
+        player timeout the next call. Sounds, the player's name and the progress
+        period are read at start (restart-only)."""
+        with self.lock:
+            self.settings = settings
+            self.book.policy = settings.busy_policy
 
     def start(self) -> None:
         node = self.node
@@ -276,6 +285,7 @@ def run(ctx: ServiceContext) -> int:
     node = ctx.node()
     server = ActionServer(node, settings, policy)
     try:
+        LiveSettings(settings, server.apply_settings).serve(node)
         server.start()
         node.log.info("play_sound action ready (sounds: %s; busy policy %s)",
                       ", ".join(sorted(server.book.sounds)), policy)

@@ -282,6 +282,15 @@ class Player:
 
     # -- control --
 
+    def apply_settings(self, settings: AudioPlayerSettings) -> None:
+        """A live parameter change (`buddybot param set audio-player volume 0.5`).
+        Decoded tracks carry the old gain, so the cache is emptied: the next
+        sound is decoded with the new settings; the one playing goes on as it
+        is. Device settings (backend, rate, channels, period) are restart-only."""
+        with self._control:
+            self.settings = settings
+            self._cache.clear()
+
     @property
     def busy(self) -> bool:
         return self._busy

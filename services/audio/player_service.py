@@ -24,6 +24,7 @@ from buddybot.core import keys, limits
 from buddybot.core import messages as m
 from buddybot.core.config import config_dir
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 
 TEXT_MAX = 1000
@@ -86,6 +87,7 @@ def run(ctx: ServiceContext) -> int:
             if opened is not None and not opened.warning:
                 diag.set("WARN", problem)
         _serve(node, player)
+        LiveSettings(settings, player.apply_settings).serve(node)
         # Last: once this is out the queryables answer (the action server does not
         # wait for it: it retries a play request that finds no queryable yet).
         free.put(m.Bool(stamp_ns=m.now_ns(), data=True))

@@ -34,13 +34,15 @@ class AudioSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
     sounds: dict[str, str] = msgspec.field(default_factory=_default_sounds)
     busy_policy: Annotated[BusyPolicy, msgspec.Meta(
+        extra={"live": True},
         description="what a goal does while another one plays")] = "preempt"
     player: Annotated[str, msgspec.Meta(
         min_length=1, max_length=64,
         description="node name of the audio player that plays the sounds")] = "audio-player"
     """Node name of the player whose liveliness says it is running."""
     player_timeout_s: Annotated[float, msgspec.Meta(
-        gt=0, le=3600.0, description="seconds a call to the player may take")] = 3.0
+        gt=0, le=3600.0, extra={"live": True},
+        description="seconds a call to the player may take")] = 3.0
     """How long a call to the player may take before the goal is aborted."""
     progress_period_s: Annotated[float, msgspec.Meta(
         gt=0, le=60.0, description="seconds between PLAYING status messages")] = 0.1
@@ -69,7 +71,9 @@ class AudioPlayerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         description="playback device name (a substring; unset: the system default)",
     )] | None = None
     volume: Annotated[float, msgspec.Meta(
-        ge=0.0, le=2.0, description="linear gain applied to the samples (1: unchanged)")] = 1.0
+        ge=0.0, le=2.0, extra={"live": True},
+        description="linear gain applied to the samples (1: unchanged; live: from the "
+        "next sound)")] = 1.0
     sample_rate: Annotated[int, msgspec.Meta(
         ge=8000, le=192000, description="device sample rate, Hz")] = 48000
     channels: Annotated[int, msgspec.Meta(
@@ -78,12 +82,14 @@ class AudioPlayerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=1, le=200, description="ms per device callback: bounds start latency and "
         "the audio buffered after a stop")] = 10
     max_duration_s: Annotated[float, msgspec.Meta(
-        gt=0, le=3600.0, description="seconds: longer sounds are refused")] = 60.0
+        gt=0, le=3600.0, extra={"live": True},
+        description="seconds: longer sounds are refused")] = 60.0
     """Longer files are refused, from their header before decoding, and a file
     whose header lies is cut off at this length while decoding (refused too):
     a decoded sound never takes more than this many seconds of memory."""
     max_file_bytes: Annotated[int, msgspec.Meta(
-        gt=0, le=2**31, description="bytes: larger files are refused unopened")] = 50_000_000
+        gt=0, le=2**31, extra={"live": True},
+        description="bytes: larger files are refused unopened")] = 50_000_000
     """Larger files are refused before they are opened (a robot sound is a
     few hundred kB; 60 s of 48 kHz stereo WAV is 11.5 MB)."""
     sound_dirs: list[str] | None = None
@@ -92,5 +98,6 @@ class AudioPlayerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     configured sound file. Paths are compared after resolving symlinks and
     `..`; anything else is refused with one text, whatever the reason."""
     cache_size: Annotated[int, msgspec.Meta(
-        ge=0, le=4096, description="decoded files kept in memory (0: none)")] = 16
+        ge=0, le=4096, extra={"live": True},
+        description="decoded files kept in memory (0: none)")] = 16
     """Decoded files kept in memory (configured sounds are decoded at start)."""

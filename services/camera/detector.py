@@ -24,6 +24,7 @@ from buddybot.camera.iris import IrisNet
 from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
+from buddybot.camera.tracking import PointSmoother
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.config import resolve_path
@@ -31,6 +32,7 @@ from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import RateLimitedLog
 from buddybot.core.overrides import given, merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 
 
@@ -146,8 +148,25 @@ def deferred_work(pipeline: FacePipeline, bgr: np.ndarray, stamp_ns: int, delay_
     return searched
 
 
+def apply_live(pipeline: FacePipeline, s: FaceDetectorSettings) -> None:
+    """Put changed live settings into a running pipeline (on the frame thread, between
+    frames). Thresholds and timings are read from `pipeline.s` on every frame; the
+    score threshold lives in the net, the switch delay in the tracker, and a new
+    smoothing filter restarts smoothing. Model, camera, intrinsics, iris and threads
+    are restart-only (settings.py marks them)."""
+    pipeline.s = s
+    net = pipeline.net
+    net.min_score = net.spec.min_score if s.min_score is None else s.min_score
+    pipeline.tracker.switch_after_s = s.switch_after_s
+    if (pipeline.smoother.min_cutoff, pipeline.smoother.beta) != (s.min_cutoff_hz, s.beta):
+        pipeline.smoother = PointSmoother(s.min_cutoff_hz, s.beta)
+
+
 def run(ctx: ServiceContext) -> int:
     settings, pipeline = build(ctx)
+    # A live change waits here for the frame thread, which applies it between frames:
+    # a frame is never processed half with the old settings, half with the new.
+    pending: list[FaceDetectorSettings] = []
     net = pipeline.net
     node = ctx.node()
     log = node.log
@@ -160,6 +179,11 @@ def run(ctx: ServiceContext) -> int:
     log.info("face detector: %s model %s on LiteRT", settings.model, net.path)
 
     def on_image(img: m.Image, _key: str) -> None:
+        nonlocal settings
+        if pending:
+            settings = pending.pop()
+            pending.clear()
+            apply_live(pipeline, settings)
         try:
             bgr = frames.decode_image(img, settings.max_pixels)
         except frames.FrameRefused as refused:
@@ -218,6 +242,7 @@ def run(ctx: ServiceContext) -> int:
                 diag.increment("debug_images")
 
     try:
+        LiveSettings(settings, pending.append).serve(node)
         node.subscribe(keys.CAMERA_IMAGE, on_image, delivery="latest", camera=settings.camera)
         diag.set("OK", f"waiting for camera/{settings.camera}/image")
         node.spin()

@@ -59,6 +59,7 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     camera: Annotated[str, msgspec.Meta(
         min_length=1, max_length=64, description="camera name whose images are read")] = "front"
     face_width_m: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         gt=0.0, le=1.0,
         description="real face width in metres: the main distance cue")] = 0.15
     """Real width of the face box on an average adult (seed: face width); calibrated for
@@ -104,29 +105,36 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     distance jitter 1.30%, 1.64%, 1.48% of the distance. 96 is what keeps the service
     path under 2 ms; 128 is the most precise."""
     min_score: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         gt=0.0, lt=1.0,
         description="detection score threshold (default: the model's own)")] | None = None
     """Detection threshold; default the model's MediaPipe value (full 0.6, short 0.5)."""
     eye_distance_m: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=0.2,
         description="inter-pupillary distance in metres: second distance cue, "
         "0 disables it")] = 0.063
     """Adult mean inter-pupillary distance: second distance cue; 0 disables it."""
     smoothing: Annotated[bool, msgspec.Meta(
+        extra={"live": True},
         description="smooth positions with a One-Euro filter (off: raw positions)")] = True
     min_cutoff_hz: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         gt=0.0, le=1000.0,
         description="One-Euro filter cut-off in Hz for a still face")] = 1.0
     """One-Euro filter: cut-off for a still face (lower = steadier, more lag)."""
     beta: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=1000.0,
         description="One-Euro filter speed coefficient, per m/s")] = 2.0
     """One-Euro filter: how fast the cut-off rises with speed (per m/s)."""
     switch_after_s: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=3600.0,
         description="seconds the followed face must be gone before another is taken")] = 0.5
     """How long the followed face must be gone before another face is taken."""
     full_every_s: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=3600.0,
         description="seconds between whole-frame detections (0: every frame)")] = 0.25
     """Between whole-frame detections, follow the tracked face by re-detecting it only in
@@ -136,6 +144,7 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     whole. A new or larger face is still noticed at the next whole-frame pass, at most
     this late. 0: the whole frame every time. Needs `refine`."""
     defer_after_ms: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=100.0,
         description="milliseconds between publishing a face and starting the work put "
         "off until then (whole-frame pass, iris)")] = 3.0
@@ -145,9 +154,11 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
     it arrive: on the whole robot (2 cores) the gaze latency's p95 fell from ~10 ms to
     ~6 ms, the median from 4.8 to 4.6 ms (benchmarks/robot.py). 0: start at once."""
     debug_jpeg_quality: Annotated[int, msgspec.Meta(
+        extra={"live": True},
         ge=1, le=100,
         description="JPEG quality of the debug image")] = 80
     max_pixels: Annotated[int, msgspec.Meta(
+        extra={"live": True},
         ge=1, le=MAX_SIDE * MAX_SIDE,
         description="largest frame accepted, pixels (width*height)")] = 3840 * 2160
     """Largest frame accepted (width*height, checked on the JPEG header before decoding).

@@ -1,3 +1,4 @@
+# PYTHON_ARGCOMPLETE_OK (argcomplete's marker: this command answers tab completion)
 """The `buddybot` command: the verbs robot people know from `ros2`.
 
     buddybot up [--sim] [--no-browser]     the whole robot on this machine
@@ -21,6 +22,9 @@ from __future__ import annotations
 # `buddybot.core.service.run_main`, which maps errors to exit statuses.
 import argparse
 import importlib
+import importlib.metadata
+import os
+import platform
 import sys
 from collections.abc import Sequence
 from types import ModuleType
@@ -30,7 +34,8 @@ from buddybot.core import registry
 from buddybot.core.errors import EXIT_USAGE
 from buddybot.core.service import add_common_arguments, run_main
 
-VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas")
+VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
+         "doctor", "param", "topics", "node")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 
@@ -38,11 +43,35 @@ def verb_module(name: str) -> ModuleType:
     return importlib.import_module(f"{__name__}.{name}")
 
 
+def version_line() -> str:
+    """`buddybot --version`: also the Python and Zenoh versions, the two a bug
+    report needs first (read from package metadata: nothing is imported)."""
+    try:
+        zenoh = importlib.metadata.version("eclipse-zenoh")
+    except importlib.metadata.PackageNotFoundError:
+        zenoh = "not installed"
+    return f"buddybot {__version__} (Python {platform.python_version()}, eclipse-zenoh {zenoh})"
+
+
+def complete() -> None:
+    """Answer a shell's tab-completion request, if this run is one, and exit.
+
+    argcomplete's protocol: the shell hook (`eval "$(register-python-argcomplete
+    buddybot)"`) runs the command with `_ARGCOMPLETE` and `COMP_LINE` set.
+    The parser is built and argcomplete imported only then, so ordinary runs
+    (and the tools, which skip the parser) start no slower."""
+    if "_ARGCOMPLETE" not in os.environ:
+        return
+    import argcomplete
+
+    argcomplete.autocomplete(build_parser())
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="buddybot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--version", action="version", version=f"buddybot {__version__}")
+    parser.add_argument("--version", action="version", version=version_line())
     verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
     for name in VERBS:
         module = verb_module(name)
@@ -80,6 +109,7 @@ def _extension(entry: registry.Entry, prog: str, argv: list[str]) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    complete()  # first: a completion request comes with no argv
     argv = list(sys.argv[1:] if argv is None else argv)
     tool = next((t for t in registry.TOOLS if argv and argv[0] == t.name), None)
     if tool is not None:

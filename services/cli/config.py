@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from typing import Any
 
 from buddybot.core.config import to_toml_dict
@@ -12,7 +13,9 @@ HELP = "print the effective configuration"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """Only the common options (`--config`, `--robot`, `--connect`) apply."""
+    """The common options (`--config`, `--robot`, `--connect`), and `--json`."""
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON document instead of TOML (unset keys are null)")
 
 
 def main(ctx: ServiceContext) -> int:
@@ -21,6 +24,9 @@ def main(ctx: ServiceContext) -> int:
     data = to_toml_dict(ctx.config)
     data["robot"]["id"] = ctx.robot  # type: ignore[index]
     data["zenoh"]["connect"] = ctx.connect  # type: ignore[index]
+    if ctx.args.json:
+        print(json.dumps(data, indent=2))
+        return 0
     print(tomli_w.dumps(_drop_none(data)), end="")
     return 0
 

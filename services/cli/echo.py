@@ -19,16 +19,22 @@ HELP = "print decoded messages on KEY"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key (prefix buddybot/<robot>/ optional; wildcards allowed)")
     parser.add_argument("--count", "-n", type=int, default=0, help="exit after N messages")
-    parser.add_argument("--timeout", type=float, default=None,
-                        help="exit after this many seconds")
+    tools.add_timeout_argument(parser, None, "exit after S seconds; exit 1 if nothing arrived")
     parser.add_argument("--show-key", action="store_true",
                         help="print the key before each message")
+    parser.add_argument("--raw", action="store_true",
+                        help="enum fields as numbers (as on the wire), not names")
 
 
 def main(ctx: ServiceContext) -> int:
-    """Print every message on KEY, decoded; latched values arrive at once."""
+    """Print every message on KEY, decoded; latched values arrive at once.
+
+    Exit 1 when nothing (or fewer than --count) arrived within --timeout,
+    saying whether anything could match the key at all.
+    """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
+    end = tools.deadline(args.timeout)
     count = 0
     done = threading.Event()
     closed = threading.Event()
@@ -36,7 +42,7 @@ def main(ctx: ServiceContext) -> int:
 
     def on_sample(sample_key: str, payload: bytes, _encoding: str) -> None:
         nonlocal count
-        text = describe(sample_key, payload)
+        text = describe(sample_key, payload, names=not args.raw)
         with lock:
             if done.is_set():
                 return
@@ -51,15 +57,31 @@ def main(ctx: ServiceContext) -> int:
             if args.count and count >= args.count:
                 done.set()
 
-    with tools.probe(ctx) as node:
+    why = ""
+    stopped = False  # Ctrl-C (closing the node sets ctx.stop too: look before)
+    with tools.probe(ctx, args.timeout) as node:
         node.subscribe_raw(key, on_sample, history=tools.is_latched(key) or "*" in key)
-        end = tools.deadline(args.timeout)
+        hint_at = time.monotonic() + tools.CONNECT_TIMEOUT_S
         while not done.is_set() and not ctx.stop.is_set() and time.monotonic() < end:
             done.wait(0.1)
+            if args.timeout is None and count == 0 and time.monotonic() > hint_at:
+                hint_at = float("inf")  # running until stopped: say it once, keep waiting
+                print(f"buddybot echo: nothing yet: {tools.silence_reason(node, key)}",
+                      file=sys.stderr, flush=True)
+        stopped = ctx.stop.is_set()
+        if count == 0 and not closed.is_set() and not stopped:
+            why = tools.silence_reason(node, key)
     if closed.is_set():
         with contextlib.suppress(OSError):  # no traceback at exit for the closed stdout
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115
         return 0
+    if stopped:
+        return 0
+    if count == 0:
+        got = f"got 0 of {args.count} messages: " if args.count else ""
+        print(f"buddybot echo: {got}nothing received on {key} within {args.timeout:g} s: "
+              f"{why}", file=sys.stderr)
+        return 1
     if args.count and count < args.count:
         print(f"buddybot echo: got {count} of {args.count} messages", file=sys.stderr)
         return 1

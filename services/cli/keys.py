@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 
 from buddybot.core import keys
 from buddybot.core.service import ServiceContext
@@ -12,10 +13,14 @@ USES_CONFIG = False
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """No options of its own."""
+    parser.add_argument("--json", action="store_true",
+                        help="one JSON document (the rows of schemas/keys.json)")
 
 
 def main(ctx: ServiceContext) -> int:
+    if ctx.args.json:
+        print(json.dumps(keys.key_table()))
+        return 0
     for row in keys.key_table():
         kind = row["kind"]
         what = row.get("type") or (f"{row.get('request')} -> {row.get('reply')}"

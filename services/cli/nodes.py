@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 
 from buddybot.core import tools
 from buddybot.core.service import ServiceContext
@@ -12,16 +14,37 @@ HELP = "list live nodes (liveliness tokens)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-robots", action="store_true", help="every robot on the router")
-    parser.add_argument("--timeout", type=float, default=2.0)
+    tools.add_timeout_argument(parser, tools.CONNECT_TIMEOUT_S,
+                               "connection and liveliness query together")
+    parser.add_argument("--json", action="store_true",
+                        help='one JSON document: {"robot": ..., "nodes": {name: [instances]}}')
 
 
 def main(ctx: ServiceContext) -> int:
-    with tools.probe(ctx) as node:
-        found = node.node_instances(all_robots=ctx.args.all_robots, timeout=ctx.args.timeout)
-    for name in sorted(found):
-        instances = sorted(found[name])
-        if len(instances) > 1:
-            print(f"{name}  DUPLICATE: {len(instances)} instances ({', '.join(instances)})")
-        else:
-            print(name)
+    """List live nodes; --timeout covers connecting and the liveliness query.
+
+    None at all exits 1 with a line on stderr (a wrong --robot, nothing
+    started, or the router's access control hiding them), so a script can
+    ask "is the robot up?" by the status alone.
+    """
+    args = ctx.args
+    end = tools.deadline(args.timeout)
+    with tools.probe(ctx, args.timeout) as node:
+        found = node.node_instances(all_robots=args.all_robots, timeout=tools.left(end))
+    if args.json:
+        print(json.dumps({"robot": "*" if args.all_robots else ctx.robot,
+                          "nodes": {name: sorted(found[name]) for name in sorted(found)}}))
+    else:
+        for name in sorted(found):
+            instances = sorted(found[name])
+            if len(instances) > 1:
+                print(f"{name}  DUPLICATE: {len(instances)} instances ({', '.join(instances)})")
+            else:
+                print(name)
+    if not found:
+        whose = "any robot" if args.all_robots else f"robot {ctx.robot!r}"
+        print(f"buddybot nodes: no live node of {whose} on {', '.join(ctx.connect)} "
+              "(nothing started, a wrong --robot, or the router's access control hides them)",
+              file=sys.stderr)
+        return 1
     return 0

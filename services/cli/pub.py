@@ -18,16 +18,23 @@ HELP = "validate and publish one message on KEY"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key")
-    parser.add_argument("message", help="JSON object; stamp_ns defaults to now")
+    parser.add_argument("message", help="JSON object; stamp_ns defaults to now; enum fields "
+                        'take names or numbers ({"action": "EYE_SLEEP"})')
     parser.add_argument("--rate", type=float, default=0.0, help="repeat at this rate (Hz)")
     parser.add_argument("--times", type=int, default=0,
                         help="with --rate: stop after N messages")
     parser.add_argument("--wait", type=float, default=2.0,
-                        help="seconds to wait for a subscriber before the first put")
+                        help="seconds to wait for a subscriber before the first put "
+                             "(none by then: a warning, and the message goes nowhere)")
+    tools.add_timeout_argument(parser, tools.CONNECT_TIMEOUT_S, "the connection")
 
 
 def main(ctx: ServiceContext) -> int:
-    """Validate a message against KEY's type, then publish it (once, or at --rate)."""
+    """Validate a message against KEY's type, then publish it (once, or at --rate).
+
+    No subscriber matching KEY after --wait: a warning on stderr (a latched
+    key still keeps the value for later subscribers), exit status 0.
+    """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
     entry = tools.catalogue_entry(key)
@@ -37,9 +44,12 @@ def main(ctx: ServiceContext) -> int:
         raise UsageError(f"{args.key}: cannot publish on a wildcard key")
     msg = tools.parse_message(entry.type, args.message)
     sent = 0
-    with tools.probe(ctx) as node, node.raw_publisher(key, entry.encoding) as publisher:
+    with tools.probe(ctx, args.timeout) as node, \
+            node.raw_publisher(key, entry.encoding) as publisher:
         # Give discovery a moment so the first put reaches existing subscribers.
-        publisher.wait_for_subscribers(args.wait, ctx.stop)
+        if not publisher.wait_for_subscribers(args.wait, ctx.stop) and not ctx.stop.is_set():
+            print(f"buddybot pub: warning: no subscriber matches {key} "
+                  f"(waited {args.wait:g} s): nobody receives this", file=sys.stderr, flush=True)
         while not ctx.stop.is_set():
             if hasattr(msg, "stamp_ns") and args.rate and "stamp_ns" not in args.message:
                 msg = msgspec.structs.replace(msg, stamp_ns=m.now_ns())

@@ -10,13 +10,39 @@ from buddybot.core.service import ServiceContext
 HELP = "run the whole robot: router on loopback + every service"
 
 
+def port_number(text: str) -> int:
+    """A TCP port for argparse: 1-65535, else a one-line usage error (exit 2)."""
+    try:
+        port = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a port number: {text!r}") from None
+    if not 1 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"port must be 1-65535, got {port}")
+    return port
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
+    for action in parser._actions:  # the common --connect means something more here
+        if "--connect" in action.option_strings:
+            action.help = ("join the router at ENDPOINT (repeatable) instead of starting "
+                           "one; nothing starts if none answers there")
     parser.add_argument("--sim", action="store_true", help="simulated radar and camera")
     parser.add_argument("--no-browser", action="store_true", help="serve the eye pages only")
     parser.add_argument("--listen", action="append", metavar="ENDPOINT",
-                        help=f"where the router listens (default {DEFAULT_ENDPOINT})")
+                        help="where the router listens (default: the config's [zenoh] connect "
+                        f"endpoint when it is on loopback, else {DEFAULT_ENDPOINT}); the "
+                        "router and every service use the config's [zenoh] config_file "
+                        "(TLS). A port already in use is refused: nothing starts")
     parser.add_argument("--only", action="append", metavar="SERVICE",
-                        help="start only these services (repeatable)")
+                        help="start only these services (repeatable; an unknown name is an "
+                        "error)")
+    parser.add_argument("--eye-port", type=port_number, metavar="PORT",
+                        help="HTTP port of the eye pages (eye-renderer --port; default "
+                        "[eye_renderer] port)")
+    parser.add_argument("--dashboard-port", type=port_number, metavar="PORT",
+                        help="HTTP port of the dashboard, passed to a service named "
+                        "'dashboard' when one is registered (none is yet: the option is "
+                        "checked and otherwise unused)")
     parser.add_argument("--status-period", type=float, default=5.0, metavar="S",
                         help="print a status line every S seconds (0: never)")
 

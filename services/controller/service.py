@@ -53,6 +53,7 @@ from buddybot.core import messages as m
 from buddybot.core.errors import ConfigError
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
@@ -104,6 +105,15 @@ class Controller:
         self._last_diag = 0.0
 
     # -- lifetime --
+
+    def apply_settings(self, settings: ControllerSettings) -> None:
+        """A live parameter change (`buddybot param set controller ...`): the
+        behaviour reads `self.s` on every decision, so the next one uses it.
+        Fields read once at start (camera, transform, tick, call timeout,
+        recovery) are restart-only in settings.py."""
+        with self._lock:
+            self.settings = settings
+            self.behaviour.s = settings
 
     def start(self) -> None:
         node = self.node
@@ -280,6 +290,7 @@ def run(ctx: ServiceContext) -> int:
     controller: Controller | None = None
     try:
         controller = Controller(node, settings)
+        LiveSettings(settings, controller.apply_settings).serve(node)
         controller.start()
         node.spin()
     finally:

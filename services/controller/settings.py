@@ -16,12 +16,20 @@ from typing import Annotated
 
 import msgspec
 
+LIVE = {"live": True}
+"""`msgspec.Meta(extra=LIVE)`: `buddybot param set controller ...` applies the field at
+once (the behaviour reads its settings on every decision); unmarked fields are read
+once at start and need a restart."""
 
-def _s(description: str, *, positive: bool = False) -> msgspec.Meta:
-    """A timing's range (0..1 h, or >0 when 0 would never end) and its description."""
+
+def _s(description: str, *, positive: bool = False, live: bool = True) -> msgspec.Meta:
+    """A timing's range (0..1 h, or >0 when 0 would never end) and its description;
+    timings are live unless `live=False`."""
+    extra = LIVE if live else None
     if positive:
-        return msgspec.Meta(gt=0.0, le=3600.0, description=f"seconds: {description}")
-    return msgspec.Meta(ge=0.0, le=3600.0, description=f"seconds: {description}")
+        return msgspec.Meta(gt=0.0, le=3600.0, description=f"seconds: {description}",
+                            extra=extra)
+    return msgspec.Meta(ge=0.0, le=3600.0, description=f"seconds: {description}", extra=extra)
 
 
 Metres = Annotated[float, msgspec.Meta(
@@ -76,12 +84,12 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     camera: Annotated[str, msgspec.Meta(
         min_length=1, max_length=64, description="camera whose faces the eyes follow")] = "front"
     camera_to_eyes: CameraToEyes = msgspec.field(default_factory=CameraToEyes)
-    greeting_sound: Annotated[str, msgspec.Meta(min_length=1)] = "greeting"
-    farewell_sound: Annotated[str, msgspec.Meta(min_length=1)] = "farewell"
+    greeting_sound: Annotated[str, msgspec.Meta(min_length=1, extra=LIVE)] = "greeting"
+    farewell_sound: Annotated[str, msgspec.Meta(min_length=1, extra=LIVE)] = "farewell"
     centre_distance_cm: Annotated[float, msgspec.Meta(
-        ge=0.0, le=10000.0,
+        ge=0.0, le=10000.0, extra=LIVE,
         description="cm: gaze distance sent when the eyes return to centre")] = 100.0
-    look_around: bool = True
+    look_around: Annotated[bool, msgspec.Meta(extra=LIVE)] = True
     absence_hold_s: Annotated[float, _s("radar absence lasts this long before the visitor "
                                         "is gone (a dropout is no farewell)")] = 0.5
     face_timeout_s: Annotated[float, _s("a face older than this is not seen")] = 0.5
@@ -97,8 +105,8 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
                                          "this (a dead audio service cannot block)",
                                          positive=True)] = 30.0
     recover_s: Annotated[float, _s("listen to latched topics this long after start before "
-                                   "deciding (no repeated greeting)")] = 0.5
+                                   "deciding (no repeated greeting)", live=False)] = 0.5
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the decision loop's timers")] = 0.05
     call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",
-                                        positive=True)] = 3.0
+                                        positive=True, live=False)] = 3.0

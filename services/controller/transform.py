@@ -10,7 +10,7 @@ about the *fixed* axes, i.e. R = Rz(yaw) @ Ry(pitch) @ Rx(roll). The
 transform maps a point given in the camera frame into the eyes frame:
 `p_eyes = R @ p_cam + t`, with `t` the camera origin in the eyes frame.
 
-Gaze, as the seed and DESIGN.md section 3 define it: `yaw = atan2(y, x)`
+Gaze, as the seed and docs/design.md section 4.4 define it: `yaw = atan2(y, x)`
 (+ = the robot's left), `pitch = atan2(z, hypot(x, y))` (+ = up), and the
 Euclidean distance in centimetres.
 """

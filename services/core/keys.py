@@ -1,4 +1,4 @@
-"""The key catalogue: every key expression of DESIGN.md section 2, once.
+"""The key catalogue: every key expression (docs/design.md section 2), once.
 
 Each entry binds a key pattern (relative to `buddybot/<robot>/`) to its
 message type, wire codec, QoS preset and whether it is latched. The node
@@ -274,13 +274,22 @@ NODES = _Entry(
 DIAGNOSTICS = Topic(
     "diagnostics/{node}", "health of each node", type=m.DiagnosticStatus, qos=BACKGROUND,
 )
+PARAMS = Service(
+    "params/{node}", "a node's live settings: list, get, set (set refuses restart-only fields)",
+    request=m.ParamRequest, reply=m.ParamReply,
+)
+NODE_INFO = Service(
+    "node_info/{node}", "what a node declared: publishers, subscriptions, services",
+    request=m.Trigger, reply=m.NodeInfo,
+)
 
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
     EYES_DIRECTION, PUPIL, LIDS, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
-    PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME,
+    PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS,
+    NODE_INFO,
 )
 
 

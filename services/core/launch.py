@@ -10,7 +10,15 @@ its children, so each child asks the kernel for SIGTERM when its parent dies
 (`die_with_supervisor`, PR_SET_PDEATHSIG); without it the router and the nine
 services lived on as orphans. And a second `up` on a port where a robot
 already runs refuses to start instead of joining it (two robots on one bus,
-with a status line counting the other robot's nodes as its own).
+with a status line counting the other robot's nodes as its own). Our router is
+ready only when it says so itself (sd_notify READY=1 on a socket of ours), so a
+port taken between the check and the bind stops `up` instead of being joined,
+and so does a port taken while the router restarts.
+
+The options are validated into an `UpPlan` before anything starts: an unknown
+`--only` name is a usage error (exit 2), `--connect` joins a running router
+instead of starting one, `[zenoh] config_file` (the TLS profile) is handed to
+the router and to every child.
 """
 
 from __future__ import annotations
@@ -31,6 +39,8 @@ from typing import IO
 
 from buddybot.core import registry
 from buddybot.core.backoff import Backoff
+from buddybot.core.config import DEFAULT_ENDPOINT
+from buddybot.core.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
 from buddybot.core.node import Node, zenoh_config
 from buddybot.core.service import ServiceContext
 from buddybot.core.status import StatusMonitor
@@ -138,20 +148,11 @@ def accepting(endpoint: str) -> bool:
         return False
 
 
-def wait_for_port(endpoint: str, timeout: float, stop: threading.Event) -> bool:
-    """True once a TCP endpoint accepts connections."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end and not stop.is_set():
-        if accepting(endpoint):
-            return True
-        time.sleep(0.1)
-    return False
-
-
-def probe_nodes(endpoint: str, timeout_s: float = 3.0) -> list[str] | None:
+def probe_nodes(endpoint: str, timeout_s: float = 3.0, zenoh_file: str | None = None
+                ) -> list[str] | None:
     """Live BuddyBot nodes (`robot/node`) behind a Zenoh router at `endpoint`,
-    or None when no Zenoh router answers there."""
-    config = zenoh_config(connect=[endpoint])
+    or None when no Zenoh router answers there (`zenoh_file`: TLS settings)."""
+    config = zenoh_config(connect=[endpoint], base_file=zenoh_file)
     config.insert_json5("connect/timeout_ms", str(int(timeout_s * 1000)))
     try:
         # A probe: it must not show up in the very list it asks for.
@@ -187,6 +188,10 @@ class Child:
     next_start: float = 0.0
     restarts: int = 0
     threads: list[threading.Thread] = field(default_factory=list)
+    notify: bool = False
+    """Give the child its own sd_notify socket: `ready` is set when it says READY=1
+    (the router does once its listening socket is bound), whatever its log level."""
+    ready: threading.Event = field(default_factory=threading.Event)
 
     def start(self, out: IO[str], lock: threading.Lock) -> None:
         # The child's PR_SET_PDEATHSIG watches the thread that forks it: only the
@@ -194,6 +199,13 @@ class Child:
         if threading.current_thread() is not threading.main_thread():
             raise RuntimeError("children of `up` must be started from its main thread")
         env = child_env(os.environ, os.getpid())
+        self.ready.clear()
+        listener = None
+        if self.notify:
+            listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM | socket.SOCK_CLOEXEC)
+            name = f"buddybot-up-{os.getpid()}-{self.name}-{self.restarts}-{time.monotonic_ns()}"
+            listener.bind(b"\0" + name.encode())
+            env["NOTIFY_SOCKET"] = "@" + name
         self.proc = subprocess.Popen(
             self.argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env=env, start_new_session=True,
@@ -204,6 +216,11 @@ class Child:
         )
         thread.start()
         self.threads = [thread]
+        if listener is not None:
+            waiter = threading.Thread(target=_await_ready, args=(listener, self.proc, self.ready),
+                                      daemon=True)
+            waiter.start()
+            self.threads.append(waiter)
 
     def alive(self) -> bool:
         return self.proc is not None and self.proc.poll() is None
@@ -225,11 +242,101 @@ def _pump(name: str, proc: subprocess.Popen[bytes], out: IO[str], lock: threadin
             out.flush()
 
 
-def service_argv(name: str, ctx: ServiceContext, connect: str) -> list[str]:
+def _await_ready(listener: socket.socket, proc: subprocess.Popen[bytes],
+                 ready: threading.Event) -> None:
+    """Set `ready` when the child sends READY=1 on its sd_notify socket (see Child.notify);
+    the socket is closed once it did, or once the child is gone."""
+    listener.settimeout(0.2)
+    with listener:
+        while proc.poll() is None:
+            try:
+                data = listener.recv(4096)
+            except TimeoutError:
+                continue
+            except OSError:
+                return
+            if b"READY=1" in data.split(b"\n"):
+                ready.set()
+                return
+
+
+@dataclass
+class UpPlan:
+    """What `up` will do, decided (and validated) before anything starts."""
+
+    entries: list[registry.Entry]
+    listen: list[str]
+    """Where our router listens; empty when joining a router (`--connect`)."""
+    connect: list[str]
+    """Where the services connect."""
+    zenoh_file: str | None = None
+    """The Zenoh file of `[zenoh] config_file` (TLS): the router's and every child's."""
+    service_args: dict[str, list[str]] = field(default_factory=dict)
+    """Extra options per service (`--eye-port` -> eye-renderer's `--port`)."""
+
+    @property
+    def joins(self) -> bool:
+        return not self.listen
+
+
+def _is_loopback(endpoint: str) -> bool:
+    host = endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
+    return host in ("127.0.0.1", "localhost", "::1")
+
+
+def select_services(only: list[str] | None, known: list[registry.Entry],
+                    installed: list[registry.Entry]) -> list[registry.Entry]:
+    """The services `--only` names (all installed ones without it).
+
+    An unknown name is a UsageError naming it and the valid names: a typo such
+    as `--only camra` must not start nothing and say nothing.
+    """
+    if not only:
+        return installed
+    names = [e.name for e in known]
+    unknown = [n for n in only if n not in names]
+    if unknown:
+        raise UsageError(f"--only: unknown service {', '.join(map(repr, unknown))} "
+                         f"(valid: {', '.join(names)})")
+    missing = [n for n in only if n not in {e.name for e in installed}]
+    if missing:
+        raise UsageError(f"--only: {', '.join(missing)} is not installed here")
+    return [e for e in installed if e.name in only]
+
+
+def plan_up(ctx: ServiceContext) -> UpPlan:
+    """Validate the options of `up` into a plan (UsageError: exit 2, nothing started)."""
+    args = ctx.args
+    entries = select_services(getattr(args, "only", None), list(registry.SERVICES),
+                              registry.available_services())
+    joined = getattr(args, "connect", None)
+    if joined and args.listen:
+        raise UsageError("--connect joins a running router, --listen starts one: not both")
+    if joined:
+        listen: list[str] = []
+        connect = list(joined)
+    else:
+        configured = ctx.config.zenoh.connect
+        default = configured[0] if configured and _is_loopback(configured[0]) \
+            else DEFAULT_ENDPOINT
+        listen = list(args.listen or [default])
+        connect = [connect_endpoint(listen[0])]
+    extra: dict[str, list[str]] = {}
+    if getattr(args, "eye_port", None) is not None:
+        extra["eye-renderer"] = ["--port", str(args.eye_port)]
+    if getattr(args, "dashboard_port", None) is not None and registry.service("dashboard"):
+        extra["dashboard"] = ["--port", str(args.dashboard_port)]
+    return UpPlan(entries, listen, connect, ctx.config.zenoh.config_file, extra)
+
+
+def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
+                 extra: list[str] | None = None) -> list[str]:
     """Command line of one service under `up`: sim flags when no hardware is set."""
     args = ctx.args
-    argv = [sys.executable, "-m", "buddybot", "run", name, "--connect", connect,
-            "--robot", ctx.robot, "--log-level", args.log_level]
+    argv = [sys.executable, "-m", "buddybot", "run", name]
+    for endpoint in [connect] if isinstance(connect, str) else connect:
+        argv += ["--connect", endpoint]
+    argv += ["--robot", ctx.robot, "--log-level", args.log_level]
     if args.config:
         argv += ["--config", args.config]
     sim = args.sim
@@ -239,53 +346,130 @@ def service_argv(name: str, ctx: ServiceContext, connect: str) -> list[str]:
         argv.append("--sim")
     if name == "eye-renderer" and args.no_browser:
         argv.append("--no-browser")
+    return argv + list(extra or [])
+
+
+def router_argv(ctx: ServiceContext, plan: UpPlan) -> list[str]:
+    argv = [sys.executable, "-m", "buddybot", "router", "--log-level", ctx.args.log_level]
+    if ctx.args.config:
+        argv += ["--config", ctx.args.config]
+    for endpoint in plan.listen:
+        argv += ["--listen", endpoint]
+    if plan.zenoh_file:
+        argv += ["--zenoh-config", plan.zenoh_file]
     return argv
+
+
+def _say(text: str) -> None:
+    print(text, file=sys.stderr, flush=True)
+
+
+def _busy(listen: list[str], zenoh_file: str | None) -> str | None:
+    """The refusal line if any of our router's ports is taken, else None."""
+    for endpoint in listen:
+        local = connect_endpoint(endpoint)
+        if local.startswith(("tcp/", "tls/")) and accepting(local):
+            return busy_message(endpoint, probe_nodes(local, zenoh_file=zenoh_file))
+    return None
+
+
+def _quick_doctor(ctx: ServiceContext, plan: UpPlan) -> None:
+    """The quick doctor's one-line summary (its port check is `_busy`'s job)."""
+    from buddybot.core import doctor
+
+    opts = doctor.Options(sim=ctx.args.sim, endpoint=plan.connect[0], robot=ctx.robot,
+                          zenoh_file=plan.zenoh_file)
+    try:
+        checks = doctor.quick_checks(ctx.config, None, opts, port=False)
+    except Exception as exc:  # a check that breaks must not stop the robot
+        log.warning("doctor: could not run the quick checks: %r", exc)
+        return
+    line = doctor.summary(checks)
+    if doctor.exit_code(checks):
+        log.warning("%s (`buddybot doctor --quick` for details)", line)
+    else:
+        log.info("%s", line)
+
+
+def _start_router(router: Child, plan: UpPlan, out: IO[str], lock: threading.Lock,
+                  stop: threading.Event, timeout: float = 15.0) -> int | None:
+    """Start our router and wait until *it* listens; an exit status on failure.
+
+    Ready means our router said so (sd_notify READY=1, sent once its listening
+    socket is bound), not "something accepts on the port": another program that
+    took the port meanwhile must not be joined."""
+    router.start(out, lock)
+    end = time.monotonic() + timeout
+    while not router.ready.wait(0.1):
+        if stop.is_set():
+            return 0
+        if not router.alive():
+            assert router.proc is not None
+            code = router.proc.returncode
+            busy = _busy(plan.listen, plan.zenoh_file)  # someone took the port meanwhile?
+            _say(busy or f"buddybot up: the router exited with status {code} before "
+                 f"listening on {', '.join(plan.listen)} (its output is above). "
+                 "Nothing started.")
+            return EXIT_USAGE if code == EXIT_USAGE else EXIT_FAILURE
+        if time.monotonic() > end:
+            _say(f"buddybot up: the router did not listen on {', '.join(plan.listen)} "
+                 f"within {timeout:.0f} s. Nothing started.")
+            return EXIT_FAILURE
+    return None
 
 
 def up(ctx: ServiceContext) -> int:
     """Run the whole robot on this machine until Ctrl-C."""
     args = ctx.args
-    listen = args.listen or ["tcp/127.0.0.1:7447"]
-    connect = connect_endpoint(listen[0])
+    plan = plan_up(ctx)
     out, lock = sys.stdout, threading.Lock()
-    router_argv = [sys.executable, "-m", "buddybot", "router", "--log-level", args.log_level]
-    for endpoint in listen:
-        router_argv += ["--listen", endpoint]
-    router = Child("router", router_argv)
+    _quick_doctor(ctx, plan)
+    if plan.joins:
+        reachable = [e for e in plan.connect if not e.startswith(("tcp/", "tls/"))
+                     or accepting(e)]
+        if not reachable:
+            _say(f"buddybot up: no router answers at {', '.join(plan.connect)} "
+                 "(--connect joins a running router). Nothing started.")
+            return EXIT_FAILURE
+    else:
+        busy = _busy(plan.listen, plan.zenoh_file)
+        if busy:
+            _say(busy)
+            return EXIT_FAILURE
+    router: Child | None = None
+    if not plan.joins:
+        router = Child("router", router_argv(ctx, plan), notify=True)
     children: list[Child] = []
-    entries = registry.available_services()
-    if args.only:
-        entries = [e for e in entries if e.name in args.only]
-    for endpoint in listen:
-        local = connect_endpoint(endpoint)
-        if local.startswith(("tcp/", "tls/")) and accepting(local):
-            print(busy_message(endpoint, probe_nodes(local)), file=sys.stderr, flush=True)
-            return 1
-    log.info("starting router on %s and %d services: %s", ", ".join(listen), len(entries),
-             ", ".join(e.name for e in entries))
-    router.start(out, lock)
+    where = f"joining the router at {', '.join(plan.connect)}" if router is None \
+        else f"starting router on {', '.join(plan.listen)}"
+    log.info("%s and %d services: %s", where, len(plan.entries),
+             ", ".join(e.name for e in plan.entries))
     try:
-        if not wait_for_port(connect, 15.0, ctx.stop):
-            log.error("router did not come up on %s", connect)
-            return 1
-        for entry in entries:
-            child = Child(entry.name, service_argv(entry.name, ctx, connect))
+        if router is not None:
+            failed = _start_router(router, plan, out, lock, ctx.stop)
+            if failed is not None:
+                return failed
+        for entry in plan.entries:
+            child = Child(entry.name, service_argv(entry.name, ctx, plan.connect,
+                                                   plan.service_args.get(entry.name)))
             child.start(out, lock)
             children.append(child)
-        if any(e.name == "eye-renderer" for e in entries):
-            port = ctx.config.eye_renderer.port
+        if any(e.name == "eye-renderer" for e in plan.entries):
+            port = getattr(args, "eye_port", None) or ctx.config.eye_renderer.port
             log.info("eyes: http://127.0.0.1:%d/eyes?eye=both", port)
-        monitor = _monitor(ctx, connect, [e.name for e in entries])
+        monitor = _monitor(ctx, plan, [e.name for e in plan.entries])
         try:
-            _supervise([router, *children], ctx.stop, out, lock, monitor, args.status_period)
+            status = _supervise(router, children, ctx.stop, out, lock, monitor,
+                                args.status_period, plan)
         finally:
             if monitor is not None:
                 monitor.close()
                 monitor.session_close()
     finally:
         _stop_all(children)  # services first, so they leave while the router is up
-        _stop_all([router])
-    return 0
+        if router is not None:
+            _stop_all([router])
+    return status
 
 
 class _Monitor(StatusMonitor):
@@ -296,7 +480,7 @@ class _Monitor(StatusMonitor):
         self.node.close()
 
 
-def _monitor(ctx: ServiceContext, connect: str, expected: list[str]) -> _Monitor | None:
+def _monitor(ctx: ServiceContext, plan: UpPlan, expected: list[str]) -> _Monitor | None:
     """A status probe on our own router; None if it cannot be had (status is optional).
 
     The probe shares `ctx.stop`, so Ctrl-C still interrupts its wait for the
@@ -304,8 +488,8 @@ def _monitor(ctx: ServiceContext, connect: str, expected: list[str]) -> _Monitor
     if ctx.args.status_period <= 0:
         return None
     try:
-        node = Node("up-status", robot=ctx.robot, connect=[connect], stop_event=ctx.stop,
-                    probe=True)
+        node = Node("up-status", robot=ctx.robot, connect=plan.connect,
+                    zenoh_config_file=plan.zenoh_file, stop_event=ctx.stop, probe=True)
     except ConnectionError as exc:
         log.warning("no status line: %s", exc)
         return None
@@ -314,18 +498,29 @@ def _monitor(ctx: ServiceContext, connect: str, expected: list[str]) -> _Monitor
     return _Monitor(node, expected)
 
 
-def _supervise(children: list[Child], stop: threading.Event, out: IO[str],
-               lock: threading.Lock, monitor: _Monitor | None, period: float) -> None:
+def _supervise(router: Child | None, children: list[Child], stop: threading.Event,
+               out: IO[str], lock: threading.Lock, monitor: _Monitor | None, period: float,
+               plan: UpPlan) -> int:
+    """Restart what dies until `stop`; the exit status of `up`.
+
+    A service that exits with a final status (2) is reported once and left down;
+    the others keep running, and the status line counts it as down. The router is
+    different: without it nothing works, so if it cannot come back (its port taken
+    by another program, or a final status) `up` stops everything.
+    """
+    everyone = ([router] if router is not None else []) + children
     next_status = time.monotonic() + period
     while not stop.wait(0.2):
         now = time.monotonic()
         if monitor is not None and now >= next_status:
             next_status = now + period
-            line = monitor.line(sum(c.restarts for c in children))
+            given_up = {c.name: c.proc.returncode for c in children
+                        if c.given_up and c.proc is not None}
+            line = monitor.line(sum(c.restarts for c in everyone), given_up)
             with lock:
                 out.write(f"[{'status':<14}] {line}\n")
                 out.flush()
-        for child in children:
+        for child in everyone:
             if child.proc is None or child.given_up or child.alive():
                 continue
             if child.next_start == 0.0:
@@ -333,6 +528,10 @@ def _supervise(children: list[Child], stop: threading.Event, out: IO[str],
                 delay = child.policy.after_exit(code, now - child.started)
                 if delay is None:
                     child.given_up = True
+                    if child is router:
+                        _say(f"buddybot up: the router exited with status {code} (bad "
+                             "Zenoh config?): stopping everything")
+                        return EXIT_FAILURE
                     log.error("%s exited with status %s (bad option or config, or a node of "
                               "that name already runs): not restarting it; the others keep "
                               "running", child.name, code)
@@ -341,10 +540,16 @@ def _supervise(children: list[Child], stop: threading.Event, out: IO[str],
                 log.warning("%s exited with status %s; restarting in %.0f s",
                             child.name, code, delay)
             elif now >= child.next_start:
+                if child is router:
+                    busy = _busy(plan.listen, plan.zenoh_file)
+                    if busy:  # another program took our port: never join it
+                        _say(busy.replace("Nothing started.", "Stopping everything."))
+                        return EXIT_FAILURE
                 child.restarts += 1
                 child.next_start = 0.0
                 log.info("restarting %s (restart %d)", child.name, child.restarts)
                 child.start(out, lock)
+    return 0
 
 
 def _stop_all(children: list[Child]) -> None:

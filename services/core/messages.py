@@ -1,4 +1,4 @@
-"""The message contract of DESIGN.md section 2, as msgspec types.
+"""The message contract (docs/design.md section 3), as msgspec types.
 
 These structs are the single source of truth: the key catalogue
 (`keys.py`) binds them to key expressions, `schemas/` is generated from
@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import enum
 import time
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import msgspec
 
@@ -277,6 +277,71 @@ class ErrorReply(Message):
     error: Text
 
 
+
+# --- parameters and introspection (`buddybot param`, `buddybot node info`) ---
+
+ParamName = Annotated[str, msgspec.Meta(max_length=256, description="a settings field")]
+KeyText = Annotated[str, msgspec.Meta(max_length=1024, description="a key expression")]
+
+
+class ParamRequest(Message):
+    """A request to a node's `params/<node>` service.
+
+    `list`: every field; `get`: the field `name`; `set`: apply `values`
+    (one field for `param set`, a whole table for `param load`) at once and
+    all together: one refused value refuses the whole request. Values are
+    plain JSON; the node validates them against its own settings type.
+    """
+
+    op: Literal["list", "get", "set"]
+    name: ParamName = ""
+    values: Annotated[dict[ParamName, Any], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=dict)
+
+
+class ParamInfo(Message):
+    """One settings field as the node holds it now."""
+
+    name: ParamName
+    value: Any
+    type: Annotated[str, msgspec.Meta(max_length=256, description="Python annotation")]
+    range: Annotated[str, msgspec.Meta(max_length=256, description="allowed values, words")]
+    live: bool
+    """True: a change applies at once; False: the node must restart (a set is refused)."""
+    description: Text = ""
+
+
+class ParamReply(Message):
+    """The node's table after the request (`params`: the fields asked for).
+
+    `error` is empty on success; else the request was refused as a whole
+    (`unknown`: it named a field the table does not have: a usage error).
+    """
+
+    node: Annotated[str, msgspec.Meta(max_length=64)]
+    table: Annotated[str, msgspec.Meta(max_length=64, description="the config table")]
+    params: Annotated[list[ParamInfo], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=list)
+    changed: Annotated[list[ParamName], msgspec.Meta(max_length=256)] = msgspec.field(
+        default_factory=list)
+    error: Text = ""
+    unknown: bool = False
+
+
+class NodeInfo(Message):
+    """What a node declared on the bus, as it reports it itself (keys relative
+    to `buddybot/<robot>/`, wildcards as declared)."""
+
+    node: Annotated[str, msgspec.Meta(max_length=64)]
+    instance: Annotated[str, msgspec.Meta(max_length=64, description="Zenoh session id")]
+    publishers: Annotated[list[KeyText], msgspec.Meta(max_length=1024)] = msgspec.field(
+        default_factory=list)
+    subscriptions: Annotated[list[KeyText], msgspec.Meta(max_length=1024)] = msgspec.field(
+        default_factory=list)
+    services: Annotated[list[KeyText], msgspec.Meta(max_length=1024)] = msgspec.field(
+        default_factory=list)
+
+
 ALL_MESSAGES: tuple[type[Message], ...] = (
     LD2410TargetDataFrame,
     LD2410TargetDataFrameArray,
@@ -299,4 +364,8 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Bool,
     DiagnosticStatus,
     ErrorReply,
+    ParamRequest,
+    ParamInfo,
+    ParamReply,
+    NodeInfo,
 )

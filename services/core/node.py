@@ -175,6 +175,7 @@ class Node:
                 self.key(keys.NODES, node=name, instance=self.instance))
             self.watch_node(name, self._on_own_instances)
             self.every(diagnostics_period_s, self.diagnostics.publish, name="diagnostics")
+            self._serve_node_info()
         self.log.log(logging.DEBUG if probe else logging.INFO,
                      "node %s up (robot %s, instance %s)", name, robot, self.instance)
 
@@ -591,6 +592,36 @@ class Node:
             options["encoding"] = zenoh.Encoding(encoding)
         replies = self._session.get(_key_expr(key), **options)
         return (_raw_reply(reply) for reply in replies)
+
+    # -- introspection (`buddybot node info`, `buddybot topics`) --
+
+    def declared(self) -> m.NodeInfo:
+        """What this node has declared and still holds open, from its own handles
+        (keys relative to the robot's prefix; liveliness watches left out): the
+        truth about this process, not what a catalogue says it should do."""
+        publishers: list[str] = []
+        subscriptions: list[str] = []
+        services: list[str] = []
+        liveliness = self.key(keys.NODES, node="*").rsplit("/", 2)[0] + "/"
+        for handle in self.handles:
+            key = str(handle.key)
+            if key.startswith(liveliness):
+                continue
+            rel = self.relative(key)
+            if isinstance(handle, (Publisher, RawPublisher)):
+                publishers.append(rel)
+            elif isinstance(handle, Subscription):
+                subscriptions.append(rel)
+            elif isinstance(handle, Queryable):
+                services.append(rel)
+        return m.NodeInfo(node=self.name, instance=self.instance,
+                          publishers=sorted(set(publishers)),
+                          subscriptions=sorted(set(subscriptions)),
+                          services=sorted(set(services)))
+
+    def _serve_node_info(self) -> Queryable:
+        """Every node answers `node_info/<name>` with `declared()`."""
+        return self.serve(keys.NODE_INFO, lambda _request: self.declared(), node=self.name)
 
     # -- timers, lifetime --
 

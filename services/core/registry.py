@@ -27,6 +27,9 @@ class Entry:
     """The service's config table (`[radar_bridge]`), None for a tool."""
     settings: str | None = None
     """`module:Struct` the table decodes into (imported when a config is read)."""
+    device_check: str | None = None
+    """`module:function` that opens the service's device from its settings, for
+    `buddybot doctor` (imported only when doctor runs, so core stays area-free)."""
 
     def exists(self) -> bool:
         """Whether the module is present in this installation."""
@@ -37,6 +40,13 @@ class Entry:
 
     def load(self) -> ModuleType:
         return importlib.import_module(self.module)
+
+    def device_opener(self) -> Any:
+        """The `device_check` function (LookupError when the service names none)."""
+        if self.device_check is None:
+            raise LookupError(f"{self.name} has no device check")
+        module, _, name = self.device_check.partition(":")
+        return getattr(importlib.import_module(module), name)
 
     def settings_type(self) -> type[Any]:
         """The msgspec struct of this service's config table."""
@@ -66,7 +76,8 @@ SERVICES: tuple[Entry, ...] = (
     Entry("audio", "buddybot.audio.action", "play_sound action server",
           "audio", "buddybot.audio.settings:AudioSettings"),
     Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)",
-          "audio_player", "buddybot.audio.settings:AudioPlayerSettings"),
+          "audio_player", "buddybot.audio.settings:AudioPlayerSettings",
+          device_check="buddybot.audio.player:open_device"),
 )
 
 TOOLS: tuple[Entry, ...] = (

@@ -7,8 +7,10 @@ regenerates them and fails when the committed copy has drifted.
 
 from __future__ import annotations
 
+import enum
 import json
 from pathlib import Path
+from typing import Any
 
 import msgspec
 
@@ -20,10 +22,35 @@ def generate() -> dict[str, str]:
     """File name (relative to schemas/) -> content."""
     files: dict[str, str] = {}
     for msg_type in m.ALL_MESSAGES:
-        schema = msgspec.json.schema(msg_type)
+        schema = with_enum_names(msgspec.json.schema(msg_type))
         files[f"messages/{msg_type.__name__}.json"] = json.dumps(schema, indent=2, sort_keys=True)
     files["keys.json"] = json.dumps(keys.key_table(), indent=2)
     return {name: text + "\n" for name, text in files.items()}
+
+
+def _int_enums() -> dict[str, type[enum.IntEnum]]:
+    return {value.__name__: value for value in vars(m).values()
+            if isinstance(value, type) and issubclass(value, enum.IntEnum)
+            and value is not enum.IntEnum}
+
+
+def with_enum_names(schema: dict[str, Any]) -> dict[str, Any]:
+    """Name the members of every integer enum: the wire carries numbers, but
+    people (and `buddybot pub`, `echo`) use names. `x-enum-names[i]` names
+    `enum[i]`; the description says the same for readers of the schema."""
+    enums = _int_enums()
+    for name, definition in schema.get("$defs", {}).items():
+        cls = enums.get(name)
+        if cls is None or "enum" not in definition:
+            continue
+        members = {member.value: member.name for member in cls}
+        names = [members[value] for value in definition["enum"]]
+        definition["x-enum-names"] = names
+        listing = ", ".join(f"{v} = {n}" for v, n in zip(definition["enum"], names, strict=True))
+        doc = definition.get("description")
+        definition["description"] = f"{doc} ({listing})" if doc else listing
+        definition.setdefault("type", "integer")
+    return schema
 
 
 def write(out: Path) -> list[Path]:

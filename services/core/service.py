@@ -30,6 +30,7 @@ from buddybot.core.errors import (
 from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
 from buddybot.core.node import Node, install_signal_handlers
 from buddybot.core.sdnotify import Notifier
+from buddybot.core.session import route_zenoh_log
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -43,16 +44,23 @@ def add_common_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--config", metavar="FILE",
                        help="TOML config file (default: $BUDDYBOT_CONFIG)")
     group.add_argument("--log-level", default="INFO",
-                       choices=["DEBUG", "INFO", "WARNING", "ERROR"], help="log verbosity")
+                       choices=["DEBUG", "INFO", "WARNING", "ERROR"],
+                       help="log verbosity, ours and Zenoh's (INFO shows Zenoh's warnings)")
 
 
 def setup_logging(level: str) -> None:
+    """Our log on stderr, with Zenoh's own log routed into it at the same
+    level (Zenoh alone would print on stdout, and not at all by default)."""
     logging.basicConfig(
         level=getattr(logging, level),
         format="%(asctime)s.%(msecs)03d %(levelname)-7s %(name)s: %(message)s",
         datefmt="%H:%M:%S",
         stream=sys.stderr,
     )
+    # Zenoh's connection-failure lines (its DEBUG) are captured for the
+    # "no router" message, but shown only at our DEBUG.
+    logging.getLogger("zenoh").setLevel(getattr(logging, level))
+    route_zenoh_log(level)
 
 
 @dataclass

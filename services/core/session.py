@@ -8,8 +8,15 @@ no message larger than the largest image we accept.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
+import io
 import json
 import logging
+import os
+import re
+import socket
+import sys
 import threading
 from typing import Any, Literal
 
@@ -17,9 +24,153 @@ import zenoh
 import zenoh.ext
 
 from buddybot.core import keys
-from buddybot.core.errors import ConfigError
+from buddybot.core.errors import BuddyBotError, ConfigError
 
 log = logging.getLogger("buddybot.node")
+
+
+class RouterUnreachable(BuddyBotError, ConnectionError):
+    """No router answered within a probe's connect timeout (exit status 1).
+
+    Also a ConnectionError, so callers that caught the old error still do."""
+
+
+# --- Zenoh's own log, routed into ours ---------------------------------------------
+#
+# Zenoh (Rust) logs to file descriptor 1 only. Left there, it would mix with
+# what `echo` prints, and without it nobody sees why a connection fails
+# (refused, TLS only, ...). So fd 1 becomes a pipe: a reader thread turns
+# Zenoh's lines into records of the `zenoh` logger (stderr, our format and
+# level) and passes anything else through to the real stdout, where Python's
+# `sys.stdout` now writes directly. Connection failures are logged by Zenoh
+# at DEBUG only: they are always captured (shown at our DEBUG) and kept per
+# endpoint, so "no router" can say why.
+
+_ZENOH_LEVELS = {"DEBUG": "debug", "INFO": "warn", "WARNING": "warn", "ERROR": "error"}
+"""Our `--log-level` -> Zenoh's: its INFO is chatty, so INFO shows Zenoh's WARN."""
+_REASONS_TARGET = "zenoh::net::runtime::orchestrator"
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+_LINE = re.compile(  # time, level, thread, [spans], target: message
+    r"^\d{4}-\d\d-\d\dT\S+\s+(TRACE|DEBUG|INFO|WARN|ERROR)\s+(?:ThreadId\(\d+\)\s+)?"
+    r"(?:.*?\s)??((?:\w+::)*\w+):\s(.*)$")
+_UNABLE = re.compile(r"Unable to connect to (?:configured peer )?(\S+?)! (.*)$")
+_LOCATION = re.compile(r"\s+at\s+\S+\.rs:\d+\.?|\.?\s*Retry in \d+\s*m?s\.?")
+_INNER = re.compile(r"\[(?:[\w.\-\[\]]+:\d+: )?([^\[\]]+)\]")
+_PY_LEVEL = {"TRACE": logging.DEBUG, "DEBUG": logging.DEBUG, "INFO": logging.INFO,
+             "WARN": logging.WARNING, "ERROR": logging.ERROR}
+_SYNC = b"\x00buddybot-zenoh-log-sync\n"
+_routed = threading.Event()
+_synced = threading.Condition()
+_sync_count = 0
+_failures: dict[str, str] = {}
+
+
+def _clean(text: str) -> str:
+    """Zenoh's message without its Rust source locations."""
+    return _LOCATION.sub("", text).strip()
+
+
+def _short_reason(text: str) -> str:
+    """The operating system's or TLS layer's words inside Zenoh's wrapping
+    (`... [127.0.0.1:1: Connection refused (os error 111)]` -> the last part)."""
+    text = _clean(text)
+    inner = _INNER.findall(text)
+    return inner[-1].strip() if inner else text
+
+
+def connect_failures() -> dict[str, str]:
+    """Endpoint -> the reason of its latest failed connection attempt (empty
+    unless Zenoh's log is routed)."""
+    with _synced:
+        return dict(_failures)
+
+
+def forget_connect_failures() -> None:
+    with _synced:
+        _failures.clear()
+
+
+def route_zenoh_log(level: str) -> bool:
+    """Send Zenoh's log into Python logging at our `level` (once per process).
+
+    False (nothing done) when stdout is not this process's own fd 1 (tests
+    capturing it in-process), or when already routed. `RUST_LOG`, if set,
+    still wins for the level, as Zenoh documents."""
+    if _routed.is_set():
+        return False
+    old = sys.stdout
+    try:
+        if old is not sys.__stdout__ or old is None or old.fileno() != 1:
+            return False
+    except (AttributeError, ValueError, io.UnsupportedOperation):
+        return False
+    _routed.set()
+    old.flush()
+    real_stdout = os.dup(1)
+    read_end, write_end = os.pipe()
+    # Room for bursts (Zenoh at DEBUG) while the reader waits for the GIL.
+    with contextlib.suppress(AttributeError, OSError):
+        fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 1 << 20)
+    os.dup2(write_end, 1)
+    os.close(write_end)
+    line_buffered = bool(getattr(old, "line_buffering", False)
+                         or getattr(old, "write_through", False))
+    sys.stdout = open(real_stdout, "w", buffering=1 if line_buffered else -1,  # noqa: SIM115
+                      encoding=old.encoding, errors=old.errors)
+    passthrough = os.dup(real_stdout)
+    threading.Thread(target=_pump_zenoh_log, args=(read_end, passthrough),
+                     name="zenoh-log", daemon=True).start()
+    zenoh_level = _ZENOH_LEVELS.get(level, "warn")
+    if zenoh_level != "debug":
+        zenoh_level += f",{_REASONS_TARGET}=debug"
+    zenoh.init_log_from_env_or(zenoh_level)
+    return True
+
+
+def _pump_zenoh_log(read_fd: int, passthrough_fd: int) -> None:
+    """Zenoh's lines -> the `zenoh` logger; anything else -> the real stdout."""
+    global _sync_count
+    zlog = logging.getLogger("zenoh")
+    with open(read_fd, "rb") as pipe:
+        for raw in pipe:
+            if raw == _SYNC:
+                with _synced:
+                    _sync_count += 1
+                    _synced.notify_all()
+                continue
+            line = _ANSI.sub("", raw.decode("utf-8", "replace")).rstrip("\n")
+            found = _LINE.match(line)
+            if found is None:
+                with contextlib.suppress(OSError):  # a child's output, say: not ours to hide
+                    os.write(passthrough_fd, raw)
+                continue
+            level, target, text = found.groups()
+            ours = target == _REASONS_TARGET
+            unable = _UNABLE.search(text) if ours else None
+            if unable is not None:
+                with _synced:
+                    _failures[unable[1]] = _short_reason(unable[2])
+            # Only captured for the reasons (Zenoh's level for it is DEBUG), and
+            # "Unable to connect to any of [...]. Timeout!", which the probe's
+            # own error line says with the reason: both for our DEBUG only.
+            quiet = ours and (_PY_LEVEL[level] < logging.WARNING
+                              or "Unable to connect to any of" in text)
+            zlog.log(logging.DEBUG if quiet else _PY_LEVEL[level], "%s: %s", target, _clean(text))
+
+
+def _sync_zenoh_log(timeout: float = 1.0) -> None:
+    """Wait until the reader has handled every line Zenoh wrote so far (a marker
+    written now comes out of the pipe after them)."""
+    if not _routed.is_set():
+        return
+    with _synced:
+        target = _sync_count + 1
+    try:
+        os.write(1, _SYNC)
+    except OSError:
+        return
+    with _synced:
+        _synced.wait_for(lambda: _sync_count >= target, timeout)
 
 
 # --- session configuration ------------------------------------------------------
@@ -36,9 +187,13 @@ def zenoh_config(
     connect: list[str] | tuple[str, ...] = (),
     listen: list[str] | tuple[str, ...] = (),
     base_file: str | None = None,
+    connect_timeout_s: float | None = None,
 ) -> zenoh.Config:
     """A Zenoh config with BuddyBot's rules: explicit endpoints, no multicast
-    scouting, clients that wait for their router and reconnect quickly."""
+    scouting, clients that wait for their router and reconnect quickly.
+
+    `connect_timeout_s`: None (services) waits for the router forever;
+    a number (probes) gives up after that long, so a tool never hangs."""
     try:
         config = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
     except zenoh.ZError as exc:  # exit status 2 (systemd units do not restart on it)
@@ -60,7 +215,8 @@ def zenoh_config(
     if mode != "router":
         # Wait for the router forever (services start in any order) and retry
         # fast, so a router restart costs ~0.2 s instead of ~4 s.
-        config.insert_json5("connect/timeout_ms", "-1")
+        timeout_ms = -1 if connect_timeout_s is None else max(1, round(connect_timeout_s * 1000))
+        config.insert_json5("connect/timeout_ms", str(timeout_ms))
         config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 500}')
     return config
 
@@ -69,9 +225,14 @@ def open_session(
     config: zenoh.Config, stop: threading.Event, what: str = "router"
 ) -> zenoh.Session | None:
     """Open a session in a helper thread so the caller stays responsive to a
-    stop request while Zenoh waits for the router. None when stopped first."""
+    stop request while Zenoh waits for the router. None when stopped first.
+
+    A failure (a bounded connect timeout ran out) raises RouterUnreachable
+    naming Zenoh's reason per endpoint (refused, TLS, ...) when Zenoh's log
+    is routed (`route_zenoh_log`), else Zenoh's own error text."""
     result: dict[str, Any] = {}
     done = threading.Event()
+    forget_connect_failures()
 
     def opener() -> None:
         try:
@@ -87,11 +248,62 @@ def open_session(
             return None
         waited += 0.1
         if abs(waited - 2.0) < 0.05 or (waited > 2 and int(waited * 10) % 100 == 0):
-            log.warning("waiting for the Zenoh %s (%.0f s so far)...", what, waited)
+            why = _reasons_text(connect_failures())
+            log.warning("waiting for the Zenoh %s (%.0f s so far)%s", what, waited,
+                        f": {why}" if why else "")
     if "error" in result:
-        raise ConnectionError(f"cannot open Zenoh session: {result['error']}")
+        raise RouterUnreachable(_unreachable(what, result["error"], _endpoints(config)))
     session: zenoh.Session = result["session"]
     return session
+
+
+def _reasons_text(reasons: dict[str, str]) -> str:
+    if len(reasons) == 1:
+        return next(iter(reasons.values()))
+    return "; ".join(f"{endpoint}: {why}" for endpoint, why in reasons.items())
+
+
+def _endpoints(config: zenoh.Config) -> list[str]:
+    try:
+        found = json.loads(config.get_json("connect/endpoints"))
+    except (zenoh.ZError, ValueError):
+        return []
+    return [str(e) for e in found] if isinstance(found, list) else []
+
+
+def _unreachable(what: str, error: BaseException, endpoints: list[str]) -> str:
+    """One line: which endpoint(s), and why (Zenoh's reason per endpoint).
+
+    Zenoh says nothing when a link opens but no session follows (`tls/` to a
+    `tcp/` listener waits for a handshake that never comes): then a plain
+    TCP connection tells "nothing listens" from "something else listens"."""
+    text = _clean(str(error))
+    if "Unable to connect to any of" not in text:  # Zenoh was specific (a TLS file, say)
+        return f"no Zenoh {what}: {text}"
+    _sync_zenoh_log()  # the reason lines were written before zenoh.open failed
+    reasons = connect_failures()
+    for endpoint in endpoints:
+        if endpoint not in reasons:
+            guess = _tcp_guess(endpoint)
+            if guess:
+                reasons[endpoint] = guess
+    return f"no Zenoh {what}: {_reasons_text(reasons) or text}"
+
+
+def _tcp_guess(endpoint: str) -> str | None:
+    """What a TCP connection to a tcp/tls/ws endpoint's address says, if anything."""
+    proto, _, address = endpoint.partition("/")
+    if proto not in ("tcp", "tls", "ws") or ":" not in address:
+        return None
+    host, _, port = re.split(r"[?#]", address, maxsplit=1)[0].rpartition(":")
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), timeout=0.5):
+            pass
+    except (OSError, ValueError) as exc:
+        return getattr(exc, "strerror", None) or str(exc)
+    return (f"a TCP connection opens at {host}:{port} but no Zenoh session follows "
+            f"(wrong protocol, e.g. {proto}/ to a listener of another kind, "
+            "or TLS settings?)")
 
 
 def live_instances(session: zenoh.Session, key: str, timeout: float = 2.0) -> set[str]:
@@ -105,3 +317,12 @@ def live_instances(session: zenoh.Session, key: str, timeout: float = 2.0) -> se
         if match is not None:
             found.add(match["instance"])
     return found
+
+
+def keys_intersect(a: str, b: str) -> bool | None:
+    """Whether two key expressions (wildcards allowed) share a key, by Zenoh's own
+    rule; None when `a` is not a valid key expression."""
+    try:
+        return bool(zenoh.KeyExpr.autocanonize(a).intersects(zenoh.KeyExpr.autocanonize(b)))
+    except zenoh.ZError:
+        return None

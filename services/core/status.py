@@ -38,14 +38,20 @@ class RobotStatus:
     expression: m.ExpressionAction | None = None
     camera_fps: float | None = None
     restarts: int = 0
+    given_up: dict[str, int | None] = field(default_factory=dict)
+    """Services `up` will not restart (name -> exit status): down, whatever the bus
+    says (a node of that name alive elsewhere is not ours)."""
 
 
 def format_status(status: RobotStatus, now: float) -> str:
     """One line, e.g. `nodes 9/9 | radar 10.0 Hz | presence IN_RANGE 1.20 m | ...`."""
-    missing = [n for n in status.expected if n not in status.up]
+    missing = [n for n in status.expected if n not in status.up or n in status.given_up]
     nodes = f"nodes {len(status.expected) - len(missing)}/{len(status.expected)}"
     if missing:
         nodes += f" (down: {', '.join(missing)})"
+    if status.given_up:
+        nodes += " (not restarted: " + ", ".join(
+            f"{n} exit {code}" for n, code in sorted(status.given_up.items())) + ")"
     if status.duplicates:
         nodes += f" (DUPLICATE: {', '.join(status.duplicates)})"
     parts = [nodes, f"radar {rate_hz(status.radar_arrivals, now):.1f} Hz"]
@@ -120,10 +126,12 @@ class StatusMonitor:
             if isinstance(fps, int | float):
                 self.status.camera_fps = float(fps)
 
-    def line(self, restarts: int) -> str:
+    def line(self, restarts: int, given_up: dict[str, int | None] | None = None) -> str:
+        """The status line now; `given_up`: services that exited for good."""
         found = self.node.node_instances(timeout=1.0)
         with self._lock:
             self.status.up = sorted(found)
+            self.status.given_up = dict(given_up or {})
             self.status.duplicates = sorted(n for n, ids in found.items() if len(ids) > 1)
             self.status.restarts = restarts
             return format_status(self.status, time.monotonic())

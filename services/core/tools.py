@@ -5,31 +5,106 @@ handles, declares no liveliness token and publishes no diagnostics (a
 probe is not a node of the robot). Keys may omit the `buddybot/<robot>/`
 prefix and may contain wildcards; messages are decoded with the
 catalogue's types.
+
+A probe never hangs and never stays silent about failing: unlike a service
+it gives up on the router after its `--timeout` (RouterUnreachable, exit 1,
+naming the endpoint and Zenoh's reason), and the verbs say why nothing
+arrived (`silence_reason`). Enum fields are typed and shown by name at
+these human-facing edges only; the wire keeps integers.
 """
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import msgspec
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.describe import enum_values
 from buddybot.core.errors import UsageError
 from buddybot.core.node import Node
 from buddybot.core.service import ServiceContext
+from buddybot.core.session import RouterUnreachable, keys_intersect, zenoh_config
+
+CONNECT_TIMEOUT_S = 5.0
+"""How long a probe waits for its router when no `--timeout` is given."""
 
 
-def probe(ctx: ServiceContext) -> Node:
-    """A probe node on the robot's router (waits for it; Ctrl-C aborts)."""
-    return Node(ctx.name, robot=ctx.robot, connect=ctx.connect,
-                zenoh_config_file=ctx.config.zenoh.config_file, stop_event=ctx.stop, probe=True)
+def add_timeout_argument(parser: argparse.ArgumentParser, default: float | None,
+                         what: str) -> None:
+    """`--timeout S`, on every probing verb: it bounds connecting to the router
+    too (CONNECT_TIMEOUT_S when not given). `what`: what else S limits."""
+    shown = f"default {default:g} s" if default else (
+        f"default: none, but the router must answer within {CONNECT_TIMEOUT_S:g} s")
+    parser.add_argument("--timeout", type=float, default=default, metavar="S",
+                        help=f"give up after S seconds, connecting included: {what} ({shown})")
+
+
+def probe(ctx: ServiceContext, timeout: float | None = None) -> Node:
+    """A probe node on the robot's router, or RouterUnreachable (exit 1) when
+    none answers within `timeout` (default CONNECT_TIMEOUT_S); Ctrl-C aborts."""
+    limit = timeout if timeout and timeout > 0 else CONNECT_TIMEOUT_S
+    config = zenoh_config(connect=ctx.connect, base_file=ctx.config.zenoh.config_file,
+                          connect_timeout_s=limit)
+    try:
+        return Node(ctx.name, robot=ctx.robot, connect=ctx.connect, config=config,
+                    stop_event=ctx.stop, probe=True)
+    except RouterUnreachable as exc:
+        raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
+
+
+def left(end: float, floor: float = 0.05) -> float:
+    """Seconds until `end` (at least `floor`, so a last query can still be sent)."""
+    return max(floor, end - time.monotonic())
 
 
 def catalogue_entry(key: str) -> keys.Topic | keys.Service | None:
     """The catalogue entry an absolute key belongs to (None: not in the catalogue)."""
     parts = keys.split_absolute(key)
     return keys.lookup(parts[1]) if parts else None
+
+
+def catalogue_matches(key: str) -> list[keys.Topic | keys.Service]:
+    """Catalogue entries whose keys intersect `key` (an absolute key expression,
+    wildcards allowed): empty means the key can never carry a BuddyBot message."""
+    found: list[keys.Topic | keys.Service] = []
+    entries: tuple[keys.Topic | keys.Service, ...] = (*keys.TOPICS, *keys.SERVICES)
+    for entry in entries:
+        meets = keys_intersect(key, f"{keys.PREFIX_ROOT}/*/{entry.wildcard()}")
+        if meets is None:
+            return []
+        if meets:
+            found.append(entry)
+    return found
+
+
+def silence_reason(node: Node, key: str, timeout: float = 2.0) -> str:
+    """Why nothing arrived on `key`: an unknown key, a robot with no live node,
+    or (the key is known and the robot alive) nobody published on it."""
+    if not catalogue_matches(key):
+        return f"{key} matches no key of the catalogue (see `buddybot keys`)"
+    parts = keys.split_absolute(key)
+    robot = parts[0] if parts else node.robot
+    if "*" in robot:
+        everyone = node.node_instances(all_robots=True, timeout=timeout)
+        if not everyone:
+            return ("no node of any robot is alive on this router, or its access control "
+                    "hides them (see `buddybot nodes --all-robots`)")
+        return f"no publisher matches {key} (live nodes: {', '.join(sorted(everyone))})"
+    alive = _robot_nodes(node, robot, timeout)
+    if not alive:
+        return (f"no node of robot {robot!r} is alive on this router, or its access "
+                "control hides them (see `buddybot nodes --all-robots`)")
+    return f"no publisher matches {key} (live nodes of robot {robot}: {', '.join(alive)})"
+
+
+def _robot_nodes(node: Node, robot: str, timeout: float) -> list[str]:
+    prefix = f"{robot}/"
+    return sorted(name[len(prefix):] for name in node.node_instances(all_robots=True,
+                                                                     timeout=timeout)
+                  if name.startswith(prefix))
 
 
 def is_latched(key: str) -> bool:
@@ -45,6 +120,7 @@ def deadline(seconds: float | None) -> float:
 def parse_message(topic_or_type: type[m.Message], text: str) -> m.Message:
     """Validate user JSON against a message type; fills a missing `stamp_ns`.
 
+    Enum fields take a member's name (`"EYE_SLEEP"`) as well as its number.
     Raises UsageError naming the offending field.
     """
     try:
@@ -56,7 +132,8 @@ def parse_message(topic_or_type: type[m.Message], text: str) -> m.Message:
     if "stamp_ns" in topic_or_type.__struct_fields__ and "stamp_ns" not in raw:
         raw["stamp_ns"] = m.now_ns()
     try:
+        raw = enum_values(raw, topic_or_type)
         return msgspec.convert(raw, topic_or_type)
-    except msgspec.ValidationError as exc:
+    except (msgspec.ValidationError, ValueError) as exc:
         text = str(exc).replace("$.", "").replace("`$`", "message")
         raise UsageError(f"invalid {topic_or_type.__name__}: {text}") from None

@@ -1,4 +1,4 @@
-"""The eyes driver's logic (seed 5.4.2), pure: no Zenoh, no I/O.
+"""The eyes driver's logic (docs/design.md section 4.5), pure: no Zenoh, no I/O.
 
 * gaze: `EyeControl` radians -> `EyesDirection` degrees, same signs
   (+yaw = the robot's left, +pitch = up), clamped to the message's range;

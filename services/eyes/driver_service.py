@@ -16,6 +16,7 @@ from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import ConfigError
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 from buddybot.eyes import driver
 from buddybot.eyes.settings import EyesSettings
@@ -35,7 +36,11 @@ def settings_from(ctx: ServiceContext) -> EyesSettings:
 def build(ctx: ServiceContext) -> tuple[driver.PupilCurve, float, dict]:
     """Validate the merged `[eyes]` into the driver's pure objects (ConfigError naming
     the key)."""
-    settings = settings_from(ctx)
+    return build_from(settings_from(ctx))
+
+
+def build_from(settings: EyesSettings) -> tuple[driver.PupilCurve, float, dict]:
+    """`build` for a given struct: at start and for each live parameter change."""
     try:
         curve = driver.PupilCurve.from_points(settings.pupil_curve)
     except ValueError as exc:
@@ -48,7 +53,10 @@ def build(ctx: ServiceContext) -> tuple[driver.PupilCurve, float, dict]:
 
 
 def run(ctx: ServiceContext) -> int:
-    curve, unknown, table = build(ctx)
+    settings = settings_from(ctx)
+    # One tuple, replaced whole by a live change: a handler reads a consistent set.
+    built = [build_from(settings)]
+    last: list[m.ScreenExpression] = []
     node = ctx.node()
     try:
         direction_pub = node.publisher(keys.EYES_DIRECTION)
@@ -57,15 +65,27 @@ def run(ctx: ServiceContext) -> int:
         diag = node.diagnostics
 
         def on_control(control: m.EyeControl, _key: str) -> None:
+            curve, unknown, _table = built[0]
             direction_pub.put(driver.direction_from_control(control))
             pupil_pub.put(driver.pupil_from_control(control, curve, unknown))
             diag.increment("controls")
 
         def on_expression(expression: m.ScreenExpression, _key: str) -> None:
-            for lids in driver.lids_for_expression(expression, table):
+            last[:] = [expression]
+            for lids in driver.lids_for_expression(expression, built[0][2]):
                 lids_pub.put(lids)
             diag.increment("expressions")
             diag.values["expression"] = expression.action.name
+
+        def apply(new: EyesSettings) -> None:
+            """A live change (`buddybot param set eyes ...`): a curve or lid table the
+            driver cannot use is refused (ValueError); new lids are shown at once."""
+            built[0] = build_from(new)
+            for expression in last[-1:]:
+                for lids in driver.lids_for_expression(expression, built[0][2]):
+                    lids_pub.put(lids)
+
+        LiveSettings(settings, apply).serve(node)
 
         # Inline: the conversion is two small puts (tens of microseconds), and gaze is
         # the latency path (camera -> eyes); a worker thread cost a wake-up per frame.

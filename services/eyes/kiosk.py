@@ -25,7 +25,8 @@ log = logging.getLogger("buddybot.eye-renderer.kiosk")
 BROWSER_NAMES = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 
 # Quiet, self-contained kiosk: no first-run UI, no crash bubbles, no
-# background traffic (DESIGN.md: tools talk to the robot and nowhere else).
+# background traffic (docs/design.md section 6: nothing talks to a network it
+# was not told about).
 KIOSK_FLAGS = (
     "--kiosk",
     "--no-first-run",

@@ -1,4 +1,5 @@
-"""Which eye goes on which display (seed 5.4.3), pure: display lists in, windows out.
+"""Which eye goes on which display (docs/design.md section 4.5), pure: display lists in,
+windows out.
 
 Rules, in the seed's words, made exact:
 

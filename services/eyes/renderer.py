@@ -21,7 +21,7 @@ tablet or a phone can be an eye:
 No display and no explicit placement: a warning and the pages are only
 served (what `buddybot up --sim` on a headless machine wants). No display
 with an explicit placement, or a placement the displays cannot satisfy:
-exit status 2 with the placement rule's message (seed 5.4.3).
+exit status 2 with the placement rule's message (docs/design.md section 4.5).
 """
 
 from __future__ import annotations

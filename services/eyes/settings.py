@@ -22,14 +22,17 @@ class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     # (distance_cm, dilation %) points of the pupil curve, distances increasing,
     # dilation never increasing: near -> large pupils, far -> small; linear in
     # between, flat beyond the ends, always clamped to 0..100.
-    pupil_curve: list[list[float]] = msgspec.field(default_factory=_default_curve)
+    # Live (`extra={"live": True}`): `buddybot param set eyes ...` applies at once.
+    pupil_curve: Annotated[list[list[float]], msgspec.Meta(extra={"live": True})] = (
+        msgspec.field(default_factory=_default_curve))
     # Dilation when eye control carries no distance (target_distance_cm = 0).
     unknown_distance_percent: Annotated[float, msgspec.Meta(
-        ge=0.0, le=100.0,
+        ge=0.0, le=100.0, extra={"live": True},
         description="pupil dilation in % when eye control carries no distance")] = 50.0
     # Lid overrides per expression name: [top, bottom] for both eyes, or
     # [left_top, left_bottom, right_top, right_bottom]; 0/0 open, 50/50 closed.
-    lids: dict[str, list[float]] = msgspec.field(default_factory=dict)
+    lids: Annotated[dict[str, list[float]], msgspec.Meta(extra={"live": True})] = msgspec.field(
+        default_factory=dict)
 
 
 EyeName = Literal["left", "right"]
@@ -50,7 +53,7 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     # Chromium executable; empty = first of chromium, chromium-browser, google-chrome.
     browser_path: Annotated[str, msgspec.Meta(
         description="Chromium executable (empty: found on PATH)")] = ""
-    # Placement (seed 5.4.3); empty/0 = not configured, defaults apply:
+    # Placement (docs/design.md section 4.5); empty/0 = not configured, defaults apply:
     # left eye on display 1, right eye on display 2, one display -> both on it.
     eyes: list[EyeName] = msgspec.field(default_factory=list)
     left_display: Annotated[int, msgspec.Meta(

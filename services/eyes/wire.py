@@ -1,7 +1,7 @@
 """What the renderer sends to its pages, pure: no web server, no Zenoh.
 
 Each WebSocket text message is `{"topic": T, "msg": M}` with M in the
-contract's field names (DESIGN.md section 2), so the page reads the same
+contract's field names (docs/design.md section 3), so the page reads the same
 fields as every other consumer. `LatestState` keeps the newest message per
 slot so a page that (re)connects gets the whole current state at once,
 and the same type serves as each client's coalescing outbox: a slow page

@@ -28,6 +28,7 @@ from buddybot.core import messages as m
 from buddybot.core.limits import clip, plausible_stamp
 from buddybot.core.node import Node
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 from buddybot.radar.intake import Intake
 from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
@@ -64,6 +65,13 @@ class PresenceService:
             self._take, general_size=QUEUE_SIZE, per_key=rules.max_sensors,
             max_trusted=rules.max_sensors, on_error=self._handler_failed,
             name="presence-intake")
+
+    def apply_settings(self, rules: PresenceRules) -> None:
+        """A live parameter change (`buddybot param set radar-presence ...`): the
+        tracker reads its rules on every frame and tick, so the next one uses
+        them. `max_sensors` sized the tables at start: it is restart-only."""
+        with self._lock:
+            self.tracker.rules = rules
 
     def submit(self, msg: m.LD2410TargetDataFrameArray, key: str) -> None:
         """In Zenoh's thread: only sorted into the intake."""
@@ -181,6 +189,7 @@ def run(ctx: ServiceContext) -> int:
     node = ctx.node()
     try:
         service = PresenceService(node, settings)
+        LiveSettings(settings, service.apply_settings).serve(node)
         service.intake.start()
         # Every device (wildcard). Zenoh's thread only sorts the frames into the
         # intake; the rule runs on its worker, established sensors first.

@@ -56,23 +56,31 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
 
 
 class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`extra={"live": True}`: `buddybot param set` applies it at once (the tracker
+    reads its rules on every frame and tick); `max_sensors` sizes tables at start."""
+
     range_m: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         gt=0.0, le=10.0,
         description="metres: IN_RANGE when a target is this close (the LD2410 sees "
         "to ~6 m)")] = 2.0
     exit_margin_m: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=10.0,
         description="metres beyond range_m every target must be to leave (LD2410 "
         "jitter is ~0.2 m)")] = 0.3
     absence_hold_s: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=3600.0,
         description="seconds nobody is within the exit range before OUT_OF_RANGE "
         "(NO_TARGET blips)")] = 3.0
     target_hold_s: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         ge=0.0, le=3600.0,
         description="seconds a new MOVING/STANDING kind must last before it is "
         "published")] = 1.0
     stale_after_s: Annotated[float, msgspec.Meta(
+        extra={"live": True},
         gt=0.0, le=3600.0,
         description="seconds of silence before a sensor is excluded and reported "
         "(frames come every ~0.1 s)")] = 1.5

@@ -153,7 +153,8 @@ def test_echo_prints_latched_value_and_exits_after_count(
     result = bb("echo", "radar/presence", "--connect", endpoint, "--count", "1",
                 "--timeout", "20")
     assert result.returncode == 0, result.stderr
-    assert '"presence_state":1' in result.stdout and '"stamp_ns":7' in result.stdout
+    # Enum fields by name (issue 13); `--raw` keeps the wire's numbers.
+    assert '"presence_state":"IN_RANGE"' in result.stdout and '"stamp_ns":7' in result.stdout
 
 
 def test_echo_summarizes_images(endpoint: str, node_factory: Callable[..., Node],

@@ -42,6 +42,12 @@ def sample_messages() -> list[m.Message]:
         m.Bool(stamp_ns=now, data=True),
         m.DiagnosticStatus(stamp_ns=now, node="n", level="WARN", message="x", values={"a": 1}),
         m.ErrorReply(error="bad"),
+        m.ParamRequest(op="set", values={"range_m": 1.5}),
+        m.ParamInfo(name="range_m", value=2.0, type="float", range="> 0 and <= 10", live=True),
+        m.ParamReply(node="radar-presence", table="radar_presence", changed=["range_m"],
+                     params=[m.ParamInfo(name="range_m", value=1.5, type="float", range="",
+                                         live=True)]),
+        m.NodeInfo(node="n", instance="abc", publishers=["radar/presence"]),
     ]
 
 
@@ -82,7 +88,7 @@ def test_out_of_range_is_rejected_naming_the_field(msg_type: type, payload: dict
 
 
 def test_contract_field_names() -> None:
-    """The DESIGN.md names (the seed's typos fixed) are exactly these."""
+    """The contract's names (docs/design.md section 3; the seed's typos fixed) are exactly these."""
     assert m.LD2410TargetDataFrame.__struct_fields__[:7] == (
         "radar_id", "target_state", "movement_distance", "movement_energy",
         "stationary_distance", "stationary_energy", "detection_distance",

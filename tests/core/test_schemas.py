@@ -29,7 +29,8 @@ COMMITTED = ROOT / "schemas"
 JSON_TYPES = {"object": dict, "array": list, "string": str, "boolean": bool}
 # Keywords that do not constrain an instance; any other unknown keyword fails the
 # test, so the little validator below can never skip a constraint silently.
-ANNOTATIONS = {"$defs", "title", "description", "default", "examples", "contentEncoding"}
+ANNOTATIONS = {"$defs", "title", "description", "default", "examples", "contentEncoding",
+               "x-enum-names"}
 
 
 # --- a small JSON Schema validator (the subset msgspec emits) --------------------------
@@ -80,6 +81,10 @@ def schema_errors(value: Any, schema: dict[str, Any], root: dict[str, Any],
                 for name, sub in arg.items():
                     if name in value:
                         errors += schema_errors(value[name], sub, root, f"{path}.{name}")
+        elif word == "propertyNames":
+            if isinstance(value, dict):
+                for name in value:
+                    errors += schema_errors(name, arg, root, f"{path}[key {name!r}]")
         elif word == "additionalProperties":
             if isinstance(value, dict):
                 known = set(schema.get("properties", {}))
@@ -147,8 +152,11 @@ def _unwrap(info: msgspec.inspect.Type) -> msgspec.inspect.Type:
 
 
 def _outside_values(info: msgspec.inspect.Type) -> list[Any]:
-    """Values just outside what the type allows (plus one of a wrong JSON type)."""
+    """Values just outside what the type allows (plus one of a wrong JSON type);
+    none for a field that takes any value (a parameter's value)."""
     t = _unwrap(info)
+    if isinstance(t, msgspec.inspect.AnyType):
+        return []
     # Of a wrong JSON type: a list where a string is expected (str, bytes as base64,
     # literals, unions with str), else a string.
     stringy = (msgspec.inspect.StrType | msgspec.inspect.BytesType

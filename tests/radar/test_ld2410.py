@@ -171,7 +171,7 @@ def test_266_cm_frame_contains_a_newline_byte_and_still_parses() -> None:
 
 def test_moving_and_still_fields_are_not_swapped() -> None:
     data = p.encode_report(report(state=1, md=111, me=22, sd=333, se=44, dd=555))
-    # Offsets from DESIGN.md section 7, from the frame start.
+    # Offsets from docs/design.md section 8, counted from the frame start.
     assert struct.unpack_from("<H", data, 9)[0] == 111 and data[11] == 22
     assert struct.unpack_from("<H", data, 12)[0] == 333 and data[14] == 44
     assert struct.unpack_from("<H", data, 15)[0] == 555

@@ -122,7 +122,10 @@ def check_service_answers_garbage(probe: Node, service: keys.Service,
     must also refuse an unknown field and an oversized request."""
     oversized = b'{"pad": "' + b"x" * service.max_bytes + b'"}'
     for payload in [*garbage, b'{"unknown_field": 1}', oversized]:
-        replies = list(probe.query(probe.key(service), payload, timeout=5))
+        # One node's service ({node} keys such as params/{node} are served by every
+        # node: ask the controller's).
+        key = probe.key(service, **dict.fromkeys(service.params, "controller"))
+        replies = list(probe.query(key, payload, timeout=5))
         what = f"{service.pattern} <- {payload[:40]!r} ({len(payload)} bytes)"
         assert len(replies) == 1, f"{what}: {len(replies)} replies"
         reply = replies[0]

@@ -2,7 +2,7 @@
 //
 // Page: /eyes?eye=left|right|both   (debug/test switches: blink=0, saccade=0)
 // The server pushes {"topic": T, "msg": M} where M has the contract's field
-// names (DESIGN.md section 2): direction {yaw, pitch} degrees (+yaw = robot's
+// names (docs/design.md section 3): direction {yaw, pitch} degrees (+yaw = robot's
 // left), pupil {dilation_percentage}, lids {eye_id 0 L/1 R/2 both,
 // top_lid_position, bottom_lid_position}, expression {action}, plus
 // hello {iris_color, max_yaw_deg, max_pitch_deg}, status {bus}.

@@ -1,0 +1,98 @@
+"""`buddybot` tab completion (argcomplete) and `buddybot --version`.
+
+The unit tests drive argcomplete's own protocol (`_ARGCOMPLETE`, `COMP_LINE`,
+`COMP_POINT`) on the real parser in-process; the integration test runs the
+installed console script the way the shell hook from `register-python-argcomplete
+buddybot` does, completions on fd 8.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import io
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import argcomplete
+import pytest
+
+from buddybot import __version__, cli
+
+IFS = "\013"
+"""argcomplete's default separator between completions."""
+
+
+class _Finder(argcomplete.CompletionFinder):
+    """argcomplete's finder without its fd 9 debug stream, which would wrap
+    (and later close) whatever pytest keeps on that descriptor."""
+
+    def _init_debug_stream(self) -> None:
+        pass
+
+
+def complete(line: str, monkeypatch: pytest.MonkeyPatch) -> list[str]:
+    """What the shell would offer for `line` with the cursor at its end."""
+    monkeypatch.setenv("_ARGCOMPLETE", "1")
+    monkeypatch.setenv("COMP_LINE", line)
+    monkeypatch.setenv("COMP_POINT", str(len(line)))
+    out = io.StringIO()
+    exits: list[int] = []
+    _Finder()(cli.build_parser(), exit_method=exits.append, output_stream=out)
+    assert exits == [0], f"argcomplete gave up on {line!r} (exit {exits})"
+    return [c.strip() for c in out.getvalue().split(IFS) if c]
+
+
+def test_a_verb_completes(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert complete("buddybot ec", monkeypatch) == ["echo"]
+
+
+def test_every_verb_is_offered(monkeypatch: pytest.MonkeyPatch) -> None:
+    offered = set(complete("buddybot ", monkeypatch))
+    assert set(cli.VERBS) | {"run"} <= offered
+
+
+def test_a_service_name_completes(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert complete("buddybot run came", monkeypatch) == ["camera"]
+
+
+def test_an_option_completes(monkeypatch: pytest.MonkeyPatch) -> None:
+    assert complete("buddybot --vers", monkeypatch) == ["--version"]
+
+
+def test_the_marker_is_where_global_completion_looks() -> None:
+    # `activate-global-python-argcomplete` completes only commands whose module
+    # says so in its first 1024 bytes.
+    head = Path(cli.__file__).read_bytes()[:1024]
+    assert b"PYTHON_ARGCOMPLETE_OK" in head
+
+
+def test_an_ordinary_run_is_no_completion(monkeypatch: pytest.MonkeyPatch,
+                                          capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.delenv("_ARGCOMPLETE", raising=False)
+    cli.complete()  # returns at once: nothing to answer
+    assert capsys.readouterr() == ("", "")
+
+
+def test_version_names_buddybot_python_and_zenoh(capsys: pytest.CaptureFixture[str]) -> None:
+    with pytest.raises(SystemExit) as exited:
+        cli.main(["--version"])
+    assert exited.value.code == 0
+    zenoh = importlib.metadata.version("eclipse-zenoh")
+    assert capsys.readouterr().out.strip() == (
+        f"buddybot {__version__} (Python {platform.python_version()}, eclipse-zenoh {zenoh})")
+
+
+@pytest.mark.integration
+def test_the_console_script_answers_the_shell_hook(tmp_path: Path) -> None:
+    # What the bash hook does: run the command with the protocol's variables,
+    # completions on fd 8, argcomplete's debug output on fd 9.
+    script = Path(sys.executable).parent / "buddybot"
+    assert script.exists(), f"no console script at {script}: is buddybot installed?"
+    env = {"PATH": "/usr/bin:/bin", "_ARGCOMPLETE": "1", "COMP_LINE": "buddybot ec",
+           "COMP_POINT": "11", "HOME": str(tmp_path)}
+    done = subprocess.run(["bash", "-c", '"$0" 8>&1 9>/dev/null 1>/dev/null 2>&1', str(script)],
+                          env=env, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split(IFS) == ["echo "]

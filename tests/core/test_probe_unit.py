@@ -1,0 +1,176 @@
+"""The probing verbs' shared parts, without processes: enum names in and out,
+the catalogue check behind "nothing matches", refusals, Zenoh's log lines
+and the bounded connection of a probe."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import os
+import threading
+import time
+
+import msgspec
+import pytest
+
+from buddybot.cli.call import refusal
+from buddybot.core import keys, schemas, session, tools
+from buddybot.core import messages as m
+from buddybot.core.config import default_config
+from buddybot.core.describe import describe, enum_values, summarize
+from buddybot.core.errors import UsageError
+from buddybot.core.service import ServiceContext
+from buddybot.core.testing import free_port
+
+# --- enum names ---------------------------------------------------------------------
+
+
+def test_enum_names_and_numbers_are_both_accepted() -> None:
+    by_name = tools.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEP", "stamp_ns": 1}')
+    by_number = tools.parse_message(m.ScreenExpression, '{"action": 1, "stamp_ns": 1}')
+    assert by_name == by_number
+    assert isinstance(by_name, m.ScreenExpression)
+    assert by_name.action is m.ExpressionAction.EYE_SLEEP
+
+
+def test_an_unknown_enum_name_is_refused_listing_the_names() -> None:
+    with pytest.raises(UsageError) as caught:
+        tools.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEPING"}')
+    text = str(caught.value)
+    assert "action" in text and "EYE_SLEEPING" in text and "EYE_SLEEP," in text
+    with pytest.raises(UsageError, match="action"):
+        tools.parse_message(m.ScreenExpression, '{"action": 99}')
+
+
+def test_nested_enum_names_are_converted() -> None:
+    frame = {"radar_id": 0, "target_state": "MOVING", "movement_distance": 1,
+             "movement_energy": 2, "stationary_distance": 3, "stationary_energy": 4,
+             "detection_distance": 5}
+    raw = enum_values({"stamp_ns": 1, "device_id": 0, "sensors": [frame]},
+                      m.LD2410TargetDataFrameArray)
+    assert raw["sensors"][0]["target_state"] == m.TargetState.MOVING.value
+    decoded = msgspec.convert(raw, m.LD2410TargetDataFrameArray)
+    assert decoded.sensors[0].target_state is m.TargetState.MOVING
+
+
+def test_summaries_show_names_and_raw_shows_numbers() -> None:
+    msg = m.EyeLidControl(stamp_ns=3, eye_id=m.EyeId.BOTH, top_lid_position=10,
+                          bottom_lid_position=20)
+    named = json.loads(summarize(msg))
+    assert named["eye_id"] == "BOTH" and named["top_lid_position"] == 10
+    assert json.loads(summarize(msg, names=False))["eye_id"] == 2
+    payload = keys.LIDS.codec.encode(msg)
+    key = keys.absolute("buddy", keys.LIDS.pattern)
+    assert '"eye_id":"BOTH"' in describe(key, payload)
+    assert '"eye_id":2' in describe(key, payload, names=False)
+
+
+def test_a_message_without_enums_is_printed_as_before() -> None:
+    msg = m.PupilControl(stamp_ns=3, dilation_percentage=33)
+    assert summarize(msg) == msgspec.json.encode(msg).decode()
+
+
+def test_schemas_name_the_members_of_integer_enums() -> None:
+    schema = json.loads(schemas.generate()["messages/ScreenExpression.json"])
+    action = schema["$defs"]["ExpressionAction"]
+    assert action["enum"][action["x-enum-names"].index("EYE_SLEEP")] == 1
+    assert len(action["x-enum-names"]) == len(action["enum"]) == len(m.ExpressionAction)
+    assert "1 = EYE_SLEEP" in action["description"]
+
+
+# --- what the verbs decide ------------------------------------------------------------
+
+
+@pytest.mark.parametrize(("key", "known"), [
+    ("buddybot/buddy/eyes/pupil", True),
+    ("buddybot/buddy/camera/*/image", True),
+    ("buddybot/buddy/**", True),
+    ("buddybot/*/eyes/expression", True),
+    ("buddybot/buddy/eyes/nothing", False),
+    ("buddybot/buddy/eye/pupil", False),
+])
+def test_catalogue_matches_names_unknown_keys(key: str, known: bool) -> None:
+    assert bool(tools.catalogue_matches(key)) is known
+
+
+def test_refusals_are_failures() -> None:
+    assert refusal(m.TriggerReply(success=True)) is None
+    assert refusal(m.PlaySoundReply(goal_id="g", accepted=True)) is None
+    why = refusal(m.TriggerReply(success=False, message="nothing is playing"))
+    assert why == "success: false (nothing is playing)"
+    assert refusal(m.PlaySoundReply(goal_id="g", accepted=False)) == "accepted: false"
+
+
+# --- the bounded connection ---------------------------------------------------------
+
+
+def test_a_probe_config_gives_up_and_a_service_config_waits() -> None:
+    probe = session.zenoh_config(connect=["tcp/127.0.0.1:7447"], connect_timeout_s=1.5)
+    service = session.zenoh_config(connect=["tcp/127.0.0.1:7447"])
+    assert json.loads(probe.get_json("connect/timeout_ms")) == 1500
+    assert json.loads(service.get_json("connect/timeout_ms")) == -1
+
+
+def test_a_probe_without_router_fails_fast_naming_endpoint_and_reason() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    args = argparse.Namespace()
+    ctx = ServiceContext(name="probe-test", args=args, config=default_config(), robot="buddy",
+                         connect=[endpoint])
+    started = time.monotonic()
+    with pytest.raises(session.RouterUnreachable) as caught:
+        tools.probe(ctx, 0.5)
+    assert time.monotonic() - started < 5
+    text = str(caught.value)
+    assert endpoint in text and "refused" in text.lower() and "0.5 s" in text
+    assert isinstance(caught.value, ConnectionError)  # callers catching the old error
+
+
+# --- Zenoh's log lines --------------------------------------------------------------
+
+REFUSED = (
+    "\x1b[2m2026-11-23T09:25:15.579753Z\x1b[0m \x1b[34mDEBUG\x1b[0m ThreadId(01) "
+    "\x1b[2mzenoh::net::runtime::orchestrator\x1b[0m\x1b[2m:\x1b[0m Unable to connect to "
+    "configured peer tcp/127.0.0.1:1! Can not create a new TCP link bound to "
+    "tcp/127.0.0.1:1: [127.0.0.1:1: Connection refused (os error 111) at "
+    "/root/.cargo/x/io/zenoh-link-commons/src/tcp.rs:105.] at /root/.cargo/x/unicast.rs:9. "
+    "Retry in 500ms.\n"
+)
+WARNING = ("2026-11-23T09:25:16.579810Z  WARN ThreadId(01) zenoh::net::routing: "
+           "something odd at /root/.cargo/x/orchestrator.rs:388.\n")
+
+
+def test_zenoh_lines_become_log_records_and_reasons(caplog: pytest.LogCaptureFixture) -> None:
+    read_end, write_end = os.pipe()
+    out_read, out_write = os.pipe()
+    session.forget_connect_failures()
+    pump = threading.Thread(target=session._pump_zenoh_log, args=(read_end, out_write))
+    with caplog.at_level(logging.DEBUG, logger="zenoh"):
+        pump.start()
+        os.write(write_end, REFUSED.encode() + WARNING.encode() + b"a child's own line\n")
+        os.close(write_end)
+        pump.join(10)
+    os.close(out_write)
+    with os.fdopen(out_read, "rb") as passed:
+        assert passed.read() == b"a child's own line\n"
+    assert session.connect_failures() == {
+        "tcp/127.0.0.1:1": "Connection refused (os error 111)"}
+    records = [(r.levelno, r.getMessage()) for r in caplog.records if r.name == "zenoh"]
+    assert (logging.WARNING, "zenoh::net::routing: something odd") in records
+    refused = [text for level, text in records if "Unable to connect" in text]
+    assert refused and "Retry" not in refused[0] and ".rs:" not in refused[0]
+    assert all(level == logging.DEBUG for level, text in records if "Unable" in text)
+    session.forget_connect_failures()
+
+
+def test_zenoh_log_is_not_rerouted_when_stdout_is_captured(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    assert session.route_zenoh_log("INFO") is False
+    print("still captured")
+    assert capsys.readouterr().out == "still captured\n"
+
+
+def test_zenoh_error_texts_lose_their_source_locations() -> None:
+    text = ("Unable to connect to any of [Single(tcp/127.0.0.1:1)]. Timeout! at "
+            "/root/.cargo/git/checkouts/zenoh/cc83980/zenoh/src/net/runtime/orchestrator.rs:388.")
+    assert session._clean(text) == "Unable to connect to any of [Single(tcp/127.0.0.1:1)]. Timeout!"

@@ -1,0 +1,329 @@
+"""`buddybot up` cannot be fooled (issue 13): a busy router port, a service that
+exits 2, a typo in `--only`, joining a router with `--connect`, the port options.
+
+Real processes on a real loopback router; the option rules themselves (which
+services, which arguments) are checked without processes.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import socket
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import psutil
+import pytest
+
+from buddybot.core import registry
+from buddybot.core.config import default_config
+from buddybot.core.errors import UsageError
+from buddybot.core.launch import plan_up, select_services, service_argv
+from buddybot.core.node import Node, zenoh_config
+from buddybot.core.service import ServiceContext
+from buddybot.core.status import RobotStatus, format_status
+from buddybot.core.testing import (
+    Process,
+    Router,
+    buddybot_argv,
+    free_port,
+    retry_until,
+)
+
+REPO = Path(__file__).resolve().parents[2]
+
+# --- the option rules, no processes ----------------------------------------------------
+
+
+def _ctx(**options: object) -> ServiceContext:
+    args = argparse.Namespace(sim=True, no_browser=True, listen=None, only=None, eye_port=None,
+                              dashboard_port=None, status_period=5.0, config=None,
+                              connect=None, robot=None, log_level="INFO")
+    for key, value in options.items():
+        setattr(args, key, value)
+    return ServiceContext(name="up", args=args, config=default_config(), robot="buddy",
+                          connect=["tcp/127.0.0.1:7447"])
+
+
+def test_only_with_an_unknown_name_names_it_and_the_valid_ones() -> None:
+    with pytest.raises(UsageError) as caught:
+        select_services(["camera", "camra"], list(registry.SERVICES),
+                        registry.available_services())
+    text = str(caught.value)
+    assert "'camra'" in text and "'camera'" not in text
+    assert all(e.name in text for e in registry.SERVICES)
+
+
+def test_only_selects_in_registry_order() -> None:
+    chosen = select_services(["controller", "camera"], list(registry.SERVICES),
+                             registry.available_services())
+    assert [e.name for e in chosen] == ["camera", "controller"]
+
+
+def test_eye_port_goes_to_the_eye_renderer_and_nowhere_else() -> None:
+    plan = plan_up(_ctx(eye_port=18080, dashboard_port=18090))
+    assert plan.service_args["eye-renderer"] == ["--port", "18080"]
+    # No service named "dashboard" is registered yet: the option is kept, not passed.
+    assert registry.service("dashboard") is None
+    assert "dashboard" not in plan.service_args
+    argv = service_argv("eye-renderer", _ctx(), plan.connect,
+                        plan.service_args["eye-renderer"])
+    assert argv[-2:] == ["--port", "18080"] and "--no-browser" in argv
+
+
+def test_connect_joins_without_a_router_and_not_with_listen() -> None:
+    plan = plan_up(_ctx(connect=["tcp/127.0.0.1:9999"]))
+    assert plan.joins and plan.connect == ["tcp/127.0.0.1:9999"]
+    with pytest.raises(UsageError, match="not both"):
+        plan_up(_ctx(connect=["tcp/127.0.0.1:9999"], listen=["tcp/127.0.0.1:9998"]))
+
+
+def test_listen_defaults_to_the_configured_loopback_endpoint() -> None:
+    """The TLS profile: `[zenoh] connect = ["tls/127.0.0.1:7447"]` makes `up` listen
+    there with the config's Zenoh file, which children and router both get."""
+    ctx = _ctx()
+    ctx.config.zenoh.connect = ["tls/127.0.0.1:7447"]
+    ctx.config.zenoh.config_file = "/etc/buddybot/zenoh/robot.json5"
+    plan = plan_up(ctx)
+    assert plan.listen == ["tls/127.0.0.1:7447"]
+    assert plan.zenoh_file == "/etc/buddybot/zenoh/robot.json5"
+    ctx.config.zenoh.connect = ["tls/buddy.local:7447"]  # a remote router: not ours to start
+    assert plan_up(ctx).listen == ["tcp/127.0.0.1:7447"]
+
+
+def test_a_service_given_up_is_down_even_if_its_name_is_alive() -> None:
+    """A service that exited 2 because another of its name runs is not *ours*: the
+    status line must not count it as up."""
+    status = RobotStatus(expected=["camera", "face-detector"],
+                         up=["camera", "face-detector"], given_up={"face-detector": 2})
+    line = format_status(status, now=10.0)
+    assert line.startswith("nodes 1/2 (down: face-detector) "
+                           "(not restarted: face-detector exit 2) |")
+
+
+# --- real processes --------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def reaped(up: Process) -> Iterator[list[psutil.Process]]:
+    """Stop `up`; whatever it started is killed afterwards even if `up` misbehaves."""
+    seen: list[psutil.Process] = []
+    try:
+        yield seen
+    finally:
+        with contextlib.suppress(psutil.Error):
+            seen.extend(psutil.Process(up.pid).children(recursive=True))
+        up.stop()
+        for proc in seen:
+            with contextlib.suppress(psutil.Error):
+                proc.kill()
+
+
+def _children(up: Process) -> list[psutil.Process]:
+    found: list[psutil.Process] = []
+    with contextlib.suppress(psutil.Error):
+        found = psutil.Process(up.pid).children(recursive=True)
+    return found
+
+
+@pytest.mark.integration
+def test_busy_port_refused_in_one_line_and_nothing_started(tmp_path: Path) -> None:
+    router = Router(log_dir=tmp_path)
+    try:
+        t0 = time.monotonic()
+        up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", router.endpoint),
+                     "up-busy", tmp_path)
+        with reaped(up):
+            started: set[int] = set()
+
+            def exited() -> bool:
+                started.update(p.pid for p in _children(up))
+                return not up.alive()
+
+            retry_until(exited, 30, 0.02, "up refusing")
+            elapsed = time.monotonic() - t0
+        out = up.output()
+        assert up.proc.returncode == 1, out
+        refusals = [x for x in out.splitlines() if "already in use" in x]
+        assert len(refusals) == 1, out
+        assert refusals[0].startswith(f"buddybot up: {router.endpoint} is already in use: "
+                                      "a Zenoh router answers there")
+        assert "Nothing started" in refusals[0]
+        assert "Traceback" not in out and "starting router" not in out
+        assert not any(line.startswith("[") for line in out.splitlines()), out
+        # The only children `up` ever had were its own Zenoh probe helpers, if any:
+        # never a `buddybot router` or `buddybot run`.
+        assert not started, started
+        assert elapsed < 20, f"refusal took {elapsed:.1f} s"
+        assert router.alive()
+    finally:
+        router.stop()
+
+
+@pytest.mark.integration
+def test_a_service_exiting_2_is_reported_once_and_the_rest_runs(tmp_path: Path) -> None:
+    config = tmp_path / "robot.toml"
+    config.write_text('[face_detector]\nmodel_path = "no/such/model.tflite"\n')
+    port = free_port()
+    # --log-level WARNING: our router's readiness does not hang on its INFO lines.
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--config", str(config),
+                               "--listen", f"tcp/127.0.0.1:{port}", "--status-period", "1",
+                               "--log-level", "WARNING",
+                               "--only", "camera", "--only", "face-detector"), "up", tmp_path)
+    with reaped(up):
+        up.wait_for_output("face-detector exited with status 2", 120)
+        seen_at = up.output().count("[status")
+        # Long enough for the old rule (1 s, 2 s, 4 s backoff) to restart it twice.
+        retry_until(lambda: up.output().count("[status") >= seen_at + 8, 60, 0.2,
+                    "eight more status lines")
+        out = up.output()
+        assert out.count("face-detector exited with status") == 1, out
+        assert "restarting face-detector" not in out
+        last = [x for x in out.splitlines() if x.startswith("[status")][-1]
+        assert "nodes 1/2 (down: face-detector) (not restarted: face-detector exit 2)" in last
+        assert " camera " in last and "camera 0.0 fps" not in last  # still capturing
+        camera = [c for c in _children(up) if "run camera" in " ".join(c.cmdline())]
+        assert len(camera) == 1 and camera[0].is_running()
+        assert up.alive()
+
+
+@pytest.mark.integration
+def test_only_with_a_typo_exits_2_naming_it(tmp_path: Path) -> None:
+    up = Process(buddybot_argv("up", "--sim", "--only", "camra"), "up-typo", tmp_path)
+    with reaped(up):
+        assert up.proc.wait(60) == 2
+    out = up.output()
+    assert "--only: unknown service 'camra'" in out
+    assert "camera" in out and "face-detector" in out  # the valid names are listed
+    assert "Traceback" not in out and "starting router" not in out
+
+
+@pytest.mark.integration
+def test_connect_joins_a_running_router_without_starting_one(tmp_path: Path) -> None:
+    router = Router(log_dir=tmp_path)
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--connect", router.endpoint,
+                               "--only", "radar-presence", "--status-period", "1"),
+                 "up-join", tmp_path)
+    try:
+        with reaped(up):
+            up.wait_for_output("nodes 1/1", 120)
+            out = up.output()
+            assert f"joining the router at {router.endpoint}" in out
+            assert "[router" not in out
+            cmdlines = [" ".join(c.cmdline()) for c in _children(up)]
+            assert not any(" router" in c for c in cmdlines), cmdlines
+            with Node("probe", connect=[router.endpoint], probe=True) as probe:
+                assert "radar-presence" in probe.node_instances(timeout=5)
+    finally:
+        router.stop()
+
+
+@pytest.mark.integration
+def test_connect_to_nothing_fails_fast(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    up = Process(buddybot_argv("up", "--sim", "--connect", endpoint), "up-nothing", tmp_path)
+    with reaped(up):
+        assert up.proc.wait(60) == 1
+    assert f"no router answers at {endpoint}" in up.output()
+
+
+def _tls_profile(tmp_path: Path, port: int) -> Path:
+    """A robot config for the TLS profile on one host: `[zenoh] connect` on loopback
+    TLS and a Zenoh file the router (listen side) and every child (connect side) use."""
+    certs = tmp_path / "certs"
+    made = subprocess.run(["bash", str(REPO / "scripts" / "make-test-certs.sh"), str(certs)],
+                          capture_output=True, text=True, timeout=120, check=False)
+    assert made.returncode == 0, made.stderr
+    zenoh_file = tmp_path / "robot-tls.json5"
+    zenoh_file.write_text(json.dumps({"transport": {"link": {
+        "protocols": ["tls"],
+        "tls": {
+            "root_ca_certificate": str(certs / "ca.pem"),
+            "listen_private_key": str(certs / "router.key"),
+            "listen_certificate": str(certs / "router.pem"),
+            "connect_private_key": str(certs / "robot.key"),
+            "connect_certificate": str(certs / "robot.pem"),
+            "enable_mtls": True,
+            "verify_name_on_connect": True,
+        },
+    }}}))
+    config = tmp_path / "robot.toml"
+    config.write_text(f'[zenoh]\nconnect = ["tls/127.0.0.1:{port}"]\n'
+                      f'config_file = "{zenoh_file.name}"\n')  # relative to the TOML file
+    return config
+
+
+@pytest.mark.integration
+def test_up_with_the_tls_profile(tmp_path: Path) -> None:
+    """`[zenoh] config_file`: the router listens with it, the services and the status
+    probe connect with it; plain TCP gets nothing; doctor sees transport tls."""
+    port = free_port()
+    config = _tls_profile(tmp_path, port)
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--config", str(config),
+                               "--only", "radar-presence", "--only", "controller",
+                               "--status-period", "1"), "up-tls", tmp_path)
+    with reaped(up):
+        up.wait_for_output("nodes 2/2", 120)
+        assert f"starting router on tls/127.0.0.1:{port}" in up.output()
+        router = [c for c in _children(up) if " router " in " ".join(c.cmdline())]
+        assert len(router) == 1
+        assert str(tmp_path / "robot-tls.json5") in router[0].cmdline()
+        doctor = Process(buddybot_argv("doctor", "--config", str(config), "--expect",
+                                       "radar-presence", "--expect", "controller", "--sim",
+                                       "--timeout", "5", "--window", "0.5"), "doctor-tls",
+                         tmp_path)
+        assert doctor.proc.wait(60) == 0, doctor.output()
+        out = doctor.output()
+        assert f"reachable at tls/127.0.0.1:{port} (transport tls)" in out
+        assert "2/2 alive" in out
+        doctor.stop()
+        # Nothing answers in clear on the robot's port.
+        plain = f"tcp/127.0.0.1:{port}"
+        with pytest.raises(ConnectionError):
+            config_plain = zenoh_config(connect=[plain])
+            config_plain.insert_json5("connect/timeout_ms", "1500")
+            Node("plain-probe", connect=[plain], config=config_plain, probe=True).close()
+
+
+@pytest.mark.integration
+def test_a_router_that_cannot_listen_stops_up_before_any_service(tmp_path: Path) -> None:
+    """Ready means *our* router logged that it listens, not "something accepts on the
+    port": a router that dies first (here: an address not on this host) ends `up`
+    with one line, and no service is started to join whatever answers there."""
+    endpoint = f"tcp/192.0.2.1:{free_port()}"  # TEST-NET-1: never a local address
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", endpoint,
+                               "--only", "radar-presence"), "up-norouter", tmp_path)
+    with reaped(up):
+        assert up.proc.wait(60) == 1
+    out = up.output()
+    assert (f"buddybot up: the router exited with status 1 before listening on {endpoint}"
+            in out), out
+    assert "[radar-presence" not in out
+
+
+@pytest.mark.integration
+def test_router_port_taken_while_it_restarts_stops_up(tmp_path: Path) -> None:
+    """The router dies and another program takes its port before the restart: `up`
+    stops everything instead of letting its services join a stranger."""
+    port = free_port()
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen",
+                               f"tcp/127.0.0.1:{port}", "--only", "radar-presence",
+                               "--status-period", "1"), "up-stolen", tmp_path)
+    with reaped(up), socket.socket() as thief:
+        up.wait_for_output("nodes 1/1", 120)
+        router = [c for c in _children(up) if " router " in " ".join(c.cmdline())]
+        assert len(router) == 1
+        router[0].kill()
+        router[0].wait(10)
+        thief.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        thief.bind(("127.0.0.1", port))  # within the 1 s before the restart
+        thief.listen(8)
+        assert up.proc.wait(60) == 1
+        out = up.output()
+        assert f"tcp/127.0.0.1:{port} is already in use" in out
+        assert "Stopping everything." in out
+        assert "restarting router" not in out

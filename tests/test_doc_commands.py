@@ -1,0 +1,280 @@
+"""Every command the README and docs/*.md show is checked against the code
+(and the `buddybot` and repository commands of the deployment guide,
+deploy/README.md, whose host tools are not ours to check).
+
+Commands are taken from fenced code blocks (```sh, ```bash, ```shell: every
+line; ```console: the `$ ` lines; any other block: lines starting with
+`$ `, `buddybot `, `.venv/bin/` or `scripts/`) and from inline code spans
+that start with `buddybot `. Then:
+
+* every `buddybot ...` command is parsed by the real parsers: the verb
+  parser (`buddybot.cli.build_parser`), and for `run SERVICE` and the tool
+  verbs (`radar`) the service's or tool's own parser, built as the CLI
+  builds it, so a wrong verb, action or option fails here. Synopsis
+  notation is read as a reader would: `on|off` -> `on`, `[--wait]` ->
+  `--wait`. An inline span without options (`buddybot call KEY [JSON]`,
+  a verb named in prose) only needs its verb, service or action to exist;
+* the quick commands without side effects (`--help`, `--version`, `keys`,
+  `config`, `schemas --check`) are also run as processes and must exit 0
+  (marked integration: they start processes). Long-running commands (`up`,
+  `run`, `router`, the probes) and the ones needing hardware (`radar`) are
+  parse-checked only;
+* other commands: `scripts/...` and `benchmarks/...` run directly must
+  exist and be executable; files given to `.venv/bin/python` and paths
+  given to pytest must exist; `make TARGET` must be a Makefile target;
+  other programs must be in `EXTERNAL` (tools of the host, not ours).
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import os
+import re
+import shlex
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+from buddybot import cli
+from buddybot.core import registry
+from buddybot.core.service import add_common_arguments
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+GUIDES = [ROOT / "deploy" / "README.md"]
+"""Checked for `buddybot` and repository commands only: they show many host tools."""
+FENCE = re.compile(r"^\s*```(\S*)\s*$")
+SHELL_BLOCKS = {"sh", "bash", "shell"}
+LINE_STARTS = ("$ ", "buddybot ", ".venv/bin/", "scripts/")
+INLINE = re.compile(r"`((?:\.venv/bin/)?buddybot [^`]+)`")
+PLACEHOLDERS = {"VERB", "SERVICE", "ACTION"}
+"""Synopsis words standing for a choice: a span containing one is not parsed."""
+EXTERNAL = {"zenoh", "sudo", "install", "systemctl", "journalctl", "openssl", "pip",
+            "apt-get", "git", "chromium", "espeak-ng", "sox", "ssh"}
+"""Programs of the host (not this repository) that docs may show."""
+QUICK = {"keys", "config", "schemas"}
+"""Verbs that only read or check: run as processes (with `--help` and `--version`)."""
+
+
+@dataclass(frozen=True)
+class Command:
+    where: str
+    text: str
+    inline: bool = False
+    strict: bool = True
+    """False: a program that is not ours is not checked (a guide's host tools)."""
+
+    def __str__(self) -> str:
+        return f"{self.where}: {self.text}"
+
+
+def _strip_comment(line: str) -> str:
+    """`cmd  # comment` -> `cmd`; a `#` inside quotes or a word stays."""
+    quote = None
+    for i, char in enumerate(line):
+        if char in "'\"" and quote in (None, char):
+            quote = None if quote else char
+        elif char == "#" and quote is None and (i == 0 or line[i - 1].isspace()):
+            return line[:i].strip()
+    return line.strip()
+
+
+def commands_in(path: Path, strict: bool = True) -> list[Command]:
+    found: list[Command] = []
+    name = path.relative_to(ROOT).as_posix()
+    lang: str | None = None
+    pending = ""
+    for number, raw in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+        fence = FENCE.match(raw)
+        if fence:
+            lang = None if lang is not None else fence.group(1)
+            pending = ""
+            continue
+        if lang is None:
+            found += [Command(f"{name}:{number}", m.group(1).strip(), inline=True,
+                              strict=strict) for m in INLINE.finditer(raw)]
+            continue
+        line = (pending + " " + raw.strip()).strip() if pending else raw.strip()
+        pending = ""
+        if line.endswith("\\"):
+            pending = line[:-1].strip()
+            continue
+        keep = (line.startswith("$ ") if lang == "console"
+                else lang in SHELL_BLOCKS or line.startswith(LINE_STARTS))
+        if not keep:
+            continue
+        line = line.removeprefix("$ ")
+        line = _strip_comment(line)
+        if line:
+            found.append(Command(f"{name}:{number}", line, strict=strict))
+    return found
+
+
+ALL = [*(c for path in DOCS for c in commands_in(path)),
+       *(c for path in GUIDES for c in commands_in(path, strict=False))]
+
+
+def words(text: str) -> list[str]:
+    """Shell words, with synopsis notation resolved (`a|b` -> a, `[x]` -> x)."""
+    out = []
+    for word in shlex.split(text):
+        if not word.startswith(("{", "'", '"')) and "|" in word and "/" not in word:
+            word = word.split("|")[0]
+        word = word.strip("[]") if not word.startswith("{") else word
+        if word:
+            out.append(word)
+    return out
+
+
+def buddybot_argv(argv: list[str]) -> list[str] | None:
+    """The arguments after the program when `argv` runs buddybot, else None."""
+    if argv and (argv[0] == "buddybot" or argv[0].endswith("/bin/buddybot")):
+        return argv[1:]
+    if len(argv) >= 3 and argv[0].endswith("python") and argv[1:3] == ["-m", "buddybot"]:
+        return argv[3:]
+    return None
+
+
+class ParseFailure(Exception):
+    pass
+
+
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            return parser.parse_args(argv)
+    except SystemExit as exit_:
+        if exit_.code in (0, None):  # --help / --version
+            return argparse.Namespace()
+        raise ParseFailure(err.getvalue().strip().splitlines()[-1]) from None
+
+
+def _extension_parser(entry: registry.Entry, prog: str) -> argparse.ArgumentParser:
+    """The parser `buddybot.cli._extension` builds for a service or tool."""
+    parser = argparse.ArgumentParser(prog=prog, description=entry.help)
+    add_common_arguments(parser)
+    entry.load().add_arguments(parser)
+    return parser
+
+
+def check_buddybot(argv: list[str], *, full: bool) -> None:
+    """Parse `buddybot <argv>` as the CLI would; `full=False`: names only."""
+    tool = next((t for t in registry.TOOLS if argv and argv[0] == t.name), None)
+    if tool is not None:
+        parser = _extension_parser(tool, f"buddybot {tool.name}")
+        if full:
+            _parse(parser, argv[1:])
+        elif len(argv) > 1:
+            actions = next(a for a in parser._actions if a.dest == "action")
+            assert argv[1] in actions.choices, f"no action {argv[1]!r}"  # type: ignore[operator]
+        return
+    if not full:
+        verbs = next(a for a in cli.build_parser()._actions if a.dest == "verb").choices
+        assert argv and argv[0] in verbs, f"no verb {argv[:1]}"  # type: ignore[operator]
+        if argv[0] == "run" and len(argv) > 1:
+            assert registry.service(argv[1]) is not None, f"no service {argv[1]!r}"
+        return
+    args = _parse(cli.build_parser(), argv)
+    if getattr(args, "verb", None) == "run":
+        entry = registry.service(args.service)
+        assert entry is not None
+        _parse(_extension_parser(entry, f"buddybot run {entry.name}"), args.service_args)
+
+
+def check_other(argv: list[str], strict: bool = True) -> None:
+    program = argv[0]
+    if program.startswith(("scripts/", "benchmarks/")):
+        path = ROOT / program
+        assert path.is_file(), f"{program} does not exist"
+        assert os.access(path, os.X_OK), f"{program} is not executable (run it with python?)"
+    elif program.endswith("/python") or program in ("python", "python3"):
+        if argv[1:2] != ["-m"]:
+            script = next((a for a in argv[1:] if not a.startswith("-")), None)
+            assert script and (ROOT / script).is_file(), f"{script} does not exist"
+    elif program.endswith("/pytest") or program == "pytest":
+        for arg in argv[1:]:
+            if not arg.startswith("-") and ("/" in arg or arg.endswith(".py")):
+                assert (ROOT / arg.split("::")[0]).exists(), f"{arg} does not exist"
+    elif program == "make":
+        targets = re.findall(r"^([\w-]+):", (ROOT / "Makefile").read_text(), re.M)
+        for target in argv[1:]:
+            assert target in targets, f"make {target}: no such target"
+    elif strict:
+        assert program in EXTERNAL, (
+            f"{program}: not a command of this repository; add it to EXTERNAL if it is "
+            "a host tool the docs may show")
+
+
+def test_the_docs_show_commands() -> None:
+    """The extraction finds what it must (else every check below passes vacuously)."""
+    texts = [c.text for c in ALL]
+    assert any(t.startswith("scripts/run.sh") for t in texts)
+    assert any(t.startswith("buddybot radar info") for t in texts)
+    assert sum(1 for t in texts if t.startswith("buddybot ")) > 20
+
+
+def test_the_parse_check_refuses_a_wrong_command() -> None:
+    for wrong in (["radar", "--port", "/dev/ttyUSB0", "info"], ["echoo", "radar/presence"],
+                  ["run", "camera", "--no-such-option"], ["hz", "camera/front/image", "--bad"]):
+        with pytest.raises(ParseFailure):
+            check_buddybot(wrong, full=True)
+    check_buddybot(["radar", "info", "--port", "/dev/ttyUSB0"], full=True)
+
+
+@pytest.mark.parametrize("command", ALL, ids=str)
+def test_command_is_valid(command: Command) -> None:
+    argv = words(command.text)
+    bb = buddybot_argv(argv)
+    if bb is None:
+        if command.inline:
+            return
+        check_other(argv, command.strict)
+        return
+    if command.inline and (PLACEHOLDERS & set(bb) or "..." in bb):
+        return  # a synopsis (`buddybot run SERVICE --help`), not a command
+    full = not command.inline or any(w.startswith("-") for w in bb)
+    problem = ""
+    try:
+        check_buddybot(bb, full=full)
+    except ParseFailure as error:
+        problem = f"the CLI refuses it: {error}"
+    except AssertionError as error:
+        problem = str(error).splitlines()[0]
+    if problem:
+        pytest.fail(f"{command}\n  {problem}", pytrace=False)
+
+
+def _quick(argv: list[str]) -> bool:
+    if "--help" in argv or "-h" in argv or argv == ["--version"]:
+        return True
+    if not argv or argv[0] not in QUICK:
+        return False
+    if argv[0] == "schemas":
+        return "--check" in argv  # without it, it rewrites schemas/
+    if "--config" in argv:
+        i = argv.index("--config")
+        return i + 1 < len(argv) and (ROOT / argv[i + 1]).is_file()
+    return True
+
+
+QUICK_COMMANDS = sorted({
+    " ".join(bb) for c in ALL
+    if (bb := buddybot_argv(words(c.text))) is not None and _quick(bb)
+    and not PLACEHOLDERS & set(bb)} | {"--help", "--version"})
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("argv", QUICK_COMMANDS)
+def test_quick_command_runs(argv: str) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "BUDDYBOT_CONFIG"}
+    result = subprocess.run([sys.executable, "-m", "buddybot", *shlex.split(argv)], cwd=ROOT,
+                            env=env, capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, f"buddybot {argv}: exit {result.returncode}\n{result.stderr}"
+    if not argv.startswith("schemas"):  # a successful check is silent
+        assert result.stdout.strip(), f"buddybot {argv} printed nothing"
