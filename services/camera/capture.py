@@ -28,6 +28,7 @@ from buddybot.core.errors import ConfigError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, Publisher, RateLimitedLog
 from buddybot.core.overrides import given, merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.rates import RateCounter
 from buddybot.core.service import ServiceContext
 
@@ -225,6 +226,7 @@ def run(ctx: ServiceContext) -> int:
     cv2.setNumThreads(1)
     source = make_source(spec, settings.width, settings.height)
     node = ctx.node()
+    LiveSettings(settings).serve(node)  # readable and dumpable; every field needs a restart
     try:
         return Capture(node, settings, spec, source).run()
     finally:

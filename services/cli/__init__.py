@@ -6,6 +6,9 @@
     buddybot run SERVICE [options]          one service
     buddybot echo|hz|pub|call KEY ...       probe the robot
     buddybot nodes | keys | config          what runs, what exists, what is set
+    buddybot topics | node info NAME        keys seen and their rates; one node
+    buddybot param list|get|set|dump|load   live parameters of a node
+    buddybot doctor [--quick]               is the robot healthy?
     buddybot schemas [--check]              regenerate / check schemas/
     buddybot radar ...                      LD2410 configuration tools
 

@@ -37,6 +37,7 @@ from buddybot.core.errors import ConfigError, UsageError
 from buddybot.core.limits import clip
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.overrides import given, merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
@@ -359,6 +360,7 @@ def run(ctx: ServiceContext) -> int:
     if not urls:
         raise UsageError("no sensor: give --sensor URL (repeatable) or --sim")
     node = ctx.node()
+    LiveSettings(cfg).serve(node)  # readable and dumpable; every field needs a restart
     bridge = Bridge(node, urls, opts.device_id, opts.baudrate,
                     (cfg.reconnect_initial_s, cfg.reconnect_max_s),
                     cfg.silence_timeout_s, cfg.query_firmware)

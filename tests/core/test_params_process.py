@@ -147,3 +147,15 @@ def test_a_reply_is_a_valid_message(spawn: Spawn, endpoint: str, probe: Node) ->
     reply = probe.call(keys.PARAMS, m.ParamRequest(op="get", name="range_m"),
                        node="radar-presence")
     assert isinstance(reply, m.ParamReply) and reply.params[0].value == 2.0
+
+
+def test_camera_settings_are_readable_and_need_a_restart(spawn: Spawn, endpoint: str) -> None:
+    """A service without live fields still exposes its settings: listed, each marked
+    restart, and a set refused without touching the running value."""
+    spawn("camera", "--sim", "--fps", "5")
+    wait_params(endpoint, "camera")
+    listed = json.loads(bb(endpoint, "param", "list", "camera", "--json").stdout)
+    by_name = {p["name"]: p for p in listed}
+    assert by_name["fps"]["value"] == 5 and not any(p["live"] for p in listed)
+    refused = bb(endpoint, "param", "set", "camera", "jpeg_quality", "50")
+    assert refused.returncode == 1 and "needs a restart" in refused.stderr
