@@ -65,6 +65,12 @@ Details = Mapping[str, Any]
 """One entry of LiteRT's get_input_details()/get_output_details()."""
 
 
+def _first_line(exc: BaseException) -> str:
+    """LiteRT's own words for a failure: the first line of its message."""
+    text = str(exc).strip()
+    return text.splitlines()[0] if text else type(exc).__name__
+
+
 def _shape(d: Details) -> list[int]:
     return [int(v) for v in np.asarray(d["shape"]).tolist()]
 
@@ -95,7 +101,7 @@ class LiteModel:
             self._interp = Interpreter(model_path=str(self.path), num_threads=num_threads)
             self._interp.allocate_tensors()
         except (ValueError, RuntimeError, OSError) as exc:
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            reason = _first_line(exc)
             raise ModelLoadError(
                 f"cannot load model {self.path}: LiteRT says: {reason} (expected a .tflite "
                 f"file with input {input.describe()} and outputs "
@@ -146,7 +152,7 @@ class LiteModel:
             self._interp.resize_tensor_input(self._input_index, list(input.shape))
             self._interp.allocate_tensors()
         except (ValueError, RuntimeError) as exc:
-            reason = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+            reason = _first_line(exc)
             raise ModelLoadError(f"model {self.path} cannot run with input "
                                  f"{input.describe()}: LiteRT says: {reason}") from None
         self.input, self.outputs = input, tuple(outputs)
