@@ -16,7 +16,18 @@ tablet or a phone can be an eye:
   "connecting" face while there is no router, never a browser error;
 * one kiosk Chromium window per eye window planned by `placement.py` from
   the displays `screeninfo` finds (or `--display` geometries); none with
-  `--no-browser`.
+  `--no-browser`;
+* its settings on `params/eye-renderer` like every service's, served once
+  the node is open: the looks and the page limits are live (`Hub.apply`,
+  run on the event loop), where it serves and its windows need a restart;
+  its diagnostics say where the pages are (`url`, `listen_host`,
+  `hostname`), which is how `buddybot doctor` finds them on any host;
+* one face, many screens: a single `motion.MotionScheduler`, fed the
+  expression and the commanded direction and woken by a timer on the
+  loop, decides every blink and saccade once; each is sent to every page
+  (`motion`) a little before its start on the server clock, and the newest
+  of each kind stays in the state a (re)connecting page gets. Pages learn
+  the server clock with `ping`/`pong` on the same socket.
 
 No display and no explicit placement: a warning and the pages are only
 served (what `buddybot up --sim` on a headless machine wants). No display
@@ -31,24 +42,29 @@ import asyncio
 import contextlib
 import importlib.resources
 import logging
+import random
 import socket
 import tempfile
-import threading
+import time
 import uuid
 from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 from typing import Any
 
+import msgspec
 from aiohttp import WSCloseCode, WSMsgType, web
 
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.errors import UsageError
 from buddybot.core.limits import clip
+from buddybot.core.loop_inbox import LoopInbox
 from buddybot.core.node import Node, RateLimitedLog
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
-from buddybot.eyes import kiosk, placement, wire
+from buddybot.eyes import kiosk, motion, placement, wire
 from buddybot.eyes.settings import EyeRendererSettings
 
 log = logging.getLogger("buddybot.eye-renderer")
@@ -188,12 +204,21 @@ class Page:
 
 
 class Hub:
-    """Current state plus the connected pages; used only on the event loop."""
+    """Current state plus the connected pages; used only on the event loop.
 
-    def __init__(self, hello: wire.Hello, max_pages: int = 16) -> None:
+    It also holds what a live settings change may alter (`apply`): the looks
+    every page gets, the page limit, the stall time and the allowed origins,
+    each read where it is used so a change applies to the next use.
+    """
+
+    def __init__(self, hello: wire.Hello, max_pages: int = 16,
+                 allowed_origins: tuple[str, ...] = (), stall_s: float = 2.0) -> None:
         self.state = wire.LatestState()
         self.pages: set[Page] = set()
         self.max_pages = max_pages
+        self.allowed_origins = allowed_origins
+        self.stall_s = stall_s
+        self.hello = hello
         self.hello_text = wire.encode("hello", hello)
         self.bus = False
         self.state.put("status", wire.encode("status", wire.Status(bus=False)))
@@ -202,10 +227,59 @@ class Hub:
         self.dropped = 0     # pages cut because they stopped reading
         self.refused = 0     # connections over max_pages
         self.forbidden = 0   # WebSockets from a foreign origin
+        self.motion: motion.MotionScheduler | None = None   # set by `start_motion`
+        self.motion_changed = asyncio.Event()   # the scheduler's plan may be sooner
+        self.motion_events = 0
+        self.pongs = 0
 
     def publish(self, msg: m.Message) -> None:
         self._push(wire.slot(msg), self.state.put_message(msg))
         self.messages += 1
+        if self.motion is None:
+            return
+        if isinstance(msg, m.EyesDirection):
+            self.send_motion(self.motion.set_direction(msg.yaw, msg.pitch, now_ms()))
+        elif isinstance(msg, m.ScreenExpression):
+            self.send_motion(self.motion.set_expression(int(msg.action), now_ms()))
+
+    def start_motion(self, scheduler: motion.MotionScheduler) -> None:
+        """Let `scheduler` decide the face's blinks and saccades (one per renderer)."""
+        self.motion = scheduler
+
+    def send_motion(self, events: list[motion.MotionEvent]) -> None:
+        """Every page gets each event; the newest of each kind stays in the state,
+        so a page that connects late joins the motion under way."""
+        for event in events:
+            text = wire.encode("motion", event)
+            slot_name = wire.motion_slot(event.kind)
+            self.state.put(slot_name, text)
+            self._push(slot_name, text)
+            self.motion_events += 1
+        self.motion_changed.set()
+
+    def pong(self, page: Page, t0: float) -> None:
+        """Answer a page's clock ping with the server clock now (NTP-style)."""
+        page.push("pong", wire.encode("pong", wire.Pong(t0=t0, server_ms=now_ms())))
+        self.pongs += 1
+
+    def apply(self, s: EyeRendererSettings) -> None:
+        """Take the live fields of `s` (on the event loop). New looks go to every
+        connected page at once as a fresh hello (a page restyles on any hello);
+        the limits apply from the next connection or send. A lower `max_pages`
+        cuts no page that is already connected."""
+        self.max_pages = s.max_pages
+        self.stall_s = s.page_stall_s
+        self.allowed_origins = tuple(s.allowed_origins)
+        hello = msgspec.structs.replace(self.hello, iris_color=s.iris_color,
+                                        max_yaw_deg=s.max_yaw_deg,
+                                        max_pitch_deg=s.max_pitch_deg)
+        if hello != self.hello:
+            self.hello = hello
+            self.hello_text = wire.encode("hello", hello)
+            self._push("hello", self.hello_text)
+        if self.motion is not None:
+            self.motion.configure(motion_config(s), now_ms())
+            self.motion_changed.set()
 
     def publish_batch(self, batch: list[m.Message]) -> None:
         for msg in batch:
@@ -251,34 +325,59 @@ class Hub:
             per_eye[page.eye] = per_eye.get(page.eye, 0) + 1
         return {"clients": len(self.pages), "pages": per_eye, "max_pages": self.max_pages,
                 "bus": self.bus, "samples": self.samples, "messages": self.messages,
-                "dropped": self.dropped, "refused": self.refused, "forbidden": self.forbidden}
+                "dropped": self.dropped, "refused": self.refused, "forbidden": self.forbidden,
+                "motion_events": self.motion_events, "pongs": self.pongs}
 
 
-class Inbox:
+def now_ms() -> float:
+    """The server clock every motion event and pong is on: ms since the epoch."""
+    return time.time_ns() / 1e6
+
+
+def motion_config(s: EyeRendererSettings) -> motion.MotionConfig:
+    """The scheduler's knobs from the (live) settings."""
+    return motion.MotionConfig(
+        blink_interval_min_ms=1000.0 * s.blink_interval_min_s,
+        blink_interval_max_ms=1000.0 * s.blink_interval_max_s,
+        gaze_blink_deg=s.gaze_blink_deg, lead_ms=s.motion_lead_ms,
+        max_yaw_deg=s.max_yaw_deg, max_pitch_deg=s.max_pitch_deg)
+
+
+MOTION_IDLE_WAKE_S = 1.0
+"""The motion timer's longest sleep (asleep, nothing is due): a bound, not a tick."""
+
+
+async def run_motion(hub: Hub) -> None:
+    """The motion timer: tick the hub's scheduler when its next decision is due,
+    or sooner when an input changed its plan (`hub.motion_changed`)."""
+    while hub.motion is not None:
+        hub.motion_changed.clear()
+        wait_s = (hub.motion.next_due_ms() - now_ms()) / 1000.0
+        if wait_s > 0:
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(min(wait_s, MOTION_IDLE_WAKE_S)):
+                    await hub.motion_changed.wait()
+            continue
+        events = hub.motion.tick(now_ms())
+        if events:
+            hub.send_motion(events)
+
+
+class Inbox(LoopInbox[m.Message]):
     """Samples from Zenoh's threads to the event loop, newest per slot.
 
-    Handing every sample to the loop on its own (one `call_soon_threadsafe`
-    each) let a flood queue callbacks faster than the loop ran them: memory
-    grew, pages got 17 s old gaze and `/healthz` timed out behind the queue.
-    Here a sample only replaces the pending one of its slot and at most one
-    wake-up is ever queued, so the loop's work per turn is bounded by the
-    number of slots, whatever the sample rate. Batches are also at least
-    `min_interval_s` apart (2 ms: many times the page's frame rate), so under
-    a flood the loop neither wakes per sample nor takes the GIL from the
-    thread that has to keep up with the bus.
+    A sample only replaces the pending one of its slot and at most one
+    wake-up is ever queued (`core.loop_inbox`), so the loop's work per turn
+    is bounded by the number of slots, whatever the sample rate: handing
+    each sample over on its own once gave pages 17 s old gaze. Batches are
+    at least `min_interval_s` apart (2 ms: many times the page's frame rate).
     """
 
     def __init__(self, loop: asyncio.AbstractEventLoop,
                  deliver: Callable[[list[m.Message]], None],
                  min_interval_s: float = 0.002) -> None:
-        self._loop = loop
-        self._deliver = deliver
-        self._min_interval = min_interval_s
-        self._last = -1e9
-        self._lock = threading.Lock()
+        super().__init__(loop, deliver, min_interval_s)
         self._pending: dict[str, m.Message] = {}
-        self._scheduled = False
-        self.received = 0
         self.coalesced = 0   # samples replaced by a newer one before the loop saw them
 
     def put(self, msg: m.Message) -> None:
@@ -289,35 +388,22 @@ class Inbox:
             if self._pending.pop(slot, None) is not None:
                 self.coalesced += 1
             self._pending[slot] = msg   # re-inserted last: arrival order is kept
-            if self._scheduled:
-                return
-            self._scheduled = True
-        with contextlib.suppress(RuntimeError):  # the loop is closing
-            self._loop.call_soon_threadsafe(self._wake)
+            self._schedule()
 
-    def _wake(self) -> None:
-        wait = self._last + self._min_interval - self._loop.time()
-        if wait > 0:
-            self._loop.call_later(wait, self._drain)
-        else:
-            self._drain()
-
-    def _drain(self) -> None:
-        self._last = self._loop.time()
-        with self._lock:
-            batch = list(self._pending.values())
-            self._pending.clear()
-            self._scheduled = False
-        self._deliver(batch)
+    def _take(self) -> list[m.Message]:
+        batch = list(self._pending.values())
+        self._pending.clear()
+        return batch
 
 
-async def _sender(ws: web.WebSocketResponse, page: Page, hub: Hub, stall_s: float) -> None:
+async def _sender(ws: web.WebSocketResponse, page: Page, hub: Hub) -> None:
     """Flush the page's outbox whenever something new is in it.
 
     A page that stops reading is cut: its sends not draining within
-    `stall_s`, or more than SEND_BUFFER_MAX bytes waiting for it. A page
+    `hub.stall_s`, or more than SEND_BUFFER_MAX bytes waiting for it. A page
     that went away ends this task quietly (the reader side cleans up).
     """
+    stall_s = hub.stall_s
     try:
         while not ws.closed:
             await page.wake.wait()
@@ -325,6 +411,7 @@ async def _sender(ws: web.WebSocketResponse, page: Page, hub: Hub, stall_s: floa
             for text in page.outbox.take():
                 if page.unsent() > SEND_BUFFER_MAX:
                     raise TimeoutError
+                stall_s = hub.stall_s
                 async with asyncio.timeout(stall_s):
                     await ws.send_str(text)
     except TimeoutError:
@@ -338,9 +425,9 @@ def _read_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in ("eyes.html", *STATIC)}
 
 
-def make_app(hub: Hub, allowed_origins: tuple[str, ...] = (), stall_s: float = 2.0
-             ) -> web.Application:
-    """The web application: page, static files, WebSocket, health.
+def make_app(hub: Hub) -> web.Application:
+    """The web application: page, static files, WebSocket, health (the allowed
+    origins and the stall time are the hub's, read on each use).
 
     No handler ever waits for a page's sends (each page has its own sender
     task), so `/healthz` and the pages are answered however busy or stuck
@@ -389,7 +476,7 @@ def make_app(hub: Hub, allowed_origins: tuple[str, ...] = (), stall_s: float = 2
             return web.Response(status=400, text=f"bad eye {clip(eye, 40)!r}: "
                                 "use left, right or both\n")
         origin = request.headers.get("Origin")
-        if not wire.origin_allowed(origin, request.host, allowed_origins, names):
+        if not wire.origin_allowed(origin, request.host, hub.allowed_origins, names):
             hub.forbidden += 1
             _warn.warning("origin", "refused a WebSocket from origin %s (not %s; "
                           "eye_renderer.allowed_origins lists more)", clip(origin, 80),
@@ -415,13 +502,17 @@ def make_app(hub: Hub, allowed_origins: tuple[str, ...] = (), stall_s: float = 2
             transport.set_write_buffer_limits(high=PAGE_WRITE_BUFFER)
         client = hub.join(eye, transport if isinstance(transport, asyncio.Transport) else None)
         sockets.add(ws)
-        sender = asyncio.create_task(_sender(ws, client, hub, stall_s))
+        sender = asyncio.create_task(_sender(ws, client, hub))
         log.info("page connected (eye=%s, %d pages)", eye, len(hub.pages))
         try:
             async for msg in ws:
                 if msg.type == WSMsgType.ERROR:
                     break
-                # Pages have nothing to say; anything they send is ignored.
+                # A page only says "ping" (clock sync); anything else is ignored.
+                if msg.type == WSMsgType.TEXT:
+                    t0 = wire.parse_ping(msg.data)
+                    if t0 is not None:
+                        hub.pong(client, t0)
         finally:
             hub.leave(client)
             sockets.discard(ws)
@@ -488,9 +579,8 @@ async def serve(ctx: ServiceContext, host: str, port: int,
     s = settings_from(ctx)
     hub = Hub(wire.Hello(iris_color=s.iris_color, max_yaw_deg=s.max_yaw_deg,
                          max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]),
-              s.max_pages)
-    runner = web.AppRunner(make_app(hub, tuple(s.allowed_origins), s.page_stall_s),
-                           access_log=None)
+              s.max_pages, tuple(s.allowed_origins), s.page_stall_s)
+    runner = web.AppRunner(make_app(hub), access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
     try:
@@ -501,7 +591,10 @@ async def serve(ctx: ServiceContext, host: str, port: int,
     actual = runner.addresses[0][1] if runner.addresses else port
     view_host = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
     base = f"http://{view_host}:{actual}"
-    inbox = Inbox(asyncio.get_running_loop(), hub.publish_batch)
+    loop = asyncio.get_running_loop()
+    inbox = Inbox(loop, hub.publish_batch)
+    hub.start_motion(motion.MotionScheduler(motion_config(s), random.Random(), now_ms()))
+    motion_timer = asyncio.create_task(run_motion(hub))
     print(f"eye renderer serving {base}/eyes?eye=both", flush=True)
     log.info("eyes: %s/eyes?eye=left|right|both", base)
 
@@ -526,6 +619,8 @@ async def serve(ctx: ServiceContext, host: str, port: int,
                 if node is None:
                     break
                 _subscribe(node, inbox)
+                LiveSettings(s, partial(_apply_on_loop, loop, hub)).serve(node)
+                node.diagnostics.values.update(where_served(base, host))
             if node is None:
                 continue
             hub.samples = inbox.received
@@ -538,8 +633,10 @@ async def serve(ctx: ServiceContext, host: str, port: int,
             diag.values["pages_refused"] = hub.refused
             diag.values["origins_refused"] = hub.forbidden
             diag.values["samples_coalesced"] = inbox.coalesced
+            diag.values["motion_events"] = hub.motion_events
     finally:
         ctx.stop.set()   # a node still waiting for its router gives up
+        motion_timer.cancel()
         for window in kiosks:
             window.stop()
         await runner.cleanup()
@@ -549,6 +646,21 @@ async def serve(ctx: ServiceContext, host: str, port: int,
                 node = await opening
         if node is not None:
             node.close()
+
+
+def _apply_on_loop(loop: asyncio.AbstractEventLoop, hub: Hub,
+                   new: EyeRendererSettings) -> None:
+    """`LiveSettings`' callback (a node worker thread): hand the change to the
+    event loop, which owns the hub. Not waited for: the loop takes it within
+    one turn; a loop that is closing refuses it (RuntimeError -> not applied)."""
+    loop.call_soon_threadsafe(hub.apply, new)
+
+
+def where_served(base: str, listen_host: str) -> dict[str, str]:
+    """Diagnostics values saying where the pages are, for `buddybot doctor` on any
+    host: `url` as this host reaches them (loopback when serving every
+    interface), the configured `listen_host` and this machine's `hostname`."""
+    return {"url": base, "listen_host": listen_host, "hostname": socket.gethostname()}
 
 
 def settings_from(ctx: ServiceContext) -> EyeRendererSettings:

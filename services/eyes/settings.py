@@ -39,7 +39,14 @@ EyeName = Literal["left", "right"]
 
 
 class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """`[eye_renderer]`: the web eye renderer and its kiosk windows."""
+    """`[eye_renderer]`: the web eye renderer and its kiosk windows.
+
+    Live (`extra={"live": True}`, `buddybot param set eye-renderer ...` applies
+    at once): the looks (sent again to every page, which restyles in place)
+    and the page limits (read on each connection or send). Restart-only:
+    where the pages are served (a bound socket) and the kiosk windows
+    (browser, placement, displays), which are decided once at start.
+    """
 
     # Loopback by default: a tablet or phone as an eye needs host = "0.0.0.0".
     host: Annotated[str, msgspec.Meta(
@@ -55,7 +62,9 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         description="Chromium executable (empty: found on PATH)")] = ""
     # Placement (docs/design.md section 4.5); empty/0 = not configured, defaults apply:
     # left eye on display 1, right eye on display 2, one display -> both on it.
-    eyes: list[EyeName] = msgspec.field(default_factory=list)
+    eyes: Annotated[list[EyeName], msgspec.Meta(
+        description="which eyes get a kiosk window: left, right (empty: both)")] = (
+        msgspec.field(default_factory=list))
     left_display: Annotated[int, msgspec.Meta(
         ge=0, le=64, description="display number (1 = leftmost) of the robot's left eye; "
         "0: the default placement")] = 0
@@ -65,25 +74,51 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     # Looks, sent to every page: iris colour and the gaze angle that puts the
     # iris at the edge of the eye (larger = calmer eyes).
     iris_color: Annotated[str, msgspec.Meta(
-        pattern=r"^#[0-9a-fA-F]{6}$", examples=["#a05a2c"],
+        pattern=r"^#[0-9a-fA-F]{6}$", examples=["#a05a2c"], extra={"live": True},
         description="iris colour, #rrggbb")] = "#2f7fd0"
     max_yaw_deg: Annotated[float, msgspec.Meta(
-        gt=0.0, le=90.0, description="degrees of yaw that put the iris at the edge")] = 40.0
+        gt=0.0, le=90.0, extra={"live": True},
+        description="degrees of yaw that put the iris at the edge")] = 40.0
     max_pitch_deg: Annotated[float, msgspec.Meta(
-        gt=0.0, le=90.0, description="degrees of pitch that put the iris at the edge")] = 30.0
+        gt=0.0, le=90.0, extra={"live": True},
+        description="degrees of pitch that put the iris at the edge")] = 30.0
     # At most this many pages connected at once (two kiosk windows, a few
     # phones); over it a new WebSocket is closed at once with code 1013 and a
     # reason, so a flood of connections cannot starve the real eyes.
     max_pages: Annotated[int, msgspec.Meta(
-        ge=1, le=256, description="pages connected at once at most")] = 16
+        ge=1, le=256, extra={"live": True},
+        description="pages connected at once at most (lowering it cuts no page already "
+        "connected)")] = 16
     # A page whose sends do not drain for this long (it stopped reading) is
     # dropped; a real page reconnects by itself and gets the whole state.
     page_stall_s: Annotated[float, msgspec.Meta(
-        ge=0.2, le=60.0, description="seconds a page's sends may not drain before it is "
-        "dropped")] = 2.0
+        ge=0.2, le=60.0, extra={"live": True},
+        description="seconds a page's sends may not drain before it is dropped")] = 2.0
     # Browser origins allowed to open the WebSocket besides the server's own
     # (same host and port), e.g. ["http://buddy.local:8080"]. A request with no
     # Origin header is not a browser page and is allowed.
-    allowed_origins: list[Annotated[str, msgspec.Meta(
+    allowed_origins: Annotated[list[Annotated[str, msgspec.Meta(
         pattern=r"^https?://[^/?#\s]+$", max_length=200, examples=["http://buddy.local:8080"],
-    )]] = msgspec.field(default_factory=list)
+    )]], msgspec.Meta(extra={"live": True}, description="browser origins besides the "
+                      "server's own allowed to open the eye WebSocket (checked on each "
+                      "connection)")] = msgspec.field(default_factory=list)
+    # The eyes' own motion, decided once for every page (services/eyes/motion.py):
+    # spontaneous blinks at a random interval between these bounds (people at
+    # rest: every 3-4 s on average, widely spread), a blink with every gaze
+    # shift at least `gaze_blink_deg` large, and how far ahead of its start an
+    # event is sent so every page has it in time (a few network delays).
+    blink_interval_min_s: Annotated[float, msgspec.Meta(
+        ge=0.3, le=60.0, extra={"live": True},
+        description="shortest time between spontaneous blinks, s")] = 2.5
+    blink_interval_max_s: Annotated[float, msgspec.Meta(
+        ge=0.3, le=120.0, extra={"live": True},
+        description="longest time between spontaneous blinks, s (below the shortest: "
+        "every interval is the shortest)")] = 6.5
+    gaze_blink_deg: Annotated[float, msgspec.Meta(
+        ge=1.0, le=180.0, extra={"live": True},
+        description="a gaze shift at least this large (degrees) comes with a blink")] = 18.0
+    motion_lead_ms: Annotated[float, msgspec.Meta(
+        ge=0.0, le=1000.0, extra={"live": True},
+        description="ms between sending a blink or saccade and its start on every "
+        "page")] = 60.0
+

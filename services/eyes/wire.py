@@ -8,12 +8,17 @@ and the same type serves as each client's coalescing outbox: a slow page
 gets the newest gaze, never a growing backlog.
 
 It also holds the WebSocket origin rule (`origin_allowed`), pure so it is
-tested without a server.
+tested without a server, and the two messages of "one face, many screens"
+(docs/eyes.md): `motion` (a blink or saccade every page draws at the same
+server time; the newest of each kind is kept in the state, so a page that
+connects late joins the motion under way) and the clock ping/pong a page
+uses to learn the server clock.
 """
 
 from __future__ import annotations
 
 import ipaddress
+import math
 from collections.abc import Collection, Iterable
 from typing import Any
 from urllib.parse import urlsplit
@@ -50,6 +55,41 @@ class Status(msgspec.Struct, kw_only=True):
     """
 
     bus: bool
+
+
+class Pong(msgspec.Struct, kw_only=True):
+    """The answer to a page's `{"topic": "ping", "msg": {"t0": T}}`: its own `t0`
+    back and the server clock (ms since the epoch) when the ping arrived.
+    The page takes the round trip with the smallest delay (NTP-style)."""
+
+    t0: float
+    server_ms: float
+
+
+PING_MAX_BYTES = 200
+"""A ping is ~40 bytes; anything longer is not one and is not parsed."""
+
+
+def parse_ping(text: str) -> float | None:
+    """The `t0` of a page's ping, or None for anything else (ignored, never raises)."""
+    if len(text) > PING_MAX_BYTES:
+        return None
+    try:
+        data = msgspec.json.decode(text)
+    except msgspec.DecodeError:
+        return None
+    if not isinstance(data, dict) or data.get("topic") != "ping":
+        return None
+    msg = data.get("msg")
+    t0 = msg.get("t0") if isinstance(msg, dict) else None
+    if isinstance(t0, bool) or not isinstance(t0, int | float) or not math.isfinite(t0):
+        return None
+    return float(t0)
+
+
+def motion_slot(kind: str) -> str:
+    """The state slot of a motion event: the newest blink and the newest saccade."""
+    return f"motion:{kind}"
 
 
 def encode(topic: str, msg: Any) -> str:

@@ -5,13 +5,19 @@
 // names (docs/design.md section 3): direction {yaw, pitch} degrees (+yaw = robot's
 // left), pupil {dilation_percentage}, lids {eye_id 0 L/1 R/2 both,
 // top_lid_position, bottom_lid_position}, expression {action}, plus
-// hello {iris_color, max_yaw_deg, max_pitch_deg}, status {bus}.
+// hello {iris_color, max_yaw_deg, max_pitch_deg}, status {bus},
+// motion {kind, start_ms, duration_ms, params} and pong {t0, server_ms}.
 //
 // Every value eases toward its target once per animation frame (exponential
 // approach, frame-rate independent), so a new target never makes a jump.
-// The page blinks and makes small saccades by itself, and reconnects by
-// itself when the server goes away. Until it is "ready" (its WebSocket is
-// open and the renderer is on the bus, so state can arrive) it shows a calm
+// One face, many screens: the page decides no blink or saccade itself. The
+// renderer decides them once for every page (motion events, start times on
+// the server clock); the page learns the server clock (ping/pong, NTP-style,
+// the sample with the smallest round trip) and draws each event at
+// server time = performance.timeOrigin + performance.now() + offset, so
+// two screens blink in the same frame. It reconnects by itself when the
+// server goes away. Until it is "ready" (its WebSocket is open and the
+// renderer is on the bus, so state can arrive) it shows a calm
 // "connecting" face: eyes half closed, looking ahead, dimmed.
 "use strict";
 
@@ -33,10 +39,16 @@
   const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15, calm: 0.3 };
   const REST_LIDS = { top: 30, bottom: 16 };   // the connecting face: half closed
   const REST_DIM = 0.55;                       // ... and dimmed toward the background
-  const BLINK_CLOSE_MS = 60;     // closing: fast, like a real blink (~50-70 ms)
-  const BLINK_OPEN_MS = 160;     // reopening: slower
+  const BLINK_CLOSE_MS = 60;     // blinkNow() (debug): closing ~50-70 ms like a real blink
+  const BLINK_OPEN_MS = 160;     // ... reopening slower
+  const CLOCK_BURST = 8;         // pings right after connecting, 60 ms apart
+  const CLOCK_EVERY_MS = 2000;   // then one every 2 s (drift, a better round trip)
+  const CLOCK_KEEP = 20;         // the best of the last 20 samples counts
   const now = () => performance.now();
   const epochMs = () => performance.timeOrigin + performance.now();
+  // The server clock (ms since the epoch) at page time t (performance.now() domain).
+  const clock = { offset: 0, rtt: -1, samples: [], synced: false };
+  const serverTime = (t) => performance.timeOrigin + t + clock.offset;
 
   const target = {
     yaw: 0, pitch: 0, dilation: 50, expression: EXPR.AWAKE,
@@ -52,12 +64,21 @@
   // Debug/benchmark surface (read by the tests and benchmarks/eyes.py).
   const eyes = {
     which, target, cur, connected: false, bus: false, ready: false,
-    stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0 },
-    blinkLog: [],                // last 50 blinks: {start_ms, close_ms, open_ms} as drawn
+    stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0, motions: 0 },
+    clock,                       // {offset ms: server - page clock, rtt ms of that sample, ...}
+    serverTime: () => serverTime(now()),
+    // Last 50 blinks as drawn: start_ms (page clock) and server_ms (server clock)
+    // of the first frame drawn with it, event_ms (its start as decided), recv_ms
+    // (when it arrived, server clock), close_ms and open_ms (measured at frame
+    // granularity).
+    blinkLog: [],
+    saccadeLog: [],              // last 50 saccades: {event_ms, server_ms, yaw, pitch, ...}
     frameIntervals: [],          // last 1200 requestAnimationFrame intervals, ms
     drawTimes: [],               // last 1200 per-frame update+draw costs, ms
     latency: [],                 // {stamp_ns, recv_ms, frame_ms} per direction message
-    blinkNow: () => startBlink(now()),
+    blinkNow: () => addBlink({ kind: "blink", start_ms: serverTime(now()),
+      duration_ms: BLINK_CLOSE_MS + BLINK_OPEN_MS,
+      params: { close_ms: BLINK_CLOSE_MS, open_ms: BLINK_OPEN_MS, cause: "debug" } }),
     receive: (text) => onMessage(text),   // feed a server message by hand (devtools, tests)
   };
   window.eyes = eyes;
@@ -99,6 +120,10 @@
         eyes.bus = msg.bus;
         updateReady();
         return true;
+      case "motion":
+        return takeMotion(msg);
+      case "pong":
+        return takePong(msg);
       case "hello":
         if (typeof msg.iris_color === "string") cfg.iris = msg.iris_color;
         if (isNum(msg.max_yaw_deg) && msg.max_yaw_deg > 0) cfg.maxYaw = msg.max_yaw_deg;
@@ -139,14 +164,27 @@
   function connect() {
     const proto = location.protocol === "https:" ? "wss:" : "ws:";
     const ws = new WebSocket(`${proto}//${location.host}/ws?eye=${which}`);
+    let pinger = null;
     ws.onopen = () => {
       eyes.connected = true;
       eyes.stats.connects++;
       retryMs = 200;
       updateReady();             // still "connecting" until the renderer says it is on the bus
+      // A new connection may be another server (a restarted renderer):
+      // start the estimate afresh (the old offset stays until a new sample).
+      clock.samples.length = 0;
+      let sent = 0;
+      const ping = () => {
+        if (ws.readyState !== WebSocket.OPEN) return;
+        ws.send(JSON.stringify({ topic: "ping", msg: { t0: now() } }));
+        sent++;
+        pinger = setTimeout(ping, sent < CLOCK_BURST ? 60 : CLOCK_EVERY_MS);
+      };
+      ping();
     };
     ws.onmessage = (ev) => onMessage(ev.data);
     ws.onclose = () => {
+      clearTimeout(pinger);
       eyes.connected = false;
       eyes.bus = false;          // the next hello batch says again
       updateReady();
@@ -156,59 +194,134 @@
     ws.onerror = () => ws.close();
   }
 
-  // --- autonomous behaviour: blinks and saccades --------------------------------------
-  let blinkStart = -1;
-  let blinkClosedAt = -1;
-  let nextBlink = now() + rand(1500, 4500);
-  let saccade = { yaw: 0, pitch: 0 };
-  let nextSaccade = now() + rand(600, 2000);
+  // --- the server clock: NTP-style, the sample with the smallest round trip ----------
+  function takePong(msg) {
+    if (!isNum(msg.t0) || !isNum(msg.server_ms)) return false;
+    const t1 = now();
+    const rtt = t1 - msg.t0;
+    if (rtt < 0 || rtt > 10000) return false;
+    // The server read its clock about halfway through the round trip.
+    const offset = msg.server_ms - (performance.timeOrigin + (msg.t0 + t1) / 2);
+    clock.samples.push({ rtt, offset });
+    if (clock.samples.length > CLOCK_KEEP) clock.samples.shift();
+    let best = clock.samples[0];
+    for (const sample of clock.samples) if (sample.rtt < best.rtt) best = sample;
+    clock.offset = best.offset;
+    clock.rtt = best.rtt;
+    clock.synced = true;
+    return true;
+  }
 
-  function startBlink(t) {
-    if (blinkStart < 0) blinkStart = t;
+  // --- motion decided by the renderer: blinks and saccades --------------------------
+  // Events are kept in start order; each is drawn at its server time. Saccades
+  // move an offset added to the commanded direction, from (from_yaw,
+  // from_pitch) to (yaw, pitch), so a page that missed earlier ones still
+  // draws the same motion; a page that connects late gets the newest of each
+  // kind with the state and joins the motion under way.
+  const blinks = [];             // pending and running blink events
+  const saccades = [];           // pending saccades plus the last one started
+  let drawnBlink = null;         // {ev, start_ms, server_ms, closedAt}
+  const offset = { yaw: 0, pitch: 0 };
+  eyes.offset = offset;          // the saccade offset drawn (degrees), for tests
+
+  function takeMotion(msg) {
+    if (!["blink", "saccade"].includes(msg.kind) || !isNum(msg.start_ms)
+        || !isNum(msg.duration_ms) || msg.duration_ms < 0 || msg.duration_ms > 10000
+        || !msg.params || typeof msg.params !== "object") return false;
+    const p = msg.params;
+    msg.recv_ms = serverTime(now());   // how early it arrived (logged with it)
+    if (msg.kind === "blink") {
+      if (!isNum(p.close_ms) || !isNum(p.open_ms) || p.close_ms <= 0 || p.open_ms <= 0) {
+        return false;
+      }
+      eyes.stats.motions++;
+      if (autoBlink) addBlink(msg);
+      return true;
+    }
+    if (!["from_yaw", "from_pitch", "yaw", "pitch"].every((k) => isNum(p[k]))) return false;
+    eyes.stats.motions++;
+    if (autoSaccade) addSaccade(msg);
+    return true;
+  }
+
+  function insertByStart(list, ev) {
+    // The same event again (a reconnect replays the state): kept once.
+    if (list.some((x) => x.start_ms === ev.start_ms)) return;
+    list.push(ev);
+    list.sort((a, b) => a.start_ms - b.start_ms);
+  }
+
+  function addBlink(ev) {
+    insertByStart(blinks, ev);
+    if (blinks.length > 20) blinks.shift();
+  }
+
+  function addSaccade(ev) {
+    insertByStart(saccades, ev);
+    if (saccades.length > 20) saccades.shift();
   }
 
   function blinkAmount(t) {
-    if (autoBlink && blinkStart < 0 && t >= nextBlink) {
-      if (target.expression !== EXPR.SLEEP) startBlink(t);
-      nextBlink = t + rand(2500, 6500);   // natural: every few seconds
+    const st = serverTime(t);
+    while (blinks.length && st >= blinks[0].start_ms + blinks[0].duration_ms) {
+      const done = blinks.shift();
+      if (drawnBlink && drawnBlink.ev === done) finishBlink(st);
     }
-    if (blinkStart < 0) return 0;
-    const e = t - blinkStart;
-    if (e < BLINK_CLOSE_MS) return easeIn(e / BLINK_CLOSE_MS);
-    if (e < BLINK_CLOSE_MS + BLINK_OPEN_MS) {
-      if (blinkClosedAt < 0) blinkClosedAt = e;   // first frame past full closure
-      return 1 - easeOut((e - BLINK_CLOSE_MS) / BLINK_OPEN_MS);
+    const ev = blinks.length && st >= blinks[0].start_ms ? blinks[0] : null;
+    if (!ev) return 0;
+    const e = st - ev.start_ms;
+    if (!drawnBlink || drawnBlink.ev !== ev) {
+      drawnBlink = { ev, start_ms: t, server_ms: st, closedAt: -1 };
     }
-    eyes.blinkLog.push({ start_ms: blinkStart, close_ms: blinkClosedAt,
-      open_ms: blinkClosedAt < 0 ? -1 : e - blinkClosedAt });
-    if (eyes.blinkLog.length > 50) eyes.blinkLog.shift();
-    blinkStart = -1;
-    blinkClosedAt = -1;
-    eyes.stats.blinks++;
-    return 0;
+    const close = ev.params.close_ms;
+    const open = ev.params.open_ms;
+    if (e < close) return easeIn(e / close);
+    if (drawnBlink.closedAt < 0) drawnBlink.closedAt = e;   // first frame past full closure
+    return 1 - easeOut(Math.min(1, (e - close) / open));
   }
 
-  function updateSaccade(t) {
-    const lookRandom = target.expression === EXPR.LOOK_RANDOM;
-    const idle = t - lastGazeMsg > 1500;
-    if (!(autoSaccade && eyes.ready && (idle || lookRandom))) {
-      saccade = { yaw: 0, pitch: 0 };
+  function finishBlink(st) {
+    const b = drawnBlink;
+    drawnBlink = null;
+    const e = st - b.ev.start_ms;
+    eyes.blinkLog.push({ start_ms: b.start_ms, server_ms: b.server_ms, event_ms: b.ev.start_ms,
+      recv_ms: b.ev.recv_ms,
+      close_ms: b.closedAt, open_ms: b.closedAt < 0 ? -1 : e - b.closedAt,
+      cause: b.ev.params.cause });
+    if (eyes.blinkLog.length > 50) eyes.blinkLog.shift();
+    eyes.stats.blinks++;
+  }
+
+  function updateOffset(t) {
+    const st = serverTime(t);
+    while (saccades.length > 1 && st >= saccades[1].start_ms) saccades.shift();
+    if (!saccades.length) return;
+    const ev = saccades[0];
+    const p = ev.params;
+    if (st < ev.start_ms) {          // not started yet: still where it starts from
+      offset.yaw = p.from_yaw;
+      offset.pitch = p.from_pitch;
       return;
     }
-    if (t < nextSaccade) return;
-    if (lookRandom) {          // look around the room
-      saccade = { yaw: rand(-0.7, 0.7) * cfg.maxYaw, pitch: rand(-0.5, 0.5) * cfg.maxPitch };
-      nextSaccade = t + rand(700, 1800);
-    } else {                   // small fixational saccades
-      saccade = { yaw: rand(-3, 3), pitch: rand(-2, 2) };
-      nextSaccade = t + rand(600, 2200);
+    if (!ev.drawn) {
+      ev.drawn = true;
+      eyes.saccadeLog.push({ event_ms: ev.start_ms, server_ms: st, recv_ms: ev.recv_ms,
+        yaw: p.yaw, pitch: p.pitch,
+        duration_ms: ev.duration_ms, purpose: p.purpose });
+      if (eyes.saccadeLog.length > 50) eyes.saccadeLog.shift();
     }
+    // Smooth start and stop, all within the event's main-sequence duration.
+    const k = ev.duration_ms > 0 ? clamp((st - ev.start_ms) / ev.duration_ms, 0, 1) : 1;
+    const s = 0.5 - 0.5 * Math.cos(Math.PI * k);
+    offset.yaw = p.from_yaw + (p.yaw - p.from_yaw) * s;
+    offset.pitch = p.from_pitch + (p.pitch - p.from_pitch) * s;
   }
 
   // --- animation ---------------------------------------------------------------------
   const canvas = document.getElementById("eyes");
   const ctx = canvas.getContext("2d", { alpha: false });
   let lastFrame = 0;
+  const base = { yaw: 0, pitch: 0 };   // the commanded direction, eased
 
   function resize() {
     const dpr = window.devicePixelRatio || 1;
@@ -233,13 +346,17 @@
     }
     lastFrame = t;
     const work0 = now();
-    updateSaccade(t);
+    updateOffset(t);
     // Connecting: look straight ahead (no stale gaze at someone who left).
-    const yawGoal = eyes.ready ? target.yaw + saccade.yaw : 0;
-    const pitchGoal = eyes.ready ? target.pitch + saccade.pitch : 0;
+    const yawGoal = eyes.ready ? target.yaw : 0;
+    const pitchGoal = eyes.ready ? target.pitch : 0;
     cur.calm = approach(cur.calm, eyes.ready ? 0 : 1, TAU.calm, dt);
-    cur.yaw = approach(cur.yaw, yawGoal, TAU.gaze, dt);
-    cur.pitch = approach(cur.pitch, pitchGoal, TAU.gaze, dt);
+    base.yaw = approach(base.yaw, yawGoal, TAU.gaze, dt);
+    base.pitch = approach(base.pitch, pitchGoal, TAU.gaze, dt);
+    // The saccade offset is drawn as decided (its own timing), faded out
+    // while connecting.
+    cur.yaw = base.yaw + offset.yaw * (1 - cur.calm);
+    cur.pitch = base.pitch + offset.pitch * (1 - cur.calm);
     cur.dilation = approach(cur.dilation, target.dilation, TAU.pupil, dt);
     for (const side of ["left", "right"]) {
       cur.lids[side].top = approach(cur.lids[side].top, target.lids[side].top, TAU.lids, dt);
@@ -429,7 +546,6 @@
   // --- helpers -----------------------------------------------------------------------
   function clamp(v, lo, hi) { return Math.min(hi, Math.max(lo, v)); }
   function isNum(v) { return typeof v === "number" && Number.isFinite(v); }
-  function rand(lo, hi) { return lo + Math.random() * (hi - lo); }
   function easeIn(p) { return p * p; }
   function easeOut(p) { return 1 - (1 - p) * (1 - p); }
 
