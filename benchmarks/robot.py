@@ -13,12 +13,19 @@ then for `--seconds`:
   needs no hold, so this is the pipeline's own latency;
 * CPU (% of one core) and resident memory of each process and in total.
 
-    .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30]
+`--dashboard` also starts the dashboard service and keeps its page open in
+a headless Chromium (Debian's, through Playwright) for the whole run, so
+the gaze latency with and without a page watching can be compared; the
+dashboard's and the browser's CPU are reported too.
+
+    .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30] [--dashboard]
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import shutil
 import statistics
 import time
 from collections.abc import Callable
@@ -32,7 +39,41 @@ from common import percentile
 from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, Router, free_port, retry_until, run_service
+from buddybot.core.testing import (
+    Collector,
+    Process,
+    Router,
+    free_port,
+    retry_until,
+    run_service,
+    wait_port,
+)
+
+
+@contextlib.contextmanager
+def dashboard_page(port: int) -> Any:
+    """The dashboard page open in a headless Chromium until the block ends; yields
+    the browser's processes (for their CPU)."""
+    from playwright.sync_api import sync_playwright
+
+    path = shutil.which("chromium")
+    if path is None:
+        raise SystemExit("--dashboard needs Debian's chromium (scripts/chromium.sh)")
+    before = {c.pid for c in psutil.Process().children(recursive=True)}
+    with sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=path, args=[
+            "--no-sandbox", "--disable-gpu", "--disable-background-networking"])
+        try:
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+            page.goto(f"http://127.0.0.1:{port}/")
+            page.wait_for_function(
+                "document.getElementById('conn').textContent === 'on the bus'", timeout=60_000)
+            page.wait_for_function("window.dash.image !== null", timeout=60_000)
+            procs = [c for c in psutil.Process().children(recursive=True)
+                     if c.pid not in before and "chrom" in c.name()]
+            yield procs, page
+        finally:
+            browser.close()
 
 
 def main() -> None:
@@ -42,6 +83,8 @@ def main() -> None:
     parser.add_argument("--sim-speed", type=float, default=3.0,
                         help="radar scenario speed (more visits per minute)")
     parser.add_argument("--config", help="robot config file for every service")
+    parser.add_argument("--dashboard", action="store_true",
+                        help="also run the dashboard with its page open in headless Chromium")
     args = parser.parse_args()
     log_dir = Path(mkdtemp(prefix="buddybot-bench-"))
     router = Router(log_dir=log_dir)
@@ -56,8 +99,15 @@ def main() -> None:
         "camera": ("--sim", "--fps", str(args.fps)),
         "radar-bridge": ("--sim", "--sim-scenario", "visit", "--sim-speed", str(args.sim_speed)),
     }
+    dash_port = free_port()
+    if args.dashboard:
+        services["dashboard"] = ("--port", str(dash_port))
     procs: dict[str, Process] = {}
     probe = Node("bench-probe", connect=[router.endpoint])
+    page = contextlib.ExitStack()
+    browser_procs: list[psutil.Process] = []
+    page_frames: tuple[int, int] | None = None
+    page_seconds = 1.0
     try:
         common = ("--config", args.config) if args.config else ()
         for name, extra in services.items():
@@ -81,6 +131,11 @@ def main() -> None:
                 awake_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
 
         Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
+        if args.dashboard:
+            wait_port(dash_port, 30)
+            browser_procs, dash = page.enter_context(dashboard_page(dash_port))
+            counts = dash.evaluate("[window.dash.counts.images, window.dash.counts.messages]")
+            counted_from = time.monotonic()
         time.sleep(3.0)  # warm-up: detector models loaded, caches filled
         probe.subscribe(keys.EYES_DIRECTION, on_direction)
         probe.subscribe(keys.FACE, hop("camera/front/face"), camera="front")
@@ -89,7 +144,7 @@ def main() -> None:
 
         ps = {name: psutil.Process(p.pid) for name, p in procs.items()}
         ps["router"] = psutil.Process(router.pid)
-        for p in ps.values():
+        for p in [*ps.values(), *browser_procs]:
             p.cpu_percent(None)
         rss: dict[str, list[float]] = {name: [] for name in ps}
         end = time.monotonic() + args.seconds
@@ -98,14 +153,27 @@ def main() -> None:
             for name, p in ps.items():
                 rss[name].append(p.memory_info().rss / 2**20)
         cpu = {name: p.cpu_percent(None) for name, p in ps.items()}
+        browser_cpu = 0.0
+        for p in browser_procs:
+            with contextlib.suppress(psutil.Error):  # a helper process may have exited
+                browser_cpu += p.cpu_percent(None)
+        if args.dashboard:
+            now = dash.evaluate("[window.dash.counts.images, window.dash.counts.messages]")
+            page_frames = (now[0] - counts[0], now[1] - counts[1])
+            page_seconds = time.monotonic() - counted_from
     finally:
+        page.close()
         probe.close()
         for proc in procs.values():
             proc.stop()
         router.stop()
 
     print(f"whole robot, {args.seconds:.0f} s, camera {args.fps:.0f} fps (simulated), "
-          f"radar visit x{args.sim_speed:g}; logs in {log_dir}")
+          f"radar visit x{args.sim_speed:g}, dashboard page "
+          f"{'open' if args.dashboard else 'not open'}; logs in {log_dir}")
+    if page_frames is not None:
+        print(f"dashboard page received {page_frames[0]} images and {page_frames[1]} messages "
+              f"in {page_seconds:.0f} s ({page_frames[0] / page_seconds:.1f} images/s)")
     if gaze_ms:
         print(f"gaze latency capture -> eyes/direction: median {statistics.median(gaze_ms):.1f} ms,"
               f" p95 {percentile(gaze_ms, 0.95):.1f} ms, n={len(gaze_ms)} "
@@ -125,6 +193,8 @@ def main() -> None:
     print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}")
     for name in ps:
         print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}")
+    if browser_procs:
+        print(f"{'chromium (page)':<16}{browser_cpu:>16.1f}{'':>14}")
     total_rss = sum(max(v or [0]) for v in rss.values())
     print(f"{'total':<16}{sum(cpu.values()):>16.1f}{total_rss:>14.1f}")
 

@@ -3,9 +3,11 @@
 Thin adapter around `pipeline.FacePipeline`. Frames arrive through a
 latest-value slot (`delivery="latest"`): inference always runs on the
 newest frame and stale ones are dropped, never queued. The face message
-keeps the image's `stamp_ns` and `frame_id`. The debug image is rendered
-and JPEG-encoded only while someone subscribes to it (Zenoh matching
-status), so it costs nothing otherwise.
+keeps the image's `stamp_ns` and `frame_id`. Every processed frame also
+gives one `camera/<cam>/faces` (`detections.to_message`: every box in
+pixels, for viewers), put after the face so the gaze never waits for it.
+The debug image is rendered and JPEG-encoded only while someone
+subscribes to it (Zenoh matching status), so it costs nothing otherwise.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ import cv2
 import numpy as np
 
 from buddybot.camera import blazeface as bf
-from buddybot.camera import draw, frames, models
+from buddybot.camera import detections, draw, frames, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.iris import IrisNet
 from buddybot.camera.litert import ModelLoadError
@@ -175,6 +177,8 @@ def run(ctx: ServiceContext) -> int:
     diag.values.update({"model": settings.model, "frames": 0, "faces": 0, "bad_frames": 0,
                         "too_large": 0, "infer_ms": 0.0, "latency_ms": 0.0})
     face_pub = node.publisher(keys.FACE, camera=settings.camera)
+    faces_pub = node.publisher(keys.FACES, camera=settings.camera)
+    bystanders = detections.Bystanders()
     debug_pub = node.publisher(keys.DEBUG_IMAGE, camera=settings.camera)
     log.info("face detector: %s model %s on LiteRT", settings.model, net.path)
 
@@ -219,11 +223,18 @@ def run(ctx: ServiceContext) -> int:
             ))
             diag.increment("faces")
         diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)
+        # Every processed frame, also without a face (viewers clear their boxes);
+        # after the face, which is on the gaze-latency path and this is not.
+        faces_pub.put(detections.to_message(
+            result, stamp_ns, img.frame_id, bgr.shape[1], bgr.shape[0],
+            bystanders.current(result, stamp_ns, 2 * settings.full_every_s + 0.1)))
         diag.values["target_changes"] = pipeline.tracker.target_changes
         if pipeline.gate_rejections:
             diag.values["track_rejected"] = sum(pipeline.gate_rejections.values())
         searched = deferred_work(pipeline, bgr, stamp_ns, settings.defer_after_ms / 1000.0,
                                  node.stop_event.wait)
+        if searched is not None:
+            bystanders.update(searched, result, stamp_ns)
         if result.estimate is not None and result.estimate.fusion is not None:
             diag.values.update(result.estimate.fusion.as_dict())  # type: ignore[arg-type]
         if pipeline.irises is not None:

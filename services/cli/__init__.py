@@ -8,9 +8,11 @@
     buddybot nodes | keys | config          what runs, what exists, what is set
     buddybot topics | node info NAME        keys seen and their rates; one node
     buddybot param list|get|set|dump|load   live parameters of a node
+    buddybot bag record|play|info FILE      record keys to MCAP, replay, describe
     buddybot doctor [--quick]               is the robot healthy?
     buddybot schemas [--check]              regenerate / check schemas/
     buddybot radar ...                      LD2410 configuration tools
+    buddybot foxglove [--port P]            every key live in the Foxglove app
 
 Exit status: 0 success, 1 failure at run time, 2 bad usage or config.
 """
@@ -38,7 +40,7 @@ from buddybot.core.errors import EXIT_USAGE
 from buddybot.core.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
-         "doctor", "param", "topics", "node")
+         "doctor", "param", "topics", "node", "foxglove", "bag")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 

@@ -63,7 +63,8 @@ def main(ctx: ServiceContext) -> int:
         robot, connect = args.robot or "buddy", args.connect or [DEFAULT_ENDPOINT]
     opts = doctor.Options(
         sim=args.sim, endpoint=connect[0], robot=robot,
-        expected=args.expect or [e.name for e in registry.available_services()],
+        expected=args.expect or doctor.expected_here(
+            [e.name for e in registry.available_services()], config),
         timeout=args.timeout, window_s=args.window,
         zenoh_file=config.zenoh.config_file if config is not None else None, stop=ctx.stop,
     )

@@ -31,8 +31,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--listen", action="append", metavar="ENDPOINT",
                         help="where the router listens (default: the config's [zenoh] connect "
                         f"endpoint when it is on loopback, else {DEFAULT_ENDPOINT}); the "
-                        "router and every service use the config's [zenoh] config_file "
-                        "(TLS). A port already in use is refused: nothing starts")
+                        "services use the config's [zenoh] config_file (TLS), the router "
+                        "its router_config_file (else config_file). A port already in use "
+                        "is refused: nothing starts")
     parser.add_argument("--only", action="append", metavar="SERVICE",
                         help="start only these services (repeatable; an unknown name is an "
                         "error)")
@@ -40,9 +41,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="HTTP port of the eye pages (eye-renderer --port; default "
                         "[eye_renderer] port)")
     parser.add_argument("--dashboard-port", type=port_number, metavar="PORT",
-                        help="HTTP port of the dashboard, passed to a service named "
-                        "'dashboard' when one is registered (none is yet: the option is "
-                        "checked and otherwise unused)")
+                        help="HTTP port of the dashboard (dashboard --port; default "
+                        "[dashboard] port)")
+    parser.add_argument("--foxglove", action="store_true",
+                        help="also start the Foxglove bridge (`buddybot foxglove`; port "
+                        "[foxglove] port)")
     parser.add_argument("--status-period", type=float, default=5.0, metavar="S",
                         help="print a status line every S seconds (0: never)")
 

@@ -42,6 +42,11 @@ visitor comes back before it started.
 Gaze: every face gives a `Look` at once (the seed's behaviour); when no
 face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
 
+`state(now)` reports what the machine believes and what holds back the
+next sound (`waiting`: recovery, sound or device busy, greeted, no face
+yet, dwell or cooldown, with the time left for the last two), for the
+service's latched `controller/state`; it changes nothing.
+
 Expressions are emitted only on change, never the same action twice in a
 row. After a start, `recover_s` is spent listening to the latched inputs
 (presence, sound status, device free): a sound still playing blocks new
@@ -69,7 +74,7 @@ from dataclasses import dataclass, field
 
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
-from buddybot.core.messages import TERMINAL_GOAL_STATES, ExpressionAction
+from buddybot.core.messages import TERMINAL_GOAL_STATES, ExpressionAction, Waiting
 
 # --- commands ------------------------------------------------------------------------
 
@@ -149,6 +154,33 @@ class Snapshot:
     counters: dict[str, int] = field(default_factory=dict)
 
 
+@dataclass(frozen=True)
+class State:
+    """What `controller/state` reports, on the behaviour's clock (`Behaviour.state`).
+
+    Two states compare equal when only `waiting_s` differs: it counts down all
+    the time, so a change of it alone is no news worth a publication.
+    """
+
+    phase: Phase
+    expression: ExpressionAction | None
+    in_range: bool
+    face_visible: bool
+    visit: int
+    """Visits since start (a return within `regreet_cooldown_s` is the same visit)."""
+    greeted: bool
+    sound: SoundKind | None
+    """Our sound playing now (or waiting for the player's reply), if any."""
+    farewell_pending: bool
+    waiting: Waiting
+    """What holds back the next sound (`messages.ControllerState` lists the reasons)."""
+    waiting_s: float = field(default=0.0, compare=False)
+    """Time left for `dwell` and `cooldown`, else 0."""
+    last_greeting_at: float | None = None
+    """When the last greeting started (the player accepted it), clock of `now`."""
+    last_farewell_at: float | None = None
+
+
 # --- the machine -----------------------------------------------------------------------
 
 
@@ -169,12 +201,15 @@ class Behaviour:
         self._noticed_at = now
         self._departed_at: float | None = None
         self._visit = _Visit()
+        self._visits = 0  # visits since start
         self._expression: ExpressionAction | None = None
         self._gaze_centred = True
         # sounds
         self._goal: _Goal | None = None
         self._last_greet: float | None = None
         self._farewell_since: float | None = None
+        self._greeting_started: float | None = None  # accepted by the player (for reports)
+        self._farewell_started: float | None = None
         self._next_request = 1
         self._orphan_status: dict[str, str] = {}
         self._recovered_sound_at: float | None = None
@@ -206,6 +241,51 @@ class Behaviour:
             farewell_pending=self._farewell_since is not None,
             recovering=self.recovering, counters=dict(self.counters),
         )
+
+    def state(self, now: float) -> State:
+        """Everything `controller/state` says, including why no sound plays now."""
+        waiting, left = self._waiting(now)
+        return State(
+            phase=self.phase(now), expression=self._expression, in_range=bool(self._in_range),
+            face_visible=self._face_visible(now), visit=self._visits,
+            greeted=self._visit.greeted, sound=None if self._goal is None else self._goal.kind,
+            farewell_pending=self._farewell_since is not None, waiting=waiting,
+            waiting_s=left, last_greeting_at=self._greeting_started,
+            last_farewell_at=self._farewell_started,
+        )
+
+    def _waiting(self, now: float) -> tuple[Waiting, float]:
+        """What holds back the next sound, and the time left when that is known.
+
+        The same conditions as `_farewell` and `_greeting`, in their order: an owed
+        farewell waits only for the sound device; with nobody here no sound is due;
+        otherwise the greeting's checks, first that fails named.
+        """
+        if self.recovering:
+            return "recovery", 0.0
+        busy: Waiting | None = ("sound_busy" if self._goal is not None else
+                                "device_busy" if self._device_free is False else None)
+        if self._farewell_since is not None:
+            return busy or "nothing", 0.0
+        if not self._present:
+            return "nothing", 0.0
+        if self._visit.greeted:
+            return "greeted", 0.0
+        if busy is not None:
+            return busy, 0.0
+        if not self._in_range:
+            return "nothing", 0.0  # leaving: no greeting for someone going
+        if not self._face_visible(now):
+            return "face", 0.0
+        face_since = self._face_since if self._face_since is not None else now
+        dwell_left = self.s.greet_dwell_s - (now - max(self._noticed_at, face_since))
+        if dwell_left > 0:
+            return "dwell", dwell_left
+        if self._last_greet is not None:
+            cooldown_left = self.s.regreet_cooldown_s - (now - self._last_greet)
+            if cooldown_left > 0:
+                return "cooldown", cooldown_left
+        return "nothing", 0.0
 
     def sound_busy(self) -> bool:
         """True while a sound of ours is unfinished or the player says it is busy."""
@@ -268,6 +348,9 @@ class Behaviour:
             goal.since = now  # the watchdog counts from the acceptance
             if goal.kind is SoundKind.GREETING:
                 self._last_greet = now  # the cooldown counts from when it really started
+                self._greeting_started = now
+            elif goal.kind is SoundKind.FAREWELL:
+                self._farewell_started = now
             if self._orphan_status.pop(goal_id, None) in TERMINAL_GOAL_STATES:
                 self._goal = None
         return self._step(now)
@@ -343,6 +426,7 @@ class Behaviour:
             )
             if not same_visit:
                 self._visit = _Visit()
+                self._visits += 1
             if self._farewell_since is not None:
                 # Back before the goodbye could start: the visit goes on.
                 self._farewell_since = None

@@ -16,6 +16,12 @@ Threads, and why:
   calls (a callback must never block: one stuck callback starves every
   other key of the session) and posts their replies back to the inbox,
   so gaze keeps flowing while a call waits.
+
+`controller/state` (latched) is published once at start and then whenever
+a field other than the stamp and the `waiting_s` countdown changed: checked
+after every decision step, and after a face once its eye control is out
+(a face changes `face_visible` and the phase at once; the gaze never waits
+for the report). The behaviour's monotonic times become wall-clock ns here.
 """
 
 from __future__ import annotations
@@ -37,6 +43,7 @@ from buddybot.controller.behaviour import (
     Look,
     PlaySound,
     SetExpression,
+    State,
 )
 from buddybot.controller.events import (
     CancelReply,
@@ -101,6 +108,8 @@ class Controller:
         self._warn = RateLimitedLog(log)
         self._expression_pub = node.publisher(keys.EXPRESSION)
         self._control_pub = node.publisher(keys.EYE_CONTROL)
+        self._state_pub = node.publisher(keys.CONTROLLER_STATE)
+        self._state: State | None = None  # the last one published
         self._threads: list[threading.Thread] = []
         self._last_diag = 0.0
 
@@ -121,6 +130,8 @@ class Controller:
         node.subscribe(keys.DEVICE_FREE, self._on_device_free)
         node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
         node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
+        with self._lock:
+            self._publish_state(self.clock())  # the first one, even before any input
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
             thread = threading.Thread(target=target, name=f"controller:{name}", daemon=True)
             thread.start()
@@ -155,7 +166,9 @@ class Controller:
 
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
         with self._lock:
-            self._handle_face(msg, self.clock())
+            now = self.clock()
+            self._handle_face(msg, now)
+            self._publish_state(now)
 
     # -- decision thread --
 
@@ -180,6 +193,7 @@ class Controller:
                         next_tick = now + tick
                         self._execute(self.behaviour.tick(now))
                         self._publish_diagnostics(now)
+                    self._publish_state(now)
             except Exception as exc:  # a bug must not stop the robot's behaviour
                 self.node.diagnostics.increment("decision_errors")
                 self._warn.warning("decide", "decision step failed: %r", exc)
@@ -234,6 +248,14 @@ class Controller:
         return m.EyeControl(stamp_ns=stamp, yaw=_clamp(g.yaw, math.pi),
                             pitch=_clamp(g.pitch, math.pi / 2), target_distance_cm=g.distance_cm)
 
+    def _publish_state(self, now: float) -> None:
+        """Put `controller/state` if it changed (beyond `waiting_s`); under the lock."""
+        state = self.behaviour.state(now)
+        if state == self._state:
+            return
+        self._state = state
+        self._state_pub.put(state_message(state, now, m.now_ns()))
+
     def _publish_diagnostics(self, now: float) -> None:
         if now - self._last_diag < 1.0:
             return
@@ -277,6 +299,23 @@ class Controller:
                 except Exception as exc:
                     log.warning("cancel of %s failed: %s", cmd.goal_id, exc)
                     self._post(CancelReply(cmd.goal_id, False))
+
+
+def state_message(state: State, now: float, now_ns: int) -> m.ControllerState:
+    """The behaviour's state as the message: its times (on the clock of `now`)
+    become wall-clock ns, taking `now` to be `now_ns`."""
+    def wall(at: float | None) -> int | None:
+        return None if at is None else max(0, now_ns - round((now - at) * 1e9))
+
+    return m.ControllerState(
+        stamp_ns=now_ns, phase=state.phase.value, expression=state.expression,
+        in_range=state.in_range, face_visible=state.face_visible, visit=state.visit,
+        greeted=state.greeted, sound=None if state.sound is None else state.sound.value,
+        farewell_pending=state.farewell_pending, waiting=state.waiting,
+        waiting_s=state.waiting_s,
+        last_greeting_ns=wall(state.last_greeting_at),
+        last_farewell_ns=wall(state.last_farewell_at),
+    )
 
 
 def _clamp(value: float, limit: float) -> float:

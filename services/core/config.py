@@ -43,10 +43,15 @@ class ZenohSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
     `config_file` is an optional Zenoh JSON5 config (TLS, credentials) that
     the runtime starts from; `connect` still decides the endpoints.
+    `router_config_file` is the file of the router `buddybot up` starts (the
+    listen side: its certificate, access control); unset, the router gets
+    `config_file` too, which then has to hold both sides. Splitting them lets
+    the shipped `deploy/zenoh/router.json5` and `robot.json5` be used as is.
     """
 
     connect: list[str] = msgspec.field(default_factory=_default_connect)
     config_file: str | None = None
+    router_config_file: str | None = None
 
 
 S = TypeVar("S")

@@ -21,14 +21,16 @@ import importlib.metadata
 import json
 import os
 import platform
+import re
 import socket
 import threading
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
+from urllib.parse import urlsplit
 
 from buddybot.core.config import DEFAULT_ENDPOINT, ConfigBase
 
@@ -109,19 +111,34 @@ def judge_config(config: ConfigBase | None, error: str | None) -> Check:
     return Check("config", OK, config.source or "defaults (no config file)")
 
 
-def judge_port(endpoint: str, accepting: bool, nodes: list[str] | None) -> Check:
+def describe_holder(nodes: list[str] | None, process: str | None = None) -> str:
+    """Who holds a port, in words: a Zenoh router (with whose nodes) or a stranger;
+    and the local process when it is known (`port_holder`)."""
+    if nodes is None:
+        who = "something that is not a Zenoh router"
+    elif nodes:
+        who = f"a Zenoh router (live nodes: {', '.join(nodes)})"
+    else:
+        who = "a Zenoh router (no live BuddyBot nodes)"
+    return who + (f", process {process}" if process else "")
+
+
+def judge_port(endpoint: str, accepting: bool, nodes: list[str] | None,
+               process: str | None = None) -> Check:
     """The router port before `up`: free, our kind of router, or a stranger.
 
-    `nodes` is what a Zenoh probe found there (None: no Zenoh router answered).
+    `nodes` is what a Zenoh probe found there (None: no Zenoh router answered);
+    `process` the local process listening there, when `port_holder` can tell.
     """
     name = "router port"
     if not accepting:
         return Check(name, OK, f"{endpoint} is free")
+    held = f", process {process}" if process else ""
     if nodes is None:
         return Check(name, FAIL, f"{endpoint} is taken by something that is not a Zenoh "
-                     "router")
+                     f"router{held}")
     who = f"live nodes: {', '.join(nodes)}" if nodes else "no live BuddyBot nodes"
-    return Check(name, OK, f"{endpoint}: a Zenoh router runs there ({who})")
+    return Check(name, OK, f"{endpoint}: a Zenoh router runs there ({who}){held}")
 
 
 def judge_router(endpoint: str, reachable: bool, error: str = "") -> Check:
@@ -211,6 +228,49 @@ def host_port(endpoint: str) -> tuple[str, int]:
     return host, int(port.split("#")[0])
 
 
+def port_holder(endpoint: str) -> str | None:
+    """The local process listening on `endpoint`'s TCP port ("python3, pid 1234"),
+    when psutil can tell: only processes whose sockets we may read (our user's,
+    or all as root), and never one on another host. None otherwise."""
+    try:
+        host, port = host_port(endpoint)
+    except ValueError:
+        return None
+    try:
+        import psutil
+
+        conns = psutil.net_connections(kind="tcp")
+    except Exception:  # no psutil, or AccessDenied (macOS without root)
+        return None
+    for conn in conns:
+        addr = conn.laddr
+        if conn.status != psutil.CONN_LISTEN or not addr or addr.port != port:
+            continue
+        if addr.ip not in (host, f"::ffff:{host}", "0.0.0.0", "::"):
+            continue
+        if conn.pid is None:
+            return None
+        try:
+            return f"{psutil.Process(conn.pid).name()}, pid {conn.pid}"
+        except psutil.Error:
+            return f"pid {conn.pid}"
+    return None
+
+
+
+def serve_failure(host: str, port: int, error: str) -> str:
+    """The one line for a web or WebSocket server that cannot listen (the dashboard,
+    the Foxglove bridge); a taken port names its holder and the way out. `error`:
+    the OS's or the server library's reason (Foxglove's prefixes are dropped)."""
+    reason = error.removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
+    reason = re.sub(r" \(os error \d+\)$", "", reason)
+    if "in use" not in reason:
+        return f"cannot serve on {host}:{port}: {reason}"
+    holder = port_holder(f"tcp/{host}:{port}")
+    held = f" by {holder}" if holder else ""
+    return (f"cannot serve on {host}:{port}: the port is taken{held} ({reason}); stop it "
+            "or give --port another port")
+
 def accepting(endpoint: str, timeout: float = 0.5) -> bool:
     """Whether something accepts TCP connections on `endpoint` (tcp or tls) right now."""
     try:
@@ -298,17 +358,158 @@ def check_audio(settings: Any, sim: bool, in_use: bool = False) -> Check:
 
 
 def check_display(host: str, port: int, timeout: float) -> Check:
-    """The eye renderer's page server answers `/healthz`."""
+    """The eye renderer's page server answers `/healthz` at `host:port` (a
+    wildcard host means this machine)."""
     if host in ("0.0.0.0", "::", ""):
         host = "127.0.0.1"
-    url = f"http://{host}:{port}/healthz"
+    return check_display_url(_http_base(host, port), timeout)
+
+
+def check_display_url(base: str, timeout: float, where: str = "") -> Check:
+    """The page server at `base` (`http://host:port`) answers `/healthz`; `where`
+    says whose it is (shown after the verdict)."""
+    url = f"{base.rstrip('/')}/healthz"
+    note = f" ({where})" if where else ""
     try:
         with urllib.request.urlopen(url, timeout=timeout) as reply:
             return Check("displays", OK, f"eye page server answers at {url} "
-                         f"(HTTP {reply.status})")
+                         f"(HTTP {reply.status}){note}")
     except (urllib.error.URLError, OSError) as exc:
         reason = getattr(exc, "reason", exc)
-        return Check("displays", FAIL, f"eye page server does not answer at {url}: {reason}")
+        return Check("displays", FAIL, f"eye page server does not answer at {url}: "
+                     f"{reason}{note}")
+
+
+# --- where the eye pages are (pure) ------------------------------------------------
+
+EYE_RENDERER = "eye-renderer"
+WILDCARD_HOSTS = ("", "0.0.0.0", "::", "[::]")
+
+
+def _http_base(host: str, port: int) -> str:
+    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+
+
+def is_loopback(host: str) -> bool:
+    return host.lower() in ("localhost", "::1", "[::1]") or host.startswith("127.")
+
+
+def is_local_host(host: str, own_names: Iterable[str], own_addresses: Iterable[str]) -> bool:
+    """Whether `host` (a configured address or name) means this machine: a
+    wildcard, loopback, one of its names or one of its interface addresses.
+    Pure, and never asks DNS (a remote name that does not answer must not
+    make doctor hang)."""
+    h = host.strip("[]").lower().rstrip(".")
+    return (host in WILDCARD_HOSTS or is_loopback(h) or h in {n.lower() for n in own_names}
+            or h in set(own_addresses))
+
+
+def plan_display(*, alive: bool, values: Mapping[str, Any] | None, config_host: str,
+                 config_port: int, expected: bool, hostname: str, local: bool
+                 ) -> tuple[str, str] | Check | None:
+    """Where to look for the eye pages: (base URL, whose), a verdict without
+    looking, or None (no display check).
+
+    The rule follows the deployment, not this host's config:
+
+    1. The eye-renderer is alive on the bus (its liveliness token): ask it.
+       Its diagnostics (`values`) say `url` (as its own host reaches the
+       pages), `listen_host` (what it binds) and `hostname`. Same host as
+       ours: check `url`. Another host: check its `listen_host`, or its
+       `hostname` when it serves every interface; if it serves only its own
+       loopback, nobody here can reach it: WARN, run doctor there.
+       Alive but silent about where it serves (no diagnostics within the
+       timeout): fall back on the config's host and port (WARN when the port
+       is 0, any free port, so unknown).
+    2. Not alive, and the config puts it on another host (`local` false):
+       WARN "eye-renderer not running here" (this host is not where it runs;
+       its own host's doctor says why it is down).
+    3. Not alive, the config puts it here and it is `expected`: check the
+       config's host and port (FAIL when nothing answers, the node check
+       says it is missing too).
+    4. Not alive, here, not expected: no check.
+    """
+    if alive and values and isinstance(values.get("url"), str):
+        url = str(values["url"])
+        theirs = str(values.get("hostname") or hostname)
+        if theirs == hostname:
+            return url, f"{EYE_RENDERER} on this host"
+        try:
+            port = urlsplit(url).port or 80
+        except ValueError:
+            return Check("displays", WARN, f"{EYE_RENDERER} on {theirs} reports an unusable "
+                         f"address {url!r}")
+        listen = str(values.get("listen_host", ""))
+        if listen in WILDCARD_HOSTS:
+            return _http_base(theirs, port), f"{EYE_RENDERER} on {theirs}"
+        if is_loopback(listen):
+            return Check("displays", WARN, f"{EYE_RENDERER} runs on {theirs} and serves only "
+                         f"its own loopback ({url}): not reachable from here; run "
+                         f"`buddybot doctor` on {theirs}")
+        return _http_base(listen, port), f"{EYE_RENDERER} on {theirs}"
+    here = "127.0.0.1" if config_host in WILDCARD_HOSTS else config_host
+    if alive:
+        if config_port == 0:
+            return Check("displays", WARN, f"{EYE_RENDERER} is running but did not say where "
+                         "it serves, and the config's port is 0 (any free port)")
+        return _http_base(here, config_port), \
+            f"{EYE_RENDERER} did not say where it serves: the config's address"
+    if not local:
+        return Check("displays", WARN, f"{EYE_RENDERER} not running here: the config serves "
+                     f"the eye pages from {_http_base(config_host, config_port)} (another host) "
+                     "and no eye-renderer is on the bus")
+    if not expected:
+        return None
+    return _http_base(here, config_port), "the config's address"
+
+
+def own_names() -> set[str]:
+    """This machine's names (no DNS): `localhost`, its hostname, short and `.local`."""
+    name = socket.gethostname().lower().rstrip(".")
+    short = name.split(".")[0]
+    return {n for n in ("localhost", name, short, f"{short}.local") if n}
+
+
+def own_addresses() -> set[str]:
+    """This machine's interface addresses, when psutil can list them."""
+    try:
+        import psutil
+
+        return {a.address.split("%")[0].lower() for addrs in psutil.net_if_addrs().values()
+                for a in addrs if a.family in (socket.AF_INET, socket.AF_INET6)}
+    except Exception:
+        return set()
+
+
+def renderer_is_local(config: ConfigBase) -> bool:
+    """Whether the config serves the eye pages from this machine."""
+    if "eye_renderer" not in set(config.__struct_fields__):
+        return True
+    return is_local_host(str(config.eye_renderer.host), own_names(), own_addresses())
+
+
+def expected_here(names: Iterable[str], config: ConfigBase | None) -> list[str]:
+    """The nodes doctor expects when not told (`--expect`): every installed
+    service, except the eye-renderer when the config serves the eye pages
+    from another host (it runs there; the displays check still looks for it)."""
+    away = config is not None and not renderer_is_local(config)
+    return [n for n in names if not (away and n == EYE_RENDERER)]
+
+
+def display_check(config: ConfigBase, bus: BusReport, expected: bool, timeout: float
+                  ) -> Check | None:
+    """The displays check of `bus_checks`: `plan_display`, then a look at the URL."""
+    if "eye_renderer" not in set(config.__struct_fields__):
+        return None
+    cfg = config.eye_renderer
+    plan = plan_display(
+        alive=EYE_RENDERER in bus.live, values=bus.diagnostics.get(EYE_RENDERER),
+        config_host=str(cfg.host), config_port=int(cfg.port), expected=expected,
+        hostname=socket.gethostname(), local=renderer_is_local(config))
+    if plan is None or isinstance(plan, Check):
+        return plan
+    base, whose = plan
+    return check_display_url(base, timeout, whose)
 
 
 # --- the bus ------------------------------------------------------------------------
@@ -326,14 +527,21 @@ class BusReport:
     """Samples per stream name over `window_s`."""
     window_s: float = 0.0
     last_stamp_ns: int | None = None
+    diagnostics: dict[str, dict[str, Any]] = field(default_factory=dict)
+    """The latest diagnostics values per node seen during the look."""
 
 
 def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
               window_s: float, streams: dict[str, str], *, all_robots: bool = False,
-              stop: threading.Event | None = None) -> BusReport:
+              stop: threading.Event | None = None,
+              wait_values: Mapping[str, str] | None = None) -> BusReport:
     """Open a probe on `endpoint` (giving up after `timeout`), list the live nodes (of
     every robot, as `robot/name`, with `all_robots`) and count the samples of
-    `streams` (name -> absolute key) for `window_s` seconds."""
+    `streams` (name -> absolute key) for `window_s` seconds.
+
+    Diagnostics values seen meanwhile are kept per node. `wait_values` (node ->
+    a value name): for each such node that is alive, wait past the window (at
+    most `timeout`) until its diagnostics carry that value (they come every 2 s)."""
     from buddybot.core import keys
     from buddybot.core import messages as m
     from buddybot.core.node import Node, zenoh_config
@@ -362,15 +570,21 @@ def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
                     counts[name] += 1
             return on_sample
 
+        wanted = {n: v for n, v in (wait_values or {}).items() if n in report.live}
+        have_values = threading.Event()
+        if not wanted:
+            have_values.set()
+
         def on_diagnostics(_key: str, payload: bytes, _encoding: str) -> None:
             try:
                 msg = keys.DIAGNOSTICS.codec.decode(payload, m.DiagnosticStatus)
             except Exception:
                 return
-            stamp = getattr(msg, "stamp_ns", None)
-            if isinstance(stamp, int):
-                with lock:
-                    report.last_stamp_ns = stamp
+            with lock:
+                report.last_stamp_ns = msg.stamp_ns
+                report.diagnostics[msg.node] = dict(msg.values)
+                if all(v in report.diagnostics.get(n, {}) for n, v in wanted.items()):
+                    have_values.set()
 
         subs = [node.subscribe_raw(key, counter(name)) for name, key in streams.items()]
         subs.append(node.subscribe_raw(node.key(keys.DIAGNOSTICS), on_diagnostics))
@@ -379,6 +593,10 @@ def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
         with lock:
             report.window_s = time.monotonic() - start
             report.counts = dict(counts)
+        deadline = time.monotonic() + timeout
+        while not have_values.wait(0.1) and not node.stop_event.is_set() \
+                and time.monotonic() < deadline:
+            pass
         for sub in subs:
             sub.close()
     return report
@@ -431,8 +649,17 @@ def port_check(endpoint: str, zenoh_file: str | None, timeout: float,
     a Zenoh router at all."""
     if not accepting(endpoint):
         return judge_port(endpoint, False, None)
+    return judge_port(endpoint, True, *port_users(endpoint, zenoh_file, timeout, robot))
+
+
+def port_users(endpoint: str, zenoh_file: str | None, timeout: float,
+               robot: str = "buddy") -> tuple[list[str] | None, str | None]:
+    """Who answers on a port that accepts connections: the live nodes behind a
+    Zenoh router there (None: not a Zenoh router), and the local process
+    (`port_holder`). The one busy-port look shared by `doctor`, `up`'s quick
+    doctor and `buddybot router`."""
     bus = probe_bus(endpoint, robot, zenoh_file, timeout, 0.0, {}, all_robots=True)
-    return judge_port(endpoint, True, sorted(bus.live) if bus.reachable else None)
+    return (sorted(bus.live) if bus.reachable else None), port_holder(endpoint)
 
 
 def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozenset[str]]:
@@ -447,7 +674,8 @@ def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozense
     if "camera" in opts.expected:
         streams["camera images"] = f"{prefix}/{keys.CAMERA_IMAGE.wildcard()}"
     bus = probe_bus(opts.endpoint, opts.robot, opts.zenoh_file, opts.timeout,
-                    opts.window_s if streams else 0.0, streams, stop=opts.stop)
+                    opts.window_s if streams else 0.0, streams, stop=opts.stop,
+                    wait_values={EYE_RENDERER: "url"})
     error = bus.error
     if not bus.reachable and opts.endpoint.startswith(("tcp/", "tls/")) \
             and not accepting(opts.endpoint):
@@ -464,9 +692,9 @@ def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozense
             config.__struct_fields__) else 0.0
         checks.append(judge_rate("camera images", bus.counts["camera images"], bus.window_s,
                                  fps or CAMERA_DEFAULT_FPS))
-    if "eye-renderer" in opts.expected and "eye_renderer" in set(config.__struct_fields__):
-        checks.append(check_display(config.eye_renderer.host, config.eye_renderer.port,
-                                    opts.timeout))
+    display = display_check(config, bus, EYE_RENDERER in opts.expected, opts.timeout)
+    if display is not None:
+        checks.append(display)
     checks.append(clock_check(bus.last_stamp_ns))
     return checks, frozenset(bus.live)
 

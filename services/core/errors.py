@@ -36,6 +36,11 @@ class DuplicateNodeError(ConfigError):
     restarting would only collide again)."""
 
 
+class ServeError(BuddyBotError):
+    """A web or WebSocket server that cannot listen (its port is taken): exit 1,
+    the port may be free later."""
+
+
 class ServiceError(BuddyBotError):
     """A service call that failed: no answer, an error reply, or a bad reply."""
 

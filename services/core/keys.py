@@ -226,6 +226,10 @@ FACE = Topic(
     "camera/{camera}/face", "tracked face centre, metres, ROS axes",
     type=m.FacePosition, qos=STREAM,
 )
+FACES = Topic(
+    "camera/{camera}/faces", "every face of each processed frame, image pixels, for viewers",
+    type=m.FaceDetections, qos=STREAM,
+)
 DEBUG_IMAGE = Topic(
     "camera/{camera}/debug_image", "JPEG with detections drawn, only while watched",
     type=m.Image, codec=MSGPACK, qos=IMAGES, max_bytes=IMAGE_MESSAGE_BYTES,
@@ -244,6 +248,10 @@ PUPIL = Topic(
 )
 LIDS = Topic(
     "eyes/lids", "lid positions per eye", type=m.EyeLidControl, qos=STATE, latched=True,
+)
+CONTROLLER_STATE = Topic(
+    "controller/state", "engagement phase, visit, sounds, why the controller waits; on change",
+    type=m.ControllerState, qos=STATE, latched=True,
 )
 PLAY_SOUND = Service(
     "audio/play_sound", "action goal: play a named sound",
@@ -284,8 +292,8 @@ NODE_INFO = Service(
 )
 
 TOPICS: tuple[Topic, ...] = (
-    RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
-    EYES_DIRECTION, PUPIL, LIDS, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+    RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
+    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
     PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS,

@@ -270,7 +270,9 @@ class UpPlan:
     connect: list[str]
     """Where the services connect."""
     zenoh_file: str | None = None
-    """The Zenoh file of `[zenoh] config_file` (TLS): the router's and every child's."""
+    """The Zenoh file of `[zenoh] config_file` (TLS): every child's and every probe's."""
+    router_file: str | None = None
+    """The Zenoh file of our router: `[zenoh] router_config_file`, else `zenoh_file`."""
     service_args: dict[str, list[str]] = field(default_factory=dict)
     """Extra options per service (`--eye-port` -> eye-renderer's `--port`)."""
 
@@ -292,7 +294,7 @@ def select_services(only: list[str] | None, known: list[registry.Entry],
     as `--only camra` must not start nothing and say nothing.
     """
     if not only:
-        return installed
+        return [e for e in installed if not e.on_request]
     names = [e.name for e in known]
     unknown = [n for n in only if n not in names]
     if unknown:
@@ -309,6 +311,11 @@ def plan_up(ctx: ServiceContext) -> UpPlan:
     args = ctx.args
     entries = select_services(getattr(args, "only", None), list(registry.SERVICES),
                               registry.available_services())
+    if getattr(args, "foxglove", False) and not any(e.name == "foxglove" for e in entries):
+        foxglove = registry.service("foxglove")
+        if foxglove is None or not foxglove.exists():
+            raise UsageError("--foxglove: the Foxglove bridge is not installed here")
+        entries.append(foxglove)
     joined = getattr(args, "connect", None)
     if joined and args.listen:
         raise UsageError("--connect joins a running router, --listen starts one: not both")
@@ -324,9 +331,13 @@ def plan_up(ctx: ServiceContext) -> UpPlan:
     extra: dict[str, list[str]] = {}
     if getattr(args, "eye_port", None) is not None:
         extra["eye-renderer"] = ["--port", str(args.eye_port)]
-    if getattr(args, "dashboard_port", None) is not None and registry.service("dashboard"):
-        extra["dashboard"] = ["--port", str(args.dashboard_port)]
-    return UpPlan(entries, listen, connect, ctx.config.zenoh.config_file, extra)
+        # The dashboard shows the eye page in a frame: it must point at the same port.
+        extra["dashboard"] = ["--eye-port", str(args.eye_port)]
+    if getattr(args, "dashboard_port", None) is not None:
+        extra.setdefault("dashboard", []).extend(["--port", str(args.dashboard_port)])
+    zenoh = ctx.config.zenoh
+    return UpPlan(entries, listen, connect, zenoh.config_file, zenoh.router_config_file
+                  or zenoh.config_file, extra)
 
 
 def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
@@ -355,9 +366,26 @@ def router_argv(ctx: ServiceContext, plan: UpPlan) -> list[str]:
         argv += ["--config", ctx.args.config]
     for endpoint in plan.listen:
         argv += ["--listen", endpoint]
-    if plan.zenoh_file:
-        argv += ["--zenoh-config", plan.zenoh_file]
+    if plan.router_file:
+        argv += ["--zenoh-config", plan.router_file]
     return argv
+
+
+def _urls(ctx: ServiceContext, plan: UpPlan) -> list[str]:
+    """Where a person looks at the robot: the eye page, the dashboard, Foxglove."""
+    names = {e.name for e in plan.entries}
+    out = []
+    if "eye-renderer" in names:
+        port = getattr(ctx.args, "eye_port", None) or ctx.config.eye_renderer.port
+        out.append(f"eyes: http://127.0.0.1:{port}/eyes?eye=both")
+    for name, scheme, option in (("dashboard", "http", "dashboard_port"),
+                                 ("foxglove", "ws", None)):
+        table = getattr(ctx.config, name, None)
+        if name in names and table is not None:
+            port = (getattr(ctx.args, option, None) if option else None) or table.port
+            host = "127.0.0.1" if table.host in ("0.0.0.0", "::", "") else table.host
+            out.append(f"{name}: {scheme}://{host}:{port}/")
+    return out
 
 
 def _say(text: str) -> None:
@@ -454,9 +482,8 @@ def up(ctx: ServiceContext) -> int:
                                                    plan.service_args.get(entry.name)))
             child.start(out, lock)
             children.append(child)
-        if any(e.name == "eye-renderer" for e in plan.entries):
-            port = getattr(args, "eye_port", None) or ctx.config.eye_renderer.port
-            log.info("eyes: http://127.0.0.1:%d/eyes?eye=both", port)
+        for line in _urls(ctx, plan):
+            log.info("%s", line)
         monitor = _monitor(ctx, plan, [e.name for e in plan.entries])
         try:
             status = _supervise(router, children, ctx.stop, out, lock, monitor,

@@ -145,6 +145,65 @@ class FacePosition(Message):
     confidence: Unit
 
 
+Pixel = Annotated[float, msgspec.Meta(ge=-100000.0, le=100000.0, description="image pixels")]
+
+
+class PixelPoint(Message):
+    """A point in image pixels (x right, y down, origin at the top-left corner)."""
+
+    x: Pixel
+    y: Pixel
+
+
+class FaceBox(Message):
+    """One detected face, in the pixels of the image it was found in.
+
+    `keypoints` are BlazeFace's six, in its order: the subject's right eye,
+    left eye, nose tip, mouth centre, right ear, left ear.
+    """
+
+    x0: Pixel
+    y0: Pixel
+    x1: Pixel
+    y1: Pixel
+    score: Unit
+    keypoints: Annotated[list[PixelPoint], msgspec.Meta(max_length=6)] = msgspec.field(
+        default_factory=list)
+    followed: bool = False
+    """The face the robot follows (the one `camera/<cam>/face` is about)."""
+
+
+class DistanceCue(Message):
+    """One distance cue of the followed face and its part in the fused distance."""
+
+    name: Annotated[str, msgspec.Meta(max_length=32, description="width, eyes, iris, ...")]
+    distance_m: Metres | None
+    """None when the cue gave no finite distance."""
+    weight: Unit
+    status: Annotated[str, msgspec.Meta(max_length=64, description="'used' or why not")]
+
+
+class FaceDetections(Message):
+    """Every face of one processed frame, so a viewer draws boxes itself.
+
+    Published for every processed frame, also when no face was found (an
+    empty list), so a viewer clears its boxes.
+    """
+
+    stamp_ns: StampNs
+    frame_id: FrameId
+    width: Annotated[int, msgspec.Meta(gt=0, le=16384, description="image width, px")]
+    height: Annotated[int, msgspec.Meta(gt=0, le=16384, description="image height, px")]
+    faces: Annotated[list[FaceBox], msgspec.Meta(max_length=64)] = msgspec.field(
+        default_factory=list)
+    tracked: bool = False
+    """The followed face was re-found in its crop (no whole-frame pass this frame)."""
+    distance_m: Metres | None = None
+    """The followed face's fused distance (before smoothing), None without one."""
+    cues: Annotated[list[DistanceCue], msgspec.Meta(max_length=8)] = msgspec.field(
+        default_factory=list)
+
+
 # --- eyes ------------------------------------------------------------------
 
 
@@ -253,6 +312,41 @@ class Bool(Message):
     data: bool
 
 
+# --- controller --------------------------------------------------------------
+
+EngagementPhase = Literal["idle", "noticed", "engaged", "leaving", "drowsy"]
+Waiting = Literal["nothing", "face", "dwell", "cooldown", "sound_busy", "device_busy",
+                  "recovery", "greeted"]
+
+
+class ControllerState(Message):
+    """What the controller believes and why it waits: latched, published on change.
+
+    `waiting` names what holds back the next sound: `face` (noticed, no
+    face yet), `dwell` (face seen for less than the greeting dwell),
+    `cooldown` (greeted less than `regreet_cooldown_s` ago), `sound_busy`
+    (our own sound still playing), `device_busy` (`audio/device_free`
+    false), `recovery` (listening to latched inputs after a start),
+    `greeted` (this visit was greeted: nothing more until the farewell) or
+    `nothing`. `waiting_s` is the time left when known (dwell, cooldown).
+    """
+
+    stamp_ns: StampNs
+    phase: EngagementPhase
+    expression: ExpressionAction | None = None
+    in_range: bool = False
+    face_visible: bool = False
+    visit: Annotated[int, msgspec.Meta(ge=0, description="visits since start")] = 0
+    greeted: bool = False
+    sound: Literal["greeting", "farewell", "unknown"] | None = None
+    """The sound of ours playing now, if any."""
+    farewell_pending: bool = False
+    waiting: Waiting = "nothing"
+    waiting_s: Annotated[float, msgspec.Meta(ge=0.0, le=86400.0, description="s")] = 0.0
+    last_greeting_ns: StampNs | None = None
+    last_farewell_ns: StampNs | None = None
+
+
 # --- system ----------------------------------------------------------------
 
 
@@ -349,11 +443,16 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Image,
     Point,
     FacePosition,
+    PixelPoint,
+    FaceBox,
+    DistanceCue,
+    FaceDetections,
     ScreenExpression,
     EyeControl,
     EyesDirection,
     PupilControl,
     EyeLidControl,
+    ControllerState,
     PlaySound,
     PlaySoundReply,
     PlaySoundStatus,

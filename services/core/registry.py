@@ -30,6 +30,8 @@ class Entry:
     device_check: str | None = None
     """`module:function` that opens the service's device from its settings, for
     `buddybot doctor` (imported only when doctor runs, so core stays area-free)."""
+    on_request: bool = False
+    """Started by `up` only when asked (`up --foxglove`), never by default."""
 
     def exists(self) -> bool:
         """Whether the module is present in this installation."""
@@ -78,6 +80,11 @@ SERVICES: tuple[Entry, ...] = (
     Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)",
           "audio_player", "buddybot.audio.settings:AudioPlayerSettings",
           device_check="buddybot.audio.player:open_device"),
+    Entry("dashboard", "buddybot.dashboard.service", "live web page of what the robot perceives",
+          "dashboard", "buddybot.dashboard.settings:DashboardSettings"),
+    Entry("foxglove", "buddybot.foxglove.service",
+          "Foxglove WebSocket bridge: every key live in the Foxglove app",
+          "foxglove", "buddybot.foxglove.settings:FoxgloveSettings", on_request=True),
 )
 
 TOOLS: tuple[Entry, ...] = (

@@ -7,10 +7,48 @@ import threading
 
 import zenoh
 
+from buddybot.core.errors import ServiceError
 from buddybot.core.node import zenoh_config
 from buddybot.core.sdnotify import Notifier
 
 log = logging.getLogger("buddybot.router")
+
+PROBE_TIMEOUT_S = 1.5
+"""How long the look at a taken port may wait for a Zenoh router to answer there
+(under the 2 s after which a waiting session logs that it waits)."""
+
+
+def busy_port(listen: list[str], base_file: str | None = None) -> str | None:
+    """The one line saying which of `listen` is taken and by whom, else None.
+
+    The same look as `doctor`'s router-port check (`doctor.port_users`): is it a
+    Zenoh router (with whose nodes) or a stranger, and which local process
+    holds it when psutil can tell. Only TCP-based endpoints can be looked at.
+    """
+    from buddybot.core import doctor
+
+    for endpoint in listen:
+        if not endpoint.startswith(("tcp/", "tls/")) or not doctor.accepting(endpoint):
+            continue
+        zlog = logging.getLogger("zenoh")
+        level = zlog.level
+        zlog.setLevel(logging.ERROR)  # the probe's own connection noise: not for this line
+        try:
+            nodes, process = doctor.port_users(endpoint, base_file, PROBE_TIMEOUT_S)
+        finally:
+            zlog.setLevel(level)
+        return (f"cannot listen on {endpoint}: the port is taken by "
+                f"{doctor.describe_holder(nodes, process)}; stop it or give --listen "
+                "another endpoint")
+    return None
+
+
+def _reason(error: Exception) -> str:
+    """Zenoh's error text without its Rust source locations."""
+    text = str(error)
+    for marker in (" at /", " at src/"):
+        text = text.split(marker)[0]
+    return text.rstrip(".") or repr(error)
 
 
 def run_router(
@@ -18,11 +56,25 @@ def run_router(
 ) -> None:
     """Serve as a router on `listen` until `stop` is set.
 
-    A Zenoh file that Zenoh cannot parse is a ConfigError (exit status 2, which the
-    systemd units do not restart on), naming the file.
+    A taken port is refused before Zenoh tries it (ServiceError, exit 1, one
+    line naming the endpoint and who holds it, see `busy_port`); a port taken
+    between that look and the bind, or any other endpoint Zenoh cannot open,
+    is one line too. A Zenoh file that Zenoh cannot parse is a ConfigError
+    (exit status 2, which the systemd units do not restart on), naming the file.
     """
+    busy = busy_port(listen, base_file)
+    if busy:
+        raise ServiceError(busy)
     config = zenoh_config(mode="router", listen=listen, base_file=base_file)
-    session = zenoh.open(config)
+    try:
+        session = zenoh.open(config)
+    except zenoh.ZError as exc:
+        reason = _reason(exc)
+        if "in use" in reason:
+            raise ServiceError(f"cannot listen on {', '.join(listen)}: the port is taken "
+                               f"({reason})") from None
+        raise ServiceError(f"cannot start the router on {', '.join(listen)}: "
+                           f"{reason}") from None
     notifier = Notifier.from_env()  # systemd Type=notify: ready, then watchdog pings
     try:
         log.info("router listening on %s (zid %s)", ", ".join(listen), session.info.zid())

@@ -108,6 +108,9 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
         raise ConfigError(f"--robot: {robot!r} is not a valid id (letters, digits, '-', '_')")
     if config.zenoh.config_file:  # relative to the TOML file, like every path in it
         config.zenoh.config_file = str(resolve_path(config, config.zenoh.config_file))
+    if config.zenoh.router_config_file:
+        config.zenoh.router_config_file = str(resolve_path(config,
+                                                           config.zenoh.router_config_file))
     return ServiceContext(name=name, args=args, config=config, robot=robot, connect=connect)
 
 

@@ -15,9 +15,11 @@ import json
 import logging
 import os
 import re
+import select
 import socket
 import sys
 import threading
+import time
 from typing import Any, Literal
 
 import zenoh
@@ -95,7 +97,26 @@ def route_zenoh_log(level: str) -> bool:
 
     False (nothing done) when stdout is not this process's own fd 1 (tests
     capturing it in-process), or when already routed. `RUST_LOG`, if set,
-    still wins for the level, as Zenoh documents."""
+    still wins for the level, as Zenoh documents.
+
+    Fd 1 becomes the write end of a pipe (`open_log_pipe`) that a Python
+    thread reads. That end is non-blocking, a trade-off: the reader needs
+    the GIL, and if it is starved while Zenoh floods lines (its DEBUG during
+    a reconnect storm), a blocking pipe would fill and park Zenoh's own
+    threads in `write(1)` (keepalives, routing, every session's traffic)
+    until Python reads again. Non-blocking, a write to a full pipe fails at
+    once: Rust's tracing writer reports the failed write on stderr and goes
+    on, so those log lines are lost, never the bus (measured on a router
+    at RUST_LOG=trace whose reader got no GIL for 8 s: with a blocking pipe
+    samples routed through it stopped for 7.9 s; non-blocking, the longest
+    gap was 14 ms and 4583 lines were dropped, each one a line of Rust's
+    on stderr, which stays blocking). The reader counts how
+    often it finds the pipe full (`zenoh_log_overflows`) and logs
+    a warning at most once per `OVERFLOW_LOG_PERIOD_S`. Anything else that
+    writes to fd 1 shares the non-blocking end: a child process inheriting
+    it could see EAGAIN, which is why every child we start gets its own
+    stdout (a pipe, DEVNULL or captured).
+    """
     if _routed.is_set():
         return False
     old = sys.stdout
@@ -107,11 +128,8 @@ def route_zenoh_log(level: str) -> bool:
     _routed.set()
     old.flush()
     real_stdout = os.dup(1)
-    read_end, write_end = os.pipe()
-    # Room for bursts (Zenoh at DEBUG) while the reader waits for the GIL.
-    with contextlib.suppress(AttributeError, OSError):
-        fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, 1 << 20)
-    os.dup2(write_end, 1)
+    read_end, write_end = open_log_pipe()
+    os.dup2(write_end, 1)  # shares the open file description: non-blocking too
     os.close(write_end)
     line_buffered = bool(getattr(old, "line_buffering", False)
                          or getattr(old, "write_through", False))
@@ -127,35 +145,113 @@ def route_zenoh_log(level: str) -> bool:
     return True
 
 
-def _pump_zenoh_log(read_fd: int, passthrough_fd: int) -> None:
-    """Zenoh's lines -> the `zenoh` logger; anything else -> the real stdout."""
-    global _sync_count
+LOG_PIPE_BYTES = 1 << 20
+"""Room in Zenoh's log pipe for bursts (Zenoh at DEBUG) while the reader waits
+for the GIL (the kernel's default is 64 KiB)."""
+OVERFLOW_LOG_PERIOD_S = 10.0
+"""At most one warning about dropped Zenoh lines per this many seconds."""
+_overflow = {"count": 0, "logged_at": -1e9}
+
+
+def open_log_pipe() -> tuple[int, int]:
+    """(read end, write end) of the pipe Zenoh's log goes through: `LOG_PIPE_BYTES`
+    large where the kernel allows it, and the write end non-blocking, so that a
+    full pipe drops lines instead of blocking whoever writes (see
+    `route_zenoh_log`). The read end stays blocking for the reader thread."""
+    read_end, write_end = os.pipe()
+    with contextlib.suppress(AttributeError, OSError):
+        fcntl.fcntl(write_end, fcntl.F_SETPIPE_SZ, LOG_PIPE_BYTES)
+    os.set_blocking(write_end, False)
+    return read_end, write_end
+
+
+def zenoh_log_overflows() -> int:
+    """How many times the reader found Zenoh's log pipe full (writes failing: lines
+    were dropped unless Zenoh wrote nothing while it was full)."""
+    with _synced:
+        return int(_overflow["count"])
+
+
+def _full(write_fd: int) -> bool:
+    """Whether a write to the pipe would fail now: poll(2) says POLLOUT on a pipe
+    while it has a free page, which is what a writer needs (one cheap
+    syscall). An fd that is no longer open is not full."""
+    poller = select.poll()
+    poller.register(write_fd, select.POLLOUT)
+    events = poller.poll(0)
+    if not events:
+        return True
+    revents = events[0][1]
+    return not revents & (select.POLLOUT | select.POLLNVAL | select.POLLERR)
+
+
+def _note_overflow(now: float) -> None:
+    with _synced:
+        _overflow["count"] += 1
+        count = int(_overflow["count"])
+        if now - _overflow["logged_at"] < OVERFLOW_LOG_PERIOD_S:
+            return
+        _overflow["logged_at"] = now
+    log.warning("Zenoh's log pipe was full (%d times so far): some of Zenoh's log lines "
+                "were dropped rather than stall Zenoh", count)
+
+
+def _pump_zenoh_log(read_fd: int, passthrough_fd: int, write_fd: int = 1) -> None:
+    """Zenoh's lines -> the `zenoh` logger; anything else -> the real stdout.
+
+    Before each read it asks whether the pipe is full (`_full` on the write
+    end, fd 1): a pipe found full is one overflow, counted once until it has
+    room again. The reader holds no write end of its own, so it ends at
+    end of file when the last writer goes away."""
     zlog = logging.getLogger("zenoh")
-    with open(read_fd, "rb") as pipe:
-        for raw in pipe:
-            if raw == _SYNC:
-                with _synced:
-                    _sync_count += 1
-                    _synced.notify_all()
-                continue
-            line = _ANSI.sub("", raw.decode("utf-8", "replace")).rstrip("\n")
-            found = _LINE.match(line)
-            if found is None:
-                with contextlib.suppress(OSError):  # a child's output, say: not ours to hide
-                    os.write(passthrough_fd, raw)
-                continue
-            level, target, text = found.groups()
-            ours = target == _REASONS_TARGET
-            unable = _UNABLE.search(text) if ours else None
-            if unable is not None:
-                with _synced:
-                    _failures[unable[1]] = _short_reason(unable[2])
-            # Only captured for the reasons (Zenoh's level for it is DEBUG), and
-            # "Unable to connect to any of [...]. Timeout!", which the probe's
-            # own error line says with the reason: both for our DEBUG only.
-            quiet = ours and (_PY_LEVEL[level] < logging.WARNING
-                              or "Unable to connect to any of" in text)
-            zlog.log(logging.DEBUG if quiet else _PY_LEVEL[level], "%s: %s", target, _clean(text))
+    was_full = False
+    rest = b""
+    with open(read_fd, "rb", buffering=0) as pipe:
+        while True:
+            full = _full(write_fd)
+            if full and not was_full:
+                _note_overflow(time.monotonic())
+            was_full = full
+            chunk = pipe.read(1 << 16)
+            if not chunk:
+                break
+            rest += chunk
+            *lines, rest = rest.split(b"\n")
+            for raw in lines:
+                _zenoh_line(raw + b"\n", zlog, passthrough_fd)
+            if len(rest) > LOG_PIPE_BYTES:  # no newline in sight (binary output)
+                _zenoh_line(rest, zlog, passthrough_fd)
+                rest = b""
+    if rest:
+        _zenoh_line(rest, zlog, passthrough_fd)
+
+
+def _zenoh_line(raw: bytes, zlog: logging.Logger, passthrough_fd: int) -> None:
+    """One line from the pipe: a sync marker, one of Zenoh's, or someone else's."""
+    global _sync_count
+    if raw == _SYNC:
+        with _synced:
+            _sync_count += 1
+            _synced.notify_all()
+        return
+    line = _ANSI.sub("", raw.decode("utf-8", "replace")).rstrip("\n")
+    found = _LINE.match(line)
+    if found is None:
+        with contextlib.suppress(OSError):  # a child's output, say: not ours to hide
+            os.write(passthrough_fd, raw)
+        return
+    level, target, text = found.groups()
+    ours = target == _REASONS_TARGET
+    unable = _UNABLE.search(text) if ours else None
+    if unable is not None:
+        with _synced:
+            _failures[unable[1]] = _short_reason(unable[2])
+    # Only captured for the reasons (Zenoh's level for it is DEBUG), and
+    # "Unable to connect to any of [...]. Timeout!", which the probe's
+    # own error line says with the reason: both for our DEBUG only.
+    quiet = ours and (_PY_LEVEL[level] < logging.WARNING
+                      or "Unable to connect to any of" in text)
+    zlog.log(logging.DEBUG if quiet else _PY_LEVEL[level], "%s: %s", target, _clean(text))
 
 
 def _sync_zenoh_log(timeout: float = 1.0) -> None:

@@ -249,9 +249,12 @@ def test_enum_values_and_required_fields_match_the_types() -> None:
             if isinstance(t, msgspec.inspect.EnumType | msgspec.inspect.LiteralType):
                 values = ([v.value for v in t.cls] if isinstance(t, msgspec.inspect.EnumType)
                           else list(t.values))
-                enum = body["properties"][name].get("enum")
+                prop = body["properties"][name]
+                if "anyOf" in prop:  # an optional enum: the branch that is not null
+                    prop = next(p for p in prop["anyOf"] if p.get("type") != "null")
+                enum = prop.get("enum")
                 if enum is None:  # an enum type is referenced from $defs
-                    ref = body["properties"][name]["$ref"].rsplit("/", 1)[-1]
+                    ref = prop["$ref"].rsplit("/", 1)[-1]
                     enum = schema["$defs"][ref]["enum"]
                 assert sorted(enum) == sorted(values), f"{where}: {name}"
 

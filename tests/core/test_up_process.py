@@ -64,15 +64,24 @@ def test_only_selects_in_registry_order() -> None:
     assert [e.name for e in chosen] == ["camera", "controller"]
 
 
-def test_eye_port_goes_to_the_eye_renderer_and_nowhere_else() -> None:
+def test_eye_port_goes_to_the_eye_renderer_and_the_dashboard_frame() -> None:
     plan = plan_up(_ctx(eye_port=18080, dashboard_port=18090))
     assert plan.service_args["eye-renderer"] == ["--port", "18080"]
-    # No service named "dashboard" is registered yet: the option is kept, not passed.
-    assert registry.service("dashboard") is None
-    assert "dashboard" not in plan.service_args
+    assert plan.service_args["dashboard"] == ["--eye-port", "18080", "--port", "18090"]
+    assert set(plan.service_args) == {"eye-renderer", "dashboard"}
     argv = service_argv("eye-renderer", _ctx(), plan.connect,
                         plan.service_args["eye-renderer"])
     assert argv[-2:] == ["--port", "18080"] and "--no-browser" in argv
+
+
+def test_on_request_services_start_only_when_asked() -> None:
+    """The Foxglove bridge is not part of a plain `up`; `--foxglove` or `--only` adds it."""
+    assert "foxglove" not in {e.name for e in plan_up(_ctx()).entries}
+    assert "dashboard" in {e.name for e in plan_up(_ctx()).entries}
+    assert "foxglove" in {e.name for e in plan_up(_ctx(foxglove=True)).entries}
+    assert [e.name for e in plan_up(_ctx(only=["foxglove"])).entries] == ["foxglove"]
+    assert [e.name for e in plan_up(_ctx(only=["camera"], foxglove=True)).entries] == [
+        "camera", "foxglove"]
 
 
 def test_connect_joins_without_a_router_and_not_with_listen() -> None:

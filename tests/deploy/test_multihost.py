@@ -20,7 +20,7 @@ import msgspec
 import pytest
 import zenoh
 
-from buddybot.core import keys
+from buddybot.core import keys, registry
 from buddybot.core import messages as m
 from buddybot.core.errors import DuplicateNodeError, ServiceError
 from buddybot.core.node import Node
@@ -457,8 +457,7 @@ def test_liveliness_grants_name_the_nodes_of_each_host() -> None:
     never nodes/** (which would let the host fake any service)."""
     acl = json.loads(zenoh.Config.from_file(str(ZENOH_DIR / "router.json5"))
                      .get_json("access_control"))
-    services = {"radar-bridge", "radar-presence", "camera", "face-detector", "controller",
-                "eyes", "eye-renderer", "audio", "audio-player"}
+    services = {e.name for e in registry.SERVICES}
     granted: dict[str, set[str]] = {}
     rules = {r["id"]: r for r in acl["rules"]}
     for policy in acl["policies"]:

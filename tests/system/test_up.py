@@ -34,9 +34,11 @@ from buddybot.core.testing import (
 def test_up_sim_runs_restarts_a_crashed_service_and_stops_cleanly(tmp_path: Path) -> None:
     port = free_port()
     up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", f"tcp/127.0.0.1:{port}",
+                               "--eye-port", str(free_port()),
+                               "--dashboard-port", str(free_port()),
                                "--status-period", "1"), "up", tmp_path)
     try:
-        expected = len(available_services())
+        expected = len([e for e in available_services() if not e.on_request])
         up.wait_for_output(f"nodes {expected}/{expected}", 120)
         # Every service is its own process, and the router one more.
         children = psutil.Process(up.pid).children(recursive=True)

@@ -1,0 +1,348 @@
+"""`buddybot bag record|play|info`: record the robot's keys to MCAP, replay them, describe a file.
+
+    buddybot bag record -o visit.mcap [--duration S] [KEY ...] [--images]
+    buddybot bag play visit.mcap [--rate R] [--loop] [--start S] [--keys KEY ...] [--robot ID]
+    buddybot bag info visit.mcap [--json]
+
+`record` subscribes to every topic of the catalogue but images (`--images`
+adds the camera frames, JPEG-compressed) or to the KEYs given, and writes
+one MCAP channel per concrete key (core/bag.py says how); the file opens
+in Foxglove. Ctrl-C, SIGTERM or `--duration` end it, and the file is
+always finished (summary and index).
+
+`play` checks the whole file first (a truncated or damaged file is refused,
+exit 1, nothing published), then republishes each message on its key
+(`--robot` moves it to another robot) with its recorded payload, so stamps
+stay as recorded, at the recorded pace divided by `--rate`. Latched keys
+are published as the services publish them, so late subscribers get them.
+
+Exit status: 0 done (or stopped with Ctrl-C), 1 an unreadable file or no
+router, 2 bad usage.
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import json
+import logging
+import statistics
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+from buddybot.core import bag, channels, keys, tools
+from buddybot.core.bag_record import Recorder
+from buddybot.core.errors import UsageError
+from buddybot.core.node import Node, Publisher
+from buddybot.core.service import ServiceContext, add_common_arguments
+from buddybot.core.session import RouterUnreachable, zenoh_config
+
+HELP = "record the robot's keys to an MCAP file, replay one, or describe one"
+PLAY_NODE = "bag-play"
+PROGRESS_S = 1.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
+    rec = _action(actions, "record", "record the robot's keys to an MCAP file")
+    rec.add_argument("keys", nargs="*", metavar="KEY",
+                     help="keys to record (relative or absolute, wildcards allowed; "
+                          "default: every topic but images)")
+    rec.add_argument("-o", "--output", metavar="FILE", required=True,
+                     help="the MCAP file to write")
+    rec.add_argument("--duration", type=float, metavar="S",
+                     help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
+    rec.add_argument("--images", action="store_true",
+                     help="also record camera/*/image (JPEG-compressed)")
+    tools.add_timeout_argument(rec, None, "the connection")
+    play = _action(actions, "play", "replay an MCAP file on the robot's keys")
+    play.add_argument("file", metavar="FILE")
+    play.add_argument("--rate", type=float, default=1.0, metavar="R",
+                      help="play R times as fast (default 1)")
+    play.add_argument("--loop", action="store_true", help="start again at the end, until stopped")
+    play.add_argument("--start", type=float, default=0.0, metavar="S",
+                      help="skip the first S seconds of the recording")
+    play.add_argument("--keys", nargs="+", action="extend", default=[], metavar="KEY",
+                      help="replay only these keys (relative or absolute, wildcards allowed)")
+    play.add_argument("--wait", type=float, default=1.0, metavar="S",
+                      help="wait up to S seconds for subscribers before the first message")
+    tools.add_timeout_argument(play, None, "the connection")
+    info_parser = _action(actions, "info", "describe an MCAP file: duration, channels, rates")
+    info_parser.add_argument("file", metavar="FILE")
+    info_parser.add_argument("--json", action="store_true", help="print JSON")
+
+
+def _action(actions: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
+            help_text: str) -> argparse.ArgumentParser:
+    """An action's parser; the common options are accepted after the action too
+    (`bag play FILE --robot other`). Their defaults are suppressed here, so
+    one given before the action is not overwritten by this parser's default."""
+    sub = actions.add_parser(name, help=help_text, description=help_text)
+    add_common_arguments(sub)
+    for action in sub._actions:  # not set_defaults: it would store SUPPRESS itself
+        if action.dest in COMMON:
+            action.default = argparse.SUPPRESS
+    return sub
+
+
+COMMON = ("connect", "robot", "config", "log_level")
+
+
+def main(ctx: ServiceContext) -> int:
+    args = ctx.args
+    if args.action == "record":
+        return record(ctx)
+    if args.action == "info":
+        return info(args.file, as_json=args.json)
+    return play(ctx, args.file)
+
+
+# --- record -------------------------------------------------------------------------
+
+
+def record_keys(robot: str, selected: list[str], images: bool) -> list[tuple[str, bool]]:
+    """The key expressions to subscribe to, each with whether it needs history
+    (a latched topic's current value). UsageError for a key nothing matches."""
+    wanted: list[tuple[str, bool]] = []
+    if not selected:
+        wanted = [(keys.absolute(robot, t.wildcard()), t.latched) for t in keys.TOPICS
+                  if not channels.is_image(t)]
+    for text in selected:
+        key = keys.absolute(robot, text)
+        topics = [e for e in tools.catalogue_matches(key) if isinstance(e, keys.Topic)]
+        if not topics:
+            raise UsageError(f"{text}: matches no topic of the catalogue (see `buddybot keys`)")
+        wanted.append((key, any(t.latched for t in topics)))
+    if images:
+        image = keys.absolute(robot, keys.CAMERA_IMAGE.wildcard())
+        if all(key != image for key, _ in wanted):
+            wanted.append((image, False))
+    return wanted
+
+
+def _megabytes(n: int) -> str:
+    return f"{n / 1e6:.1f} MB"
+
+
+def record(ctx: ServiceContext) -> int:
+    """Record until Ctrl-C, SIGTERM or --duration; the file is always finished."""
+    args = ctx.args
+    if args.duration is not None and args.duration <= 0:
+        raise UsageError("--duration must be positive")
+    wanted = record_keys(ctx.robot, args.keys, args.images)
+    tty = sys.stderr.isatty()
+    with tools.probe(ctx, args.timeout) as node:
+        recorder = Recorder(bag.BagWriter(args.output, robot=ctx.robot))
+
+        def on_sample(key: str, payload: bytes, _encoding: str) -> None:
+            recorder.offer(key, payload, time.time_ns())  # never blocks Zenoh's thread
+
+        subscriptions = [node.subscribe_raw(key, on_sample, history=history)
+                         for key, history in wanted]
+        started = time.monotonic()
+        end = tools.deadline(args.duration)
+        next_line = started + PROGRESS_S
+        try:
+            while not ctx.stop.is_set() and recorder.error is None:
+                now = time.monotonic()
+                if now >= end:
+                    break
+                if tty and now >= next_line:
+                    next_line += PROGRESS_S
+                    _progress(recorder, now - started)
+                wake = min(end, next_line) if tty else min(end, now + 1.0)
+                ctx.stop.wait(max(0.0, wake - now))
+        finally:
+            for sub in subscriptions:  # no sample after this: the queue only drains
+                sub.close()
+            final = recorder.close()
+            elapsed = time.monotonic() - started
+        if final.written == 0 and recorder.error is None and not ctx.stop.is_set():
+            print(f"buddybot bag: warning: nothing recorded: "
+                  f"{tools.silence_reason(node, keys.absolute(ctx.robot, '**'))}",
+                  file=sys.stderr)
+    if tty:
+        print(file=sys.stderr)
+    extra = "".join(f", {n} {what}" for n, what in ((final.dropped, "dropped (queue full)"),
+                                                     (final.malformed, "malformed (skipped)"),
+                                                     (final.unknown, "not in the catalogue"))
+                    if n)
+    keys_seen = len(recorder.writer.stats.per_key)
+    print(f"recorded {final.written} messages on {keys_seen} keys, {_megabytes(final.bytes)}, "
+          f"{elapsed:.1f} s{extra} -> {args.output}", file=sys.stderr, flush=True)
+    if recorder.error is not None:
+        print(f"buddybot bag: writing {args.output} failed: {recorder.error}", file=sys.stderr)
+        return 1
+    return 0
+
+
+def _progress(recorder: Recorder, elapsed: float) -> None:
+    p = recorder.progress()
+    drops = f", {p.dropped} dropped" if p.dropped else ""
+    print(f"\rrecording: {p.written} messages, {_megabytes(p.bytes)}, {elapsed:.0f} s{drops}  ",
+          end="", file=sys.stderr, flush=True)
+
+
+# --- play ---------------------------------------------------------------------------
+
+
+@dataclass
+class PlayStats:
+    """What a replay did, and how late each message left against its schedule."""
+
+    played: int = 0
+    loops: int = 0
+    late_ms: collections.deque[float] = field(
+        default_factory=lambda: collections.deque(maxlen=100_000))
+    """The latest lateness figures (bounded: a replay may loop for hours)."""
+
+    def lateness(self) -> str:
+        if not self.late_ms:
+            return ""
+        ordered = sorted(self.late_ms)
+        p95 = ordered[min(len(ordered) - 1, int(0.95 * len(ordered)))]
+        return f"; late vs schedule p50 {statistics.median(ordered):.2f} ms, p95 {p95:.2f} ms"
+
+
+def play(ctx: ServiceContext, path: str) -> int:
+    """Check the whole file, then replay it; nothing is published from a bad file."""
+    args = ctx.args
+    if args.rate <= 0:
+        raise UsageError("--rate must be positive")
+    if args.start < 0:
+        raise UsageError("--start must be 0 or more")
+    recording = bag.open_recording(path)  # BagError (exit 1) before any connection
+    only = [_on_any_robot(k) for k in args.keys]
+    selected = recording.selected(only)
+    if args.keys and not selected:
+        raise UsageError(f"--keys {' '.join(args.keys)}: no channel of {path} matches")
+    for channel in recording.unknown:
+        print(f"buddybot bag: skipping {channel.key}: {channel.skipped}", file=sys.stderr)
+    info = recording.info
+    robot = args.robot  # the common option as given: None keeps the recorded robots
+    start_ns = info.start_ns + round(args.start * 1e9) if args.start else None
+    if start_ns is not None and start_ns > info.end_ns:
+        raise UsageError(f"--start {args.start:g}: the recording lasts {info.duration_s:.1f} s")
+    node = _play_node(ctx, robot or info.metadata.get("robot") or ctx.robot)
+    stats = PlayStats()
+    tty = sys.stderr.isatty()
+    with node:
+        publishers: dict[str, Publisher[Any]] = {
+            c.key: Publisher(node, c.topic, bag.with_robot(c.key, robot))
+            for c in selected if c.topic is not None}
+        _wait_for_subscribers(list(publishers.values()), args.wait, ctx)
+        while not ctx.stop.is_set():
+            _play_once(recording, publishers, start_ns, only, args.rate, ctx, stats, tty)
+            stats.loops += 1
+            if not args.loop:
+                break
+        stopped = " (stopped)" if ctx.stop.is_set() else ""  # closing the node sets it too
+        time.sleep(0.1)  # let the last puts leave before the session closes
+    if tty:
+        print(file=sys.stderr)
+    loops = f" in {stats.loops} loops" if args.loop else ""
+    print(f"played {stats.played} messages on {len(publishers)} keys{loops}{stopped}"
+          f"{stats.lateness()}", file=sys.stderr, flush=True)
+    return 0
+
+
+def _on_any_robot(key: str) -> str:
+    """A relative `--keys` KEY matches that key of whichever robot was recorded."""
+    key = key.strip("/")
+    if key == keys.PREFIX_ROOT or key.startswith(f"{keys.PREFIX_ROOT}/"):
+        return key
+    return f"{keys.PREFIX_ROOT}/*/{key}"
+
+
+def _play_node(ctx: ServiceContext, robot: str) -> Node:
+    """The player's node: seen by `nodes` (it publishes on the robot's keys), but
+    giving up on the router after --timeout like a probe instead of waiting."""
+    limit = ctx.args.timeout if ctx.args.timeout and ctx.args.timeout > 0 \
+        else tools.CONNECT_TIMEOUT_S
+    config = zenoh_config(connect=ctx.connect, base_file=ctx.config.zenoh.config_file,
+                          connect_timeout_s=limit)
+    if getattr(ctx.args, "log_level", "INFO") == "INFO":  # its "node up" line is noise here
+        logging.getLogger(f"buddybot.{PLAY_NODE}").setLevel(logging.WARNING)
+    try:
+        return Node(PLAY_NODE, robot=robot, connect=ctx.connect, config=config,
+                    stop_event=ctx.stop)
+    except RouterUnreachable as exc:
+        raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
+
+
+def _wait_for_subscribers(publishers: list[Publisher[Any]], wait: float,
+                          ctx: ServiceContext) -> None:
+    """Give discovery a moment, so the first messages reach the subscribers that
+    exist (latched publishers keep their value for later ones anyway)."""
+    end = time.monotonic() + max(0.0, wait)
+    while time.monotonic() < end and not ctx.stop.is_set():
+        if all(p.has_subscribers() for p in publishers):
+            return
+        ctx.stop.wait(0.02)
+
+
+def _play_once(recording: bag.Recording, publishers: dict[str, Publisher[Any]],
+               start_ns: int | None, only: list[str], rate: float, ctx: ServiceContext,
+               stats: PlayStats, tty: bool) -> None:
+    """One pass over the file at the recorded pace (absolute schedule: no drift)."""
+    t0 = time.monotonic()
+    first: int | None = None
+    next_line = t0 + PROGRESS_S
+    total = recording.info.duration_s / rate
+    for item in recording.messages(start_ns=start_ns, only=only):
+        if first is None:
+            first = item.log_time_ns
+            t0 = time.monotonic()
+        due = t0 + bag.schedule_s(item.log_time_ns, first, rate)
+        delay = due - time.monotonic()
+        if delay > 0 and ctx.stop.wait(delay):
+            return
+        if ctx.stop.is_set():
+            return
+        publishers[item.key].put_bytes(item.payload)
+        stats.late_ms.append((time.monotonic() - due) * 1e3)
+        stats.played += 1
+        if tty and time.monotonic() >= next_line:
+            next_line += PROGRESS_S
+            print(f"\rplaying: {time.monotonic() - t0:.0f} / {total:.0f} s, "
+                  f"{stats.played} messages  ", end="", file=sys.stderr, flush=True)
+
+
+# --- info ---------------------------------------------------------------------------
+
+
+def _time(ns: int) -> str:
+    if ns <= 0:
+        return "-"
+    moment = datetime.fromtimestamp(ns / 1e9, UTC)
+    return f"{moment:%Y-%m-%d %H:%M:%S}.{ns % 1_000_000_000 // 1_000_000:03d} UTC ({ns})"
+
+
+def info(path: str, *, as_json: bool) -> int:
+    """Print a recording's summary, like `ros2 bag info` (reads the summary only)."""
+    summary = bag.read_info(path)
+    if as_json:
+        print(json.dumps(summary.as_json(), indent=2))
+        return 0
+    meta = summary.metadata
+    lines = [
+        f"File:       {summary.path}",
+        f"Size:       {_megabytes(summary.size)} ({summary.compression})",
+        f"Robot:      {meta.get('robot', '?')} (buddybot {meta.get('version', '?')})",
+        f"Duration:   {summary.duration_s:.3f} s",
+        f"Start:      {_time(summary.start_ns)}",
+        f"End:        {_time(summary.end_ns)}",
+        f"Messages:   {summary.messages}",
+        f"Channels:   {len(summary.channels)}",
+    ]
+    width = max((len(c.key) for c in summary.channels), default=0)
+    schema_width = max((len(c.schema) for c in summary.channels), default=0)
+    for c in summary.channels:
+        note = "" if not c.skipped else f"  (not replayed: {c.skipped})"
+        lines.append(f"  {c.key:<{width}}  {c.schema:<{schema_width}}  {c.count:>7} msgs  "
+                     f"{c.rate_hz(summary.duration_s):7.2f} Hz{note}")
+    print("\n".join(lines))
+    return 0

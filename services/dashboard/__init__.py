@@ -1,0 +1,1 @@
+"""The dashboard: a live web page of what the robot perceives (docs/dashboard.md)."""

@@ -1,0 +1,202 @@
+"""The dashboard's side of the bus: subscriptions, timers, button calls.
+
+Everything here runs in Zenoh's or the node's threads and hands results to
+the event loop through the `Mailbox` only: newest value per slot, radar
+frames appended, at most one wake-up queued and batches >= 20 ms apart, so
+a flood of samples costs the loop a bounded amount of work per turn and
+never waits for a page.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import cv2
+import numpy as np
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.errors import ServiceError
+from buddybot.core.limits import clip
+from buddybot.core.loop_inbox import LoopInbox
+from buddybot.core.node import Node, RateLimitedLog, Subscription
+from buddybot.dashboard import model
+from buddybot.dashboard.settings import DashboardSettings
+
+log = logging.getLogger("buddybot.dashboard")
+_warn = RateLimitedLog(log)
+
+CALL_TIMEOUT_S = 3.0
+"""How long a button's bus call may take before the page is told it failed."""
+PRESENCE_NODE = "radar-presence"
+AUDIO_NODE = "audio"
+NODES_REFRESH_S = 2.0
+"""Live tokens are asked for at least this often (and at once when one changes)."""
+
+# --- from Zenoh's threads to the loop --------------------------------------------------
+
+
+class Mailbox(LoopInbox[tuple[str, Any]]):
+    """Samples from Zenoh's threads to the event loop (`core.loop_inbox`): newest
+    per slot, radar frames appended (bounded); batches `min_interval_s` apart."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop,
+                 deliver: Callable[[list[tuple[str, Any]]], None],
+                 min_interval_s: float = 0.02) -> None:
+        super().__init__(loop, deliver, min_interval_s)
+        self._box = model.Outbox()
+
+    def put(self, slot: str, value: Any) -> None:
+        with self._lock:
+            self.received += 1
+            self._box.put(slot, value)
+            self._schedule()
+
+    def put_frames(self, frames: list[Any]) -> None:
+        with self._lock:
+            self.received += 1
+            self._box.put_frames(frames)
+            self._schedule()
+
+    def _take(self) -> list[tuple[str, Any]]:
+        return self._box.take()
+
+
+# --- the bus side ----------------------------------------------------------------------
+
+
+class Bus:
+    """The node's subscriptions, timers and calls (the node is opened later than
+    the web server, in a thread; everything here runs only once it exists)."""
+
+    def __init__(self, node: Node, s: DashboardSettings, mailbox: Mailbox,
+                 configured_sounds: dict[str, str]) -> None:
+        self.node = node
+        self.s = s
+        self.mailbox = mailbox
+        self.configured_sounds = configured_sounds
+        self.limiter = model.RateLimiter(s.max_image_fps)
+        self.expression = node.publisher(keys.EXPRESSION)
+        self._nodes_wanted = threading.Event()
+        self._nodes_wanted.set()
+        self._last_nodes = 0.0
+        self.images_bad = 0
+        self.image_sub: Subscription | None = None
+        self._subscribe()
+
+    def _subscribe(self) -> None:
+        node, box = self.node, self.mailbox
+
+        def latest(slot: str) -> Callable[[Any, str], None]:
+            return lambda msg, _key: box.put(slot, msg)
+
+        def on_radar(msg: m.LD2410TargetDataFrameArray, _key: str) -> None:
+            box.put_frames([(msg.stamp_ns / 1e9, msg)])
+
+        def on_direction(msg: m.EyesDirection, _key: str) -> None:
+            box.put("direction", (msg, (time.time_ns() - msg.stamp_ns) / 1e6))
+
+        def on_diag(msg: m.DiagnosticStatus, _key: str) -> None:
+            box.put(f"diag:{msg.node}", msg)
+
+        node.subscribe(keys.RADAR_FRAMES, on_radar, device="*")
+        node.subscribe(keys.PRESENCE, latest("presence"))
+        node.subscribe(keys.FACES, latest("faces"), camera=self.s.camera)
+        node.subscribe(keys.CONTROLLER_STATE, latest("controller"))
+        node.subscribe(keys.EXPRESSION, latest("expression"))
+        node.subscribe(keys.EYES_DIRECTION, on_direction)
+        node.subscribe(keys.PUPIL, latest("pupil"))
+        node.subscribe(keys.LIDS, latest("lids"))
+        node.subscribe(keys.DIAGNOSTICS, on_diag, node="*")
+        node.watch_node("*", lambda _instances: self._nodes_wanted.set())
+        node.every(0.1, self._refresh_nodes, name="nodes")
+        node.every(self.s.params_period_s, self.refresh_params, name="params")
+        threading.Thread(target=self.refresh_params, name="dashboard:params0",
+                         daemon=True).start()
+
+    # -- nodes and parameters (timer threads) --
+
+    def _refresh_nodes(self) -> None:
+        """Ask for every live token when one came or went (and every few seconds)."""
+        due = time.monotonic() - self._last_nodes > NODES_REFRESH_S
+        if not (self._nodes_wanted.is_set() or due):
+            return
+        self._nodes_wanted.clear()
+        self._last_nodes = time.monotonic()
+        self.mailbox.put("live", self.node.node_instances(timeout=1.0))
+
+    def _params(self, node_name: str, request: m.ParamRequest) -> m.ParamReply | None:
+        try:
+            reply: m.ParamReply = self.node.call(keys.PARAMS, request, timeout=1.0,
+                                                 node=node_name)
+            return reply
+        except ServiceError:
+            return None
+
+    def refresh_params(self) -> None:
+        reply = self._params(PRESENCE_NODE, m.ParamRequest(op="list"))
+        self.mailbox.put("rules", None if reply is None else model.presence_rules(reply))
+        sounds = self._params(AUDIO_NODE, m.ParamRequest(op="get", name="sounds"))
+        self.mailbox.put("sounds", model.sound_names(sounds, self.configured_sounds))
+
+    # -- images --
+
+    def watch_images(self, on: bool) -> None:
+        """Subscribe to the camera only while a page is connected."""
+        if on and self.image_sub is None:
+            self.image_sub = self.node.subscribe(
+                keys.CAMERA_IMAGE, self._on_image, delivery="latest", camera=self.s.camera)
+            log.info("watching camera/%s/image", self.s.camera)
+        elif not on and self.image_sub is not None:
+            self.image_sub.close()
+            self.image_sub = None
+            log.info("no page left: camera images unsubscribed")
+
+    def _on_image(self, msg: m.Image, _key: str) -> None:
+        """On the subscription's worker: at most max_image_fps JPEGs, quality from settings."""
+        if not self.limiter.allow(time.monotonic()):
+            return
+        if msg.encoding == "jpeg":
+            jpeg = msg.data
+        else:
+            if len(msg.data) != msg.width * msg.height * 3:
+                self.images_bad += 1
+                _warn.warning("image", "dropped a bgr8 image of %d bytes (%dx%d needs %d)",
+                              len(msg.data), msg.width, msg.height, msg.width * msg.height * 3)
+                return
+            pixels = np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.width, 3)
+            ok, buf = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, self.s.jpeg_quality])
+            if not ok:
+                self.images_bad += 1
+                return
+            jpeg = buf.tobytes()
+        self.mailbox.put("image", model.pack_image(model.image_header(msg), jpeg))
+
+    # -- buttons (called in a worker thread) --
+
+    def run_command(self, cmd: model.Command) -> tuple[bool, str]:
+        if isinstance(cmd, model.SetExpression):
+            action = m.ExpressionAction[cmd.action]
+            self.expression.put(m.ScreenExpression(stamp_ns=m.now_ns(), action=action))
+            return True, f"expression {action.name} published"
+        if isinstance(cmd, model.PlaySound):
+            try:
+                reply: m.PlaySoundReply = self.node.call(
+                    keys.PLAY_SOUND, m.PlaySound(sound=cmd.sound), timeout=CALL_TIMEOUT_S)
+            except ServiceError as exc:
+                return False, f"play {clip(cmd.sound, 60)}: {clip(exc, 200)}"
+            if reply.accepted:
+                return True, f"playing {clip(cmd.sound, 60)} (goal {reply.goal_id})"
+            return False, f"{clip(cmd.sound, 60)} refused: {clip(reply.message, 200)}"
+        try:
+            stopped: m.TriggerReply = self.node.call(keys.AUDIO_STOP, m.Trigger(),
+                                                     timeout=CALL_TIMEOUT_S)
+        except ServiceError as exc:
+            return False, f"stop: {clip(exc, 200)}"
+        return stopped.success, stopped.message or ("stopped" if stopped.success else "refused")
+

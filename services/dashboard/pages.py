@@ -1,0 +1,312 @@
+"""The pages: what they are shown, their queues, and the aiohttp application.
+
+Each page has its own `Outbox` (newest per slot, radar frames appended) and
+its own sender task: a slow page never delays the others or the bus, a page
+that stops reading is cut after `STALL_S`, and camera frames are skipped
+for a page whose socket is still full (a lower frame rate, not a backlog).
+Only the dashboard's own page may open the WebSocket (it has buttons).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib.resources
+import logging
+import time
+from collections.abc import Callable
+from typing import Any
+
+import msgspec
+from aiohttp import WSMsgType, web
+
+from buddybot.core import messages as m
+from buddybot.core.limits import BoundedDict, clip
+from buddybot.core.node import RateLimitedLog
+from buddybot.dashboard import model
+from buddybot.dashboard.bus import Bus
+from buddybot.dashboard.settings import DashboardSettings
+
+log = logging.getLogger("buddybot.dashboard")
+_warn = RateLimitedLog(log)
+
+STATIC = {"dashboard.js": "application/javascript", "dashboard.css": "text/css"}
+STALL_S = 5.0
+"""A page whose sends do not drain for this long is cut (it reconnects by itself)."""
+IMAGE_BACKLOG_BYTES = 256 * 1024
+"""A camera frame is skipped for a page with more than this still unsent."""
+MAX_PENDING_CALLS = 4
+"""Button presses being carried out at once (each one a bus call)."""
+
+
+def now_s() -> float:
+    return time.time()
+
+# --- the pages -------------------------------------------------------------------------
+
+
+class Page:
+    """One connected page: its outbox and a wake-up event for its sender."""
+
+    def __init__(self, transport: asyncio.Transport | None) -> None:
+        self.transport = transport
+        self.outbox = model.Outbox()
+        self.wake = asyncio.Event()
+        self.images_skipped = 0
+
+    def put(self, slot: str, value: Any) -> None:
+        self.outbox.put(slot, value)
+        self.wake.set()
+
+    def put_frames(self, frames: list[dict[str, Any]]) -> None:
+        self.outbox.put_frames(frames)
+        self.wake.set()
+
+    def unsent(self) -> int:
+        return 0 if self.transport is None else self.transport.get_write_buffer_size()
+
+    def cut(self) -> None:
+        if self.transport is not None:
+            self.transport.abort()
+
+
+class Board:
+    """What the pages show now, and the pages; used only on the event loop."""
+
+    def __init__(self, s: DashboardSettings, eye_port: int, sounds: list[str]) -> None:
+        self.s = s
+        self.eye_port = eye_port
+        self.pages: set[Page] = set()
+        self.state: dict[str, Any] = {"status": {"bus": False}}
+        self.radar = model.RadarHistory(s.history_s)
+        self.radar_latest: BoundedDict[str, dict[str, Any]] = BoundedDict(model.MAX_SENSORS)
+        self.nodes = model.NodeTable()
+        self.latency = model.Latency()
+        self.sounds = sounds
+        self.on_pages_changed: Callable[[int], None] = lambda _n: None
+        self.refused = 0
+        self.forbidden = 0
+        self.bad_requests = 0
+        self.images_sent = 0
+
+    def hello(self, page_host: str | None) -> dict[str, Any]:
+        return {
+            "camera": self.s.camera, "history_s": self.s.history_s,
+            "max_image_fps": self.s.max_image_fps,
+            "eye_url": model.eye_page_url(self.s.eye_url, self.eye_port, page_host),
+            "enums": model.enum_names(),
+            "expressions": [a.name for a in m.ExpressionAction],
+            "now": now_s(),
+        }
+
+    def join(self, page: Page, page_host: str | None) -> None:
+        page.put("hello", self.hello(page_host))
+        page.put("history", {"span_s": self.s.history_s, "now": now_s(),
+                             "sensors": self.radar.snapshot(now_s())})
+        page.put("sounds", self.sounds)
+        page.put("nodes", self.nodes.view())
+        page.put_frames(self.radar_latest.values())
+        for slot, value in self.state.items():
+            page.put(slot, value)
+        self.pages.add(page)
+        self.on_pages_changed(len(self.pages))
+
+    def leave(self, page: Page) -> None:
+        if page in self.pages:
+            self.pages.discard(page)
+            self.on_pages_changed(len(self.pages))
+
+    def _send(self, slot: str, value: Any, keep: bool = True) -> None:
+        if keep:
+            self.state[slot] = value
+        for page in self.pages:
+            page.put(slot, value)
+
+    def deliver(self, batch: list[tuple[str, Any]]) -> None:
+        """A batch from the mailbox: update what is remembered, push it to the pages."""
+        now = now_s()
+        for slot, value in batch:
+            if slot == "radar":
+                views: list[dict[str, Any]] = []
+                for t, frames in value:
+                    self.radar.add(t, frames)
+                    views.extend(model.radar_view(t, frames))
+                for page in self.pages:
+                    page.put_frames(views)
+                for v in views:
+                    self.radar_latest[v["sensor"]] = v
+            elif slot == "live":
+                if self.nodes.update(value, now):
+                    self._send("nodes", self.nodes.view(), keep=False)
+            elif slot.startswith("diag:"):
+                if self.nodes.diagnostics(value, now):
+                    self._send("nodes", self.nodes.view(), keep=False)
+            elif slot == "direction":
+                msg, latency_ms = value
+                self.latency.add(latency_ms)
+                self._send("direction", {"msg": msgspec.to_builtins(msg),
+                                         "latency": self.latency.view()})
+            elif slot == "image":
+                for page in self.pages:
+                    if page.unsent() > IMAGE_BACKLOG_BYTES:
+                        page.images_skipped += 1
+                    else:
+                        page.put("image", value)
+            elif slot == "sounds":
+                if value != self.sounds:
+                    self.sounds = value
+                    self._send("sounds", value, keep=False)
+            elif isinstance(value, msgspec.Struct):
+                self._send(slot, msgspec.to_builtins(value))
+            else:
+                self._send(slot, value)
+
+    def set_bus(self, up: bool) -> None:
+        if self.state["status"].get("bus") != up:
+            self._send("status", {"bus": up})
+
+    def reply(self, page: Page, ident: int, ok: bool, text: str) -> None:
+        page.put("reply", {"id": ident, "ok": ok, "text": text})
+
+
+async def _sender(ws: web.WebSocketResponse, page: Page, board: Board) -> None:
+    """Flush the page's outbox whenever something is in it; cut it when it stalls."""
+    encode = msgspec.json.encode
+    try:
+        while not ws.closed:
+            await page.wake.wait()
+            page.wake.clear()
+            for slot, value in page.outbox.take():
+                async with asyncio.timeout(STALL_S):
+                    if slot == "image":
+                        await ws.send_bytes(value)
+                        board.images_sent += 1
+                    else:
+                        await ws.send_str(encode({"t": slot, "v": value}).decode())
+    except TimeoutError:
+        _warn.warning("stall", "page cut: it has not read for %.0f s", STALL_S)
+        page.cut()
+    except (ConnectionError, RuntimeError) as exc:  # closing transport
+        log.debug("page send failed: %r", exc)
+
+
+
+# --- the web application ---------------------------------------------------------------
+
+
+def _read_static() -> dict[str, bytes]:
+    folder = importlib.resources.files("buddybot.dashboard") / "web"
+    return {name: (folder / name).read_bytes() for name in ("index.html", *STATIC)}
+
+
+class App:
+    """The aiohttp application and the glue between the pages and the bus."""
+
+    def __init__(self, board: Board) -> None:
+        self.board = board
+        self.bus: Bus | None = None
+        self.calls = asyncio.Semaphore(MAX_PENDING_CALLS)
+        self.sockets: set[web.WebSocketResponse] = set()
+        self.files = _read_static()
+
+    def make(self) -> web.Application:
+        app = web.Application()
+        app.router.add_get("/", self.index)
+        app.router.add_get("/static/{name}", self.static)
+        app.router.add_get("/ws", self.websocket)
+        app.router.add_get("/healthz", self.health)
+        app.router.add_get("/favicon.ico", self.no_icon)
+        app.on_shutdown.append(self.close_sockets)
+        return app
+
+    async def index(self, _request: web.Request) -> web.StreamResponse:
+        return web.Response(body=self.files["index.html"], content_type="text/html",
+                            headers={"Cache-Control": "no-cache"})
+
+    async def static(self, request: web.Request) -> web.StreamResponse:
+        name = request.match_info["name"]
+        if name not in STATIC:
+            raise web.HTTPNotFound()
+        return web.Response(body=self.files[name], content_type=STATIC[name],
+                            headers={"Cache-Control": "no-cache"})
+
+    async def no_icon(self, _request: web.Request) -> web.StreamResponse:
+        return web.Response(status=204)
+
+    async def health(self, _request: web.Request) -> web.StreamResponse:
+        b = self.board
+        return web.json_response({
+            "pages": len(b.pages), "bus": b.state["status"].get("bus", False),
+            "images_sent": b.images_sent, "bad_requests": b.bad_requests,
+            "refused": b.refused, "forbidden": b.forbidden,
+            "watching_images": self.bus is not None and self.bus.image_sub is not None})
+
+    async def websocket(self, request: web.Request) -> web.StreamResponse:
+        b = self.board
+        origin = request.headers.get("Origin")
+        if not model.origin_allowed(origin, request.host):
+            b.forbidden += 1
+            _warn.warning("origin", "refused a WebSocket from origin %s (the page is %s)",
+                          clip(origin, 80), clip(request.host, 80))
+            return web.Response(status=403, text="only the dashboard's own page may connect\n")
+        if len(b.pages) >= b.s.max_pages:
+            b.refused += 1
+            return web.Response(status=503, text=f"too many pages ({b.s.max_pages} max)\n")
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=64 * 1024, compress=False)
+        await ws.prepare(request)
+        transport = request.transport
+        page = Page(transport if isinstance(transport, asyncio.Transport) else None)
+        b.join(page, request.host)
+        self.sockets.add(ws)
+        sender = asyncio.create_task(_sender(ws, page, b))
+        tasks: set[asyncio.Task[None]] = set()
+        log.info("page connected (%d pages)", len(b.pages))
+        try:
+            async for msg in ws:
+                if msg.type == WSMsgType.TEXT:
+                    task = asyncio.create_task(self.command(page, msg.data))
+                    tasks.add(task)
+                    task.add_done_callback(tasks.discard)
+                elif msg.type == WSMsgType.BINARY:
+                    b.bad_requests += 1
+                    b.reply(page, 0, False, "bad request: send JSON text, not binary")
+                elif msg.type == WSMsgType.ERROR:
+                    break
+        finally:
+            b.leave(page)
+            self.sockets.discard(ws)
+            sender.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await sender
+            log.info("page left (%d pages)", len(b.pages))
+        return ws
+
+    async def command(self, page: Page, text: str) -> None:
+        """One request from a page; every one gets a reply (ok or a one-line error)."""
+        b = self.board
+        try:
+            cmd = model.parse_command(text)
+        except model.BadCommand as exc:
+            b.bad_requests += 1
+            b.reply(page, 0, False, str(exc))
+            return
+        bus = self.bus
+        if bus is None:
+            b.reply(page, cmd.id, False, "not connected to the robot yet")
+            return
+        if self.calls.locked():
+            b.reply(page, cmd.id, False, f"busy: {MAX_PENDING_CALLS} requests already running")
+            return
+        async with self.calls:
+            try:
+                ok, text_out = await asyncio.to_thread(bus.run_command, cmd)
+            except Exception as exc:  # the service never dies for a button
+                log.warning("request %r failed: %r", cmd, exc)
+                ok, text_out = False, f"failed: {clip(exc, 200)}"
+        b.reply(page, cmd.id, ok, text_out)
+
+    async def close_sockets(self, _app: web.Application) -> None:
+        for ws in list(self.sockets):
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(2.0):
+                    await ws.close(message=b"server shutdown")

@@ -1,0 +1,149 @@
+"""`buddybot run dashboard`: a live web page of what the robot perceives.
+
+One aiohttp server per robot serves the page (`web/`, no build step) and one
+WebSocket (`/ws`) that streams JSON (and the camera image as binary frames)
+to every connected page. The server is the page's only door to the bus: it
+holds one Node, subscribes to what the page shows, and does the buttons'
+bus work (publish an expression, call `audio/play_sound` and `audio/stop`).
+
+The parts, each in its own module:
+
+* `bus.py`: the node's subscriptions, timers and calls; Zenoh's threads
+  hand the newest value per slot to the event loop (`Mailbox`), so a flood
+  of samples costs the loop a bounded amount of work per turn;
+* `pages.py`: each page's queue and sender (a slow page never delays the
+  others or the bus) and the aiohttp application;
+* `model.py`: the pure rules (history, image rate, node restarts, requests);
+* camera images are subscribed only while a page is connected, at most
+  `max_image_fps` are JPEG-encoded (on the subscription's own worker), and
+  faces, radar, state and gaze go as JSON for the page to draw itself;
+* this module: the options, and the order of things: the HTTP server
+  starts before the node, so the page loads (and says "connecting") while
+  there is no router;
+* a WebSocket from another web site is refused (the page has buttons).
+
+A port already in use is one line and exit status 1 (`buddybot up`
+restarts it; the port may be free again).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+
+from aiohttp import web
+
+from buddybot.core.doctor import serve_failure
+from buddybot.core.errors import ServeError
+from buddybot.core.node import Node
+from buddybot.core.overrides import merge, settings_option
+from buddybot.core.service import ServiceContext
+from buddybot.dashboard.bus import Bus, Mailbox
+from buddybot.dashboard.pages import App, Board
+from buddybot.dashboard.settings import DashboardSettings
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """Options overriding `[dashboard]` keys (defaults and ranges: settings.py)."""
+    struct = DashboardSettings
+    settings_option(parser, "--host", struct=struct, field="host")
+    settings_option(parser, "--port", struct=struct, field="port")
+    settings_option(parser, "--camera", struct=struct, field="camera")
+    settings_option(parser, "--max-image-fps", struct=struct, field="max_image_fps")
+    settings_option(parser, "--history-s", struct=struct, field="history_s")
+    settings_option(parser, "--eye-url", struct=struct, field="eye_url", metavar="URL")
+    settings_option(parser, "--eye-port", struct=struct, field="eye_port", metavar="PORT")
+
+
+def settings_from(ctx: ServiceContext) -> DashboardSettings:
+    """`[dashboard]` with the command line on top (0 and "" are values)."""
+    return merge(ctx.config.section(DashboardSettings), ctx.args)
+
+
+# --- the service -----------------------------------------------------------------------
+
+
+async def _open_node(ctx: ServiceContext) -> Node | None:
+    def opener() -> Node | None:
+        try:
+            return ctx.node()
+        except KeyboardInterrupt:  # stopped while waiting for the router
+            return None
+
+    return await asyncio.to_thread(opener)
+
+
+def _other_tables(ctx: ServiceContext, s: DashboardSettings) -> tuple[int, dict[str, str]]:
+    """The eye renderer's port (`eye_port`, else `[eye_renderer] port`) and the
+    configured sounds, from this machine's config (tables read by name: the
+    dashboard imports no other area)."""
+    eye = getattr(ctx.config, "eye_renderer", None)
+    audio = getattr(ctx.config, "audio", None)
+    port = s.eye_port or int(getattr(eye, "port", 8080))
+    sounds = dict(getattr(audio, "sounds", {}) or {})
+    return port, sounds
+
+
+async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
+    """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
+    eye_port, sounds = _other_tables(ctx, s)
+    board = Board(s, eye_port, sorted(sounds))
+    app = App(board)
+    runner = web.AppRunner(app.make(), access_log=None)
+    await runner.setup()
+    site = web.TCPSite(runner, s.host or None, s.port)
+    try:
+        await site.start()
+    except OSError as exc:
+        await runner.cleanup()
+        raise ServeError(serve_failure(s.host or "0.0.0.0", s.port,
+                                       str(exc.strerror or exc))) from None
+    port = runner.addresses[0][1] if runner.addresses else s.port
+    view_host = "127.0.0.1" if s.host in ("0.0.0.0", "", "::") else s.host
+    print(f"dashboard serving http://{view_host}:{port}/", flush=True)
+
+    loop = asyncio.get_running_loop()
+    mailbox = Mailbox(loop, board.deliver)
+    opening = asyncio.create_task(_open_node(ctx))
+    node: Node | None = None
+
+    def pages_changed(count: int) -> None:
+        if app.bus is not None:
+            app.bus.watch_images(count > 0)
+
+    board.on_pages_changed = pages_changed
+    try:
+        while not ctx.stop.is_set():
+            await asyncio.sleep(0.2)
+            if node is None and opening.done():
+                node = opening.result()
+                if node is None:
+                    break
+                app.bus = Bus(node, s, mailbox, sounds)
+                pages_changed(len(board.pages))
+            if node is None:
+                continue
+            board.set_bus(node.connected())
+            d = node.diagnostics.values
+            d["pages"] = len(board.pages)
+            d["images_sent"] = board.images_sent
+            d["bad_requests"] = board.bad_requests
+            d["pages_refused"] = board.refused
+            d["origins_refused"] = board.forbidden
+            d["samples"] = mailbox.received
+    finally:
+        ctx.stop.set()
+        await runner.cleanup()
+        if node is None:
+            with contextlib.suppress(Exception):
+                node = await opening
+        if node is not None:
+            node.close()
+
+
+def run(ctx: ServiceContext) -> int:
+    s = settings_from(ctx)
+    asyncio.run(serve(ctx, s))
+    return 0
+

@@ -1,0 +1,1 @@
+"""Foxglove bridge: every key of the robot live in the Foxglove app (docs/foxglove.md)."""

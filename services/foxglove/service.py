@@ -1,0 +1,249 @@
+"""`buddybot run foxglove` (and `buddybot foxglove`): every key live in the Foxglove app.
+
+A Foxglove WebSocket server (the `foxglove-sdk` package) fed by one node:
+
+* every catalogue topic but the images is subscribed to all the time;
+  each concrete key becomes a channel named by its full key
+  (`buddybot/buddy/radar/presence`) the first time it is seen, with its
+  JSON Schema, and its messages are sent as JSON (encoded only while a
+  client subscribes to the channel);
+* `camera/<cam>/faces` also feeds `.../faces/annotations`
+  (`foxglove.ImageAnnotations`), so the Image panel draws the boxes;
+* images are found from the nodes' own reports (`node_info/*`, every few
+  seconds), advertised as `foxglove.CompressedImage`, and subscribed to
+  only while a Foxglove client watches them, at most `max_image_fps`;
+* two Foxglove services: `eyes/expression` publishes a ScreenExpression,
+  `audio/play_sound` sends the goal to the audio action and returns its reply.
+
+The server starts before the node, so a busy port fails at once (one line,
+exit 1) rather than after the router was found. Bad payloads are counted
+and dropped by the node (`malformed` in diagnostics), never shown.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from functools import partial
+from typing import Any
+from urllib.parse import urlencode
+
+import foxglove
+import msgspec
+
+from buddybot.cli.topics import node_infos
+from buddybot.core import channels, keys, tools
+from buddybot.core import messages as m
+from buddybot.core.handles import Publisher, Subscription
+from buddybot.core.limits import clip
+from buddybot.core.node import Node
+from buddybot.core.params import LiveSettings
+from buddybot.core.service import ServiceContext
+from buddybot.foxglove import logic
+from buddybot.foxglove.options import add_arguments, settings_from
+from buddybot.foxglove.server import FoxgloveServer, service_schema
+from buddybot.foxglove.settings import FoxgloveSettings
+
+__all__ = ["add_arguments", "run", "settings_from"]
+
+DISCOVERY_S = 3.0
+"""How often the nodes are asked which image keys they publish."""
+QUERY_TIMEOUT_S = 1.0
+CALL_TIMEOUT_S = 5.0
+APP_URL = "https://app.foxglove.dev"
+
+
+def urls(host: str, port: int) -> tuple[str, str]:
+    """(the WebSocket URL, the Foxglove app link that opens it) for a local viewer."""
+    view_host = "127.0.0.1" if host in ("", "0.0.0.0", "::") else host
+    ws = f"ws://{view_host}:{port}"
+    return ws, f"{APP_URL}/?{urlencode({'ds': 'foxglove-websocket', 'ds.url': ws})}"
+
+
+class Bridge:
+    """The node side: subscriptions, image demand, services."""
+
+    def __init__(self, node: Node, fox: FoxgloveServer, settings: FoxgloveSettings) -> None:
+        self.node = node
+        self.fox = fox
+        self.settings = settings
+        self.messages = 0
+        self.images_sent = 0
+        self.image_errors = 0
+        self._images: dict[str, keys.Topic] = {}  # absolute image key -> its topic
+        self._image_subs: dict[str, Subscription] = {}
+        self._limiters: dict[str, logic.RateLimiter] = {}
+        self._expression: Publisher[Any] | None = None
+        self._expression_lock = threading.Lock()
+
+    def apply_settings(self, settings: FoxgloveSettings) -> None:
+        """A live change (`buddybot param set foxglove max_image_fps 5`): the image
+        limiters take the new rate at their next frame; the rest needs a restart."""
+        self.settings = settings
+        for limiter in list(self._limiters.values()):
+            limiter.set_rate(settings.max_image_fps)
+
+    # -- everything but images: always on, in Zenoh's thread (nothing here blocks) --
+
+    def subscribe_all(self) -> None:
+        for topic in logic.streamed_topics():
+            self.node.subscribe(topic, partial(self.on_message, topic), delivery="inline")
+
+    def on_message(self, topic: keys.Topic, msg: Any, relative_key: str) -> None:
+        key = f"{self.node.prefix}/{relative_key}"
+        channel = self.fox.channel(key, topic)
+        if channel is None:
+            return
+        self.messages += 1
+        stamp = getattr(msg, "stamp_ns", 0) or time.time_ns()
+        if channel.has_sinks():  # nobody watching: not even encoded
+            channel.log(msgspec.json.encode(msg), log_time=stamp)
+        if topic is keys.FACES:
+            boxes = self.fox.annotations(key)
+            if boxes is not None and boxes.has_sinks():
+                boxes.log(msgspec.json.encode(channels.annotations(msg)), log_time=stamp)
+
+    # -- images: advertised from node reports, subscribed while watched --
+
+    def discover(self) -> None:
+        """Advertise every image key a node says it publishes."""
+        if not self.settings.images:
+            return
+        infos = node_infos(self.node, self.node.prefix, QUERY_TIMEOUT_S)
+        for relative_key in sorted(logic.declared_images(infos)):
+            key = f"{self.node.prefix}/{relative_key}"
+            topic = logic.topic_of(relative_key)
+            if key in self._images or topic is None:
+                continue
+            if self.fox.channel(key, topic) is not None:
+                self._images[key] = topic
+                self.node.log.info("image channel %s", clip(key))
+
+    def reconcile(self) -> None:
+        """Subscribe to the watched image keys, stop the others."""
+        wanted = self.fox.watched() & set(self._images)
+        start, stop = logic.plan(wanted, set(self._image_subs))
+        for key in stop:
+            self._image_subs.pop(key).close()
+            self.node.log.info("nobody watches %s: unsubscribed", clip(key))
+        for key in start:
+            topic = self._images[key]
+            params: dict[str, Any] = topic.match(self.node.relative(key)) or {}
+            self._limiters[key] = logic.RateLimiter(self.settings.max_image_fps)
+            self._image_subs[key] = self.node.subscribe(
+                topic, partial(self.on_image, topic), delivery="latest", **params)
+            self.node.log.info("a client watches %s: subscribed", clip(key))
+
+    def on_image(self, topic: keys.Topic, msg: m.Image, relative_key: str) -> None:
+        """On the subscription's worker (it only ever sees the newest frame)."""
+        key = f"{self.node.prefix}/{relative_key}"
+        limiter = self._limiters.get(key)
+        channel = self.fox.channel(key, topic)
+        if limiter is None or channel is None or not limiter.allow(time.monotonic()):
+            return
+        try:
+            data = msgspec.json.encode(channels.compressed_image(msg))
+        except channels.ChannelError as exc:
+            self.image_errors += 1
+            self.node.log.warning("image on %s not shown: %s", clip(key), clip(exc))
+            return
+        channel.log(data, log_time=msg.stamp_ns)
+        self.images_sent += 1
+
+    def manage(self) -> None:
+        """The manager thread: discovery every DISCOVERY_S, and image subscriptions
+        follow the clients' at once (the SDK's listener sets `changed`)."""
+        next_discovery = 0.0
+        while not self.node.stop_event.is_set():
+            now = time.monotonic()
+            try:
+                if now >= next_discovery:
+                    next_discovery = now + DISCOVERY_S
+                    self.discover()
+                self.reconcile()
+            except Exception as exc:  # a transient bus error: try again next round
+                self.node.diagnostics.increment("manager_errors")
+                self.node.log.warning("foxglove manager: %s", clip(repr(exc)))
+            self.fox.changed.wait(max(0.0, next_discovery - time.monotonic()))
+            self.fox.changed.clear()
+
+    def update_diagnostics(self) -> None:
+        values = self.node.diagnostics.values
+        values["channels"] = self.fox.channel_count()
+        values["channels_refused"] = self.fox.refused
+        values["watched_channels"] = len(self.fox.watched())
+        values["messages"] = self.messages
+        values["image_subscriptions"] = len(self._image_subs)
+        values["images_sent"] = self.images_sent
+        values["images_skipped"] = sum(r.skipped for r in self._limiters.values())
+        values["image_errors"] = self.image_errors
+
+    # -- Foxglove services (the SDK runs each call on its own thread: blocking is fine) --
+
+    def services(self) -> list[foxglove.Service]:
+        expression = foxglove.Service(
+            logic.EXPRESSION_SERVICE, handler=self.set_expression,
+            schema=service_schema("buddybot.SetExpression",
+                                  logic.request_schema(m.ScreenExpression),
+                                  channels.message_schema(m.ScreenExpression)))
+        play = foxglove.Service(
+            logic.PLAY_SOUND_SERVICE, handler=self.play_sound,
+            schema=service_schema("buddybot.PlaySound", logic.request_schema(m.PlaySound),
+                                  channels.message_schema(m.PlaySoundReply)))
+        return [expression, play]
+
+    def set_expression(self, request: foxglove.ServiceRequest) -> bytes:
+        """Publish the expression (`{"action": "EYE_HAPPY"}`; a name or a number)."""
+        msg = tools.parse_message(m.ScreenExpression, _text(request.payload))
+        with self._expression_lock:
+            if self._expression is None:  # declared on first use: `node info` stays true
+                self._expression = self.node.publisher(keys.EXPRESSION)
+            self._expression.put(msg)
+        assert isinstance(msg, m.ScreenExpression)
+        self.node.log.info("expression %s set from Foxglove", msg.action.name)
+        return msgspec.json.encode(msg)
+
+    def play_sound(self, request: foxglove.ServiceRequest) -> bytes:
+        """Send a play_sound goal; the reply says whether it was accepted."""
+        goal = tools.parse_message(m.PlaySound, _text(request.payload))
+        # No audio service, or an error reply: ServiceError, which the SDK sends
+        # back to the app as the call's failure message.
+        reply = self.node.call(keys.PLAY_SOUND, goal, timeout=CALL_TIMEOUT_S)
+        return msgspec.json.encode(reply)
+
+
+def _text(payload: bytes) -> str:
+    try:
+        return payload.decode("utf-8")
+    except UnicodeDecodeError:
+        return "\x00"  # not JSON: parse_message refuses it by name
+
+
+def run(ctx: ServiceContext) -> int:
+    settings = settings_from(ctx)
+    fox = FoxgloveServer(settings.max_channels)
+    server = fox.start(settings.host, settings.port)  # busy port: ServeError, exit 1
+    try:
+        ws, app = urls(settings.host, server.port)
+        print(f"foxglove bridge serving {ws}", flush=True)
+        where = "every interface" if settings.host in ("", "0.0.0.0", "::") else settings.host
+        node = ctx.node()
+        try:
+            node.log.info("Foxglove: connect the app to %s (listening on %s), or open %s",
+                          ws, where, app)
+            bridge = Bridge(node, fox, settings)
+            fox.add_services(bridge.services())
+            bridge.subscribe_all()
+            LiveSettings(settings, bridge.apply_settings).serve(node)
+            manager = threading.Thread(target=bridge.manage, name="foxglove-manager",
+                                       daemon=True)
+            manager.start()
+            node.every(1.0, bridge.update_diagnostics, name="foxglove-diagnostics")
+            node.spin()
+            fox.changed.set()  # wake the manager so it sees the stop
+            manager.join(5.0)
+        finally:
+            node.close()
+    finally:
+        fox.stop()
+    return 0

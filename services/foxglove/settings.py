@@ -1,0 +1,38 @@
+"""Config table `[foxglove]` (a pure msgspec struct).
+
+Defaults serve this machine only: the Foxglove app on a laptop needs
+`host = "0.0.0.0"` (docs/foxglove.md says why that needs care: the bridge
+can set the eyes' expression and play sounds).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import msgspec
+
+
+class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[foxglove]`: the Foxglove WebSocket bridge."""
+
+    # Loopback by default: anyone who can connect can call the bridge's services.
+    host: Annotated[str, msgspec.Meta(
+        max_length=253, description="address the WebSocket server listens on (0.0.0.0: "
+        "every interface, so the Foxglove app on a laptop can connect)")] = "127.0.0.1"
+    # Foxglove's own default port, the one the app proposes.
+    port: Annotated[int, msgspec.Meta(
+        ge=0, le=65535, description="WebSocket port (0: any free port)")] = 8765
+    images: Annotated[bool, msgspec.Meta(
+        description="offer camera images (as foxglove.CompressedImage) while a client "
+        "watches them")] = True
+    # Raw frames are JPEG-compressed per sent frame: this bounds the CPU and
+    # the Wi-Fi a viewer costs the robot.
+    # Live (`buddybot param set foxglove max_image_fps 5`): applies to the next frame.
+    max_image_fps: Annotated[float, msgspec.Meta(
+        gt=0.0, le=60.0, extra={"live": True},
+        description="images sent per camera key per second, at most")] = 10.0
+    # Channels are made from keys seen on the bus, which anyone on it can
+    # invent (`radar/<anything>/frames`): the table is bounded.
+    max_channels: Annotated[int, msgspec.Meta(
+        ge=1, le=4096, description="Foxglove channels at most (keys seen beyond are "
+        "counted and not shown)")] = 256

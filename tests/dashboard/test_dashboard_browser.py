@@ -1,0 +1,267 @@
+"""The dashboard page in a real Chromium, fed real messages through a real router.
+
+probe -> router -> dashboard process -> WebSocket -> page. What the page
+drew is read back from its canvases' pixels (face box, radar bars) or its
+DOM (presence, nodes), never from the page's own variables alone.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import Collector, Process, buddybot_argv, free_port, wait_port
+
+from ..conftest import ARTIFACTS
+
+pytestmark = [pytest.mark.integration, pytest.mark.browser]
+
+W, H = 1280, 800
+SHOTS = ARTIFACTS / "dashboard"
+
+
+def start_dashboard(spawn: Callable[..., Process], *args: str) -> int:
+    port = free_port()
+    spawn("dashboard", "--port", str(port), *args)
+    wait_port(port, 30)
+    return port
+
+
+def open_page(browser: Any, port: int) -> Any:
+    page = browser.new_page(viewport={"width": W, "height": H})
+    errors: list[str] = []
+    page.on("pageerror", lambda exc: errors.append(str(exc)))
+    page.errors = errors
+    page.goto(f"http://127.0.0.1:{port}/")
+    page.wait_for_function("document.getElementById('conn').textContent === 'on the bus'",
+                           timeout=30_000)
+    return page
+
+
+def sensor_frame(moving: list[int], still: list[int], device: int = 7,
+                 moving_cm: int = 140) -> m.LD2410TargetDataFrameArray:
+    return m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=device, sensors=[
+        m.LD2410TargetDataFrame(
+            radar_id=0, target_state=m.TargetState.MOVING_AND_STATIONARY,
+            movement_distance=moving_cm, movement_energy=60, stationary_distance=150,
+            stationary_energy=35, detection_distance=150, max_moving_gate=8,
+            max_stationary_gate=8, moving_gate_energy=moving, stationary_gate_energy=still)])
+
+
+def test_face_box_is_drawn_over_the_image_at_the_face_pixels(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    images = probe.publisher(keys.CAMERA_IMAGE, camera="front")
+    faces = probe.publisher(keys.FACES, camera="front")
+    pixels = np.zeros((480, 640, 3), np.uint8)
+    pixels[:] = (40, 90, 200)  # BGR: an orange-red scene
+    box = m.FaceBox(x0=200, y0=150, x1=320, y1=290, score=0.93, followed=True,
+                    keypoints=[m.PixelPoint(x=235, y=200), m.PixelPoint(x=285, y=200)])
+    detections = m.FaceDetections(
+        stamp_ns=m.now_ns(), frame_id="cam", width=640, height=480, faces=[box],
+        distance_m=0.62, cues=[m.DistanceCue(name="width", distance_m=0.6, weight=0.7,
+                                             status="used")])
+
+    def publish_until_drawn() -> None:
+        for _ in range(300):
+            images.put(m.Image(stamp_ns=m.now_ns(), frame_id="cam", width=640, height=480,
+                               encoding="bgr8", data=pixels.tobytes()))
+            faces.put(detections)
+            if page.evaluate("!!(window.dash.image && window.dash.faces)"):
+                return
+            time.sleep(0.05)
+        raise TimeoutError("the page never got both an image and faces")
+
+    publish_until_drawn()
+    page.evaluate("drawCamera()")
+    rgba = page.evaluate("""() => {
+        const c = document.getElementById('camera');
+        const g = c.getContext('2d');
+        const at = (x, y) => Array.from(g.getImageData(x, y, 1, 1).data);
+        return {size: [c.width, c.height], left: at(200, 220), right: at(320, 250),
+                top: at(260, 150), inside: at(260, 260), outside: at(120, 400),
+                eye: at(235, 200)};
+    }""")
+    assert rgba["size"] == [640, 480]
+    green = (63, 185, 80)   # the followed face's box colour
+    scene = (200, 90, 40)   # the image, as RGB after JPEG
+    for where in ("left", "right", "top"):
+        assert np.abs(np.array(rgba[where][:3]) - green).max() < 30, (where, rgba[where])
+    for where in ("inside", "outside"):
+        assert np.abs(np.array(rgba[where][:3]) - scene).max() < 25, (where, rgba[where])
+    assert rgba["eye"][:3] == [255, 79, 216]  # a keypoint dot
+    text = page.inner_text("#faces")
+    assert "0.62 m" in text and "width 0.60 m (weight 0.70)" in text
+    assert page.errors == []
+
+
+def test_radar_bars_match_the_published_energies(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    radar = probe.publisher(keys.RADAR_FRAMES, device="7")
+    moving = [5, 15, 25, 35, 45, 55, 65, 75, 95]
+    still = [90, 80, 70, 60, 50, 40, 30, 20, 10]
+    radar.put(sensor_frame(moving, still))
+    page.wait_for_function("window.dash.sensors['7/0'] && window.dash.sensors['7/0'].last",
+                           timeout=20_000)
+    page.evaluate("drawBars(window.dash.sensors['7/0'])")
+    heights = page.evaluate("""() => {
+        const c = document.querySelector('[data-sensor="7/0"] .bars');
+        const g = c.getContext('2d'), geo = window.dashBars(c.width, c.height);
+        const data = g.getImageData(0, 0, c.width, c.height).data;
+        const out = [[], []];
+        for (let gate = 0; gate < 9; gate++) for (const which of [0, 1]) {
+            const x = Math.round(geo.x(gate, which) + geo.bw / 2);
+            let n = 0;  // coloured pixels up from the baseline
+            for (let y = Math.floor(geo.base) - 1; y > 0; y--) {
+                const i = (y * c.width + x) * 4;
+                const [r, gr, b] = [data[i], data[i + 1], data[i + 2]];
+                const bar = which ? (b > 200 && r < 120) : (r > 200 && b < 100);
+                if (!bar) break;
+                n++;
+            }
+            out[which].push(Math.round(n / geo.ph * 100));
+        }
+        return out;
+    }""")
+    print("bar heights (moving, still):", heights)
+    assert np.abs(np.array(heights[0]) - moving).max() <= 2
+    assert np.abs(np.array(heights[1]) - still).max() <= 2
+    # Basic mode (no gate energies) is said, not drawn as empty bars.
+    basic = sensor_frame(moving, still)
+    basic.sensors[0].moving_gate_energy = basic.sensors[0].stationary_gate_energy = None
+    radar.put(basic)
+    page.wait_for_function("window.dash.sensors['7/0'].last.moving_gates === null",
+                           timeout=20_000)
+    assert page.errors == []
+
+
+def test_a_presence_change_is_shown_within_300_ms(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    presence = probe.publisher(keys.PRESENCE)
+    figures = []
+    for i in range(6):
+        state = m.PresenceState.IN_RANGE if i % 2 == 0 else m.PresenceState.OUT_OF_RANGE
+        distance = 1.0 + i / 10
+        text = f"{state.name} {distance:.2f} m"
+        page.evaluate("""(text) => {
+            window.seen = null;
+            const el = document.getElementById('presence');
+            const obs = new MutationObserver(() => {
+                if (el.textContent === text && window.seen === null) {
+                    window.seen = Date.now(); obs.disconnect();
+                }
+            });
+            obs.observe(el, {childList: true, characterData: true, subtree: true});
+        }""", text)
+        sent = time.time() * 1000
+        presence.put(m.PresenceDetection(stamp_ns=m.now_ns(), target_state=m.PresenceTarget.MOVING,
+                                         presence_state=state, distance_m=distance))
+        page.wait_for_function("window.seen !== null", timeout=20_000)
+        figures.append(page.evaluate("window.seen") - sent)
+    print("presence publish -> DOM change, ms:", [round(f) for f in figures],
+          f"median {statistics.median(figures):.0f}")
+    assert statistics.median(figures) < 300
+    assert max(figures) < 1000
+    assert page.errors == []
+
+
+def test_a_killed_node_is_shown_down_and_its_restart_counted(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    port = start_dashboard(spawn)
+    presence = spawn("radar-presence", "--range-m", "1.7")
+    page = open_page(browser, port)
+    row = "#nodes tr[data-node='radar-presence']"
+    page.wait_for_function(f"""() => {{
+        const r = document.querySelector("{row}");
+        return r && r.children[1].textContent === 'alive';
+    }}""", timeout=30_000)
+    # Its live parameters reach the page (range and holds on the distance plot).
+    page.wait_for_function(
+        "document.getElementById('rules').textContent.startsWith('range 1.70 m')",
+        timeout=30_000)
+    presence.kill()
+    page.wait_for_function(f"""() => {{
+        const r = document.querySelector("{row}");
+        return r.children[1].textContent === 'down' && r.children[1].className === 'down';
+    }}""", timeout=15_000)
+    spawn("radar-presence")
+    page.wait_for_function(f"""() => {{
+        const r = document.querySelector("{row}");
+        return r.children[1].textContent === 'alive' && r.children[2].textContent === '1';
+    }}""", timeout=30_000)
+    assert page.errors == []
+
+
+def test_buttons_set_the_expression_and_report_a_missing_audio_service(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    page.click("button[data-expression='EYE_GRIN']")
+    got = expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
+                               "EYE_GRIN on eyes/expression")
+    assert got.stamp_ns > 0
+    page.wait_for_function("document.getElementById('expression').textContent === 'EYE_GRIN'",
+                           timeout=15_000)
+    # No audio service runs: the page says so, and the dashboard lives on.
+    page.click("button[data-sound='greeting']")
+    page.wait_for_function(
+        "document.getElementById('reply').textContent.startsWith('play greeting:')",
+        timeout=20_000)
+    assert "bad" in page.get_attribute("#reply", "class")
+    page.click("button[data-expression='EYE_SAD']")
+    expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_SAD, 15)
+    assert page.errors == []
+
+
+def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: Path) -> None:
+    """`buddybot up --sim` with the dashboard open at 1280x800: every panel has live
+    content; the screenshot is saved for a person to look at (docs/images/dashboard.png
+    is a copy of one)."""
+    eye_port, dash_port, router_port = free_port(), free_port(), free_port()
+    config = tmp_path / "robot.toml"
+    config.write_text(f"[eye_renderer]\nport = {eye_port}\n\n[dashboard]\nport = {dash_port}\n"
+                      "\n[audio_player]\nbackend = \"null\"\n")
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--config", str(config),
+                               "--listen", f"tcp/127.0.0.1:{router_port}",
+                               "--status-period", "0"), "up", tmp_path)
+    try:
+        wait_port(dash_port, 60)
+        wait_port(eye_port, 60)
+        page = open_page(browser, dash_port)
+        # Live content everywhere: a face on the image, radar lines, presence rules,
+        # the controller's state, gaze, every node alive.
+        page.wait_for_function("""() => {
+            const d = window.dash;
+            const nodes = d.nodes || [];
+            return d.image && d.faces && d.faces.faces.length > 0
+                && Object.values(d.sensors).some((s) => s.points.length > 50
+                    && s.points[s.points.length - 1][0] - s.points[0][0] > 25)
+                && d.rules && d.controller && d.presence
+                && document.getElementById('gaze').textContent !== '–'
+                && nodes.length >= 9 && nodes.every((n) => n.alive);
+        }""", timeout=120_000)
+        page.wait_for_timeout(1500)  # let the eye page in its frame settle (a picture only)
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SHOTS / "dashboard.png"), full_page=True)
+        size = page.evaluate("[document.documentElement.scrollWidth, "
+                             "document.documentElement.scrollHeight]")
+        assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+        assert page.errors == []
+    finally:
+        up.stop(30)
+        print(up.output()[-3000:])

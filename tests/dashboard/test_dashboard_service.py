@@ -1,0 +1,201 @@
+"""The dashboard server through a real router, with a plain WebSocket client (no browser).
+
+Covers what a page cannot easily show: a busy port, a foreign origin, bad
+requests from a page, camera images subscribed only while a page is there
+and sent as JPEG at no more than `max_image_fps`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import socket
+import time
+from collections.abc import Callable
+from typing import Any
+
+import aiohttp
+import cv2
+import numpy as np
+import pytest
+
+from buddybot.core import keys
+from buddybot.core import messages as m
+from buddybot.core.node import Node
+from buddybot.core.testing import (
+    LOOPBACK,
+    Collector,
+    Process,
+    free_port,
+    retry_until,
+    wait_port,
+)
+from buddybot.dashboard import model
+
+pytestmark = pytest.mark.integration
+
+
+def start_dashboard(spawn: Callable[..., Process], *args: str) -> tuple[Process, int]:
+    port = free_port()
+    proc = spawn("dashboard", "--port", str(port), *args)
+    wait_port(port, 30)
+    return proc, port
+
+
+def health(port: int) -> dict[str, Any]:
+    async def get() -> dict[str, Any]:
+        async with aiohttp.ClientSession() as http, http.get(
+                f"http://{LOOPBACK}:{port}/healthz") as resp:
+            data: dict[str, Any] = await resp.json()
+            return data
+
+    return asyncio.run(get())
+
+
+def test_a_busy_port_is_one_line_and_exit_1(spawn: Callable[..., Process]) -> None:
+    with socket.socket() as taken:
+        taken.bind((LOOPBACK, 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        proc = spawn("dashboard", "--port", str(port))
+        assert proc.proc.wait(30) == 1
+    lines = [x for x in proc.output().splitlines() if x.strip()]
+    assert lines[-1].startswith(f"buddybot dashboard: cannot serve on 127.0.0.1:{port}: "
+                                f"the port is taken by ")
+    assert f"pid {os.getpid()}" in lines[-1]  # this test holds it
+    assert "Traceback" not in proc.output()
+
+
+def test_bad_requests_get_error_replies_and_foreign_origins_are_refused(
+        spawn: Callable[..., Process]) -> None:
+    proc, port = start_dashboard(spawn)
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    url = f"http://{LOOPBACK}:{port}/ws"
+
+    async def talk() -> list[dict[str, Any]]:
+        replies: list[dict[str, Any]] = []
+        async with aiohttp.ClientSession() as http:
+            with pytest.raises(aiohttp.WSServerHandshakeError) as refused:
+                await http.ws_connect(url, origin="http://evil.example")
+            assert refused.value.status == 403
+            async with http.ws_connect(url, origin=f"http://{LOOPBACK}:{port}") as ws:
+                for bad in ("not json", '{"op": "expression", "action": "EYE_WINK"}',
+                            '{"op": "play"}'):
+                    await ws.send_str(bad)
+                    replies.append(await _next(ws, "reply"))
+                await ws.send_bytes(b"\x00\x01")
+                replies.append(await _next(ws, "reply"))
+                # The socket still works after all that.
+                await ws.send_str('{"op": "expression", "action": "EYE_SAD", "id": 7}')
+                replies.append(await _next(ws, "reply"))
+        return replies
+
+    replies = asyncio.run(talk())
+    assert [r["ok"] for r in replies] == [False, False, False, False, True]
+    assert "bad request" in replies[0]["text"]
+    assert "EYE_WINK" in replies[1]["text"]
+    assert "sound" in replies[2]["text"]
+    assert "binary" in replies[3]["text"]
+    assert replies[4]["id"] == 7
+    assert proc.alive()
+    assert health(port)["bad_requests"] == 4
+
+
+async def _next(ws: aiohttp.ClientWebSocketResponse, slot: str,
+                timeout: float = 15.0) -> dict[str, Any]:
+    """The value of the next text message of `slot` (others skipped)."""
+    async with asyncio.timeout(timeout):
+        while True:
+            msg = await ws.receive()
+            if msg.type == aiohttp.WSMsgType.TEXT:
+                data = msg.json()
+                if data["t"] == slot:
+                    value: dict[str, Any] = data["v"]
+                    return value
+            elif msg.type in (aiohttp.WSMsgType.CLOSED, aiohttp.WSMsgType.ERROR):
+                raise ConnectionError(f"closed while waiting for {slot}")
+
+
+def test_images_only_while_a_page_is_connected_as_jpeg_at_the_rate_limit(
+        spawn: Callable[..., Process], probe: Node) -> None:
+    proc, port = start_dashboard(spawn, "--max-image-fps", "5", "--camera", "side")
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    assert not health(port)["watching_images"]
+    publisher = probe.publisher(keys.CAMERA_IMAGE, camera="side")
+    pixels = np.zeros((120, 160, 3), np.uint8)
+    pixels[:, :80] = (0, 0, 255)  # left half red (BGR)
+
+    async def watch() -> tuple[list[tuple[dict[str, Any], bytes]], float]:
+        frames: list[tuple[dict[str, Any], bytes]] = []
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                f"http://{LOOPBACK}:{port}/ws") as ws:
+            await asyncio.to_thread(retry_until, lambda: health(port)["watching_images"], 15)
+            stop = asyncio.Event()
+
+            async def publish() -> None:  # 30 fps until told to stop
+                while not stop.is_set():
+                    publisher.put(m.Image(stamp_ns=m.now_ns(), frame_id="side", width=160,
+                                          height=120, encoding="bgr8", data=pixels.tobytes()))
+                    await asyncio.sleep(1 / 30)
+
+            task = asyncio.create_task(publish())
+            arrivals: list[float] = []
+            try:
+                async with asyncio.timeout(30):
+                    while len(frames) < 13:
+                        msg = await ws.receive()
+                        if msg.type == aiohttp.WSMsgType.BINARY:
+                            arrivals.append(time.monotonic())
+                            frames.append(model.unpack_image(msg.data))
+            finally:
+                stop.set()
+                await task
+        # The first frames may come late (the subscription is new): time the rest.
+        return frames, arrivals[-1] - arrivals[2]
+
+    frames, took = asyncio.run(watch())
+    fps = (len(frames) - 3) / took
+    print(f"images at {fps:.1f} fps with a 5 fps limit and 30 fps published")
+    assert fps < 6.0
+    header, jpeg = frames[-1]
+    assert (header["width"], header["height"], header["frame_id"]) == (160, 120, "side")
+    decoded = cv2.imdecode(np.frombuffer(jpeg, np.uint8), cv2.IMREAD_COLOR)
+    assert decoded is not None and decoded.shape == (120, 160, 3)
+    assert abs(int(decoded[60, 20, 2]) - 255) < 20 and int(decoded[60, 140, 2]) < 20
+    retry_until(lambda: not health(port)["watching_images"], 15,
+                what="camera unsubscribed once the page left")
+    assert proc.alive()
+
+
+def test_malformed_samples_are_skipped_and_the_pages_still_get_the_good_ones(
+        spawn: Callable[..., Process], probe: Node) -> None:
+    proc, port = start_dashboard(spawn)
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    bad = probe.raw_publisher(probe.key(keys.RADAR_FRAMES, device="9"),
+                              keys.RADAR_FRAMES.encoding)
+    radar = probe.publisher(keys.RADAR_FRAMES, device="9")
+    frame = m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=9, sensors=[
+        m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
+                                movement_distance=123, movement_energy=50,
+                                stationary_distance=0, stationary_energy=0,
+                                detection_distance=123)])
+
+    async def watch() -> list[dict[str, Any]]:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                f"http://{LOOPBACK}:{port}/ws") as ws:
+            await _next(ws, "hello")
+            for payload in (b"{", b'{"stamp_ns": -1}', b"\xff" * 100):
+                bad.put(payload)
+            radar.put(frame)
+            async with asyncio.timeout(15):
+                while True:
+                    msg = await ws.receive()
+                    if msg.type == aiohttp.WSMsgType.TEXT and msg.json()["t"] == "radar":
+                        frames: list[dict[str, Any]] = msg.json()["v"]
+                        return frames
+
+    frames = asyncio.run(watch())
+    assert [(f["sensor"], f["moving_cm"]) for f in frames] == [("9/0", 123)]
+    diagnostics = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="dashboard")
+    diagnostics.wait_for(lambda d: d.values.get("malformed") == 3, 15, "3 malformed counted")
+    assert proc.alive()

@@ -1,0 +1,191 @@
+"""The dashboard's pure parts: history, image rate, node table, latency, requests."""
+
+from __future__ import annotations
+
+import msgspec
+import pytest
+
+from buddybot.core import messages as m
+from buddybot.dashboard import model
+
+
+def frames(t_ns: int, moving: int, still: int, radar_id: int = 0,
+           gates: bool = True) -> m.LD2410TargetDataFrameArray:
+    sensor = m.LD2410TargetDataFrame(
+        radar_id=radar_id, target_state=m.TargetState.MOVING_AND_STATIONARY,
+        movement_distance=moving, movement_energy=40, stationary_distance=still,
+        stationary_energy=20, detection_distance=still,
+        moving_gate_energy=list(range(0, 90, 10)) if gates else None,
+        stationary_gate_energy=[5] * 9 if gates else None)
+    return m.LD2410TargetDataFrameArray(stamp_ns=t_ns, device_id=1, sensors=[sensor])
+
+
+def test_history_keeps_only_its_span_and_never_goes_back() -> None:
+    h = model.History(span_s=10.0)
+    for t in range(30):
+        h.add(float(t), t, 2 * t)
+    assert [p[0] for p in h.points()] == [float(t) for t in range(19, 30)]
+    h.add(5.0, 1, 1)  # a late frame joins the end, at the end's time
+    assert h.points()[-1] == (29.0, 1, 1)
+    h.trim(100.0)
+    assert len(h) == 0
+
+
+def test_radar_history_per_sensor_and_bounded() -> None:
+    r = model.RadarHistory(span_s=30.0, max_sensors=2)
+    for radar_id in range(3):
+        r.add(1.0, frames(1_000_000_000, 100, 120, radar_id=radar_id))
+    snap = r.snapshot(2.0)
+    assert sorted(snap) == ["1/1", "1/2"]  # the oldest sensor was forgotten
+    assert snap["1/2"] == [(1.0, 100, 120)]
+
+
+def test_radar_view_says_basic_mode_by_missing_gates() -> None:
+    eng = model.radar_view(1.0, frames(1, 150, 160))[0]
+    assert eng["moving_gates"] == [0, 10, 20, 30, 40, 50, 60, 70, 80]
+    assert eng["state"] == "MOVING_AND_STATIONARY" and eng["sensor"] == "1/0"
+    basic = model.radar_view(1.0, frames(1, 150, 160, gates=False))[0]
+    assert basic["moving_gates"] is None and basic["still_gates"] is None
+
+
+def test_rate_limiter_gives_the_rate_without_bursts() -> None:
+    limiter = model.RateLimiter(10.0)
+    # 15 fps for 10 s: 10 fps out, not the 7.5 of "at least 100 ms apart".
+    allowed = sum(limiter.allow(i / 15.0) for i in range(150))
+    assert 99 <= allowed <= 101
+    # A long pause buys no burst: 30 fps right after it still gives ~10 fps.
+    after = sum(limiter.allow(100.0 + i / 30.0) for i in range(30))
+    assert 10 <= after <= 11
+    with pytest.raises(ValueError):
+        model.RateLimiter(0.0)
+
+
+def test_image_frame_round_trip() -> None:
+    header = {"stamp_ns": 5, "frame_id": "cam", "width": 4, "height": 2}
+    packed = model.pack_image(header, b"\xff\xd8jpeg")
+    assert model.unpack_image(packed) == (header, b"\xff\xd8jpeg")
+
+
+def test_node_table_alive_down_and_restarts() -> None:
+    t = model.NodeTable()
+    assert t.update({"camera": {"a"}, "eyes": {"e"}}, 1.0)
+    assert not t.update({"camera": {"a"}, "eyes": {"e"}}, 2.0)  # nothing new
+    assert t.update({"eyes": {"e"}}, 3.0)                    # camera died
+    cam = t.get("camera")
+    assert cam is not None and not cam.alive and cam.since_s == 3.0 and cam.restarts == 0
+    t.update({"camera": {"b"}, "eyes": {"e"}}, 4.0)          # back, new instance
+    assert cam.alive and cam.restarts == 1 and cam.since_s == 4.0
+    t.update({"camera": {"b", "c"}, "eyes": {"e"}}, 5.0)     # a second process
+    assert cam.restarts == 2 and cam.view()["instances"] == ["b", "c"]
+    rows = {r["name"]: r for r in t.view()}
+    assert rows["eyes"]["alive"] and rows["eyes"]["restarts"] == 0
+
+
+def test_node_table_diagnostics_and_bound() -> None:
+    t = model.NodeTable(max_nodes=2)
+    diag = m.DiagnosticStatus(stamp_ns=1, node="camera", level="WARN", message="x" * 500)
+    assert t.diagnostics(diag, 1.0)
+    assert not t.diagnostics(diag, 2.0)  # same level and message
+    row = t.get("camera")
+    assert row is not None and row.level == "WARN" and len(row.message) < 300
+    assert not row.alive  # diagnostics alone do not make a node alive
+    t.update({"a": {"1"}, "b": {"2"}}, 3.0)
+    assert len(t.view()) == 2
+
+
+def test_latency_percentiles() -> None:
+    lat = model.Latency(window=100)
+    assert lat.view()["p95_ms"] is None
+    for ms in range(1, 201):
+        lat.add(float(ms))
+    v = lat.view()
+    assert v["n"] == 100 and v["last_ms"] == 200.0
+    assert v["p50_ms"] == 150.0 and v["p95_ms"] == 195.0
+
+
+def test_outbox_keeps_newest_per_slot_and_appends_frames_bounded() -> None:
+    box = model.Outbox()
+    box.put("presence", 1)
+    box.put("faces", "f")
+    box.put("presence", 2)
+    box.put_frames([{"n": i} for i in range(model.MAX_QUEUED_FRAMES + 5)])
+    out = box.take()
+    assert out[0] == ("faces", "f") and out[1] == ("presence", 2)
+    assert out[2][0] == "radar" and len(out[2][1]) == model.MAX_QUEUED_FRAMES
+    assert out[2][1][0] == {"n": 5} and box.dropped_frames == 5
+    assert not box and box.take() == []
+
+
+@pytest.mark.parametrize(("text", "kind"), [
+    ('{"op": "expression", "action": "EYE_GRIN", "id": 3}', model.SetExpression),
+    ('{"op": "play", "sound": "greeting"}', model.PlaySound),
+    ('{"op": "stop"}', model.StopSound),
+])
+def test_commands_parse(text: str, kind: type) -> None:
+    assert isinstance(model.parse_command(text), kind)
+
+
+@pytest.mark.parametrize("text", [
+    "not json", "{}", '{"op": "explode"}', '{"op": "expression", "action": "EYE_WINK"}',
+    '{"op": "expression", "action": 3}', '{"op": "play", "sound": ""}',
+    '{"op": "stop", "extra": 1}', "[" * 5000,
+])
+def test_bad_commands_get_one_line_reasons(text: str) -> None:
+    with pytest.raises(model.BadCommand) as err:
+        model.parse_command(text)
+    assert "\n" not in str(err.value) and len(str(err.value)) < 600
+
+
+def params(**values: object) -> m.ParamReply:
+    return m.ParamReply(node="n", table="t", params=[
+        m.ParamInfo(name=k, value=v, type="float", range="", live=True) for k, v in values.items()])
+
+
+def test_presence_rules_from_params() -> None:
+    rules = model.presence_rules(params(range_m=2.0, exit_margin_m=0.3, absence_hold_s=5,
+                                        target_hold_s=1.5, stale_after_s=1.0))
+    assert rules == {"range_m": 2.0, "exit_margin_m": 0.3, "absence_hold_s": 5.0,
+                     "target_hold_s": 1.5}
+    assert model.presence_rules(params(exit_margin_m=0.3)) is None
+    assert model.presence_rules(params(range_m=True)) is None
+    refused = params(range_m=2.0)
+    refused.error = "no"
+    assert model.presence_rules(refused) is None
+
+
+def test_sound_names_from_the_service_else_the_config() -> None:
+    live = m.ParamReply(node="audio", table="audio", params=[m.ParamInfo(
+        name="sounds", value={"hello": "a.wav", "bye": "b.wav"}, type="dict", range="",
+        live=False)])
+    assert model.sound_names(live, {"greeting": "x"}) == ["bye", "hello"]
+    assert model.sound_names(None, {"greeting": "x", "farewell": "y"}) == ["farewell", "greeting"]
+
+
+@pytest.mark.parametrize(("configured", "host", "expected"), [
+    ("http://eyes.local:9000/eyes?eye=left", "robot:8090", "http://eyes.local:9000/eyes?eye=left"),
+    ("", "buddy.local:8090", "http://buddy.local:8080/eyes?eye=both"),
+    ("", "192.168.1.20:8090", "http://192.168.1.20:8080/eyes?eye=both"),
+    ("", "[::1]:8090", "http://[::1]:8080/eyes?eye=both"),
+    ("", None, "http://127.0.0.1:8080/eyes?eye=both"),
+])
+def test_eye_page_url(configured: str, host: str | None, expected: str) -> None:
+    assert model.eye_page_url(configured, 8080, host) == expected
+
+
+@pytest.mark.parametrize(("origin", "host", "ok"), [
+    (None, "127.0.0.1:8090", True),
+    ("http://127.0.0.1:8090", "127.0.0.1:8090", True),
+    ("http://BUDDY.local:8090", "buddy.local:8090", True),
+    ("http://evil.example", "127.0.0.1:8090", False),
+    ("http://127.0.0.1:8080", "127.0.0.1:8090", False),
+    ("null", "127.0.0.1:8090", False),
+    ("http://127.0.0.1:8090", None, False),
+])
+def test_origin_allowed(origin: str | None, host: str | None, ok: bool) -> None:
+    assert model.origin_allowed(origin, host) is ok
+
+
+def test_enum_names_are_json_ready() -> None:
+    names = msgspec.json.decode(msgspec.json.encode(model.enum_names()))
+    assert names["ExpressionAction"]["3"] == "EYE_GRIN"
+    assert names["PresenceState"]["1"] == "IN_RANGE"
