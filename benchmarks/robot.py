@@ -13,22 +13,40 @@ then for `--seconds`:
   needs no hold, so this is the pipeline's own latency;
 * CPU (% of one core) and resident memory of each process and in total.
 
-`--dashboard` also starts the dashboard service and keeps its page open in
-a headless Chromium (Debian's, through Playwright) for the whole run, so
-the gaze latency with and without a page watching can be compared; the
-dashboard's and the browser's CPU are reported too.
+`--dashboard MODE` also starts the dashboard service and asks: does an open
+dashboard page slow the robot? The run is cut into `--windows` pairs of
+windows, the page closed in the first of each pair and open in the second,
+on the same robot, so the machine's drift (other work on a shared
+machine changes the latency by more than the page does) falls on both
+sides alike. The gaze latency of each side is pooled and compared; the
+first `SETTLE_S` of each window are left out (a page loading is not its
+steady cost). MODE says who opens the page:
 
-    .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30] [--dashboard]
+* `remote`: a reader that opens the page's two WebSockets (the dashboard's
+  and the mirrored eye page's) and takes everything they send, drawing
+  nothing (benchmarks/remote_page.py): a page opened on a laptop, as the
+  dashboard is meant to be used, where the robot pays for serving the page
+  but not for the browser drawing it;
+* `browser`: the real page in a headless Chromium (Debian's, through
+  Playwright) on this same machine, which then also shares the robot's
+  cores with the browser drawing it (about a third of a core without a GPU).
+
+    .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30]
+        [--dashboard remote|browser] [--windows 4]
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import json
 import shutil
+import signal
 import statistics
+import subprocess
+import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from tempfile import mkdtemp
 from typing import Any
@@ -49,31 +67,85 @@ from buddybot.core.testing import (
     wait_port,
 )
 
+SETTLE_S = 2.0
+"""Left out at the start of each window: the page connecting or going away."""
 
-@contextlib.contextmanager
-def dashboard_page(port: int) -> Any:
-    """The dashboard page open in a headless Chromium until the block ends; yields
-    the browser's processes (for their CPU)."""
-    from playwright.sync_api import sync_playwright
 
-    path = shutil.which("chromium")
-    if path is None:
-        raise SystemExit("--dashboard needs Debian's chromium (scripts/chromium.sh)")
-    before = {c.pid for c in psutil.Process().children(recursive=True)}
-    with sync_playwright() as pw:
+class BrowserPage:
+    """The dashboard in a headless Chromium, kept running; `open` loads the page,
+    `close` goes to about:blank (a fresh browser per window would measure its start)."""
+
+    def __init__(self, stack: contextlib.ExitStack, port: int) -> None:
+        from playwright.sync_api import sync_playwright
+
+        path = shutil.which("chromium")
+        if path is None:
+            raise SystemExit("--dashboard browser needs Debian's chromium (scripts/chromium.sh)")
+        before = {c.pid for c in psutil.Process().children(recursive=True)}
+        pw = stack.enter_context(sync_playwright())
         browser = pw.chromium.launch(executable_path=path, args=[
             "--no-sandbox", "--disable-gpu", "--disable-background-networking"])
-        try:
-            page = browser.new_page(viewport={"width": 1280, "height": 800})
-            page.goto(f"http://127.0.0.1:{port}/")
-            page.wait_for_function(
-                "document.getElementById('conn').textContent === 'on the bus'", timeout=60_000)
-            page.wait_for_function("window.dash.image !== null", timeout=60_000)
-            procs = [c for c in psutil.Process().children(recursive=True)
-                     if c.pid not in before and "chrom" in c.name()]
-            yield procs, page
-        finally:
-            browser.close()
+        stack.callback(browser.close)
+        self.page = browser.new_page(viewport={"width": 1280, "height": 800})
+        self.url = f"http://127.0.0.1:{port}/"
+        self.procs = [c for c in psutil.Process().children(recursive=True)
+                      if c.pid not in before and "chrom" in c.name()]
+        self.received = [0, 0]
+
+    def open(self) -> None:
+        self.page.goto(self.url)
+        self.page.wait_for_function(
+            "document.getElementById('conn').textContent === 'on the bus'", timeout=60_000)
+        self.page.wait_for_function("window.dash.image !== null", timeout=60_000)
+
+    def close(self) -> None:
+        counts = self.page.evaluate("[window.dash.counts.images, window.dash.counts.messages]")
+        self.received[0] += counts[0]
+        self.received[1] += counts[1]
+        self.page.goto("about:blank")
+
+
+class RemotePage:
+    """benchmarks/remote_page.py, started for each open window and stopped after it."""
+
+    def __init__(self, dash_port: int, eye_port: int) -> None:
+        self.argv = [sys.executable, str(Path(__file__).with_name("remote_page.py")),
+                     "--dashboard-port", str(dash_port), "--eye-port", str(eye_port)]
+        self.proc: subprocess.Popen[str] | None = None
+        self.procs: list[psutil.Process] = []
+        self.received = [0, 0]
+
+    def open(self) -> None:
+        self.proc = subprocess.Popen(self.argv, stdout=subprocess.PIPE, text=True)
+        assert self.proc.stdout is not None
+        if self.proc.stdout.readline().strip() != "reading":
+            raise SystemExit("the remote page reader did not start")
+        self.procs = [psutil.Process(self.proc.pid)]
+
+    def close(self) -> None:
+        if self.proc is None:
+            return
+        self.proc.send_signal(signal.SIGINT)
+        out, _ = self.proc.communicate(timeout=30)
+        got = json.loads(out.strip().splitlines()[-1])
+        self.received[0] += got["images"]
+        self.received[1] += got["messages"]
+        self.proc = None
+
+
+def windows(total_s: float, pairs: int) -> Iterator[tuple[bool, float]]:
+    """(page open?, seconds) for each window: closed, open, closed, open, ..."""
+    each = total_s / (2 * pairs)
+    for _ in range(pairs):
+        yield False, each
+        yield True, each
+
+
+def summary(values: list[float]) -> str:
+    if not values:
+        return "no samples"
+    return (f"median {statistics.median(values):.1f} ms, p95 {percentile(values, 0.95):.1f} ms,"
+            f" n={len(values)}")
 
 
 def main() -> None:
@@ -83,16 +155,19 @@ def main() -> None:
     parser.add_argument("--sim-speed", type=float, default=3.0,
                         help="radar scenario speed (more visits per minute)")
     parser.add_argument("--config", help="robot config file for every service")
-    parser.add_argument("--dashboard", action="store_true",
-                        help="also run the dashboard with its page open in headless Chromium")
+    parser.add_argument("--dashboard", choices=("remote", "browser"),
+                        help="also run the dashboard and compare the page closed and open")
+    parser.add_argument("--windows", type=int, default=4,
+                        help="with --dashboard: pairs of windows (page closed, page open)")
     args = parser.parse_args()
     log_dir = Path(mkdtemp(prefix="buddybot-bench-"))
     router = Router(log_dir=log_dir)
+    eye_port = free_port()
     services: dict[str, tuple[str, ...]] = {
         "audio-player": ("--backend", "null"),
         "audio": (),
         "eyes": (),
-        "eye-renderer": ("--no-browser", "--port", str(free_port())),
+        "eye-renderer": ("--no-browser", "--port", str(eye_port)),
         "controller": (),
         "face-detector": (),
         "radar-presence": (),
@@ -101,13 +176,15 @@ def main() -> None:
     }
     dash_port = free_port()
     if args.dashboard:
-        services["dashboard"] = ("--port", str(dash_port))
+        services["dashboard"] = ("--port", str(dash_port), "--eye-port", str(eye_port))
     procs: dict[str, Process] = {}
     probe = Node("bench-probe", connect=[router.endpoint])
-    page = contextlib.ExitStack()
-    browser_procs: list[psutil.Process] = []
-    page_frames: tuple[int, int] | None = None
-    page_seconds = 1.0
+    stack = contextlib.ExitStack()
+    page: BrowserPage | RemotePage | None = None
+    # Samples go to the side of the window they arrive in; None while settling.
+    gaze: dict[bool, list[float]] = {False: [], True: []}
+    side: list[bool | None] = [False if args.dashboard else None]
+    cpu_by_side: dict[bool, dict[str, float]] = {False: {}, True: {}}
     try:
         common = ("--config", args.config) if args.config else ()
         for name, extra in services.items():
@@ -119,7 +196,10 @@ def main() -> None:
         hops: dict[str, list[float]] = {"camera/front/face": [], "eyes/control": []}
 
         def on_direction(msg: m.EyesDirection, _key: str) -> None:
-            gaze_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
+            latency = (time.time_ns() - msg.stamp_ns) / 1e6
+            gaze_ms.append(latency)
+            if side[0] is not None:
+                gaze[side[0]].append(latency)
 
         def hop(name: str) -> Callable[[Any, str], None]:
             def on(msg: Any, _key: str) -> None:
@@ -131,11 +211,13 @@ def main() -> None:
                 awake_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
 
         Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
-        if args.dashboard:
+        if args.dashboard == "browser":
             wait_port(dash_port, 30)
-            browser_procs, dash = page.enter_context(dashboard_page(dash_port))
-            counts = dash.evaluate("[window.dash.counts.images, window.dash.counts.messages]")
-            counted_from = time.monotonic()
+            page = BrowserPage(stack, dash_port)
+        elif args.dashboard == "remote":
+            wait_port(dash_port, 30)
+            page = RemotePage(dash_port, eye_port)
+            stack.callback(page.close)
         time.sleep(3.0)  # warm-up: detector models loaded, caches filled
         probe.subscribe(keys.EYES_DIRECTION, on_direction)
         probe.subscribe(keys.FACE, hop("camera/front/face"), camera="front")
@@ -144,46 +226,80 @@ def main() -> None:
 
         ps = {name: psutil.Process(p.pid) for name, p in procs.items()}
         ps["router"] = psutil.Process(router.pid)
-        for p in [*ps.values(), *browser_procs]:
+        for p in ps.values():
             p.cpu_percent(None)
         rss: dict[str, list[float]] = {name: [] for name in ps}
-        end = time.monotonic() + args.seconds
-        while time.monotonic() < end:
-            time.sleep(1.0)
-            for name, p in ps.items():
-                rss[name].append(p.memory_info().rss / 2**20)
+        started = time.monotonic()
+
+        def sample_for(seconds: float) -> None:
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                time.sleep(min(1.0, max(0.0, end - time.monotonic())))
+                for name, p in ps.items():
+                    rss[name].append(p.memory_info().rss / 2**20)
+
+        if page is None:
+            sample_for(args.seconds)
+        else:
+            for is_open, seconds in windows(args.seconds, args.windows):
+                side[0] = None
+                if is_open:
+                    page.open()
+                sample_for(SETTLE_S)
+                window_ps = {**ps, **{f"page{i}": p for i, p in enumerate(page.procs)}}
+                for p in window_ps.values():
+                    with contextlib.suppress(psutil.Error):
+                        p.cpu_percent(None)
+                side[0] = is_open
+                sample_for(max(0.0, seconds - SETTLE_S))
+                side[0] = None
+                share = cpu_by_side[is_open]
+                for name, p in window_ps.items():
+                    with contextlib.suppress(psutil.Error):  # a helper process may have exited
+                        key = "page" if name.startswith("page") else name
+                        share[key] = share.get(key, 0.0) + p.cpu_percent(None) / args.windows
+                if is_open:
+                    page.close()
+        elapsed = time.monotonic() - started
         cpu = {name: p.cpu_percent(None) for name, p in ps.items()}
-        browser_cpu = 0.0
-        for p in browser_procs:
-            with contextlib.suppress(psutil.Error):  # a helper process may have exited
-                browser_cpu += p.cpu_percent(None)
-        if args.dashboard:
-            now = dash.evaluate("[window.dash.counts.images, window.dash.counts.messages]")
-            page_frames = (now[0] - counts[0], now[1] - counts[1])
-            page_seconds = time.monotonic() - counted_from
     finally:
-        page.close()
+        stack.close()
         probe.close()
         for proc in procs.values():
             proc.stop()
         router.stop()
 
     print(f"whole robot, {args.seconds:.0f} s, camera {args.fps:.0f} fps (simulated), "
-          f"radar visit x{args.sim_speed:g}, dashboard page "
-          f"{'open' if args.dashboard else 'not open'}; logs in {log_dir}")
-    if page_frames is not None:
-        print(f"dashboard page received {page_frames[0]} images and {page_frames[1]} messages "
-              f"in {page_seconds:.0f} s ({page_frames[0] / page_seconds:.1f} images/s)")
+          f"radar visit x{args.sim_speed:g}"
+          + (f", dashboard page {args.dashboard}, {args.windows} pairs of windows"
+             if args.dashboard else "") + f"; logs in {log_dir}")
     if gaze_ms:
-        print(f"gaze latency capture -> eyes/direction: median {statistics.median(gaze_ms):.1f} ms,"
-              f" p95 {percentile(gaze_ms, 0.95):.1f} ms, n={len(gaze_ms)} "
-              f"({len(gaze_ms) / args.seconds:.1f}/s)")
+        print(f"gaze latency capture -> eyes/direction: {summary(gaze_ms)} "
+              f"({len(gaze_ms) / elapsed:.1f}/s)")
         for name, values in hops.items():
             if values:
-                print(f"  capture -> {name}: median {statistics.median(values):.1f} ms, "
-                      f"p95 {percentile(values, 0.95):.1f} ms, n={len(values)}")
+                print(f"  capture -> {name}: {summary(values)}")
     else:
         print("gaze latency: no eyes/direction received")
+    if page is not None:
+        open_s = args.seconds / 2 - args.windows * SETTLE_S
+        print(f"page open: received {page.received[0]} images ({page.received[0] / open_s:.1f}"
+              f"/s) and {page.received[1]} dashboard messages")
+        print(f"gaze latency, page closed: {summary(gaze[False])}")
+        print(f"gaze latency, page open:   {summary(gaze[True])}")
+        if gaze[False] and gaze[True]:
+            closed95 = percentile(gaze[False], 0.95)
+            open95 = percentile(gaze[True], 0.95)
+            print(f"p95 open / closed: {open95 / closed95:.3f} "
+                  f"({(open95 / closed95 - 1) * 100:+.1f} %; target within +10 %)")
+        print(f"{'CPU % of a core':<22}{'closed':>8}{'open':>8}")
+        for name in ("dashboard", "eye-renderer", "page"):
+            print(f"  {name:<20}{cpu_by_side[False].get(name, 0.0):>8.1f}"
+                  f"{cpu_by_side[True].get(name, 0.0):>8.1f}")
+        robot = [n for n in ps if n != "dashboard"]
+        print(f"  {'the rest of the robot':<20}"
+              f"{sum(cpu_by_side[False].get(n, 0.0) for n in robot):>8.1f}"
+              f"{sum(cpu_by_side[True].get(n, 0.0) for n in robot):>8.1f}")
     if awake_ms:
         print(f"presence latency radar frame -> eyes/expression AWAKE: "
               f"median {statistics.median(awake_ms):.1f} ms, max {max(awake_ms):.1f} ms, "
@@ -193,8 +309,6 @@ def main() -> None:
     print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}")
     for name in ps:
         print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}")
-    if browser_procs:
-        print(f"{'chromium (page)':<16}{browser_cpu:>16.1f}{'':>14}")
     total_rss = sum(max(v or [0]) for v in rss.values())
     print(f"{'total':<16}{sum(cpu.values()):>16.1f}{total_rss:>14.1f}")
 

@@ -12,6 +12,7 @@ process that hangs or stops loses its pings and systemd restarts it.
 from __future__ import annotations
 
 import argparse
+import asyncio
 import logging
 import os
 import sys
@@ -94,6 +95,18 @@ class ServiceContext:
                 notifier.watchdog()
                 node.every(notifier.watchdog_s, notifier.watchdog, name="watchdog")
         return node
+
+    async def node_in_thread(self) -> Node | None:
+        """`node()` for a service whose asyncio loop must keep running meanwhile
+        (a web server serving pages before the router is found): opened in a
+        thread; None when the service is stopped before a router answered."""
+        def opener() -> Node | None:
+            try:
+                return self.node()
+            except KeyboardInterrupt:  # stopped while waiting for the router
+                return None
+
+        return await asyncio.to_thread(opener)
 
 
 def resolve(args: argparse.Namespace, name: str) -> ServiceContext:

@@ -64,16 +64,6 @@ def settings_from(ctx: ServiceContext) -> DashboardSettings:
 # --- the service -----------------------------------------------------------------------
 
 
-async def _open_node(ctx: ServiceContext) -> Node | None:
-    def opener() -> Node | None:
-        try:
-            return ctx.node()
-        except KeyboardInterrupt:  # stopped while waiting for the router
-            return None
-
-    return await asyncio.to_thread(opener)
-
-
 def _other_tables(ctx: ServiceContext, s: DashboardSettings) -> tuple[int, dict[str, str]]:
     """The eye renderer's port (`eye_port`, else `[eye_renderer] port`) and the
     configured sounds, from this machine's config (tables read by name: the
@@ -105,7 +95,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
 
     loop = asyncio.get_running_loop()
     mailbox = Mailbox(loop, board.deliver)
-    opening = asyncio.create_task(_open_node(ctx))
+    opening = asyncio.create_task(ctx.node_in_thread())
     node: Node | None = None
 
     def pages_changed(count: int) -> None:

@@ -556,18 +556,6 @@ def _on_bus(node: Node) -> bool:
     return node.connected()  # False as well while the node closes
 
 
-async def _open_node(ctx: ServiceContext) -> Node | None:
-    """The node, opened in a thread while the pages are already served; None
-    when the renderer is stopped before a router was found."""
-    def opener() -> Node | None:
-        try:
-            return ctx.node()
-        except KeyboardInterrupt:  # stopped while waiting for the router
-            return None
-
-    return await asyncio.to_thread(opener)
-
-
 async def serve(ctx: ServiceContext, host: str, port: int,
                 windows: list[placement.Window], browser: str | None) -> None:
     """Serve the pages first, then join the bus.
@@ -600,7 +588,7 @@ async def serve(ctx: ServiceContext, host: str, port: int,
 
     kiosks: list[kiosk.KioskWindow] = []
     profiles = tempfile.TemporaryDirectory(prefix="buddybot-eyes-")
-    opening = asyncio.create_task(_open_node(ctx))
+    opening = asyncio.create_task(ctx.node_in_thread())
     node: Node | None = None
     try:
         for win in windows:
