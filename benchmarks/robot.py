@@ -246,7 +246,10 @@ def main() -> None:
                 if is_open:
                     page.open()
                 sample_for(SETTLE_S)
-                window_ps = {**ps, **{f"page{i}": p for i, p in enumerate(page.procs)}}
+                # Own psutil objects: cpu_percent(None) counts from the last call on
+                # the same object, and `ps` keeps counting the whole run.
+                window_ps = {name: psutil.Process(p.pid) for name, p in ps.items()}
+                window_ps.update({f"page{i}": p for i, p in enumerate(page.procs)})
                 for p in window_ps.values():
                     with contextlib.suppress(psutil.Error):
                         p.cpu_percent(None)
@@ -282,7 +285,7 @@ def main() -> None:
     else:
         print("gaze latency: no eyes/direction received")
     if page is not None:
-        open_s = args.seconds / 2 - args.windows * SETTLE_S
+        open_s = args.seconds / 2  # received while open, settling included
         print(f"page open: received {page.received[0]} images ({page.received[0] / open_s:.1f}"
               f"/s) and {page.received[1]} dashboard messages")
         print(f"gaze latency, page closed: {summary(gaze[False])}")
@@ -296,8 +299,8 @@ def main() -> None:
         for name in ("dashboard", "eye-renderer", "page"):
             print(f"  {name:<20}{cpu_by_side[False].get(name, 0.0):>8.1f}"
                   f"{cpu_by_side[True].get(name, 0.0):>8.1f}")
-        robot = [n for n in ps if n != "dashboard"]
-        print(f"  {'the rest of the robot':<20}"
+        robot = [n for n in ps if n not in ("dashboard", "eye-renderer")]
+        print(f"  {'the rest (router too)':<20}"
               f"{sum(cpu_by_side[False].get(n, 0.0) for n in robot):>8.1f}"
               f"{sum(cpu_by_side[True].get(n, 0.0) for n in robot):>8.1f}")
     if awake_ms:
