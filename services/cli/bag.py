@@ -57,7 +57,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
     rec.add_argument("--images", action="store_true",
                      help="also record camera/*/image (JPEG-compressed)")
-    tools.add_timeout_argument(rec, None, "the connection")
+    tools.add_timeout_argument(rec, None, "here only the connection (--duration ends a recording)")
     play = _action(actions, "play", "replay an MCAP file on the robot's keys")
     play.add_argument("file", metavar="FILE")
     play.add_argument("--rate", type=float, default=1.0, metavar="R",
@@ -69,7 +69,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="replay only these keys (relative or absolute, wildcards allowed)")
     play.add_argument("--wait", type=float, default=1.0, metavar="S",
                       help="wait up to S seconds for subscribers before the first message")
-    tools.add_timeout_argument(play, None, "the connection")
+    tools.add_timeout_argument(play, None, "here only the connection (a replay lasts its file)")
     info_parser = _action(actions, "info", "describe an MCAP file: duration, channels, rates")
     info_parser.add_argument("file", metavar="FILE")
     info_parser.add_argument("--json", action="store_true", help="print JSON")
