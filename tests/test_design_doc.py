@@ -18,7 +18,7 @@ import msgspec
 import pytest
 
 from buddybot import cli
-from buddybot.core import config, errors, keys, registry
+from buddybot.core import config, errors, keys, params, registry
 from buddybot.core import messages as m
 
 DESIGN = Path(__file__).resolve().parents[1] / "docs" / "design.md"
@@ -154,6 +154,24 @@ def test_every_config_key_is_listed(table: str, struct: type[msgspec.Struct]) ->
     assert listed == expected, (
         f"docs/design.md section 1 `[{table}]`: missing {sorted(expected - listed)}, "
         f"not in the code {sorted(listed - expected)}")
+
+
+LIVE_MARK = re.compile(r";\s*live\s*$")
+"""How a row says its field is live: its meaning ends in `; live`."""
+
+
+@pytest.mark.parametrize("table, struct", _tables(), ids=[t for t, _ in _tables()])
+def test_the_config_tables_say_which_keys_are_live(table: str,
+                                                   struct: type[msgspec.Struct]) -> None:
+    """`buddybot param set` applies a live key at once and refuses the others:
+    the contract says which is which (the settings struct's mark decides)."""
+    block = rows(subsection(section("1"), f"`[{table}]`", level="####"))
+    wrong = {name: params.is_live(struct, name) for name, cells in block.items()
+             if name in struct.__struct_fields__
+             and bool(LIVE_MARK.search(cells[-1])) != params.is_live(struct, name)}
+    assert not wrong, (
+        f"docs/design.md section 1 `[{table}]`: end the meaning with '; live' exactly for "
+        f"the live keys; wrong rows (key: is live) {wrong}")
 
 
 def test_every_verb_the_page_names_exists() -> None:

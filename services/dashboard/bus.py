@@ -89,6 +89,12 @@ class Bus:
         self.image_sub: Subscription | None = None
         self._subscribe()
 
+    def apply(self, s: DashboardSettings) -> None:
+        """A live settings change (a node worker thread): the image rate and JPEG
+        quality hold from the next image; the rest is read where it is used."""
+        self.limiter.set_rate(s.max_image_fps)
+        self.s = s
+
     def _subscribe(self) -> None:
         node, box = self.node, self.mailbox
 

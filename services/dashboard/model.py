@@ -123,12 +123,17 @@ class RateLimiter:
     """
 
     def __init__(self, rate: float) -> None:
-        if not rate > 0:
-            raise ValueError("rate must be > 0")
-        self.interval = 1.0 / rate
+        self.interval = 1.0
+        self.set_rate(rate)
         self._due = -math.inf
         self.allowed = 0
         self.refused = 0
+
+    def set_rate(self, rate: float) -> None:
+        """A new limit, from the next event on (a live parameter change)."""
+        if not rate > 0:
+            raise ValueError("rate must be > 0")
+        self.interval = 1.0 / rate
 
     def allow(self, now: float) -> bool:
         # A hair of tolerance: frames at exactly the limit's rate arrive with jitter.

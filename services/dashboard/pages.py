@@ -89,6 +89,10 @@ class Board:
         self.bad_requests = 0
         self.images_sent = 0
 
+    def apply(self, s: DashboardSettings) -> None:
+        """A live settings change: `max_pages` holds from the next connection."""
+        self.s = s
+
     def hello(self, page_host: str | None) -> dict[str, Any]:
         return {
             "camera": self.s.camera, "history_s": self.s.history_s,

@@ -31,6 +31,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+from functools import partial
 
 from aiohttp import web
 
@@ -38,6 +39,7 @@ from buddybot.core.doctor import serve_failure
 from buddybot.core.errors import ServeError
 from buddybot.core.node import Node
 from buddybot.core.overrides import merge, settings_option
+from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
@@ -111,6 +113,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
                 if node is None:
                     break
                 app.bus = Bus(node, s, mailbox, sounds)
+                LiveSettings(s, partial(_apply, loop, app.bus, board)).serve(node)
                 pages_changed(len(board.pages))
             if node is None:
                 continue
@@ -130,6 +133,14 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
                 node = await opening
         if node is not None:
             node.close()
+
+
+def _apply(loop: asyncio.AbstractEventLoop, bus: Bus, board: Board,
+           new: DashboardSettings) -> None:
+    """`LiveSettings`' callback (a node worker thread): the bus side takes the
+    change at once, the pages' side on the event loop that owns it."""
+    bus.apply(new)
+    loop.call_soon_threadsafe(board.apply, new)
 
 
 def run(ctx: ServiceContext) -> int:

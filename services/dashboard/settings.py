@@ -13,7 +13,14 @@ import msgspec
 
 
 class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """`[dashboard]`: the live dashboard page and its server."""
+    """`[dashboard]`: the live dashboard page and its server.
+
+    Live (`buddybot param set dashboard ...` applies at once): what the pages
+    cost the robot, the image rate and JPEG quality (from the next image) and
+    how many pages may connect (from the next connection; pages already
+    connected stay). Restart-only: where it serves, which camera it watches,
+    the history it keeps and the eye page it shows, all decided at start.
+    """
 
     # Loopback by default: anyone who can open the page can press its buttons.
     host: Annotated[str, msgspec.Meta(
@@ -29,12 +36,13 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     # Images are re-encoded as JPEG per page frame: this bounds the CPU the
     # page costs the robot (and the Wi-Fi it uses).
     max_image_fps: Annotated[float, msgspec.Meta(
-        ge=0.5, le=60.0, description="camera images sent to the pages per second, at most")
-    ] = 10.0
+        ge=0.5, le=60.0, extra={"live": True},
+        description="camera images sent to the pages per second, at most")] = 10.0
     history_s: Annotated[float, msgspec.Meta(
         ge=2.0, le=600.0, description="seconds of radar distance history drawn")] = 30.0
     jpeg_quality: Annotated[int, msgspec.Meta(
-        ge=10, le=100, description="JPEG quality of the images sent to the pages")] = 70
+        ge=10, le=100, extra={"live": True},
+        description="JPEG quality of the images sent to the pages")] = 70
     # Empty: the eye renderer's page on the host the dashboard was loaded
     # from, at [eye_renderer] port.
     eye_url: Annotated[str, msgspec.Meta(
@@ -51,4 +59,6 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
         ge=0.5, le=60.0, description="seconds between reads of radar-presence's live "
         "parameters (range and holds)")] = 3.0
     max_pages: Annotated[int, msgspec.Meta(
-        ge=1, le=64, description="dashboard pages connected at once at most")] = 8
+        ge=1, le=64, extra={"live": True},
+        description="dashboard pages connected at once at most (lowering it cuts no page "
+        "already connected)")] = 8

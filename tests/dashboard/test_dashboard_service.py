@@ -8,8 +8,10 @@ and sent as JPEG at no more than `max_image_fps`.
 from __future__ import annotations
 
 import asyncio
+import json
 import os
 import socket
+import subprocess
 import time
 from collections.abc import Callable
 from typing import Any
@@ -26,11 +28,13 @@ from buddybot.core.testing import (
     LOOPBACK,
     Collector,
     Process,
+    buddybot_argv,
     free_port,
     retry_until,
     wait_port,
 )
 from buddybot.dashboard import model
+from buddybot.dashboard.settings import DashboardSettings
 
 pytestmark = pytest.mark.integration
 
@@ -198,4 +202,70 @@ def test_malformed_samples_are_skipped_and_the_pages_still_get_the_good_ones(
     assert [(f["sensor"], f["moving_cm"]) for f in frames] == [("9/0", 123)]
     diagnostics = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="dashboard")
     diagnostics.wait_for(lambda d: d.values.get("malformed") == 3, 15, "3 malformed counted")
+    assert proc.alive()
+
+
+def test_live_parameters_change_the_image_rate_and_restart_only_ones_are_refused(
+        spawn: Callable[..., Process], probe: Node, endpoint: str) -> None:
+    proc, port = start_dashboard(spawn, "--max-image-fps", "20", "--camera", "side")
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+
+    def param(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(buddybot_argv("param", *args, "--connect", endpoint,
+                                            "--timeout", "10"),
+                              capture_output=True, text=True, timeout=60)
+
+    retry_until(lambda: param("list", "dashboard").returncode == 0, 30, 0.2,
+                "dashboard params")
+    listed = {p["name"]: p for p in json.loads(param("list", "dashboard", "--json").stdout)}
+    assert set(listed) == set(DashboardSettings.__struct_fields__)
+    assert {n for n, p in listed.items() if p["live"]} == {
+        "max_image_fps", "jpeg_quality", "max_pages"}
+    refused = param("set", "dashboard", "port", "9999")
+    assert refused.returncode == 1 and "port" in refused.stderr and "restart" in refused.stderr
+    out_of_range = param("set", "dashboard", "max_image_fps", "0")
+    assert out_of_range.returncode == 1 and "max_image_fps" in out_of_range.stderr
+
+    publisher = probe.publisher(keys.CAMERA_IMAGE, camera="side")
+    pixels = np.zeros((60, 80, 3), np.uint8)
+
+    async def rates() -> tuple[float, float]:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                f"http://{LOOPBACK}:{port}/ws") as ws:
+            await asyncio.to_thread(retry_until, lambda: health(port)["watching_images"], 15)
+            stop = asyncio.Event()
+
+            async def publish() -> None:  # 30 fps until told to stop
+                while not stop.is_set():
+                    publisher.put(m.Image(stamp_ns=m.now_ns(), frame_id="side", width=80,
+                                          height=60, encoding="bgr8", data=pixels.tobytes()))
+                    await asyncio.sleep(1 / 30)
+
+            async def rate(frames: int) -> float:
+                arrivals: list[float] = []
+                async with asyncio.timeout(30):
+                    while len(arrivals) < frames:
+                        msg = await ws.receive()
+                        if msg.type == aiohttp.WSMsgType.BINARY:
+                            arrivals.append(time.monotonic())
+                return (frames - 1) / (arrivals[-1] - arrivals[0])
+
+            task = asyncio.create_task(publish())
+            try:
+                await rate(3)  # the subscription is new: the first frames may lag
+                fast = await rate(12)
+                changed = await asyncio.to_thread(param, "set", "dashboard", "max_image_fps",
+                                                  "2")
+                assert changed.returncode == 0, changed.stderr
+                await rate(2)  # a frame already on its way
+                slow = await rate(4)
+            finally:
+                stop.set()
+                await task
+            return fast, slow
+
+    fast, slow = asyncio.run(rates())
+    print(f"images at {fast:.1f} fps with a 20 fps limit, {slow:.1f} fps after set to 2")
+    assert fast > 8.0 and slow < 3.0
+    assert param("get", "dashboard", "max_image_fps").stdout.strip().splitlines()[-1] == "2.0"
     assert proc.alive()
