@@ -100,6 +100,9 @@ def test_face_box_is_drawn_over_the_image_at_the_face_pixels(
     for where in ("inside", "outside"):
         assert np.abs(np.array(rgba[where][:3]) - scene).max() < 25, (where, rgba[where])
     assert rgba["eye"][:3] == [255, 79, 216]  # a keypoint dot
+    # Text is written at most 4 times a second (the page's own rule): wait for it.
+    page.wait_for_function("document.getElementById('faces').innerText.includes('0.62 m')",
+                           timeout=10_000)
     text = page.inner_text("#faces")
     assert "0.62 m" in text and "width 0.60 m (weight 0.70)" in text
     assert page.errors == []
