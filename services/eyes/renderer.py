@@ -61,17 +61,19 @@ from buddybot.core.errors import UsageError
 from buddybot.core.limits import clip
 from buddybot.core.loop_inbox import LoopInbox
 from buddybot.core.node import Node, RateLimitedLog
-from buddybot.core.overrides import merge, settings_option
+from buddybot.core.config import resolve_path
+from buddybot.core.overrides import given, merge, settings_option
 from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext
-from buddybot.eyes import kiosk, motion, placement, wire
+from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 
 log = logging.getLogger("buddybot.eye-renderer")
 _warn = RateLimitedLog(log)
 
 PAGE_EYES = ("left", "right", "both")
-STATIC = {"eyes.js": "application/javascript", "eyes.css": "text/css"}
+STATIC = {"eyes.js": "application/javascript", "pose.js": "application/javascript",
+          "draw.js": "application/javascript", "eyes.css": "text/css"}
 
 
 def _eye_list(choice: str) -> list[str]:
@@ -95,6 +97,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     metavar="N")
     settings_option(parser, "--right-display", struct=struct, field="right_display",
                     metavar="N")
+    settings_option(parser, "--style", struct=struct, field="style", metavar="NAME")
+    settings_option(parser, "--style-file", struct=struct, field="style_file", metavar="PATH")
     parser.add_argument("--browser-arg", action="append", default=[], metavar="ARG",
                         help="extra browser flag (repeatable), e.g. --browser-arg=--disable-gpu")
     parser.add_argument("--display", action="append", default=[], metavar="WxH+X+Y",
@@ -212,7 +216,9 @@ class Hub:
     """
 
     def __init__(self, hello: wire.Hello, max_pages: int = 16,
-                 allowed_origins: tuple[str, ...] = (), stall_s: float = 2.0) -> None:
+                 allowed_origins: tuple[str, ...] = (), stall_s: float = 2.0,
+                 library: styles.StyleLibrary | None = None) -> None:
+        self.library = library   # the styles a live `style` change may name
         self.state = wire.LatestState()
         self.pages: set[Page] = set()
         self.max_pages = max_pages
@@ -270,9 +276,10 @@ class Hub:
         self.max_pages = s.max_pages
         self.stall_s = s.page_stall_s
         self.allowed_origins = tuple(s.allowed_origins)
+        style = self.library.get(s.style) if self.library is not None else self.hello.style
         hello = msgspec.structs.replace(self.hello, iris_color=s.iris_color,
                                         max_yaw_deg=s.max_yaw_deg,
-                                        max_pitch_deg=s.max_pitch_deg)
+                                        max_pitch_deg=s.max_pitch_deg, style=style)
         if hello != self.hello:
             self.hello = hello
             self.hello_text = wire.encode("hello", hello)
@@ -565,9 +572,11 @@ async def serve(ctx: ServiceContext, host: str, port: int,
     instead of a browser error, and kiosk windows open at once.
     """
     s = settings_from(ctx)
+    library = load_styles(ctx, s)
     hub = Hub(wire.Hello(iris_color=s.iris_color, max_yaw_deg=s.max_yaw_deg,
-                         max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8]),
-              s.max_pages, tuple(s.allowed_origins), s.page_stall_s)
+                         max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8],
+                         style=library.get(s.style)),
+              s.max_pages, tuple(s.allowed_origins), s.page_stall_s, library)
     runner = web.AppRunner(make_app(hub), access_log=None)
     await runner.setup()
     site = web.TCPSite(runner, host, port)
@@ -607,7 +616,7 @@ async def serve(ctx: ServiceContext, host: str, port: int,
                 if node is None:
                     break
                 _subscribe(node, inbox)
-                LiveSettings(s, partial(_apply_on_loop, loop, hub)).serve(node)
+                LiveSettings(s, partial(_apply_on_loop, loop, hub, library)).serve(node)
                 node.diagnostics.values.update(where_served(base, host))
             if node is None:
                 continue
@@ -636,12 +645,29 @@ async def serve(ctx: ServiceContext, host: str, port: int,
             node.close()
 
 
-def _apply_on_loop(loop: asyncio.AbstractEventLoop, hub: Hub,
+def _apply_on_loop(loop: asyncio.AbstractEventLoop, hub: Hub, library: styles.StyleLibrary,
                    new: EyeRendererSettings) -> None:
     """`LiveSettings`' callback (a node worker thread): hand the change to the
     event loop, which owns the hub. Not waited for: the loop takes it within
-    one turn; a loop that is closing refuses it (RuntimeError -> not applied)."""
+    one turn; a loop that is closing refuses it (RuntimeError -> not applied).
+    A style nobody knows is refused here, before anything changes (ConfigError
+    naming the known ones)."""
+    library.get(new.style)
     loop.call_soon_threadsafe(hub.apply, new)
+
+
+def load_styles(ctx: ServiceContext, s: EyeRendererSettings) -> styles.StyleLibrary:
+    """The built-in styles plus `style_file`'s (read once: restart-only), and
+    `style` checked against them: a bad file or an unknown style is a
+    ConfigError naming the key (exit status 2)."""
+    path = None
+    if s.style_file:
+        path = resolve_path(ctx.config, s.style_file,
+                            from_command_line=given(ctx.args, EyeRendererSettings,
+                                                    "style_file"))
+    library = styles.load(path)
+    library.get(s.style)
+    return library
 
 
 def where_served(base: str, listen_host: str) -> dict[str, str]:
@@ -662,6 +688,7 @@ def settings_from(ctx: ServiceContext) -> EyeRendererSettings:
 
 def run(ctx: ServiceContext) -> int:
     s = settings_from(ctx)
+    load_styles(ctx, s)   # a bad style or style file: exit 2 before any window opens
     windows = plan_windows(s, ctx.args.display)  # StartupError: exit 2 (run_main)
     browser = None
     if windows:

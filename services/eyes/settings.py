@@ -82,6 +82,18 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     max_pitch_deg: Annotated[float, msgspec.Meta(
         gt=0.0, le=90.0, extra={"live": True},
         description="degrees of pitch that put the iris at the edge")] = 30.0
+    # How the eyes are drawn (services/eyes/styles.json, docs/eyes.md): `glow`
+    # (rounded glowing shapes) or `eyeball`, or a style from `style_file`.
+    # Live: every page restyles in place. The name is checked against the
+    # known styles when the renderer starts and on every change.
+    style: Annotated[str, msgspec.Meta(
+        min_length=1, max_length=64, examples=["eyeball"], extra={"live": True},
+        description="eye style: glow, eyeball or one from style_file")] = "glow"
+    # A JSON file of styles added to the built-in ones (or changing them),
+    # read once at start; relative to the config file's folder.
+    style_file: Annotated[str, msgspec.Meta(
+        max_length=4096, description="JSON file of extra eye styles, read at start "
+        "(empty: the built-in ones only)")] = ""
     # At most this many pages connected at once (two kiosk windows, a few
     # phones); over it a new WebSocket is closed at once with code 1013 and a
     # reason, so a flood of connections cannot starve the real eyes.

@@ -26,6 +26,7 @@ from urllib.parse import urlsplit
 import msgspec
 
 from buddybot.core import messages as m
+from buddybot.eyes.styles import Style
 
 TOPIC_NAMES: dict[type[m.Message], str] = {
     m.EyesDirection: "direction",
@@ -38,12 +39,18 @@ _encoder = msgspec.json.Encoder()
 
 
 class Hello(msgspec.Struct, kw_only=True):
-    """First message on every connection: how the page should look."""
+    """First message on every connection: how the page should look.
+
+    `style` is the whole chosen style, every expression's pose resolved
+    (styles.py), so the page needs no other file and a live change is one
+    new hello; None: the page keeps the style it has (its built-in fallback
+    at first)."""
 
     iris_color: str
     max_yaw_deg: float
     max_pitch_deg: float
     server_id: str
+    style: Style | None = None
 
 
 class Status(msgspec.Struct, kw_only=True):

@@ -90,7 +90,8 @@ def test_the_wheel_holds_every_module_and_data_file(wheel: Path) -> None:
         names = {n for n in archive.namelist() if not n.startswith("buddybot-")}
     missing = shipped_files() - names
     assert not missing, f"not in the wheel: {sorted(missing)}"
-    for data in ("buddybot/eyes/web/eyes.html", "buddybot/audio/sounds/greeting.wav",
+    for data in ("buddybot/eyes/web/eyes.html", "buddybot/eyes/styles.json",
+                 "buddybot/audio/sounds/greeting.wav",
                  "buddybot/camera/data/astronaut_face.jpg"):
         assert data in names
     assert not {n for n in names if "make_sounds" in n}

@@ -5,7 +5,7 @@
 // names (docs/design.md section 3): direction {yaw, pitch} degrees (+yaw = robot's
 // left), pupil {dilation_percentage}, lids {eye_id 0 L/1 R/2 both,
 // top_lid_position, bottom_lid_position}, expression {action}, plus
-// hello {iris_color, max_yaw_deg, max_pitch_deg}, status {bus},
+// hello {iris_color, max_yaw_deg, max_pitch_deg, style}, status {bus},
 // motion {kind, start_ms, duration_ms, params} and pong {t0, server_ms}.
 //
 // Every value eases toward its target once per animation frame (exponential
@@ -19,6 +19,11 @@
 // server goes away. Until it is "ready" (its WebSocket is open and the
 // renderer is on the bus, so state can arrive) it shows a calm
 // "connecting" face: eyes half closed, looking ahead, dimmed.
+//
+// How the eyes look is the style's (pose.js eases between its key poses,
+// draw.js draws a frame); the hello carries the style and a new hello
+// restyles the page in place. direction may carry target_distance_cm: a
+// person close by makes the eyes converge (vergence), unknown = none.
 "use strict";
 
 (() => {
@@ -28,17 +33,15 @@
   const autoSaccade = params.get("saccade") !== "0";
 
   const EXPR = { AWAKE: 0, SLEEP: 1, SLEEPY: 2, GRIN: 3, SAD: 4, LOOK_RANDOM: 5, LOVE: 6, STAR: 7 };
-  const BG = "#101522";          // background and lid colour: the eyes are cut-outs
-  const SCLERA = "#f2f4f8";
-  const PUPIL = "#000000";
-  const LASH = "#3c4966";        // lash line of a closed eye
+  const { EyePose, EyeDraw } = window;
 
-  const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30 };
+  const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30, style: EyePose.FALLBACK };
 
   // Time constants (s) of the exponential approach toward targets.
-  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15, calm: 0.3 };
-  const REST_LIDS = { top: 30, bottom: 16 };   // the connecting face: half closed
-  const REST_DIM = 0.55;                       // ... and dimmed toward the background
+  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15, calm: 0.3, verge: 0.25 };
+  // Vergence: none beyond this distance, the most at NEAR_CM and closer.
+  const VERGE_FAR_CM = 150;
+  const VERGE_NEAR_CM = 30;
   const BLINK_CLOSE_MS = 60;     // blinkNow() (debug): closing ~50-70 ms like a real blink
   const BLINK_OPEN_MS = 160;     // ... reopening slower
   const CLOCK_BURST = 8;         // pings right after connecting, 60 ms apart
@@ -51,19 +54,23 @@
   const serverTime = (t) => performance.timeOrigin + t + clock.offset;
 
   const target = {
-    yaw: 0, pitch: 0, dilation: 50, expression: EXPR.AWAKE,
+    yaw: 0, pitch: 0, dilation: 50, expression: EXPR.AWAKE, distance: null,
     lids: { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } },
   };
   const cur = {
     yaw: 0, pitch: 0, dilation: 50,
     lids: { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } },
-    sad: 0, grin: 0, love: 0, star: 0,
+    sad: 0, grin: 0, love: 0, star: 0,   // how far each expression's shape is in (0..1)
     calm: 1,                     // 1 = the connecting face, 0 = normal eyes
+    verg: 0,                     // vergence, 0 (far or unknown) .. 1 (near)
+    pose: EyePose.target(EyePose.FALLBACK, EXPR.AWAKE, "#2f7fd0"),   // the eased pose drawn
+    poseT: 1,                    // progress of the pose change under way (1: arrived)
+    spinAngle: 0,                // radians a spinning shape (a star) has turned
   };
 
   // Debug/benchmark surface (read by the tests and benchmarks/eyes.py).
   const eyes = {
-    which, target, cur, connected: false, bus: false, ready: false,
+    which, target, cur, cfg, connected: false, bus: false, ready: false,
     stats: { frames: 0, messages: 0, badMessages: 0, connects: 0, blinks: 0, motions: 0 },
     clock,                       // {offset ms: server - page clock, rtt ms of that sample, ...}
     serverTime: () => serverTime(now()),
@@ -99,6 +106,8 @@
         if (!isNum(msg.yaw) || !isNum(msg.pitch)) return false;
         target.yaw = msg.yaw;
         target.pitch = msg.pitch;
+        target.distance = isNum(msg.target_distance_cm) && msg.target_distance_cm > 0
+          ? msg.target_distance_cm : null;
         lastGazeMsg = now();
         pendingLatency = { stamp_ns: msg.stamp_ns, recv_ms: epochMs(), frame_ms: 0 };
         return true;
@@ -125,6 +134,8 @@
       case "pong":
         return takePong(msg);
       case "hello":
+        if (msg.style != null && !EyePose.isStyle(msg.style)) return false;
+        if (msg.style != null) cfg.style = msg.style;
         if (typeof msg.iris_color === "string") cfg.iris = msg.iris_color;
         if (isNum(msg.max_yaw_deg) && msg.max_yaw_deg > 0) cfg.maxYaw = msg.max_yaw_deg;
         if (isNum(msg.max_pitch_deg) && msg.max_pitch_deg > 0) cfg.maxPitch = msg.max_pitch_deg;
@@ -337,6 +348,31 @@
     return value + (goal - value) * (1 - Math.exp(-dt / tau));
   }
 
+  // A new expression, style or iris colour: ease every pose number from
+  // where it is now to the new pose over the style's transition time.
+  const poseMove = { key: "", from: cur.pose, to: cur.pose, t0: 0, ms: 0 };
+  function updatePose(t, dt) {
+    const key = `${cfg.style.name}|${target.expression}|${cfg.iris}`;
+    if (key !== poseMove.key || cfg.style !== poseMove.style) {
+      poseMove.key = key;
+      poseMove.style = cfg.style;
+      poseMove.from = cur.pose;
+      poseMove.to = EyePose.target(cfg.style, target.expression, cfg.iris);
+      poseMove.t0 = t;
+      poseMove.ms = cfg.style.transition_ms;
+    }
+    const k = poseMove.ms > 0 ? clamp((t - poseMove.t0) / poseMove.ms, 0, 1) : 1;
+    cur.pose = k >= 1 ? poseMove.to : EyePose.lerp(poseMove.from, poseMove.to, EyePose.ease(k));
+    cur.poseT = k;
+    cur.spinAngle = (cur.spinAngle + (cur.pose.spin * Math.PI / 180) * dt) % (2 * Math.PI);
+  }
+
+  // 0 beyond VERGE_FAR_CM or with no distance, 1 at VERGE_NEAR_CM and nearer.
+  function vergenceGoal() {
+    if (!eyes.ready || target.distance === null) return 0;
+    return clamp((VERGE_FAR_CM - target.distance) / (VERGE_FAR_CM - VERGE_NEAR_CM), 0, 1);
+  }
+
   function step(t) {
     const dt = lastFrame ? Math.min((t - lastFrame) / 1000, 0.1) : 0;
     if (lastFrame) {
@@ -364,6 +400,8 @@
         TAU.lids, dt);
     }
     const ex = target.expression;
+    updatePose(t, dt);
+    cur.verg = approach(cur.verg, vergenceGoal(), TAU.verge, dt);
     cur.sad = approach(cur.sad, ex === EXPR.SAD ? 1 : 0, TAU.shape, dt);
     cur.grin = approach(cur.grin, ex === EXPR.GRIN ? 1 : 0, TAU.shape, dt);
     cur.love = approach(cur.love, ex === EXPR.LOVE ? 1 : 0, TAU.shape, dt);
@@ -382,165 +420,14 @@
     requestAnimationFrame(step);
   }
 
-  // --- drawing -----------------------------------------------------------------------
+  // --- drawing (draw.js) ---------------------------------------------------------------
   function draw(t, blink) {
     resize();
-    const W = canvas.width;
-    const H = canvas.height;
-    ctx.fillStyle = BG;
-    ctx.fillRect(0, 0, W, H);
-    if (which === "both") {
-      // Facing the viewer: the robot's right eye is on the viewer's left.
-      drawEye("right", 0, 0, W / 2, H, t, blink);
-      drawEye("left", W / 2, 0, W / 2, H, t, blink);
-    } else {
-      drawEye(which, 0, 0, W, H, t, blink);
-    }
-    if (cur.calm > 0.001) {      // the connecting face is dimmed toward the background
-      ctx.globalAlpha = REST_DIM * cur.calm;
-      ctx.fillStyle = BG;
-      ctx.fillRect(0, 0, W, H);
-      ctx.globalAlpha = 1;
-    }
-  }
-
-  function drawEye(side, x, y, w, h, t, blink) {
-    const R = Math.min(w, h) * 0.4;
-    const cx = x + w / 2;
-    const cy = y + h / 2;
-    // Gaze: +yaw (robot's left) -> viewer's right (+x); +pitch (up) -> up (-y).
-    const reach = R * 0.5;
-    const gx = cx + clamp(cur.yaw / cfg.maxYaw, -1, 1) * reach;
-    const gy = cy - clamp(cur.pitch / cfg.maxPitch, -1, 1) * reach;
-    const irisR = R * 0.46;
-
-    ctx.save();
-    ctx.beginPath();
-    ctx.arc(cx, cy, R, 0, 2 * Math.PI);
-    ctx.fillStyle = SCLERA;
-    ctx.fill();
-    ctx.clip();
-
-    const plain = 1 - Math.max(cur.love, cur.star);
-    if (plain > 0.01) {
-      ctx.globalAlpha = plain;
-      ctx.beginPath();
-      ctx.arc(gx, gy, irisR, 0, 2 * Math.PI);
-      ctx.fillStyle = cfg.iris;
-      ctx.fill();
-      ctx.lineWidth = irisR * 0.08;
-      ctx.strokeStyle = "rgba(0,0,0,0.25)";
-      ctx.stroke();
-      // Seed: dilation is a percentage of the iris; kept within 12..92 % so
-      // the pupil never vanishes and a ring of iris always shows.
-      const pupilR = irisR * clamp(cur.dilation / 100, 0.12, 0.92);
-      ctx.beginPath();
-      ctx.arc(gx, gy, pupilR, 0, 2 * Math.PI);
-      ctx.fillStyle = PUPIL;
-      ctx.fill();
-      ctx.globalAlpha = 1;
-    }
-    if (cur.love > 0.01) {
-      ctx.globalAlpha = cur.love;
-      const beat = 1 + 0.08 * Math.sin(t / 1000 * 2 * Math.PI * 1.3);
-      heart(gx, gy, irisR * 1.15 * beat, "#e0245e");
-      ctx.globalAlpha = 1;
-    }
-    if (cur.star > 0.01) {
-      ctx.globalAlpha = cur.star;
-      star(gx, gy, irisR * 1.15, irisR * 0.5, t / 1000 * 0.8, "#f5b400");
-      ctx.globalAlpha = 1;
-    }
-    // Catch-light: makes the eye look wet and alive.
-    ctx.beginPath();
-    ctx.arc(gx - irisR * 0.35, gy - irisR * 0.38, irisR * 0.16, 0, 2 * Math.PI);
-    ctx.fillStyle = "rgba(255,255,255,0.85)";
-    ctx.fill();
-    ctx.restore();
-
-    drawLids(side, cx, cy, R, blink);
-  }
-
-  function drawLids(side, cx, cy, R, blink) {
-    const lids = cur.lids[side];
-    // Connecting: at least half closed (a closed eye stays closed).
-    const restTop = lids.top + (Math.max(lids.top, REST_LIDS.top) - lids.top) * cur.calm;
-    const restBottom = lids.bottom
-      + (Math.max(lids.bottom, REST_LIDS.bottom) - lids.bottom) * cur.calm;
-    const top = restTop + (50 - restTop) * blink;
-    const bottom = restBottom + (50 - restBottom) * blink;
-    const span = R * 1.04;
-    // Middles of the lid edges; closed lids overlap a little so no seam of
-    // sclera shows through the anti-aliasing.
-    const yT = cy - span + (top / 50) * (span + R * 0.03);
-    const yB = cy + span - (bottom / 50) * (span + R * 0.03);
-    const openness = clamp(1 - (top + bottom) / 100, 0, 1);
-    const c = R * 0.22 * openness;                 // lid curvature, flat when closed
-    const ext = R * 1.3;
-    // Sad: outer corners droop. The robot's left eye is on the viewer's right,
-    // so its outer corner is at +x; the right eye's outer corner is at -x.
-    const outer = side === "left" ? 1 : -1;
-    const slant = R * 0.45 * cur.sad * openness;
-    // Lid edges bulge toward the eye's middle (the lid is a cap over a ball):
-    // the top edge's ends sit higher than its middle, the bottom edge's lower.
-    const yLeftEnd = yT - c + (outer < 0 ? slant : -slant * 0.5);
-    const yRightEnd = yT - c + (outer > 0 ? slant : -slant * 0.5);
-    ctx.fillStyle = BG;
-    ctx.beginPath();
-    ctx.moveTo(cx - ext, cy - ext);
-    ctx.lineTo(cx + ext, cy - ext);
-    ctx.lineTo(cx + ext, yRightEnd);
-    ctx.quadraticCurveTo(cx, yT + c, cx - ext, yLeftEnd);
-    ctx.closePath();
-    ctx.fill();
-    // Grin: the bottom lid bulges up into a happy crescent.
-    const lift = R * 0.4 * cur.grin * openness;
-    ctx.beginPath();
-    ctx.moveTo(cx - ext, cy + ext);
-    ctx.lineTo(cx + ext, cy + ext);
-    ctx.lineTo(cx + ext, yB + c);
-    ctx.quadraticCurveTo(cx, yB - c - 2 * lift, cx - ext, yB + c);
-    ctx.closePath();
-    ctx.fill();
-    // Closed (asleep, or mid-blink): a soft lash line so the eye reads as shut,
-    // not as a screen that went off.
-    const shut = clamp(((top + bottom) / 100 - 0.9) / 0.1, 0, 1);
-    if (shut > 0) {
-      ctx.globalAlpha = shut;
-      ctx.beginPath();
-      ctx.moveTo(cx - R * 0.85, cy);
-      ctx.quadraticCurveTo(cx, cy + R * 0.28, cx + R * 0.85, cy);
-      ctx.lineWidth = Math.max(2, R * 0.06);
-      ctx.lineCap = "round";
-      ctx.strokeStyle = LASH;
-      ctx.stroke();
-      ctx.globalAlpha = 1;
-    }
-  }
-
-  function heart(x, y, s, color) {
-    ctx.beginPath();
-    ctx.moveTo(x, y + s * 0.75);
-    ctx.bezierCurveTo(x - s * 1.2, y - s * 0.05, x - s * 0.55, y - s * 0.95, x, y - s * 0.35);
-    ctx.bezierCurveTo(x + s * 0.55, y - s * 0.95, x + s * 1.2, y - s * 0.05, x, y + s * 0.75);
-    ctx.closePath();
-    ctx.fillStyle = color;
-    ctx.fill();
-  }
-
-  function star(x, y, outerR, innerR, angle, color) {
-    ctx.beginPath();
-    for (let i = 0; i < 10; i++) {
-      const r = i % 2 === 0 ? outerR : innerR;
-      const a = angle - Math.PI / 2 + (i * Math.PI) / 5;
-      const px = x + r * Math.cos(a);
-      const py = y + r * Math.sin(a);
-      if (i === 0) ctx.moveTo(px, py);
-      else ctx.lineTo(px, py);
-    }
-    ctx.closePath();
-    ctx.fillStyle = color;
-    ctx.fill();
+    EyeDraw.draw(ctx, canvas.width, canvas.height, {
+      which, style: cfg.style, pose: cur.pose, lids: cur.lids, calm: cur.calm, blink,
+      yawN: clamp(cur.yaw / cfg.maxYaw, -1, 1), pitchN: clamp(cur.pitch / cfg.maxPitch, -1, 1),
+      verg: cur.verg, dilation: cur.dilation, spinAngle: cur.spinAngle, t,
+    });
   }
 
   // --- helpers -----------------------------------------------------------------------

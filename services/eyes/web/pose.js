@@ -1,0 +1,76 @@
+// BuddyBot eyes: key poses and their interpolation (no drawing, no I/O).
+//
+// A style (services/eyes/styles.py, sent in the hello) gives every expression
+// a pose: a few numbers (size, roundness, lids, glow, ...), a colour and a
+// shape. The page never jumps from one pose to the next: on a change it
+// eases every number from where it is to the new pose (ease in and out over
+// the style's transition_ms), the colour channel by channel, and the shape
+// as weights (a heart fades in while the plain eye fades out).
+"use strict";
+
+window.EyePose = (() => {
+  // ExpressionAction order (core/messages.py), as the style's poses name them.
+  const NAMES = ["AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR"];
+  const NUM = ["width", "height", "roundness", "top_lid", "top_lid_angle", "bottom_lid",
+    "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "beat", "spin"];
+  const STYLE_NUM = ["lid_follow", "curiosity", "vergence", "squash", "stretch", "reach",
+    "transition_ms"];
+
+  // Until the first hello (the renderer sends its style at once, so this shows
+  // only while it cannot be reached): a plain glow eye for every expression.
+  const BASE = {
+    width: 50, height: 56, roundness: 45, top_lid: 0, top_lid_angle: 0, bottom_lid: 0,
+    bottom_lid_curve: 0, iris: 0, pupil: 0, glow: 70, brightness: 100, breathe: 0, beat: 0,
+    spin: 0, color: "", shape: "eye",
+  };
+  const FALLBACK = {
+    name: "fallback", kind: "glow", description: "", background: "#03050a", color: "#3ce6ff",
+    lid_follow: 14, curiosity: 12, vergence: 7, squash: 25, stretch: 14, reach: 15,
+    transition_ms: 280, poses: Object.fromEntries(NAMES.map((n) => [n, BASE])),
+  };
+
+  function isNum(v) { return typeof v === "number" && Number.isFinite(v); }
+  function isColour(v) { return typeof v === "string" && /^#[0-9a-fA-F]{6}$/.test(v); }
+
+  // A style from the server, checked before use (a bad one is refused whole).
+  function isStyle(st) {
+    if (!st || typeof st !== "object" || !["glow", "eyeball"].includes(st.kind)) return false;
+    if (!isColour(st.background) || !isColour(st.color)) return false;
+    if (!STYLE_NUM.every((k) => isNum(st[k]))) return false;
+    if (!st.poses || typeof st.poses !== "object") return false;
+    return NAMES.every((n) => {
+      const p = st.poses[n];
+      return p && typeof p === "object" && NUM.every((k) => isNum(p[k]))
+        && (p.color === "" || isColour(p.color)) && ["eye", "heart", "star"].includes(p.shape);
+    });
+  }
+
+  function rgb(hex) {
+    const v = parseInt(hex.slice(1), 16);
+    return [(v >> 16) & 255, (v >> 8) & 255, v & 255];
+  }
+
+  // The flat pose the page eases toward: numbers, r/g/b and shape weights.
+  // An empty pose colour is the style's (eyeball: the iris_color setting).
+  function target(style, expression, irisColour) {
+    const p = style.poses[NAMES[expression]] || style.poses.AWAKE;
+    const out = {};
+    for (const k of NUM) out[k] = p[k];
+    const colour = p.color || (style.kind === "eyeball" ? irisColour : style.color);
+    [out.r, out.g, out.b] = rgb(isColour(colour) ? colour : style.color);
+    out.heart = p.shape === "heart" ? 1 : 0;
+    out.star = p.shape === "star" ? 1 : 0;
+    return out;
+  }
+
+  function lerp(a, b, k) {
+    const out = {};
+    for (const key of Object.keys(b)) out[key] = a[key] + (b[key] - a[key]) * k;
+    return out;
+  }
+
+  // Slow in, slow out (cubic): a pose change starts and lands softly.
+  function ease(k) { return k < 0.5 ? 4 * k * k * k : 1 - Math.pow(-2 * k + 2, 3) / 2; }
+
+  return { NAMES, NUM, FALLBACK, isStyle, target, lerp, ease, rgb };
+})();
