@@ -41,8 +41,10 @@ SHOTS = ARTIFACTS / "eyes"
 
 
 def start_renderer(spawn: Callable[..., Process], port: int | None = None) -> tuple[Process, int]:
+    """A renderer in the eyeball style: these tests measure its white sclera and
+    black pupil (the glow style, the default, is tested in test_eyes_styles_browser)."""
     port = port or free_port()
-    proc = spawn("eye-renderer", "--port", str(port), "--no-browser")
+    proc = spawn("eye-renderer", "--port", str(port), "--no-browser", "--style", "eyeball")
     wait_port(port, 30)
     return proc, port
 
@@ -68,7 +70,8 @@ def settled(page: Any, timeout_ms: int = 15_000) -> None:
             && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top, 0.1)
                                         && near(c.lids[s].bottom, t.lids[s].bottom, 0.1))
             && near(c.sad, x === 4 ? 1 : 0, 0.01) && near(c.grin, x === 3 ? 1 : 0, 0.01)
-            && near(c.love, x === 6 ? 1 : 0, 0.01) && near(c.star, x === 7 ? 1 : 0, 0.01);
+            && near(c.love, x === 6 ? 1 : 0, 0.01) && near(c.star, x === 7 ? 1 : 0, 0.01)
+            && c.poseT >= 1 && (t.distance !== null || c.verg < 0.01);
         }""", timeout=timeout_ms)
 
 
@@ -344,7 +347,7 @@ def test_page_shows_a_calm_connecting_face_until_the_bus_is_there(
     port = free_port()
     renderer = Process(buddybot_argv("run", "eye-renderer", "--connect",
                                      f"tcp/127.0.0.1:{router_port}", "--port", str(port),
-                                     "--no-browser"), "renderer-no-router", tmp_path)
+                                     "--no-browser", "--style", "eyeball"), "renderer-no-router", tmp_path)
     router: Router | None = None
     try:
         wait_port(port, 30)

@@ -22,7 +22,8 @@ from buddybot.eyes.settings import EyeRendererSettings
 pytestmark = pytest.mark.integration
 
 NO_DISPLAY = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
-RESTART = {"host", "port", "browser", "browser_path", "eyes", "left_display", "right_display"}
+RESTART = {"host", "port", "browser", "browser_path", "eyes", "left_display", "right_display",
+           "style_file"}
 """Where the pages are served and the kiosk windows: decided once at start."""
 LIVE_HERE = {"iris_color", "max_yaw_deg", "max_pitch_deg", "max_pages", "page_stall_s",
              "allowed_origins"}
