@@ -216,16 +216,16 @@ def parse(data: Any, source: str) -> dict[str, dict[str, Any]]:
         if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", name):
             raise ConfigError(f"{source}: {where}: a style name is 1-64 letters, digits, "
                               "_ or -")
-        spec = _convert(raw, StyleSpec, where + ".", source)
+        spec = _convert(raw, StyleSpec, where, source)
         fields = {k: v for k, v in msgspec.structs.asdict(spec).items()
                   if v is not None and k not in ("base", "poses")}
-        fields["base"] = _pose_spec(spec.base or {}, f"{where}.base.", source)
+        fields["base"] = _pose_spec(spec.base or {}, f"{where}.base", source)
         poses: dict[str, dict[str, Any]] = {}
         for expr, pose in (spec.poses or {}).items():
             if expr not in EXPRESSIONS:
                 raise ConfigError(f"{source}: {where}.poses.{expr}: unknown expression "
                                   f"(known: {', '.join(EXPRESSIONS)})")
-            poses[expr] = _pose_spec(pose, f"{where}.poses.{expr}.", source)
+            poses[expr] = _pose_spec(pose, f"{where}.poses.{expr}", source)
         fields["poses"] = poses
         out[name] = fields
     return out
@@ -306,10 +306,10 @@ def resolve(specs: Mapping[str, Mapping[str, Any]], source: str,
             if missing:
                 raise ConfigError(f"{source}: styles.{name}.poses.{expr}: missing "
                                   f"{', '.join(missing)} (give them in its base)")
-            poses[expr] = _convert(pose, Pose, f"styles.{name}.poses.{expr}.", source)
+            poses[expr] = _convert(pose, Pose, f"styles.{name}.poses.{expr}", source)
         style_fields = {k: fields[k] for k in STYLE_FIELDS}
         result[name] = _convert({**style_fields, "name": name, "poses": {}}, Style,
-                                f"styles.{name}.", source)
+                                f"styles.{name}", source)
         result[name].poses = poses
     return result
 
