@@ -23,7 +23,8 @@ window.EyeDraw = (() => {
   const PUPIL = "#000000";
   const LASH = "#3c4966";                      // lash line of a closed eyeball
   const GLOW_SCALE = 0.25;                     // the glow layer's size, of the canvas
-  const GLOW_BLUR = 0.09;                      // halo blur, of the eye's cell
+  const GLOW_BLUR = 0.12;                      // halo blur, of the eye's cell
+  const GLOW_GAIN = 1.6;                       // halo strength at glow 100
   const BREATH_HZ = 0.25;                      // asleep: one slow breath every 4 s
   const CLOSED_LINE = 0.028;                   // a shut glow eye: a line this thick (of cell)
   const near = document.createElement("canvas");   // glow layer: the shapes, small
@@ -163,11 +164,22 @@ window.EyeDraw = (() => {
     c.beginPath();
     c.moveTo(cx - half, yTLeft);
     c.lineTo(cx + half, yTRight);
-    c.lineTo(cx + half, yB + lift * 0.6);
-    c.quadraticCurveTo(cx, yB - 2 * lift, cx - half, yB + lift * 0.6);
+    // The arch spans the eye's own width; its feet reach below the lid line.
+    const feet = yB + lift * 0.7;
+    c.lineTo(cx + half, feet);
+    c.lineTo(cx + ew / 2, feet);
+    c.quadraticCurveTo(cx, yB - 2 * lift, cx - ew / 2, feet);
+    c.lineTo(cx - half, feet);
     c.closePath();
     c.clip();
-    c.fillStyle = fill;
+    // A touch of depth: lit from above, a little darker toward the bottom.
+    if (typeof fill === "string") c.fillStyle = fill;
+    else {
+      const grad = c.createLinearGradient(0, cy - eh / 2, 0, cy + eh / 2);
+      grad.addColorStop(0, fill[0]);
+      grad.addColorStop(1, fill[1]);
+      c.fillStyle = grad;
+    }
     const plain = clamp(1 - P.heart - P.star, 0, 1);
     if (plain > 0.01) {
       c.globalAlpha = plain;
@@ -191,7 +203,9 @@ window.EyeDraw = (() => {
     const P = s.pose;
     const k = (P.brightness / 100) * breath(s);
     const fill = colourOf(P, k);
-    const strength = (P.glow / 100) * k;
+    const shaded = [colourOf({ r: lighten(P.r), g: lighten(P.g), b: lighten(P.b) }, k),
+      colourOf(P, k * 0.8)];
+    const strength = (P.glow / 100) * k * GLOW_GAIN;
     if (strength > 0.01) {
       const w = Math.max(1, Math.ceil(W * GLOW_SCALE));
       const h = Math.max(1, Math.ceil(H * GLOW_SCALE));
@@ -209,13 +223,18 @@ window.EyeDraw = (() => {
       haloCtx.drawImage(near, 0, 0);
       ctx.save();
       ctx.globalCompositeOperation = "lighter";
-      ctx.globalAlpha = clamp(strength, 0, 1);
       ctx.imageSmoothingEnabled = true;
-      ctx.drawImage(halo, 0, 0, w, h, 0, 0, w / GLOW_SCALE, h / GLOW_SCALE);
+      // Above 1 the halo is added twice (canvas alpha stops at 1).
+      for (let a = strength; a > 0.01; a -= 1) {
+        ctx.globalAlpha = clamp(a, 0, 1);
+        ctx.drawImage(halo, 0, 0, w, h, 0, 0, w / GLOW_SCALE, h / GLOW_SCALE);
+      }
       ctx.restore();
     }
-    for (const [side, L] of cells) glowEye(ctx, s, side, L, fill);
+    for (const [side, L] of cells) glowEye(ctx, s, side, L, shaded);
   }
+
+  function lighten(v) { return v + (255 - v) * 0.2; }
 
   // --- eyeball -----------------------------------------------------------------------
 
