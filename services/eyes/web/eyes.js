@@ -87,6 +87,7 @@
       duration_ms: BLINK_CLOSE_MS + BLINK_OPEN_MS,
       params: { close_ms: BLINK_CLOSE_MS, open_ms: BLINK_OPEN_MS, cause: "debug" } }),
     receive: (text) => onMessage(text),   // feed a server message by hand (devtools, tests)
+    vergenceGoal: () => vergenceGoal(),   // the vergence the page eases toward (tests)
   };
   window.eyes = eyes;
 
