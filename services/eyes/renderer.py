@@ -57,11 +57,11 @@ from aiohttp import WSCloseCode, WSMsgType, web
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.config import resolve_path
 from buddybot.core.errors import UsageError
 from buddybot.core.limits import clip
 from buddybot.core.loop_inbox import LoopInbox
 from buddybot.core.node import Node, RateLimitedLog
-from buddybot.core.config import resolve_path
 from buddybot.core.overrides import given, merge, settings_option
 from buddybot.core.params import LiveSettings
 from buddybot.core.service import ServiceContext

@@ -347,7 +347,8 @@ def test_page_shows_a_calm_connecting_face_until_the_bus_is_there(
     port = free_port()
     renderer = Process(buddybot_argv("run", "eye-renderer", "--connect",
                                      f"tcp/127.0.0.1:{router_port}", "--port", str(port),
-                                     "--no-browser", "--style", "eyeball"), "renderer-no-router", tmp_path)
+                                     "--no-browser", "--style", "eyeball"),
+                       "renderer-no-router", tmp_path)
     router: Router | None = None
     try:
         wait_port(port, 30)

@@ -31,7 +31,7 @@ def test_the_built_in_file_loads_with_both_styles_and_glow_is_the_default() -> N
 def test_every_expression_has_its_own_pose_in_each_built_in_style() -> None:
     """Named in the file itself (not only inherited from the base), and no two alike."""
     specs = styles.builtin_specs()
-    assert styles.EXPRESSIONS == tuple(a.name.split("_", 1)[1] for a in m.ExpressionAction)
+    assert tuple(a.name.split("_", 1)[1] for a in m.ExpressionAction) == styles.EXPRESSIONS
     for name, style in styles.load().styles.items():
         assert set(specs[name]["poses"]) == set(styles.EXPRESSIONS), name
         poses = [msgspec.to_builtins(style.poses[e]) for e in styles.EXPRESSIONS]
