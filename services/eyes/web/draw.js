@@ -22,7 +22,7 @@ window.EyeDraw = (() => {
   const SCLERA = "#f2f4f8";
   const PUPIL = "#000000";
   const LASH = "#3c4966";                      // lash line of a closed eyeball
-  const GLOW_SCALE = 0.25;                     // the glow layer's size, of the canvas
+  const GLOW_SCALE = 0.125;                    // the glow layer's size, of the canvas
   const GLOW_BLUR = 0.12;                      // halo blur, of the eye's cell
   const GLOW_GAIN = 1.6;                       // halo strength at glow 100
   const BREATH_HZ = 0.25;                      // asleep: one slow breath every 4 s
@@ -35,12 +35,14 @@ window.EyeDraw = (() => {
   function clamp(v, lo, hi) { return Math.min(hi, Math.max(lo, v)); }
 
   // The lids one eye shows, % of its height covered from the top and bottom.
-  function lidsOf(s, side) {
+  // `uncut`: a glow heart or star is not cut by its expression's lids (a
+  // blink still closes it).
+  function lidsOf(s, side, uncut = 0) {
     const P = s.pose;
     const L = s.lids[side];
     // The commanded lids (eyes/lids), at least what the pose asks for.
-    let top = Math.max(L.top, P.top_lid);
-    let bottom = Math.max(L.bottom, P.bottom_lid);
+    let top = Math.max(L.top, P.top_lid) * (1 - uncut);
+    let bottom = Math.max(L.bottom, P.bottom_lid) * (1 - uncut);
     // Connecting: at least half closed (a closed eye stays closed).
     top += (Math.max(top, REST_LIDS.top) - top) * s.calm;
     bottom += (Math.max(bottom, REST_LIDS.bottom) - bottom) * s.calm;
@@ -137,7 +139,7 @@ window.EyeDraw = (() => {
   function glowEye(c, s, side, L, fill) {
     const P = s.pose;
     const st = s.style;
-    const lids = lidsOf(s, side);
+    const lids = lidsOf(s, side, clamp(P.heart + P.star, 0, 1));
     const squash = s.blink * (st.squash / 100);
     const ew = (L.S * P.width / 100) * L.grow * (1 + s.blink * (st.stretch / 100));
     const eh = (L.S * P.height / 100) * L.grow * (1 - squash);
@@ -220,18 +222,45 @@ window.EyeDraw = (() => {
       haloCtx.clearRect(0, 0, w, h);
       haloCtx.shadowColor = colourOf(P, 1);
       haloCtx.shadowBlur = GLOW_BLUR * cells[0][1].S * GLOW_SCALE;
-      haloCtx.drawImage(near, 0, 0);
-      ctx.save();
-      ctx.globalCompositeOperation = "lighter";
-      ctx.imageSmoothingEnabled = true;
-      // Above 1 the halo is added twice (canvas alpha stops at 1).
+      // Above 1 the halo is laid twice, here on the small canvas (canvas alpha
+      // stops at 1), so the frame gets one scaled-up copy.
       for (let a = strength; a > 0.01; a -= 1) {
-        ctx.globalAlpha = clamp(a, 0, 1);
-        ctx.drawImage(halo, 0, 0, w, h, 0, 0, w / GLOW_SCALE, h / GLOW_SCALE);
+        haloCtx.globalAlpha = clamp(a, 0, 1);
+        haloCtx.drawImage(near, 0, 0);
       }
-      ctx.restore();
+      ctx.imageSmoothingEnabled = true;
+      // Only around the eyes (the rest of the halo layer is empty), each pixel
+      // once: boxes that overlap are merged.
+      const boxes = [];
+      for (const [, L] of cells) {
+        const r = glowReach(s, L);
+        const box = [L.cx + L.gx - r.x, L.cy + L.gy - r.y, L.cx + L.gx + r.x, L.cy + L.gy + r.y];
+        const other = boxes.find((b) => b[0] < box[2] && box[0] < b[2] && b[1] < box[3] && box[1] < b[3]);
+        if (other) {
+          for (const i of [0, 1]) other[i] = Math.min(other[i], box[i]);
+          for (const i of [2, 3]) other[i] = Math.max(other[i], box[i]);
+        } else boxes.push(box);
+      }
+      for (const b of boxes) {
+        const x0 = clamp(Math.floor(b[0] * GLOW_SCALE), 0, w);
+        const y0 = clamp(Math.floor(b[1] * GLOW_SCALE), 0, h);
+        const x1 = clamp(Math.ceil(b[2] * GLOW_SCALE), 0, w);
+        const y1 = clamp(Math.ceil(b[3] * GLOW_SCALE), 0, h);
+        if (x1 > x0 && y1 > y0) {
+          ctx.drawImage(halo, x0, y0, x1 - x0, y1 - y0, x0 / GLOW_SCALE, y0 / GLOW_SCALE,
+            (x1 - x0) / GLOW_SCALE, (y1 - y0) / GLOW_SCALE);
+        }
+      }
     }
     for (const [side, L] of cells) glowEye(ctx, s, side, L, shaded);
+  }
+
+  // Half-sizes (px) of the box an eye's halo can reach from its centre.
+  function glowReach(s, L) {
+    const P = s.pose;
+    const big = 1.1 * L.grow * (1 + s.style.stretch / 100) * (1 + P.beat / 100);
+    const margin = 2.5 * GLOW_BLUR * L.S;
+    return { x: (L.S * P.width / 200) * big + margin, y: (L.S * P.height / 200) * big + margin };
   }
 
   function lighten(v) { return v + (255 - v) * 0.2; }
