@@ -25,7 +25,7 @@ from buddybot.core import keys
 from buddybot.core import messages as m
 from buddybot.core.node import Node
 from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until, wait_port
-from buddybot.eyes import styles
+from buddybot.eyes import driver, styles
 
 from ..conftest import ARTIFACTS
 
@@ -82,9 +82,12 @@ def shot(page: Any, name: str | None = None) -> np.ndarray:
 def express(probe: Node, page: Any, action: A, stamp: int) -> None:
     """Publish an expression (the driver adds its lids) and wait until it is drawn."""
     probe.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp, action=action))
-    page.wait_for_function(f"window.eyes.target.expression === {int(action)}", timeout=20_000)
-    if action == A.EYE_SLEEP:
-        page.wait_for_function("window.eyes.target.lids.left.top === 50", timeout=20_000)
+    # The driver's lids come on their own topic, maybe after the expression.
+    lids = driver.DEFAULT_LIDS[action].left
+    page.wait_for_function(
+        f"window.eyes.target.expression === {int(action)} "
+        f"&& window.eyes.target.lids.left.top === {lids.top} "
+        f"&& window.eyes.target.lids.right.bottom === {lids.bottom}", timeout=20_000)
     settled(page)
 
 
