@@ -55,6 +55,10 @@ from buddybot.core.testing import (
     wait_port,
 )
 
+FRAME_MS = 16.67
+"""One display frame at 60 Hz."""
+TIMER_MS = 0.2
+"""performance.now() resolution in Chromium (0.1 ms) on both ends of an interval."""
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update"]
 
@@ -259,8 +263,12 @@ def bench_style(browser: Any, node: Node, router: Router, style: str, sizes: lis
             fps = 1000.0 / statistics.mean(intervals)
             figures("frame time (rAF interval)", intervals)
             figures("update+draw per frame", draws)
-            met = "met" if percentile(intervals, 0.95) < 16.7 else "NOT met"
-            print(f"{'frames per second':<44} {fps:7.1f}   (p95 frame time < 16.7 ms: {met})")
+            # rAF intervals are whole display frames (16.67 ms at 60 Hz) read with
+            # Chromium's 0.1 ms timer: p95 at one frame (+ that resolution) means
+            # no frame was dropped, one frame more would be 33.3 ms.
+            met = "met" if percentile(intervals, 0.95) <= FRAME_MS + TIMER_MS else "NOT met"
+            print(f"{'frames per second':<44} {fps:7.1f}   (p95 frame time within one "
+                  f"60 Hz frame, {FRAME_MS} ms + {TIMER_MS} ms timer resolution: {met})")
             print(f"{'Chromium CPU (all its processes)':<44} {cpu:7.1f} % of one core")
             # Discovery: wait until the page follows this publisher at all.
             def follows(page: Any = page) -> bool:
@@ -344,7 +352,8 @@ def main() -> int:
             node.close()
         driver.stop()
         router.stop()
-    print("\nsummary (targets: frame p95 < 16.7 ms, direction->drawn median < 20 ms)")
+    print("\nsummary (targets: frame p95 one 60 Hz frame (16.7 ms), direction->drawn "
+          "median < 20 ms)")
     for line in summary:
         print(line)
     return 0

@@ -64,6 +64,7 @@ def settled(page: Any) -> None:
           const e = window.eyes, c = e.cur, t = e.target, near = (a, b) => Math.abs(a - b) < 0.05;
           return c.poseT >= 1 && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
             && Math.abs(c.verg - e.vergenceGoal()) < 0.003
+            && Math.abs(c.rest - (t.expression === 1 ? 1 : 0)) < 0.003
             && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top)
                                         && near(c.lids[s].bottom, t.lids[s].bottom));
         }""", timeout=15_000)
@@ -212,6 +213,7 @@ def test_asleep_only_the_glow_breathes(browser: Any, spawn: Callable[..., Proces
     spawn("eyes")
     page = open_page(browser, start(spawn, "glow"))
     express(probe, page, A.EYE_SLEEP, 1)
+    look(page, 30, 10)                         # asleep, the eyes do not follow
     brightness, columns = [], []
     for _ in range(9):                         # 4 s: one breath at ~0.25 Hz
         img = shot(page).astype(float)
@@ -220,6 +222,7 @@ def test_asleep_only_the_glow_breathes(browser: Any, spawn: Callable[..., Proces
         page.wait_for_timeout(500)
     assert max(brightness) > 1.15 * min(brightness), brightness
     assert max(columns) - min(columns) < 1.0, columns    # nothing else moves
+    assert abs(columns[0] - W / 2) < 2.0, columns           # resting in the middle
     page.close()
 
 

@@ -63,6 +63,7 @@
     sad: 0, grin: 0, love: 0, star: 0,   // how far each expression's shape is in (0..1)
     calm: 1,                     // 1 = the connecting face, 0 = normal eyes
     verg: 0,                     // vergence, 0 (far or unknown) .. 1 (near)
+    rest: 0,                     // asleep: 1 = the eyes rest in the middle, whatever the gaze
     pose: EyePose.target(EyePose.FALLBACK, EXPR.AWAKE, "#2f7fd0"),   // the eased pose drawn
     poseT: 1,                    // progress of the pose change under way (1: arrived)
     spinAngle: 0,                // radians a spinning shape (a star) has turned
@@ -403,6 +404,7 @@
     const ex = target.expression;
     updatePose(t, dt);
     cur.verg = approach(cur.verg, vergenceGoal(), TAU.verge, dt);
+    cur.rest = approach(cur.rest, ex === EXPR.SLEEP ? 1 : 0, TAU.calm, dt);
     cur.sad = approach(cur.sad, ex === EXPR.SAD ? 1 : 0, TAU.shape, dt);
     cur.grin = approach(cur.grin, ex === EXPR.GRIN ? 1 : 0, TAU.shape, dt);
     cur.love = approach(cur.love, ex === EXPR.LOVE ? 1 : 0, TAU.shape, dt);
@@ -426,8 +428,10 @@
     resize();
     EyeDraw.draw(ctx, canvas.width, canvas.height, {
       which, style: cfg.style, pose: cur.pose, lids: cur.lids, calm: cur.calm, blink,
-      yawN: clamp(cur.yaw / cfg.maxYaw, -1, 1), pitchN: clamp(cur.pitch / cfg.maxPitch, -1, 1),
-      verg: cur.verg, dilation: cur.dilation, spinAngle: cur.spinAngle, t,
+      // Asleep nothing moves but the breathing glow: the eyes rest in the middle.
+      yawN: clamp(cur.yaw / cfg.maxYaw, -1, 1) * (1 - cur.rest),
+      pitchN: clamp(cur.pitch / cfg.maxPitch, -1, 1) * (1 - cur.rest),
+      verg: cur.verg * (1 - cur.rest), dilation: cur.dilation, spinAngle: cur.spinAngle, t,
     });
   }
 
