@@ -148,7 +148,7 @@ def main() -> int:
                 (folder / f"{style}_{name}.png").write_bytes(png)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    cv2.imwrite(str(out), sheet(rows))
+    cv2.imwrite(str(out), sheet(rows), [cv2.IMWRITE_PNG_COMPRESSION, 9])
     print(f"wrote {out}")
     return 0
 
