@@ -75,7 +75,7 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     # iris at the edge of the eye (larger = calmer eyes).
     iris_color: Annotated[str, msgspec.Meta(
         pattern=r"^#[0-9a-fA-F]{6}$", examples=["#a05a2c"], extra={"live": True},
-        description="iris colour, #rrggbb")] = "#2f7fd0"
+        description="iris colour of the eyeball style, #rrggbb")] = "#2f7fd0"
     max_yaw_deg: Annotated[float, msgspec.Meta(
         gt=0.0, le=90.0, extra={"live": True},
         description="degrees of yaw that put the iris at the edge")] = 40.0

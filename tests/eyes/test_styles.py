@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from pathlib import Path
 from typing import Any
 
@@ -11,6 +12,7 @@ import pytest
 
 from buddybot.core import messages as m
 from buddybot.core.errors import ConfigError
+from buddybot.core.testing import buddybot_argv
 from buddybot.eyes import styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 
@@ -152,3 +154,22 @@ def test_the_hello_carries_the_whole_style() -> None:
     assert msg["style"]["kind"] == "glow"
     assert set(msg["style"]["poses"]) == set(styles.EXPRESSIONS)
     assert msg["style"]["poses"]["LOVE"]["shape"] == "heart"
+
+
+@pytest.mark.integration
+def test_the_renderer_refuses_to_start_with_an_unknown_style_or_a_bad_file(
+        tmp_path: Path) -> None:
+    """Exit status 2 (not restarted) with the key in the message, before serving."""
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(buddybot_argv("run", "eye-renderer", "--no-browser", "--port", "0",
+                                            "--connect", "tcp/127.0.0.1:1", *args),
+                              capture_output=True, text=True, timeout=60)
+
+    unknown = run("--style", "sparkly")
+    assert unknown.returncode == 2, unknown.stderr
+    assert "eye_renderer.style = 'sparkly': no such style (known: eyeball, glow)" in unknown.stderr
+    path = write(tmp_path, {"styles": {"glow": {"poses": {"GRIN": {"top_lid": 101}}}}})
+    bad = run("--style-file", str(path))
+    assert bad.returncode == 2, bad.stderr
+    assert "styles.glow.poses.GRIN.top_lid: expected <= 100" in bad.stderr
+    assert "Traceback" not in bad.stderr + unknown.stderr
