@@ -233,11 +233,17 @@ class EyeControl(Message):
 
 
 class EyesDirection(Message):
-    """Gaze for the renderer, degrees (+yaw left, +pitch up)."""
+    """Gaze for the renderer, degrees (+yaw left, +pitch up).
+
+    `target_distance_cm` is how far the looked-at person is, so the pages
+    can converge the eyes as they come closer; None when unknown (the
+    controller's "0 = unknown" of `EyeControl`, or an older sender).
+    """
 
     stamp_ns: StampNs
     yaw: Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
     pitch: Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+    target_distance_cm: DistanceCm | None = None
 
 
 class PupilControl(Message):

@@ -38,12 +38,15 @@ def direction_from_control(control: m.EyeControl) -> m.EyesDirection:
 
     `EyeControl` allows +-3.15 rad (a hair over pi), so the degrees are
     clamped into `EyesDirection`'s +-180 / +-90 range instead of producing
-    a message the renderer would refuse.
+    a message the renderer would refuse. The target distance is passed on
+    (the pages converge the eyes on a near face); 0, "unknown" in
+    `EyeControl`, becomes None.
     """
     return m.EyesDirection(
         stamp_ns=control.stamp_ns,
         yaw=_clamp(math.degrees(control.yaw), -MAX_YAW_DEG, MAX_YAW_DEG),
         pitch=_clamp(math.degrees(control.pitch), -MAX_PITCH_DEG, MAX_PITCH_DEG),
+        target_distance_cm=control.target_distance_cm or None,
     )
 
 

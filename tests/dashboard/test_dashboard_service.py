@@ -8,12 +8,13 @@ and sent as JPEG at no more than `max_image_fps`.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import socket
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import AsyncIterator, Callable
 from typing import Any
 
 import aiohttp
@@ -23,6 +24,7 @@ import pytest
 
 from buddybot.core import keys
 from buddybot.core import messages as m
+from buddybot.core.handles import Publisher
 from buddybot.core.node import Node
 from buddybot.core.testing import (
     LOOPBACK,
@@ -54,6 +56,28 @@ def health(port: int) -> dict[str, Any]:
             return data
 
     return asyncio.run(get())
+
+
+@contextlib.asynccontextmanager
+async def camera_at_30_fps(publisher: Publisher[m.Image],
+                           pixels: np.ndarray) -> AsyncIterator[None]:
+    """Publish `pixels` as camera "side" at 30 fps while the block runs."""
+    height, width = pixels.shape[:2]
+    data = pixels.tobytes()
+
+    async def publish() -> None:
+        while True:
+            publisher.put(m.Image(stamp_ns=m.now_ns(), frame_id="side", width=width,
+                                  height=height, encoding="bgr8", data=data))
+            await asyncio.sleep(1 / 30)
+
+    task = asyncio.create_task(publish())
+    try:
+        yield
+    finally:
+        task.cancel()
+        with contextlib.suppress(asyncio.CancelledError):
+            await task
 
 
 def test_a_busy_port_is_one_line_and_exit_1(spawn: Callable[..., Process]) -> None:
@@ -134,26 +158,13 @@ def test_images_only_while_a_page_is_connected_as_jpeg_at_the_rate_limit(
         async with aiohttp.ClientSession() as http, http.ws_connect(
                 f"http://{LOOPBACK}:{port}/ws") as ws:
             await asyncio.to_thread(retry_until, lambda: health(port)["watching_images"], 15)
-            stop = asyncio.Event()
-
-            async def publish() -> None:  # 30 fps until told to stop
-                while not stop.is_set():
-                    publisher.put(m.Image(stamp_ns=m.now_ns(), frame_id="side", width=160,
-                                          height=120, encoding="bgr8", data=pixels.tobytes()))
-                    await asyncio.sleep(1 / 30)
-
-            task = asyncio.create_task(publish())
             arrivals: list[float] = []
-            try:
-                async with asyncio.timeout(30):
-                    while len(frames) < 13:
-                        msg = await ws.receive()
-                        if msg.type == aiohttp.WSMsgType.BINARY:
-                            arrivals.append(time.monotonic())
-                            frames.append(model.unpack_image(msg.data))
-            finally:
-                stop.set()
-                await task
+            async with camera_at_30_fps(publisher, pixels), asyncio.timeout(30):
+                while len(frames) < 13:
+                    msg = await ws.receive()
+                    if msg.type == aiohttp.WSMsgType.BINARY:
+                        arrivals.append(time.monotonic())
+                        frames.append(model.unpack_image(msg.data))
         # The first frames may come late (the subscription is new): time the rest.
         return frames, arrivals[-1] - arrivals[2]
 
@@ -233,13 +244,6 @@ def test_live_parameters_change_the_image_rate_and_restart_only_ones_are_refused
         async with aiohttp.ClientSession() as http, http.ws_connect(
                 f"http://{LOOPBACK}:{port}/ws") as ws:
             await asyncio.to_thread(retry_until, lambda: health(port)["watching_images"], 15)
-            stop = asyncio.Event()
-
-            async def publish() -> None:  # 30 fps until told to stop
-                while not stop.is_set():
-                    publisher.put(m.Image(stamp_ns=m.now_ns(), frame_id="side", width=80,
-                                          height=60, encoding="bgr8", data=pixels.tobytes()))
-                    await asyncio.sleep(1 / 30)
 
             async def rate(frames: int) -> float:
                 arrivals: list[float] = []
@@ -250,8 +254,7 @@ def test_live_parameters_change_the_image_rate_and_restart_only_ones_are_refused
                             arrivals.append(time.monotonic())
                 return (frames - 1) / (arrivals[-1] - arrivals[0])
 
-            task = asyncio.create_task(publish())
-            try:
+            async with camera_at_30_fps(publisher, pixels):
                 await rate(3)  # the subscription is new: the first frames may lag
                 fast = await rate(12)
                 changed = await asyncio.to_thread(param, "set", "dashboard", "max_image_fps",
@@ -259,9 +262,6 @@ def test_live_parameters_change_the_image_rate_and_restart_only_ones_are_refused
                 assert changed.returncode == 0, changed.stderr
                 await rate(2)  # a frame already on its way
                 slow = await rate(4)
-            finally:
-                stop.set()
-                await task
             return fast, slow
 
     fast, slow = asyncio.run(rates())

@@ -48,6 +48,22 @@ def test_direction_is_degrees_with_the_same_signs(
     msgspec.json.decode(msgspec.json.encode(out), type=m.EyesDirection)
 
 
+@pytest.mark.parametrize(("cm", "expected"), [(45.5, 45.5), (250.0, 250.0), (0.0, None)])
+def test_direction_carries_the_target_distance_for_vergence(
+    cm: float, expected: float | None
+) -> None:
+    """The pages converge the eyes on a near face; 0 ("unknown") becomes None."""
+    out = driver.direction_from_control(control(0.1, 0.0, cm=cm))
+    assert out.target_distance_cm == expected
+    wire_text = msgspec.json.encode(out)
+    assert msgspec.json.decode(wire_text, type=m.EyesDirection) == out
+
+
+def test_direction_from_an_older_sender_without_a_distance_is_accepted() -> None:
+    old = b'{"stamp_ns": 5, "yaw": 1.0, "pitch": 2.0}'
+    assert msgspec.json.decode(old, type=m.EyesDirection).target_distance_cm is None
+
+
 # --- pupil ------------------------------------------------------------------------------
 
 
@@ -230,8 +246,8 @@ def test_latest_state_keeps_newest_per_slot_in_arrival_order() -> None:
     state.put_message(lids(m.EyeId.LEFT, 10))
     state.put_message(m.EyesDirection(stamp_ns=2, yaw=2, pitch=0))
     assert [msgspec.json.decode(t)["topic"] for t in state.snapshot()] == ["lids", "direction"]
-    assert msgspec.json.decode(state.snapshot()[-1])["msg"] == {"stamp_ns": 2, "yaw": 2.0,
-                                                                 "pitch": 0.0}
+    assert msgspec.json.decode(state.snapshot()[-1])["msg"] == {
+        "stamp_ns": 2, "yaw": 2.0, "pitch": 0.0, "target_distance_cm": None}
     state.put_message(lids(m.EyeId.BOTH, 50))     # supersedes the per-eye value
     assert [s for s, _ in state.items()] == ["direction", "lids:2"]
     state.put_message(lids(m.EyeId.RIGHT, 20))    # a later per-eye message applies after BOTH

@@ -107,7 +107,8 @@ def test_websocket_gets_hello_state_and_updates(
         expression.put(m.ScreenExpression(stamp_ns=now + 6,
                                           action=m.ExpressionAction.ANIMATE_LOVE))
         pupil.put(m.PupilControl(stamp_ns=now + 7, dilation_percentage=80))
-        direction.put(m.EyesDirection(stamp_ns=now + 8, yaw=12.5, pitch=-3))
+        direction.put(m.EyesDirection(stamp_ns=now + 8, yaw=12.5, pitch=-3,
+                                      target_distance_cm=80.0))
 
     def complete(got: list[dict[str, Any]]) -> bool:
         return {"expression", "pupil", "direction"} <= {x["topic"] for x in got}
@@ -121,7 +122,8 @@ def test_websocket_gets_hello_state_and_updates(
     by_topic = {x["topic"]: x["msg"] for x in got}
     assert by_topic["expression"] == {"stamp_ns": now + 6, "action": 6}
     assert by_topic["pupil"]["dilation_percentage"] == 80.0
-    assert by_topic["direction"] == {"stamp_ns": now + 8, "yaw": 12.5, "pitch": -3.0}
+    assert by_topic["direction"] == {"stamp_ns": now + 8, "yaw": 12.5, "pitch": -3.0,
+                                        "target_distance_cm": 80.0}
 
 
 def test_malformed_samples_and_client_junk_are_survived(
