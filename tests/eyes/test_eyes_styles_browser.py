@@ -254,3 +254,26 @@ def test_a_live_style_change_restyles_the_page(browser: Any, spawn: Callable[...
     assert "no such style (known: eyeball, glow)" in refused.stderr
     assert page.evaluate("window.eyes.cfg.style.kind") == "eyeball"
     page.close()
+
+
+def test_the_driver_passes_the_distance_and_the_eyes_converge(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    """End to end: eyes/control's target_distance_cm -> driver -> eyes/direction ->
+    renderer -> page, measured as the gap between the two glowing eyes."""
+    spawn("eyes")
+    page = open_page(browser, start(spawn, "glow"))
+    pub = probe.publisher(keys.EYE_CONTROL)
+    gaps = {}
+    for stamp, cm in enumerate((300, 30), start=1):
+        control = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)
+
+        def arrived(control: m.EyeControl = control, cm: int = cm) -> bool:
+            pub.put(control)
+            return bool(page.evaluate("window.eyes.target.distance") == cm)
+
+        retry_until(arrived, 20, 0.2, f"distance {cm} cm on the page")
+        settled(page)
+        mask = eye_mask(shot(page), "glow")
+        gaps[cm] = (centroid_x(mask[:, W // 2:]) + W // 2) - centroid_x(mask[:, : W // 2])
+    assert gaps[30] < gaps[300] - 8, gaps
+    page.close()
