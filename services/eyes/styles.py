@@ -126,7 +126,8 @@ class Style(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """% of the eye's cell each eye moves toward the nose for a person at 30 cm
     (none beyond 150 cm)."""
     squash: Percent
-    """% flatter a blinking eye gets on top of its lids closing (squash and stretch)."""
+    """% of a blink done by flattening the eye, the rest by its lids closing (squash
+    and stretch: a glow eye gets flatter as it shuts, its corners staying round)."""
     stretch: Percent
     """% wider a fully closed eye is."""
     reach: Percent

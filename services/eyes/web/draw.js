@@ -51,8 +51,10 @@ window.EyeDraw = (() => {
     const follow = s.style.lid_follow * s.pitchN * (1 - s.calm) * open;
     top = clamp(top - follow, 0, 100);
     bottom = clamp(bottom + 0.4 * follow, 0, 100);
-    top += (50 - top) * s.blink;
-    bottom += (50 - bottom) * s.blink;
+    // The part of a blink the lids do (the rest flattens a glow eye: squash).
+    const lidBlink = s.blink * (1 - s.style.squash / 100);
+    top += (50 - top) * lidBlink;
+    bottom += (50 - bottom) * lidBlink;
     if (top + bottom > 100) {
       const k = 100 / (top + bottom);
       top *= k;
