@@ -277,3 +277,33 @@ def test_the_driver_passes_the_distance_and_the_eyes_converge(
         gaps[cm] = (centroid_x(mask[:, W // 2:]) + W // 2) - centroid_x(mask[:, : W // 2])
     assert gaps[30] < gaps[300] - 8, gaps
     page.close()
+
+
+def test_a_glow_blink_squashes_and_stretches(browser: Any, spawn: Callable[..., Process],
+                                             tmp_path: Any) -> None:
+    """Halfway through a (slowed-down) blink the glow eye is flatter and wider."""
+    cfg = tmp_path / "eyes.toml"      # no spontaneous blink in the way
+    cfg.write_text("[eye_renderer]\nblink_interval_min_s = 60\nblink_interval_max_s = 120\n")
+    port = free_port()
+    spawn("eye-renderer", "--port", str(port), "--no-browser", "--config", str(cfg))
+    wait_port(port, 30)
+    page = browser.new_page(viewport={"width": W, "height": H})
+    page.goto(f"http://127.0.0.1:{port}/eyes?eye=left&saccade=0")
+    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
+                           timeout=20_000)
+    settled(page)
+
+    def box() -> tuple[int, int]:
+        ys, xs = np.nonzero(shot(page).max(axis=2) > 90)
+        return int(np.ptp(xs)), int(np.ptp(ys))
+
+    width0, height0 = box()
+    start = page.evaluate("window.eyes.serverTime()") + 300
+    blink = {"kind": "blink", "start_ms": start, "duration_ms": 3000,
+             "params": {"close_ms": 1500, "open_ms": 1500, "cause": "test"}}
+    page.evaluate("(t) => window.eyes.receive(t)", json.dumps({"topic": "motion", "msg": blink}))
+    page.wait_for_function(f"window.eyes.serverTime() > {start + 1100}", timeout=10_000)
+    width, height = box()
+    assert height < 0.75 * height0, (height, height0)
+    assert width > width0 + 4, (width, width0)
+    page.close()
