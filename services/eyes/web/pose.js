@@ -63,10 +63,41 @@ window.EyePose = (() => {
     return out;
   }
 
+  // Colours ease through hue (the short way round), not through RGB, which
+  // would pass through grey between, say, cyan and pink.
   function lerp(a, b, k) {
     const out = {};
     for (const key of Object.keys(b)) out[key] = a[key] + (b[key] - a[key]) * k;
+    const from = hsl(a.r, a.g, a.b);
+    const to = hsl(b.r, b.g, b.b);
+    if (from[1] < 0.05) from[0] = to[0];     // a grey has no hue of its own
+    if (to[1] < 0.05) to[0] = from[0];
+    const turn = ((to[0] - from[0] + 540) % 360) - 180;
+    [out.r, out.g, out.b] = rgbOf((from[0] + turn * k + 360) % 360,
+      from[1] + (to[1] - from[1]) * k, from[2] + (to[2] - from[2]) * k);
     return out;
+  }
+
+  function hsl(r, g, b) {
+    r /= 255; g /= 255; b /= 255;
+    const max = Math.max(r, g, b);
+    const min = Math.min(r, g, b);
+    const l = (max + min) / 2;
+    const d = max - min;
+    if (d < 1e-6) return [0, 0, l];
+    const s = d / (1 - Math.abs(2 * l - 1));
+    let h = max === r ? ((g - b) / d) % 6 : max === g ? (b - r) / d + 2 : (r - g) / d + 4;
+    h *= 60;
+    return [h < 0 ? h + 360 : h, s, l];
+  }
+
+  function rgbOf(h, s, l) {
+    const c = (1 - Math.abs(2 * l - 1)) * s;
+    const x = c * (1 - Math.abs(((h / 60) % 2) - 1));
+    const m = l - c / 2;
+    const [r, g, b] = h < 60 ? [c, x, 0] : h < 120 ? [x, c, 0] : h < 180 ? [0, c, x]
+      : h < 240 ? [0, x, c] : h < 300 ? [x, 0, c] : [c, 0, x];
+    return [(r + m) * 255, (g + m) * 255, (b + m) * 255];
   }
 
   // Slow in, slow out (cubic): a pose change starts and lands softly.
