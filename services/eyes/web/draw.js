@@ -144,12 +144,12 @@ window.EyeDraw = (() => {
     const lids = lidsOf(s, side, clamp(P.heart + P.star, 0, 1));
     const squash = s.blink * (st.squash / 100);
     const ew = (L.S * P.width / 100) * L.grow * (1 + s.blink * (st.stretch / 100));
-    const eh = (L.S * P.height / 100) * L.grow * (1 - squash);
+    const line = CLOSED_LINE * L.S;
+    const eh = Math.max(line, (L.S * P.height / 100) * L.grow * (1 - squash));
     const cx = L.cx + L.gx;
     const cy = L.cy + L.gy;
     let yT = cy - eh / 2 + (lids.top / 100) * eh;
     let yB = cy + eh / 2 - (lids.bottom / 100) * eh;
-    const line = CLOSED_LINE * L.S;
     if (yB - yT < line) {          // shut: a thin glowing line, never nothing
       const mid = (yT + yB) / 2;
       yT = mid - line / 2;

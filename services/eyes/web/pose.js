@@ -25,7 +25,7 @@ window.EyePose = (() => {
   };
   const FALLBACK = {
     name: "fallback", kind: "glow", description: "", background: "#03050a", color: "#3ce6ff",
-    lid_follow: 14, curiosity: 12, vergence: 7, squash: 85, stretch: 14, reach: 15,
+    lid_follow: 14, curiosity: 12, vergence: 7, squash: 100, stretch: 14, reach: 15,
     transition_ms: 280, poses: Object.fromEntries(NAMES.map((n) => [n, BASE])),
   };
 
