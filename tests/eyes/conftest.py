@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import shutil
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
+import cv2
+import numpy as np
 import pytest
 
 CHROMIUM_ARGS = [
@@ -31,3 +34,15 @@ def browser() -> Iterator[Any]:
             yield chromium
         finally:
             chromium.close()
+
+
+def screenshot(page: Any, directory: Path, name: str | None = None) -> np.ndarray:
+    """The page as a BGR image; saved as `directory/name.png` for a person to look
+    at when `name` is given."""
+    png = page.screenshot()
+    if name:
+        directory.mkdir(parents=True, exist_ok=True)
+        (directory / f"{name}.png").write_bytes(png)
+    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+    assert img is not None
+    return img

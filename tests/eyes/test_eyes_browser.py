@@ -15,7 +15,6 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-import cv2
 import numpy as np
 import pytest
 
@@ -32,6 +31,7 @@ from buddybot.core.testing import (
 )
 
 from ..conftest import ARTIFACTS
+from .conftest import screenshot
 
 pytestmark = [pytest.mark.integration, pytest.mark.browser]
 
@@ -76,13 +76,7 @@ def settled(page: Any, timeout_ms: int = 15_000) -> None:
 
 
 def shot(page: Any, name: str | None = None) -> np.ndarray:
-    png = page.screenshot()
-    if name:
-        SHOTS.mkdir(parents=True, exist_ok=True)
-        (SHOTS / f"{name}.png").write_bytes(png)
-    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
-    assert img is not None
-    return img
+    return screenshot(page, SHOTS, name)
 
 
 def pupil_centre(img: np.ndarray) -> tuple[float, float]:

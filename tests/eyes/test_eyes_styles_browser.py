@@ -17,7 +17,6 @@ import subprocess
 from collections.abc import Callable
 from typing import Any
 
-import cv2
 import numpy as np
 import pytest
 
@@ -28,6 +27,7 @@ from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until
 from buddybot.eyes import driver, styles
 
 from ..conftest import ARTIFACTS
+from .conftest import screenshot
 
 pytestmark = [pytest.mark.integration, pytest.mark.browser]
 
@@ -71,13 +71,7 @@ def settled(page: Any) -> None:
 
 
 def shot(page: Any, name: str | None = None) -> np.ndarray:
-    png = page.screenshot()
-    if name:
-        SHOTS.mkdir(parents=True, exist_ok=True)
-        (SHOTS / f"{name}.png").write_bytes(png)
-    img = cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
-    assert img is not None
-    return img
+    return screenshot(page, SHOTS, name)
 
 
 def express(probe: Node, page: Any, action: A, stamp: int) -> None:
