@@ -282,6 +282,7 @@ def test_page_survives_malformed_messages(browser: Any, spawn: Callable[..., Pro
     _proc, port = start_renderer(spawn)
     page = open_page(browser, port, "left")
     before = page.evaluate("JSON.stringify(window.eyes.target)")
+    style_before = page.evaluate("JSON.stringify(window.eyes.cfg.style)")
     junk = [
         "", "not json", "null", "42", "[]", '{"topic": "direction"}',
         '{"topic": "direction", "msg": {"yaw": "left", "pitch": 0}}',
@@ -291,11 +292,22 @@ def test_page_survives_malformed_messages(browser: Any, spawn: Callable[..., Pro
         '{"topic": "expression", "msg": {"action": 99}}',
         '{"topic": "pupil", "msg": {"dilation_percentage": "big"}}',
         '{"topic": "unknown", "msg": {}}',
+        # A style that is not one: wrong kind, a pose missing, a number as text.
+        '{"topic": "hello", "msg": {"style": {"kind": "laser"}}}',
+        '{"topic": "hello", "msg": {"style": {"kind": "glow", "background": "#000000", '
+        '"color": "#00ffff", "poses": {}}}}',
+        '{"topic": "hello", "msg": {"style": "glow"}}',
     ]
     for text in junk:
         page.evaluate("(t) => window.eyes.receive(t)", text)
     assert page.evaluate("window.eyes.stats.badMessages") == len(junk)
     assert page.evaluate("JSON.stringify(window.eyes.target)") == before
+    assert page.evaluate("JSON.stringify(window.eyes.cfg.style)") == style_before
+    # A distance that is not a number means "unknown": no vergence, the gaze still taken.
+    page.evaluate("(t) => window.eyes.receive(t)",
+                  '{"topic": "direction", "msg": {"yaw": 5, "pitch": 0, '
+                  '"target_distance_cm": "near"}}')
+    assert page.evaluate("[window.eyes.target.yaw, window.eyes.target.distance]") == [5, None]
     # Out-of-range but well-formed values are clamped, not trusted.
     page.evaluate("""(t) => window.eyes.receive(t)""",
                   '{"topic": "pupil", "msg": {"dilation_percentage": 1000}}')
