@@ -29,11 +29,11 @@ from common import percentile
 
 from buddybot.audio.player import decode_file
 from buddybot.audio.sounds import resolve_file
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Router, retry_until, run_service, write_tone
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Router, retry_until, run_service, write_tone
 
 MB = 1024 * 1024
 

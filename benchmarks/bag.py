@@ -33,9 +33,9 @@ from pathlib import Path
 import psutil
 from common import percentile
 
-from buddybot.core import bag
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until, wait_port
+from buddybot.runtime.node import Node
+from buddybot.tools import bag
+from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until, wait_port
 
 ROBOT_NODES = ("radar-bridge", "radar-presence", "camera", "face-detector", "controller",
                "eyes", "audio", "audio-player")

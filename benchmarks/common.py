@@ -9,8 +9,8 @@ from __future__ import annotations
 import statistics
 from typing import Any
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 
 # Payload kind -> (ping topic, pong topic, ping params, pong params)
 ROUTES: dict[str, tuple[keys.Topic, keys.Topic, dict[str, str], dict[str, str]]] = {

@@ -24,13 +24,13 @@ import msgspec
 import zenoh
 from common import summary
 
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.controller.behaviour import Behaviour
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Router, retry_until, run_service
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Router, retry_until, run_service
 
 
 class Timer:

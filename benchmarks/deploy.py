@@ -31,8 +31,8 @@ from typing import Any
 import zenoh
 from common import ROUTES, make_message, percentile, reply_for
 
-from buddybot.core.node import Node, zenoh_config
-from buddybot.core.testing import LOOPBACK, Process, buddybot_argv, free_port, wait_port
+from buddybot.runtime.node import Node, zenoh_config
+from buddybot.tools.testing import LOOPBACK, Process, buddybot_argv, free_port, wait_port
 
 REPO = Path(__file__).resolve().parents[1]
 ZENOH_DIR = REPO / "deploy" / "zenoh"

@@ -43,10 +43,10 @@ from typing import Any
 import psutil
 from common import percentile
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     Router,
     free_port,
     retry_until,

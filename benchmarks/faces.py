@@ -69,8 +69,8 @@ from buddybot.camera import models  # noqa: E402
 from buddybot.camera.facenet import FaceNet  # noqa: E402
 from buddybot.camera.settings import FaceDetectorSettings  # noqa: E402
 from buddybot.camera.sim import SimCamera  # noqa: E402
-from buddybot.core import keys  # noqa: E402
-from buddybot.core import messages as m  # noqa: E402
+from buddybot.contract import keys  # noqa: E402
+from buddybot.contract import messages as m  # noqa: E402
 from tests.camera import scenes  # noqa: E402
 
 Box = scenes.Box
@@ -405,10 +405,10 @@ def end_to_end(seconds: float = 15.0) -> None:
     latency seen by a subscriber, and the face rate."""
     import threading
 
-    from buddybot.core import keys
-    from buddybot.core import messages as m
-    from buddybot.core.node import Node
-    from buddybot.core.testing import Router, run_service
+    from buddybot.contract import keys
+    from buddybot.contract import messages as m
+    from buddybot.runtime.node import Node
+    from buddybot.tools.testing import Router, run_service
 
     os.sched_setaffinity(0, set(range(os.cpu_count() or 1)))
     router = Router()

@@ -29,15 +29,15 @@ from pathlib import Path
 
 import psutil
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Router, retry_until, run_service
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar import ld2410 as p
 from buddybot.radar.convert import report_to_frame
 from buddybot.radar.presence import PresenceTracker, Reading
 from buddybot.radar.scenarios import NOBODY, Target
 from buddybot.radar.sim import PtySensor
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Router, retry_until, run_service
 
 
 def _frames(engineering: bool, n: int) -> bytes:

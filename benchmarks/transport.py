@@ -27,8 +27,8 @@ from typing import Any
 import zenoh
 from common import ROUTES, make_message, percentile, reply_for
 
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, Router, retry_until
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, Router, retry_until
 
 ROBOT = "bench"
 

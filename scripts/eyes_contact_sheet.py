@@ -23,9 +23,9 @@ from typing import Any
 import cv2
 import numpy as np
 
-from buddybot.core import messages as m
-from buddybot.core.testing import Router, free_port, run_service, wait_port
+from buddybot.contract import messages as m
 from buddybot.eyes import driver, styles
+from buddybot.tools.testing import Router, free_port, run_service, wait_port
 
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update"]

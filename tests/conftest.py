@@ -7,7 +7,7 @@ Also the marker rules, enforced rather than hoped for, so that
   and one that uses the `browser` fixture must be marked `browser`
   (checked from its fixture closure, before it runs);
 * an unmarked test that starts a process itself (`subprocess`, directly or via
-  `buddybot.core.testing`) fails at that call, naming the marker it lacks.
+  `buddybot.tools.testing`) fails at that call, naming the marker it lacks.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ from typing import Any
 
 import pytest
 
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, Router, run_service, stop_and_report
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, Router, run_service, stop_and_report
 
 ARTIFACTS = Path(os.environ.get("BUDDYBOT_ARTIFACTS", "test-artifacts"))
 
@@ -34,7 +34,7 @@ INTEGRATION_FIXTURES = frozenset({
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
 TESTS = Path(__file__).resolve().parent
-TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "core" / "testing.py"
+TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "tools" / "testing.py"
 
 
 def missing_markers(item: pytest.Item) -> list[str]:
@@ -59,7 +59,7 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 def _started_by_test_code() -> bool:
     """True if the innermost caller outside the subprocess module is test code
-    (a test, a conftest, `buddybot.core.testing`), not a library that happens to
+    (a test, a conftest, `buddybot.tools.testing`), not a library that happens to
     run a helper program (ctypes looking for a library, say)."""
     for frame in reversed(traceback.extract_stack()[:-2]):
         path = Path(frame.filename)

@@ -18,8 +18,9 @@ import msgspec
 import pytest
 
 from buddybot import cli
-from buddybot.core import config, errors, keys, params, registry
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import config, errors, params, registry
 
 DESIGN = Path(__file__).resolve().parents[1] / "docs" / "design.md"
 QOS_NAMES = {id(keys.STREAM): "STREAM", id(keys.IMAGES): "IMAGES",

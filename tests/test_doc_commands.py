@@ -41,8 +41,8 @@ from pathlib import Path
 import pytest
 
 from buddybot import cli
-from buddybot.core import registry
-from buddybot.core.service import add_common_arguments
+from buddybot.runtime import registry
+from buddybot.runtime.service import add_common_arguments
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]

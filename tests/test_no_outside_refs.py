@@ -60,7 +60,7 @@ def tracked_files() -> list[Path]:
 
 def test_the_index_reader_finds_this_repository_s_files() -> None:
     files = {p.relative_to(ROOT).as_posix() for p in tracked_files()}
-    assert {"README.md", "services/core/keys.py", "pyproject.toml"} <= files
+    assert {"README.md", "services/contract/keys.py", "pyproject.toml"} <= files
 
 
 def test_the_pattern_catches_what_it_must() -> None:

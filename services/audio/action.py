@@ -27,13 +27,14 @@ from buddybot.audio import protocol
 from buddybot.audio.goals import GoalBook
 from buddybot.audio.settings import AudioSettings
 from buddybot.audio.sounds import effective_sounds
-from buddybot.core import keys, limits
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import CallError, Node, NoReplyError, new_goal_id
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import limits
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import CallError, Node, NoReplyError, new_goal_id
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 RETRY_S = 0.05
 """Pause between play requests that found no player queryable yet (a starting

@@ -18,9 +18,9 @@ from __future__ import annotations
 from collections.abc import Collection
 from dataclasses import dataclass, field
 
-from buddybot.core import limits
-from buddybot.core import messages as m
-from buddybot.core.messages import TERMINAL_GOAL_STATES, GoalState
+from buddybot.contract import messages as m
+from buddybot.contract.messages import TERMINAL_GOAL_STATES, GoalState
+from buddybot.runtime import limits
 
 END_TOLERANCE_S = 0.25
 """A device that becomes free this much before the announced end still means

@@ -20,12 +20,13 @@ from buddybot.audio import protocol
 from buddybot.audio.player import AudioError, Player
 from buddybot.audio.settings import AudioPlayerSettings, AudioSettings
 from buddybot.audio.sounds import effective_sounds
-from buddybot.core import keys, limits
-from buddybot.core import messages as m
-from buddybot.core.config import config_dir
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import limits
+from buddybot.runtime.config import config_dir
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 TEXT_MAX = 1000
 """Characters of a refusal reason kept in a reply or a log line (enough for a

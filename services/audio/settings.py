@@ -2,7 +2,7 @@
 
 Every field has a default that works on a headless box, so an empty
 config file runs the robot; an unknown key or a wrong type is reported
-at start-up by `buddybot.core.config`.
+at start-up by `buddybot.runtime.config`.
 """
 
 from __future__ import annotations

@@ -20,17 +20,17 @@ import numpy as np
 from buddybot.camera import frames
 from buddybot.camera.settings import CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.backoff import Backoff
-from buddybot.core.config import resolve_path
-from buddybot.core.errors import ConfigError
-from buddybot.core.limits import clip
-from buddybot.core.node import Node, Publisher, RateLimitedLog
-from buddybot.core.overrides import given, merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.rates import RateCounter
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.backoff import Backoff
+from buddybot.runtime.config import resolve_path
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.limits import clip
+from buddybot.runtime.node import Node, Publisher, RateLimitedLog
+from buddybot.runtime.overrides import given, merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.rates import RateCounter
+from buddybot.runtime.service import ServiceContext
 
 DEFAULT_FPS = 30.0
 MESSAGE_OVERHEAD = 256

@@ -9,7 +9,7 @@ A strange detection (a NaN keypoint, an infinite distance, a box far
 outside the image) must never raise here nor make receivers refuse the
 message, so every value is put into its field's range: a non-finite pixel
 or weight becomes 0, a non-finite distance None, anything else is clamped.
-The ranges are read from the message types once (`core/messages.py` is
+The ranges are read from the message types once (`contract/messages.py` is
 their one definition).
 """
 
@@ -23,8 +23,8 @@ import msgspec.inspect as mi
 from buddybot.camera import blazeface as bf
 from buddybot.camera.fusion import Weighted
 from buddybot.camera.pipeline import FaceResult
-from buddybot.core import messages as m
-from buddybot.core.overrides import field_info
+from buddybot.contract import messages as m
+from buddybot.runtime.overrides import field_info
 
 
 def _constraint(struct: type[msgspec.Struct], field: str, name: str) -> float:

@@ -27,15 +27,15 @@ from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.tracking import PointSmoother
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.config import resolve_path
-from buddybot.core.errors import ConfigError
-from buddybot.core.limits import clip, plausible_stamp
-from buddybot.core.node import RateLimitedLog
-from buddybot.core.overrides import given, merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.config import resolve_path
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.limits import clip, plausible_stamp
+from buddybot.runtime.node import RateLimitedLog
+from buddybot.runtime.overrides import given, merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

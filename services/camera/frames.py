@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from buddybot.camera import jpeg
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 
 MAX_SIDE = 16384
 """The `Image` message's limit on width and height (messages.py): a larger

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 from ai_edge_litert.interpreter import Interpreter  # type: ignore[import-untyped]
 
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.errors import ConfigError
 
 P = TypeVar("P")
 R = TypeVar("R")

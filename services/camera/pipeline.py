@@ -46,7 +46,7 @@ from buddybot.camera.geometry import (
 from buddybot.camera.iris import IrisNet, IrisSchedule
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.tracking import PointSmoother, TargetTracker
-from buddybot.core.limits import BoundedDict
+from buddybot.runtime.limits import BoundedDict
 
 MEASURE_MAX_RATIO = 1.5
 """A crop re-detection whose width differs from the whole-frame box by more than this

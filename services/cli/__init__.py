@@ -24,7 +24,7 @@ from __future__ import annotations
 # False` for verbs that never read the robot's configuration. `run SERVICE`
 # and the registry's tools bring their own parser (`buddybot run camera
 # --help` lists the camera's options). Every path ends in one place,
-# `buddybot.core.service.run_main`, which maps errors to exit statuses.
+# `buddybot.runtime.service.run_main`, which maps errors to exit statuses.
 import argparse
 import importlib
 import importlib.metadata
@@ -35,9 +35,9 @@ from collections.abc import Sequence
 from types import ModuleType
 
 from buddybot import __version__
-from buddybot.core import registry
-from buddybot.core.errors import EXIT_USAGE
-from buddybot.core.service import add_common_arguments, run_main
+from buddybot.runtime import registry
+from buddybot.runtime.errors import EXIT_USAGE
+from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
          "doctor", "param", "topics", "node", "foxglove", "bag")

@@ -6,7 +6,7 @@
 
 `record` subscribes to every topic of the catalogue but images (`--images`
 adds the camera frames, JPEG-compressed) or to the KEYs given, and writes
-one MCAP channel per concrete key (core/bag.py says how); the file opens
+one MCAP channel per concrete key (tools/bag.py says how); the file opens
 in Foxglove. Ctrl-C, SIGTERM or `--duration` end it, and the file is
 always finished (summary and index).
 
@@ -33,12 +33,13 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
-from buddybot.core import bag, channels, keys, tools
-from buddybot.core.bag_record import Recorder
-from buddybot.core.errors import UsageError
-from buddybot.core.node import Node, Publisher
-from buddybot.core.service import ServiceContext, add_common_arguments
-from buddybot.core.session import RouterUnreachable, zenoh_config
+from buddybot.contract import channels, keys
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.node import Node, Publisher
+from buddybot.runtime.service import ServiceContext, add_common_arguments
+from buddybot.runtime.session import RouterUnreachable, zenoh_config
+from buddybot.tools import bag, probing
+from buddybot.tools.bag_record import Recorder
 
 HELP = "record the robot's keys to an MCAP file, replay one, or describe one"
 PLAY_NODE = "bag-play"
@@ -57,7 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                      help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
     rec.add_argument("--images", action="store_true",
                      help="also record camera/*/image (JPEG-compressed)")
-    tools.add_timeout_argument(rec, None, "here only the connection (--duration ends a recording)")
+    probing.add_timeout_argument(
+        rec, None, "here only the connection (--duration ends a recording)")
     play = _action(actions, "play", "replay an MCAP file on the robot's keys")
     play.add_argument("file", metavar="FILE")
     play.add_argument("--rate", type=float, default=1.0, metavar="R",
@@ -69,7 +71,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                       help="replay only these keys (relative or absolute, wildcards allowed)")
     play.add_argument("--wait", type=float, default=1.0, metavar="S",
                       help="wait up to S seconds for subscribers before the first message")
-    tools.add_timeout_argument(play, None, "here only the connection (a replay lasts its file)")
+    probing.add_timeout_argument(play, None, "here only the connection (a replay lasts its file)")
     info_parser = _action(actions, "info", "describe an MCAP file: duration, channels, rates")
     info_parser.add_argument("file", metavar="FILE")
     info_parser.add_argument("--json", action="store_true", help="print JSON")
@@ -112,7 +114,7 @@ def record_keys(robot: str, selected: list[str], images: bool) -> list[tuple[str
                   if not channels.is_image(t)]
     for text in selected:
         key = keys.absolute(robot, text)
-        topics = [e for e in tools.catalogue_matches(key) if isinstance(e, keys.Topic)]
+        topics = [e for e in probing.catalogue_matches(key) if isinstance(e, keys.Topic)]
         if not topics:
             raise UsageError(f"{text}: matches no topic of the catalogue (see `buddybot keys`)")
         wanted.append((key, any(t.latched for t in topics)))
@@ -134,7 +136,7 @@ def record(ctx: ServiceContext) -> int:
         raise UsageError("--duration must be positive")
     wanted = record_keys(ctx.robot, args.keys, args.images)
     tty = sys.stderr.isatty()
-    with tools.probe(ctx, args.timeout) as node:
+    with probing.probe(ctx, args.timeout) as node:
         recorder = Recorder(bag.BagWriter(args.output, robot=ctx.robot))
 
         def on_sample(key: str, payload: bytes, _encoding: str) -> None:
@@ -143,7 +145,7 @@ def record(ctx: ServiceContext) -> int:
         subscriptions = [node.subscribe_raw(key, on_sample, history=history)
                          for key, history in wanted]
         started = time.monotonic()
-        end = tools.deadline(args.duration)
+        end = probing.deadline(args.duration)
         next_line = started + PROGRESS_S
         try:
             while not ctx.stop.is_set() and recorder.error is None:
@@ -162,7 +164,7 @@ def record(ctx: ServiceContext) -> int:
             elapsed = time.monotonic() - started
         if final.written == 0 and recorder.error is None and not ctx.stop.is_set():
             print(f"buddybot bag: warning: nothing recorded: "
-                  f"{tools.silence_reason(node, keys.absolute(ctx.robot, '**'))}",
+                  f"{probing.silence_reason(node, keys.absolute(ctx.robot, '**'))}",
                   file=sys.stderr)
     if tty:
         print(file=sys.stderr)
@@ -261,7 +263,7 @@ def _play_node(ctx: ServiceContext, robot: str) -> Node:
     """The player's node: seen by `nodes` (it publishes on the robot's keys), but
     giving up on the router after --timeout like a probe instead of waiting."""
     limit = ctx.args.timeout if ctx.args.timeout and ctx.args.timeout > 0 \
-        else tools.CONNECT_TIMEOUT_S
+        else probing.CONNECT_TIMEOUT_S
     config = zenoh_config(connect=ctx.connect, base_file=ctx.config.zenoh.config_file,
                           connect_timeout_s=limit)
     if getattr(ctx.args, "log_level", "INFO") == "INFO":  # its "node up" line is noise here

@@ -7,11 +7,12 @@ import sys
 
 import msgspec
 
-from buddybot.core import keys, tools
-from buddybot.core import messages as m
-from buddybot.core.describe import summarize
-from buddybot.core.errors import UsageError
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.contract.describe import summarize
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "query a service (or send an action goal) and print the reply"
 
@@ -23,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key")
     parser.add_argument("request", nargs="?", default="{}",
                         help="JSON request (default {}); enum fields take names or numbers")
-    tools.add_timeout_argument(parser, 5.0, "connection and reply together")
+    probing.add_timeout_argument(parser, 5.0, "connection and reply together")
     parser.add_argument("--raw", action="store_true",
                         help="enum fields of the reply as numbers, not names")
 
@@ -47,13 +48,13 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
-    entry = tools.catalogue_entry(key)
+    entry = probing.catalogue_entry(key)
     if not isinstance(entry, keys.Service):
         raise UsageError(f"{args.key}: not a service of the catalogue (see `buddybot keys`)")
-    request = tools.parse_message(entry.request, args.request)
-    end = tools.deadline(args.timeout)
-    with tools.probe(ctx, args.timeout) as node:
-        remaining = round(tools.left(end, 0.1), 1) if args.timeout else 5.0
+    request = probing.parse_message(entry.request, args.request)
+    end = probing.deadline(args.timeout)
+    with probing.probe(ctx, args.timeout) as node:
+        remaining = round(probing.left(end, 0.1), 1) if args.timeout else 5.0
         reply = node.call_key(key, entry, request, timeout=remaining)
     print(summarize(reply, names=not args.raw) if isinstance(reply, m.Message)
           else msgspec.json.encode(reply).decode(), flush=True)

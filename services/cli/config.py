@@ -6,8 +6,8 @@ import argparse
 import json
 from typing import Any
 
-from buddybot.core.config import to_toml_dict
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.config import to_toml_dict
+from buddybot.runtime.service import ServiceContext
 
 HELP = "print the effective configuration"
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from buddybot.core.service import ServiceContext, add_common_arguments
+from buddybot.runtime.service import ServiceContext, add_common_arguments
 
 HELP = "check the robot: config, devices, versions, router, nodes, sensor rates, eyes, clock"
 USES_CONFIG = False
@@ -40,10 +40,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(ctx: ServiceContext) -> int:
-    from buddybot.core import doctor, registry
-    from buddybot.core.config import DEFAULT_ENDPOINT, default_config
-    from buddybot.core.errors import ConfigError, UsageError
-    from buddybot.core.service import resolve
+    from buddybot.runtime import registry
+    from buddybot.runtime.config import DEFAULT_ENDPOINT, default_config
+    from buddybot.runtime.errors import ConfigError, UsageError
+    from buddybot.runtime.service import resolve
+    from buddybot.tools import doctor
 
     args = ctx.args
     # Zenoh's own "unable to connect" warning repeats what the router check says.

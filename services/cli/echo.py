@@ -9,9 +9,10 @@ import sys
 import threading
 import time
 
-from buddybot.core import keys, tools
-from buddybot.core.describe import describe
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract.describe import describe
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "print decoded messages on KEY"
 
@@ -19,7 +20,7 @@ HELP = "print decoded messages on KEY"
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("key", help="key (prefix buddybot/<robot>/ optional; wildcards allowed)")
     parser.add_argument("--count", "-n", type=int, default=0, help="exit after N messages")
-    tools.add_timeout_argument(parser, None, "exit after S seconds; exit 1 if nothing arrived")
+    probing.add_timeout_argument(parser, None, "exit after S seconds; exit 1 if nothing arrived")
     parser.add_argument("--show-key", action="store_true",
                         help="print the key before each message")
     parser.add_argument("--raw", action="store_true",
@@ -34,7 +35,7 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
-    end = tools.deadline(args.timeout)
+    end = probing.deadline(args.timeout)
     count = 0
     done = threading.Event()
     closed = threading.Event()
@@ -59,18 +60,18 @@ def main(ctx: ServiceContext) -> int:
 
     why = ""
     stopped = False  # Ctrl-C (closing the node sets ctx.stop too: look before)
-    with tools.probe(ctx, args.timeout) as node:
-        node.subscribe_raw(key, on_sample, history=tools.is_latched(key) or "*" in key)
-        hint_at = time.monotonic() + tools.CONNECT_TIMEOUT_S
+    with probing.probe(ctx, args.timeout) as node:
+        node.subscribe_raw(key, on_sample, history=probing.is_latched(key) or "*" in key)
+        hint_at = time.monotonic() + probing.CONNECT_TIMEOUT_S
         while not done.is_set() and not ctx.stop.is_set() and time.monotonic() < end:
             done.wait(0.1)
             if args.timeout is None and count == 0 and time.monotonic() > hint_at:
                 hint_at = float("inf")  # running until stopped: say it once, keep waiting
-                print(f"buddybot echo: nothing yet: {tools.silence_reason(node, key)}",
+                print(f"buddybot echo: nothing yet: {probing.silence_reason(node, key)}",
                       file=sys.stderr, flush=True)
         stopped = ctx.stop.is_set()
         if count == 0 and not closed.is_set() and not stopped:
-            why = tools.silence_reason(node, key)
+            why = probing.silence_reason(node, key)
     if closed.is_set():
         with contextlib.suppress(OSError):  # no traceback at exit for the closed stdout
             sys.stdout = open(os.devnull, "w")  # noqa: SIM115

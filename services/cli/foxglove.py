@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import argparse
 
-from buddybot.core.service import ServiceContext
 from buddybot.foxglove import options
+from buddybot.runtime.service import ServiceContext
 
 HELP = "serve every key live to the Foxglove app (ws://127.0.0.1:8765)"
 

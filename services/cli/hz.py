@@ -12,9 +12,10 @@ import time
 from collections import deque
 from typing import Any
 
-from buddybot.core import keys, tools
-from buddybot.core.rates import span_hz
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.runtime.rates import span_hz
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "print the publishing rate of KEY"
 
@@ -24,7 +25,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--window", type=int, default=100, help="samples in the window")
     parser.add_argument("--duration", type=float, default=None,
                         help="exit after this many seconds")
-    tools.add_timeout_argument(parser, None, "exit 1 if nothing arrived within S")
+    probing.add_timeout_argument(parser, None, "exit 1 if nothing arrived within S")
     parser.add_argument("--json", action="store_true",
                         help="print one JSON document at exit instead of a line per second")
 
@@ -66,13 +67,13 @@ def main(ctx: ServiceContext) -> int:
             stamps.append(time.monotonic())
             received += 1
 
-    first_by = tools.deadline(args.timeout)
-    end = tools.deadline(args.duration)
+    first_by = probing.deadline(args.timeout)
+    end = probing.deadline(args.duration)
     why = ""
     period = 0.1 if args.json else 1.0  # --json prints once: only check the deadlines
-    with tools.probe(ctx, args.timeout) as node:
+    with probing.probe(ctx, args.timeout) as node:
         node.subscribe_raw(key, on_sample)
-        hint_at = (time.monotonic() + tools.CONNECT_TIMEOUT_S
+        hint_at = (time.monotonic() + probing.CONNECT_TIMEOUT_S
                    if args.timeout is None else float("inf"))
         while not ctx.stop.wait(period) and time.monotonic() < end:
             with lock:
@@ -82,7 +83,7 @@ def main(ctx: ServiceContext) -> int:
                 break
             if nothing and time.monotonic() > hint_at:
                 hint_at = float("inf")  # running until stopped: say it once, keep waiting
-                print(f"buddybot hz: nothing yet: {tools.silence_reason(node, key)}",
+                print(f"buddybot hz: nothing yet: {probing.silence_reason(node, key)}",
                       file=sys.stderr, flush=True)
             if not args.json:
                 print(report or "no new messages", flush=True)
@@ -90,7 +91,7 @@ def main(ctx: ServiceContext) -> int:
             nothing = received == 0
             stats = rate_stats(list(stamps))
         if nothing and not ctx.stop.is_set():
-            why = tools.silence_reason(node, key)
+            why = probing.silence_reason(node, key)
     if args.json:
         print(json.dumps({"key": key, "received": received, **(stats or {"rate_hz": None})}))
     if why:

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from buddybot.core import keys
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.runtime.service import ServiceContext
 
 HELP = "list the key catalogue"
 USES_CONFIG = False

@@ -12,10 +12,11 @@ import argparse
 
 import msgspec
 
-from buddybot.core import keys, tools
-from buddybot.core import messages as m
-from buddybot.core.errors import NoReplyError, ServiceError, UsageError
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "what a running node publishes, subscribes, serves, and its parameters"
 
@@ -57,7 +58,7 @@ def main(ctx: ServiceContext) -> int:
     name = args.name
     if not keys.valid_robot_id(name):
         raise UsageError(f"{name!r} is not a node name")
-    with tools.probe(ctx) as node:
+    with probing.probe(ctx) as node:
         try:
             info: m.NodeInfo = node.call(keys.NODE_INFO, m.Trigger(), timeout=args.timeout,
                                          node=name)

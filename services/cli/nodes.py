@@ -6,15 +6,15 @@ import argparse
 import json
 import sys
 
-from buddybot.core import tools
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "list live nodes (liveliness tokens)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-robots", action="store_true", help="every robot on the router")
-    tools.add_timeout_argument(parser, tools.CONNECT_TIMEOUT_S,
+    probing.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S,
                                "connection and liveliness query together")
     parser.add_argument("--json", action="store_true",
                         help='one JSON document: {"robot": ..., "nodes": {name: [instances]}}')
@@ -28,9 +28,9 @@ def main(ctx: ServiceContext) -> int:
     ask "is the robot up?" by the status alone.
     """
     args = ctx.args
-    end = tools.deadline(args.timeout)
-    with tools.probe(ctx, args.timeout) as node:
-        found = node.node_instances(all_robots=args.all_robots, timeout=tools.left(end))
+    end = probing.deadline(args.timeout)
+    with probing.probe(ctx, args.timeout) as node:
+        found = node.node_instances(all_robots=args.all_robots, timeout=probing.left(end))
     if args.json:
         print(json.dumps({"robot": "*" if args.all_robots else ctx.robot,
                           "nodes": {name: sorted(found[name]) for name in sorted(found)}}))

@@ -20,10 +20,11 @@ from typing import Any
 
 import msgspec
 
-from buddybot.core import keys, tools
-from buddybot.core import messages as m
-from buddybot.core.errors import NoReplyError, ServiceError, UsageError
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "list, get, set, dump or load a running node's parameters (its settings)"
 OPS = ("list", "get", "set", "dump", "load")
@@ -54,7 +55,7 @@ def request(ctx: ServiceContext, node_name: str, req: m.ParamRequest) -> m.Param
     """One call to `params/<node>`; ServiceError (exit 1) when nobody answers."""
     if not keys.valid_robot_id(node_name):
         raise UsageError(f"{node_name!r} is not a node name")
-    with tools.probe(ctx) as node:
+    with probing.probe(ctx) as node:
         try:
             reply: m.ParamReply = node.call(keys.PARAMS, req, timeout=ctx.args.timeout,
                                             node=node_name)

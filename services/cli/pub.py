@@ -8,10 +8,11 @@ import time
 
 import msgspec
 
-from buddybot.core import keys, tools
-from buddybot.core import messages as m
-from buddybot.core.errors import UsageError
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "validate and publish one message on KEY"
 
@@ -26,7 +27,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait", type=float, default=2.0,
                         help="seconds to wait for a subscriber before the first put "
                              "(none by then: a warning, and the message goes nowhere)")
-    tools.add_timeout_argument(parser, tools.CONNECT_TIMEOUT_S, "the connection")
+    probing.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S, "the connection")
 
 
 def main(ctx: ServiceContext) -> int:
@@ -37,14 +38,14 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
-    entry = tools.catalogue_entry(key)
+    entry = probing.catalogue_entry(key)
     if not isinstance(entry, keys.Topic):
         raise UsageError(f"{args.key}: not a topic of the catalogue (see `buddybot keys`)")
     if "*" in key:
         raise UsageError(f"{args.key}: cannot publish on a wildcard key")
-    msg = tools.parse_message(entry.type, args.message)
+    msg = probing.parse_message(entry.type, args.message)
     sent = 0
-    with tools.probe(ctx, args.timeout) as node, \
+    with probing.probe(ctx, args.timeout) as node, \
             node.raw_publisher(key, entry.encoding) as publisher:
         # Give discovery a moment so the first put reaches existing subscribers.
         if not publisher.wait_for_subscribers(args.wait, ctx.stop) and not ctx.stop.is_set():

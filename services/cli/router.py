@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from buddybot.core.config import DEFAULT_ENDPOINT
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.config import DEFAULT_ENDPOINT
+from buddybot.runtime.service import ServiceContext
 
 HELP = "run a Zenoh router"
 
@@ -24,7 +24,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(ctx: ServiceContext) -> int:
-    from buddybot.core.router import run_router
+    from buddybot.supervisor.router import run_router
 
     run_router(ctx.args.listen or [DEFAULT_ENDPOINT], ctx.stop, ctx.args.zenoh_config)
     return 0

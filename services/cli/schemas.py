@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from buddybot.core import schemas
-from buddybot.core.service import ServiceContext
+from buddybot.contract import schemas
+from buddybot.runtime.service import ServiceContext
 
 HELP = "write (or --check) the JSON schemas in schemas/"
 USES_CONFIG = False

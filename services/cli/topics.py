@@ -25,10 +25,10 @@ from dataclasses import dataclass, field
 
 import msgspec
 
-from buddybot.core import keys, tools
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
 
 HELP = "keys seen on the robot with their rates, publishers and subscribers"
 
@@ -97,28 +97,14 @@ def table(counts: dict[str, int], window_s: float, infos: list[m.NodeInfo]) -> l
     return rows
 
 
-def node_infos(node: Node, prefix: str, timeout: float) -> list[m.NodeInfo]:
-    """Every node's own report (`node_info/*`); replies that do not decode are skipped."""
-    found = []
-    for reply in node.query(f"{prefix}/{keys.NODE_INFO.wildcard()}",
-                            keys.NODE_INFO.codec.encode(m.Trigger()), timeout=timeout):
-        if not reply.ok:
-            continue
-        try:
-            found.append(keys.NODE_INFO.codec.decode(reply.payload, m.NodeInfo))
-        except (msgspec.DecodeError, msgspec.ValidationError):
-            continue
-    return found
-
-
 def main(ctx: ServiceContext) -> int:
     args = ctx.args
     prefix = keys.prefix(ctx.robot)
     traffic = Traffic()
-    with tools.probe(ctx) as node:
+    with probing.probe(ctx) as node:
         start = time.monotonic()
         node.subscribe_raw(f"{prefix}/**", traffic.on_sample)
-        infos = node_infos(node, prefix, min(args.timeout, 5.0))
+        infos = node.node_infos(min(args.timeout, 5.0))
         ctx.stop.wait(max(0.0, args.timeout - (time.monotonic() - start)))
         window = time.monotonic() - start
         with traffic.lock:

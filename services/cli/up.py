@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from buddybot.core.config import DEFAULT_ENDPOINT
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.config import DEFAULT_ENDPOINT
+from buddybot.runtime.service import ServiceContext
 
 HELP = "run the whole robot: router on loopback + every service"
 
@@ -51,6 +51,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(ctx: ServiceContext) -> int:
-    from buddybot.core.launch import up  # the supervisor: loaded only by this verb
+    from buddybot.supervisor.launch import up  # the supervisor: loaded only by this verb
 
     return up(ctx)

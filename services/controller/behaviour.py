@@ -72,9 +72,9 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
+from buddybot.contract.messages import TERMINAL_GOAL_STATES, ExpressionAction, Waiting
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
-from buddybot.core.messages import TERMINAL_GOAL_STATES, ExpressionAction, Waiting
 
 # --- commands ------------------------------------------------------------------------
 

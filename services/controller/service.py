@@ -36,6 +36,8 @@ import time
 from collections.abc import Callable
 from typing import assert_never
 
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.controller.behaviour import (
     Behaviour,
     CancelSound,
@@ -55,13 +57,11 @@ from buddybot.controller.events import (
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ConfigError
-from buddybot.core.node import Node, RateLimitedLog
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.node import Node, RateLimitedLog
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
 

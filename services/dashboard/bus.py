@@ -19,14 +19,14 @@ from typing import Any
 import cv2
 import numpy as np
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.limits import clip
-from buddybot.core.loop_inbox import LoopInbox
-from buddybot.core.node import Node, RateLimitedLog, Subscription
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.dashboard import model
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.limits import clip
+from buddybot.runtime.loop_inbox import LoopInbox
+from buddybot.runtime.node import Node, RateLimitedLog, Subscription
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)

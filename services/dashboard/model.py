@@ -29,8 +29,8 @@ from urllib.parse import urlsplit
 
 import msgspec
 
-from buddybot.core import messages as m
-from buddybot.core.limits import BoundedDict, clip
+from buddybot.contract import messages as m
+from buddybot.runtime.limits import BoundedDict, clip
 
 MAX_NODES = 256
 """Node names remembered (liveliness keys are chosen by whoever connects)."""

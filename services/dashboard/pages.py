@@ -20,12 +20,12 @@ from typing import Any
 import msgspec
 from aiohttp import WSMsgType, web
 
-from buddybot.core import messages as m
-from buddybot.core.limits import BoundedDict, clip
-from buddybot.core.node import RateLimitedLog
+from buddybot.contract import messages as m
 from buddybot.dashboard import model
 from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime.limits import BoundedDict, clip
+from buddybot.runtime.node import RateLimitedLog
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)

@@ -35,15 +35,15 @@ from functools import partial
 
 from aiohttp import web
 
-from buddybot.core.doctor import serve_failure
-from buddybot.core.errors import ServeError
-from buddybot.core.node import Node
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime.errors import ServeError
+from buddybot.runtime.node import Node
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools.doctor import serve_failure
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

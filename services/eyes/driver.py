@@ -21,7 +21,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 
 # --- gaze --------------------------------------------------------------------------
 

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 import argparse
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ConfigError
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.eyes import driver
 from buddybot.eyes.settings import EyesSettings
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -17,8 +17,8 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-from buddybot.core.backoff import Backoff
 from buddybot.eyes.placement import Window
+from buddybot.runtime.backoff import Backoff
 
 log = logging.getLogger("buddybot.eye-renderer.kiosk")
 

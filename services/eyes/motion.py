@@ -40,7 +40,7 @@ from dataclasses import dataclass
 import msgspec
 
 AWAKE, SLEEP, SLEEPY, LOOK_RANDOM = 0, 1, 2, 5
-"""The `ExpressionAction` values the motion depends on (core/messages.py)."""
+"""The `ExpressionAction` values the motion depends on (contract/messages.py)."""
 
 NEVER = math.inf
 

@@ -55,18 +55,18 @@ from typing import Any
 import msgspec
 from aiohttp import WSCloseCode, WSMsgType, web
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.config import resolve_path
-from buddybot.core.errors import UsageError
-from buddybot.core.limits import clip
-from buddybot.core.loop_inbox import LoopInbox
-from buddybot.core.node import Node, RateLimitedLog
-from buddybot.core.overrides import given, merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
+from buddybot.runtime.config import resolve_path
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.limits import clip
+from buddybot.runtime.loop_inbox import LoopInbox
+from buddybot.runtime.node import Node, RateLimitedLog
+from buddybot.runtime.overrides import given, merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.eye-renderer")
 _warn = RateLimitedLog(log)

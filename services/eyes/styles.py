@@ -35,10 +35,10 @@ from typing import Annotated, Any, Literal
 
 import msgspec
 
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.errors import ConfigError
 
 EXPRESSIONS = ("AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR")
-"""Pose names, in `ExpressionAction` order (core/messages.py without the EYE_/ANIMATE_
+"""Pose names, in `ExpressionAction` order (contract/messages.py without the EYE_/ANIMATE_
 prefixes, as the page's EXPR table names them)."""
 
 Percent = Annotated[float, msgspec.Meta(ge=0.0, le=100.0)]

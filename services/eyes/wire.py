@@ -25,7 +25,7 @@ from urllib.parse import urlsplit
 
 import msgspec
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from buddybot.eyes.styles import Style
 
 TOPIC_NAMES: dict[type[m.Message], str] = {

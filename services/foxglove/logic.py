@@ -10,8 +10,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from buddybot.core import channels, keys
-from buddybot.core import messages as m
+from buddybot.contract import channels, keys
+from buddybot.contract import messages as m
 
 ANNOTATIONS_SUFFIX = "/annotations"
 """Topic of the boxes drawn over a camera's image: `<faces key>/annotations`."""

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import argparse
 
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.service import ServiceContext
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.service import ServiceContext
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,6 +1,6 @@
 """The Foxglove SDK side of the bridge: channels, the WebSocket server, who watches.
 
-No Zenoh here. Channels are made from `core/channels.py` (the bag recorder
+No Zenoh here. Channels are made from `contract/channels.py` (the bag recorder
 shows keys the same way) the first time a key is seen, and advertised to
 every connected client at once.
 
@@ -21,10 +21,10 @@ import foxglove
 import msgspec
 from foxglove.websocket import Capability, ChannelView, Client, ServerListener, WebSocketServer
 
-from buddybot.core import channels, keys
-from buddybot.core.doctor import serve_failure
-from buddybot.core.errors import ServeError
+from buddybot.contract import channels, keys
 from buddybot.foxglove import logic
+from buddybot.runtime.errors import ServeError
+from buddybot.tools.doctor import serve_failure
 
 SERVER_NAME = "buddybot"
 

@@ -31,18 +31,17 @@ from urllib.parse import urlencode
 import foxglove
 import msgspec
 
-from buddybot.cli.topics import node_infos
-from buddybot.core import channels, keys, tools
-from buddybot.core import messages as m
-from buddybot.core.handles import Publisher, Subscription
-from buddybot.core.limits import clip
-from buddybot.core.node import Node
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import channels, describe, keys
+from buddybot.contract import messages as m
 from buddybot.foxglove import logic
 from buddybot.foxglove.options import add_arguments, settings_from
 from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.runtime.handles import Publisher, Subscription
+from buddybot.runtime.limits import clip
+from buddybot.runtime.node import Node
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 __all__ = ["add_arguments", "run", "settings_from"]
 
@@ -109,7 +108,7 @@ class Bridge:
         """Advertise every image key a node says it publishes."""
         if not self.settings.images:
             return
-        infos = node_infos(self.node, self.node.prefix, QUERY_TIMEOUT_S)
+        infos = self.node.node_infos(QUERY_TIMEOUT_S)
         for relative_key in sorted(logic.declared_images(infos)):
             key = f"{self.node.prefix}/{relative_key}"
             topic = logic.topic_of(relative_key)
@@ -194,7 +193,7 @@ class Bridge:
 
     def set_expression(self, request: foxglove.ServiceRequest) -> bytes:
         """Publish the expression (`{"action": "EYE_HAPPY"}`; a name or a number)."""
-        msg = tools.parse_message(m.ScreenExpression, _text(request.payload))
+        msg = describe.parse_message(m.ScreenExpression, _text(request.payload))
         with self._expression_lock:
             if self._expression is None:  # declared on first use: `node info` stays true
                 self._expression = self.node.publisher(keys.EXPRESSION)
@@ -205,7 +204,7 @@ class Bridge:
 
     def play_sound(self, request: foxglove.ServiceRequest) -> bytes:
         """Send a play_sound goal; the reply says whether it was accepted."""
-        goal = tools.parse_message(m.PlaySound, _text(request.payload))
+        goal = describe.parse_message(m.PlaySound, _text(request.payload))
         # No audio service, or an error reply: ServiceError, which the SDK sends
         # back to the app as the call's failure message.
         reply = self.node.call(keys.PLAY_SOUND, goal, timeout=CALL_TIMEOUT_S)

@@ -30,21 +30,21 @@ from typing import Any
 import msgspec
 import serial
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.backoff import Backoff
-from buddybot.core.errors import ConfigError, UsageError
-from buddybot.core.limits import clip
-from buddybot.core.node import Node, RateLimitedLog
-from buddybot.core.overrides import given, merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.convert import report_to_frame
 from buddybot.radar.ld2410 import Parser, ProtocolError, Report
 from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.runtime.backoff import Backoff
+from buddybot.runtime.errors import ConfigError, UsageError
+from buddybot.runtime.limits import clip
+from buddybot.runtime.node import Node, RateLimitedLog
+from buddybot.runtime.overrides import given, merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 FIRMWARE_TIMEOUT_S = 0.5  # per ACK, two attempts: a mute sensor costs 1 s per connect
 NOISE_STATES = {

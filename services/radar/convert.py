@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from buddybot.radar.ld2410 import Report
 
 ENERGY_MAX = 100

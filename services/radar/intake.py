@@ -20,7 +20,7 @@ import threading
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
-from buddybot.core.limits import BoundedDict
+from buddybot.runtime.limits import BoundedDict
 
 T = TypeVar("T")
 

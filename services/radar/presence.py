@@ -43,9 +43,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from buddybot.core.limits import BoundedDict
-from buddybot.core.messages import PresenceState, PresenceTarget, TargetState
+from buddybot.contract.messages import PresenceState, PresenceTarget, TargetState
 from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.runtime.limits import BoundedDict
 
 TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
 ESTABLISHED_S = 1.0  # a sensor heard this long ...

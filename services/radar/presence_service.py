@@ -23,16 +23,16 @@ import argparse
 import threading
 import time
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.limits import clip, plausible_stamp
-from buddybot.core.node import Node
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.params import LiveSettings
-from buddybot.core.service import ServiceContext
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar.intake import Intake
 from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
 from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.runtime.limits import clip, plausible_stamp
+from buddybot.runtime.node import Node
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.service import ServiceContext
 
 TICK_S = 0.05  # hold/staleness resolution; costs nothing, keeps OUT_OF_RANGE on time
 REPORT_MIN_S = 1.0  # a changing sensor list is reported at most this often (level: at once)

@@ -3,7 +3,7 @@
 Every default is chosen for a real LD2410 at its factory settings; the
 reasons are in docs/radar.md. Each number carries its range and a
 description (unit, why): the config file, the command-line options
-(`buddybot.core.overrides`) and their help all take them from here.
+(`buddybot.runtime.overrides`) and their help all take them from here.
 """
 
 from __future__ import annotations

@@ -27,14 +27,14 @@ import time
 
 import serial
 
-from buddybot.core.errors import DeviceError, UsageError
-from buddybot.core.limits import clip
-from buddybot.core.overrides import merge, settings_option
-from buddybot.core.service import ServiceContext
 from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
 from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.runtime.errors import DeviceError, UsageError
+from buddybot.runtime.limits import clip
+from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.service import ServiceContext
 
 NOISE_POLL_S = 0.5
 

@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, retry_until
 
 RATE = 48000
 CHANNELS = 2

@@ -16,11 +16,11 @@ import psutil
 import pytest
 
 from buddybot.audio.access import REFUSAL
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import Node, error_text
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import Node, error_text
+from buddybot.tools.testing import (
     Collector,
     Process,
     Router,

@@ -12,10 +12,10 @@ import time
 import numpy as np
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.testing import retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import ServiceError
+from buddybot.tools.testing import retry_until
 
 from .conftest import RATE, beep_config, final, send_goal, tone, write_wav
 

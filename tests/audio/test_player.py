@@ -14,7 +14,7 @@ import pytest
 from buddybot.audio import access
 from buddybot.audio.player import AudioError, Player, decode_file
 from buddybot.audio.settings import AudioPlayerSettings
-from buddybot.core.testing import retry_until
+from buddybot.tools.testing import retry_until
 
 from .conftest import (
     CHANNELS,

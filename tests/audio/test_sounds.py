@@ -9,8 +9,8 @@ import pytest
 
 from buddybot.audio import access, protocol, sounds
 from buddybot.audio.settings import AudioSettings
-from buddybot.core.config import parse_config
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.config import parse_config
+from buddybot.runtime.errors import ConfigError
 
 
 def test_shipped_sounds_exist_are_short_and_decode() -> None:

@@ -7,7 +7,7 @@ import subprocess
 import numpy as np
 import pytest
 
-from buddybot.core.testing import buddybot_argv
+from buddybot.tools.testing import buddybot_argv
 
 from .conftest import beep_config, final, send_goal
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from buddybot.camera import models
-from buddybot.core.testing import Process, retry_until
+from buddybot.tools.testing import Process, retry_until
 
 pytestmark = pytest.mark.integration
 

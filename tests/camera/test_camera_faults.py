@@ -21,11 +21,11 @@ import pytest
 from buddybot.camera.capture import Capture
 from buddybot.camera.settings import CameraSettings
 from buddybot.camera.sources import SourceSpec
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.limits import stamp_plausible
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.limits import stamp_plausible
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, retry_until
 from tests.camera import jpegs, scenes
 
 pytestmark = pytest.mark.integration

@@ -19,8 +19,8 @@ from buddybot.camera.facenet import FaceNet
 from buddybot.camera.geometry import DistanceEstimate, Intrinsics, locate
 from buddybot.camera.pipeline import FacePipeline, FaceResult
 from buddybot.camera.settings import FaceDetectorSettings
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from tests.camera import scenes
 
 STAMP = 1_700_000_000_000_000_000

@@ -9,10 +9,10 @@ from typing import Any
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 from tests.camera import scenes
 
 pytestmark = pytest.mark.integration

@@ -13,7 +13,7 @@ import pytest
 from PIL import Image as PilImage
 
 from buddybot.camera import frames
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from tests.camera import jpegs
 
 DATA = Path(__file__).parent / "data"

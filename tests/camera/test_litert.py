@@ -9,7 +9,7 @@ import pytest
 
 from buddybot.camera import models
 from buddybot.camera.litert import ANY, LiteModel, ModelLoadError, Tensor
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.errors import ConfigError
 
 BLAZE_FULL_IN = Tensor((1, 192, 192, 3))
 BLAZE_FULL_OUT = [Tensor((1, 2304, 1)), Tensor((1, 2304, 16))]

@@ -9,9 +9,9 @@ import pytest
 
 from buddybot.camera import capture, detector, models
 from buddybot.camera.pipeline import FacePipeline
-from buddybot.core.config import parse_config
-from buddybot.core.errors import ConfigError
-from buddybot.core.service import ServiceContext
+from buddybot.runtime.config import parse_config
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.service import ServiceContext
 from tests.camera import scenes
 
 

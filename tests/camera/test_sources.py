@@ -8,7 +8,7 @@ import pytest
 
 from buddybot.camera import models
 from buddybot.camera.sources import parse_source
-from buddybot.core.backoff import Backoff
+from buddybot.runtime.backoff import Backoff
 
 
 @pytest.mark.parametrize(("text", "kind"), [

@@ -13,9 +13,9 @@ from typing import Any
 import pytest
 import zenoh
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node, new_goal_id
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node, new_goal_id
 
 FAST_CONFIG = """
 [controller]

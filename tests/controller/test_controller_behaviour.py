@@ -5,6 +5,7 @@ from __future__ import annotations
 import msgspec
 import pytest
 
+from buddybot.contract.messages import ExpressionAction as X
 from buddybot.controller.behaviour import (
     Behaviour,
     CancelSound,
@@ -16,7 +17,6 @@ from buddybot.controller.behaviour import (
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
-from buddybot.core.messages import ExpressionAction as X
 
 GAZE = Gaze(0.1, -0.05, 120.0)
 

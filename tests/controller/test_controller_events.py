@@ -10,6 +10,7 @@ from typing import Any
 import msgspec
 import pytest
 
+from buddybot.contract import messages as m
 from buddybot.controller.behaviour import CancelSound, PlaySound
 from buddybot.controller.events import (
     CancelReply,
@@ -20,7 +21,6 @@ from buddybot.controller.events import (
 )
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
-from buddybot.core import messages as m
 
 A = m.ExpressionAction
 

@@ -22,6 +22,7 @@ from hypothesis import HealthCheck, event, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
+from buddybot.contract.messages import TERMINAL_GOAL_STATES, ExpressionAction
 from buddybot.controller.behaviour import (
     Behaviour,
     CancelSound,
@@ -32,7 +33,6 @@ from buddybot.controller.behaviour import (
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
-from buddybot.core.messages import TERMINAL_GOAL_STATES, ExpressionAction
 
 COOLDOWN = 4.0
 SETTINGS = msgspec.convert(

@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, retry_until
 
 X = m.ExpressionAction
 pytestmark = pytest.mark.integration
@@ -269,7 +269,7 @@ def test_bad_config_is_refused_with_the_key_named(spawn, tmp_path) -> None:
 
 
 def _probe_config(endpoint: str) -> zenoh.Config:
-    from buddybot.core.node import zenoh_config
+    from buddybot.runtime.node import zenoh_config
 
     return zenoh_config(connect=[endpoint])
 

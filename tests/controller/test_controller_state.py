@@ -10,12 +10,12 @@ from typing import Any
 
 import pytest
 
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.controller.behaviour import Phase, PlaySound, SoundKind, State
 from buddybot.controller.service import state_message
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process
 from tests.controller.test_controller_behaviour import Rig
 
 

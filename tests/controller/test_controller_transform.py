@@ -141,8 +141,8 @@ def test_service_config_errors_name_the_key() -> None:
 
     from buddybot.controller.service import camera_transform
     from buddybot.controller.settings import ControllerSettings
-    from buddybot.core.config import parse_config
-    from buddybot.core.errors import ConfigError
+    from buddybot.runtime.config import parse_config
+    from buddybot.runtime.errors import ConfigError
 
     bad_nan = msgspec.convert({"camera_to_eyes": {"rpy_rad": [0.0, 0.0, 0.0]}},
                               ControllerSettings)

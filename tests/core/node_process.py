@@ -9,9 +9,9 @@ from __future__ import annotations
 import sys
 import threading
 
-from buddybot.core import keys
-from buddybot.core.node import Node, install_signal_handlers
-from buddybot.core.service import setup_logging
+from buddybot.contract import keys
+from buddybot.runtime.node import Node, install_signal_handlers
+from buddybot.runtime.service import setup_logging
 
 
 def main() -> None:

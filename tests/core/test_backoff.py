@@ -1,8 +1,8 @@
-"""The one retry rule (core/backoff.py): pure, so every number is checked here."""
+"""The one retry rule (runtime/backoff.py): pure, so every number is checked here."""
 
 from __future__ import annotations
 
-from buddybot.core.backoff import Backoff
+from buddybot.runtime.backoff import Backoff
 
 
 def test_doubles_from_initial_up_to_the_cap() -> None:

@@ -14,10 +14,11 @@ import pytest
 from mcap.writer import Writer
 
 from buddybot.cli import bag as bag_cli
-from buddybot.core import bag, channels, keys
-from buddybot.core import messages as m
-from buddybot.core.bag_record import Recorder
-from buddybot.core.errors import UsageError
+from buddybot.contract import channels, keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import UsageError
+from buddybot.tools import bag
+from buddybot.tools.bag_record import Recorder
 
 from .test_messages import sample_messages
 

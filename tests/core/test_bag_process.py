@@ -14,10 +14,11 @@ import cv2
 import numpy as np
 import pytest
 
-from buddybot.core import bag, channels, keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, Router, buddybot_argv, retry_until
+from buddybot.contract import channels, keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools import bag
+from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
 
 from .test_bag import concrete_key, samples, write_recording
 
@@ -272,7 +273,7 @@ def test_latched_keys_reach_late_subscribers_and_unknown_channels_are_named(
     pupils = RawCollector(watcher, pupil)
     retry_until(lambda: pupils.on(pupil), 30, 0.05, "the replay under way")
     late = RawCollector(node_factory("late", probe=True), key)  # no history: not yet...
-    from buddybot.core.testing import Collector
+    from buddybot.tools.testing import Collector
 
     typed = Collector[m.PresenceDetection](node_factory("late-typed"), keys.PRESENCE)
     typed.wait_for(lambda p: p.distance_m == 1.0, 20, "the latched presence")

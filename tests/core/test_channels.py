@@ -10,8 +10,8 @@ import msgspec
 import numpy as np
 import pytest
 
-from buddybot.core import channels, keys
-from buddybot.core import messages as m
+from buddybot.contract import channels, keys
+from buddybot.contract import messages as m
 from tests.core.test_messages import sample_messages
 
 

@@ -12,11 +12,11 @@ from typing import Any
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.registry import SERVICES
-from buddybot.core.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.runtime.registry import SERVICES
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 
 pytestmark = pytest.mark.integration  # every verb runs as a real process (most against a router)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core.config import (
+from buddybot.runtime.config import (
     ConfigError,
     config_dir,
     load_config,

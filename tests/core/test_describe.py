@@ -6,9 +6,9 @@ import json
 
 import msgspec
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.describe import describe
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.contract.describe import describe
 
 
 def test_image_summary_is_valid_json_for_any_frame_id() -> None:

@@ -9,10 +9,10 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core import doctor
-from buddybot.core.config import default_config, parse_config
-from buddybot.core.doctor import FAIL, OK, WARN, Check
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.config import default_config, parse_config
+from buddybot.runtime.errors import ConfigError
+from buddybot.tools import doctor
+from buddybot.tools.doctor import FAIL, OK, WARN, Check
 
 
 def test_report_is_one_line_per_check_and_a_summary() -> None:

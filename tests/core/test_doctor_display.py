@@ -12,11 +12,11 @@ from typing import Any
 
 import pytest
 
-from buddybot.core import doctor
-from buddybot.core.config import parse_config
-from buddybot.core.doctor import FAIL, WARN, Check
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until
+from buddybot.runtime.config import parse_config
+from buddybot.runtime.node import Node
+from buddybot.tools import doctor
+from buddybot.tools.doctor import FAIL, WARN, Check
+from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until
 
 HERE = "robot-a"
 

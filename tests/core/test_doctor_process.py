@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until
 
 
 def run_doctor(tmp_path: Path, *args: str, timeout: float = 60.0) -> tuple[int, str, float]:

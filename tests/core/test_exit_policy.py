@@ -13,14 +13,14 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core import errors
+from buddybot.runtime import errors
 
 pytestmark = pytest.mark.integration  # each case runs in a child process
 
 CHILD = """
 import argparse, sys
-from buddybot.core import errors
-from buddybot.core.service import run_main
+from buddybot.runtime import errors
+from buddybot.runtime.service import run_main
 
 how = sys.argv[1]
 

@@ -13,11 +13,11 @@ from collections.abc import Callable
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import Node, NoReplyError, ServiceReply
-from buddybot.core.testing import Collector, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import Node, NoReplyError, ServiceReply
+from buddybot.tools.testing import Collector, retry_until
 
 pytestmark = pytest.mark.integration  # every test here talks through a real router
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 
 
 def test_patterns_are_unique() -> None:
@@ -59,8 +59,7 @@ def test_qos_presets() -> None:
 
 def test_payload_limits() -> None:
     """Only image keys accept large payloads; the router bound matches the largest."""
-    from buddybot.core import node
-
+    from buddybot.runtime import node
     for topic in keys.TOPICS:
         big = topic.type is m.Image
         assert (topic.max_bytes == keys.IMAGE_MESSAGE_BYTES) == big, topic.pattern

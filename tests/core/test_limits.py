@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from buddybot.core import limits
+from buddybot.runtime import limits
 
 S = 1_000_000_000
 

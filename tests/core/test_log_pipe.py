@@ -16,8 +16,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from buddybot.core import session
-from buddybot.core.testing import retry_until
+from buddybot.runtime import session
+from buddybot.tools.testing import retry_until
 
 LINE = b"2026-11-23T12:00:00.000000Z  WARN ThreadId(02) zenoh::net::test: flood line %06d\n"
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import msgspec
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 
 
 def sample_messages() -> list[m.Message]:

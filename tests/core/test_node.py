@@ -11,11 +11,11 @@ import msgspec
 import pytest
 import zenoh
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, Router, free_port, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, Router, free_port, retry_until
 
 from .test_messages import sample_messages
 

@@ -10,11 +10,11 @@ from collections.abc import Callable
 import msgspec
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import DuplicateNodeError, ServiceError
-from buddybot.core.node import Node, RawReply
-from buddybot.core.testing import Collector, buddybot_argv, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import DuplicateNodeError, ServiceError
+from buddybot.runtime.node import Node, RawReply
+from buddybot.tools.testing import Collector, buddybot_argv, retry_until
 
 pytestmark = pytest.mark.integration  # every test here talks through a real router
 

@@ -10,12 +10,12 @@ import pytest
 
 from buddybot.cli import param as param_cli
 from buddybot.cli import topics as topics_cli
-from buddybot.core import messages as m
-from buddybot.core import registry
-from buddybot.core.config import parse_config
-from buddybot.core.errors import UsageError
-from buddybot.core.params import LiveSettings, ParamRefused, describe, is_live, validate
+from buddybot.contract import messages as m
 from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.runtime import registry
+from buddybot.runtime.config import parse_config
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.params import LiveSettings, ParamRefused, describe, is_live, validate
 
 
 class Tuning(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

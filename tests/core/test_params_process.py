@@ -10,12 +10,12 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.config import parse_config
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.runtime.config import parse_config
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, buddybot_argv, retry_until
 
 pytestmark = pytest.mark.integration
 

@@ -15,20 +15,22 @@ import msgspec
 import pytest
 
 from buddybot.cli.call import refusal
-from buddybot.core import keys, schemas, session, tools
-from buddybot.core import messages as m
-from buddybot.core.config import default_config
-from buddybot.core.describe import describe, enum_values, summarize
-from buddybot.core.errors import UsageError
-from buddybot.core.service import ServiceContext
-from buddybot.core.testing import free_port
+from buddybot.contract import keys, schemas
+from buddybot.contract import messages as m
+from buddybot.contract.describe import describe, enum_values, summarize
+from buddybot.runtime import session
+from buddybot.runtime.config import default_config
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.service import ServiceContext
+from buddybot.tools import probing
+from buddybot.tools.testing import free_port
 
 # --- enum names ---------------------------------------------------------------------
 
 
 def test_enum_names_and_numbers_are_both_accepted() -> None:
-    by_name = tools.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEP", "stamp_ns": 1}')
-    by_number = tools.parse_message(m.ScreenExpression, '{"action": 1, "stamp_ns": 1}')
+    by_name = probing.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEP", "stamp_ns": 1}')
+    by_number = probing.parse_message(m.ScreenExpression, '{"action": 1, "stamp_ns": 1}')
     assert by_name == by_number
     assert isinstance(by_name, m.ScreenExpression)
     assert by_name.action is m.ExpressionAction.EYE_SLEEP
@@ -36,11 +38,11 @@ def test_enum_names_and_numbers_are_both_accepted() -> None:
 
 def test_an_unknown_enum_name_is_refused_listing_the_names() -> None:
     with pytest.raises(UsageError) as caught:
-        tools.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEPING"}')
+        probing.parse_message(m.ScreenExpression, '{"action": "EYE_SLEEPING"}')
     text = str(caught.value)
     assert "action" in text and "EYE_SLEEPING" in text and "EYE_SLEEP," in text
     with pytest.raises(UsageError, match="action"):
-        tools.parse_message(m.ScreenExpression, '{"action": 99}')
+        probing.parse_message(m.ScreenExpression, '{"action": 99}')
 
 
 def test_nested_enum_names_are_converted() -> None:
@@ -91,7 +93,7 @@ def test_schemas_name_the_members_of_integer_enums() -> None:
     ("buddybot/buddy/eye/pupil", False),
 ])
 def test_catalogue_matches_names_unknown_keys(key: str, known: bool) -> None:
-    assert bool(tools.catalogue_matches(key)) is known
+    assert bool(probing.catalogue_matches(key)) is known
 
 
 def test_refusals_are_failures() -> None:
@@ -119,7 +121,7 @@ def test_a_probe_without_router_fails_fast_naming_endpoint_and_reason() -> None:
                          connect=[endpoint])
     started = time.monotonic()
     with pytest.raises(session.RouterUnreachable) as caught:
-        tools.probe(ctx, 0.5)
+        probing.probe(ctx, 0.5)
     assert time.monotonic() - started < 5
     text = str(caught.value)
     assert endpoint in text and "refused" in text.lower() and "0.5 s" in text

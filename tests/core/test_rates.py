@@ -1,4 +1,4 @@
-"""The one rate module (core/rates.py): fixed-window counts and first-to-last spans."""
+"""The one rate module (runtime/rates.py): fixed-window counts and first-to-last spans."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from collections import deque
 
 import pytest
 
-from buddybot.core.rates import RateCounter, rate_hz, span_hz
+from buddybot.runtime.rates import RateCounter, rate_hz, span_hz
 
 
 def test_rate_counts_only_the_window() -> None:

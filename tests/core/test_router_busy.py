@@ -9,9 +9,9 @@ import subprocess
 
 import pytest
 
-from buddybot.core import doctor
-from buddybot.core.node import Node
-from buddybot.core.testing import LOOPBACK, buddybot_argv
+from buddybot.runtime.node import Node
+from buddybot.tools import doctor
+from buddybot.tools.testing import LOOPBACK, buddybot_argv
 
 
 def run_router(*args: str) -> subprocess.CompletedProcess[str]:

@@ -20,8 +20,8 @@ from typing import Any
 import msgspec
 import pytest
 
-from buddybot.core import keys, schemas
-from buddybot.core import messages as m
+from buddybot.contract import keys, schemas
+from buddybot.contract import messages as m
 from tests.core.test_messages import sample_messages
 
 ROOT = Path(__file__).resolve().parents[2]

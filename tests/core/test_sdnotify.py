@@ -18,9 +18,9 @@ from pathlib import Path
 import psutil
 import pytest
 
-from buddybot.core import router as router_module
-from buddybot.core.sdnotify import Notifier, socket_address, watchdog_period_s
-from buddybot.core.testing import (
+from buddybot.runtime.sdnotify import Notifier, socket_address, watchdog_period_s
+from buddybot.supervisor import router as router_module
+from buddybot.tools.testing import (
     Process,
     Router,
     buddybot_argv,
@@ -162,7 +162,7 @@ def test_service_is_ready_once_on_the_bus_and_pings_only_while_running(
 
 @pytest.mark.integration
 @pytest.mark.skipif("sdnotify" not in Path(router_module.__file__).read_text(),
-                    reason="services/core/router.py does not call sdnotify yet")
+                    reason="services/supervisor/router.py does not call sdnotify yet")
 def test_router_is_ready_once_listening_and_pings(
     notify_socket: tuple[socket.socket, str], tmp_path: Path
 ) -> None:

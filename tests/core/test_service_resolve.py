@@ -6,8 +6,8 @@ import argparse
 
 import pytest
 
-from buddybot.core.errors import ConfigError
-from buddybot.core.service import resolve
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.service import resolve
 
 
 def test_empty_robot_flag_is_refused_not_replaced_by_the_config_id() -> None:

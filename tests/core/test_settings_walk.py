@@ -23,11 +23,11 @@ import msgspec
 import msgspec.inspect as mi
 import pytest
 
-from buddybot.core import overrides
-from buddybot.core.config import Config, parse_config
-from buddybot.core.errors import ConfigError
-from buddybot.core.registry import SERVICES
-from buddybot.core.service import ServiceContext, add_common_arguments, resolve
+from buddybot.runtime import overrides
+from buddybot.runtime.config import Config, parse_config
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.registry import SERVICES
+from buddybot.runtime.service import ServiceContext, add_common_arguments, resolve
 
 # --- the walk -------------------------------------------------------------------------
 

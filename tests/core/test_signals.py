@@ -19,7 +19,7 @@ pytestmark = pytest.mark.integration  # each case signals a child process
 # The main thread takes the stop event's lock all the time, as `spin()` does.
 BUSY_WAITER = """
 import threading, sys
-from buddybot.core.node import install_signal_handlers
+from buddybot.runtime.node import install_signal_handlers
 stop = threading.Event()
 install_signal_handlers(stop)
 print("READY", flush=True)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections import deque
 
-from buddybot.core import messages as m
-from buddybot.core.status import RobotStatus, format_status, rate_hz
+from buddybot.contract import messages as m
+from buddybot.supervisor.status import RobotStatus, format_status, rate_hz
 
 
 def test_rate_counts_only_the_window() -> None:

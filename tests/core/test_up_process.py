@@ -19,14 +19,14 @@ from pathlib import Path
 import psutil
 import pytest
 
-from buddybot.core import registry
-from buddybot.core.config import default_config
-from buddybot.core.errors import UsageError
-from buddybot.core.launch import plan_up, select_services, service_argv
-from buddybot.core.node import Node, zenoh_config
-from buddybot.core.service import ServiceContext
-from buddybot.core.status import RobotStatus, format_status
-from buddybot.core.testing import (
+from buddybot.runtime import registry
+from buddybot.runtime.config import default_config
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.node import Node, zenoh_config
+from buddybot.runtime.service import ServiceContext
+from buddybot.supervisor.launch import plan_up, select_services, service_argv
+from buddybot.supervisor.status import RobotStatus, format_status
+from buddybot.tools.testing import (
     Process,
     Router,
     buddybot_argv,

@@ -16,10 +16,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, buddybot_argv, free_port, wait_port
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, wait_port
 
 from ..conftest import ARTIFACTS
 

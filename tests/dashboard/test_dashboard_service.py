@@ -22,11 +22,13 @@ import cv2
 import numpy as np
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.handles import Publisher
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.dashboard import model
+from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime.handles import Publisher
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     LOOPBACK,
     Collector,
     Process,
@@ -35,8 +37,6 @@ from buddybot.core.testing import (
     retry_until,
     wait_port,
 )
-from buddybot.dashboard import model
-from buddybot.dashboard.settings import DashboardSettings
 
 pytestmark = pytest.mark.integration
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import msgspec
 import pytest
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from buddybot.dashboard import model
 
 

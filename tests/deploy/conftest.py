@@ -25,8 +25,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from buddybot.core.node import Node, zenoh_config
-from buddybot.core.testing import (
+from buddybot.runtime.node import Node, zenoh_config
+from buddybot.tools.testing import (
     LOOPBACK,
     Process,
     buddybot_argv,

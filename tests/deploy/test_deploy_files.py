@@ -18,9 +18,10 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from buddybot.core import keys, registry
-from buddybot.core.config import load_config, parse_config
-from buddybot.core.errors import ConfigError
+from buddybot.contract import keys
+from buddybot.runtime import registry
+from buddybot.runtime.config import load_config, parse_config
+from buddybot.runtime.errors import ConfigError
 from tests.deploy.conftest import DEPLOY, HOSTS, INSTALLED_CERTS, SYSTEMD_DIR, ZENOH_DIR
 
 INSTALLED_BIN = "/opt/buddybot/.venv/bin/buddybot"

@@ -20,11 +20,12 @@ import msgspec
 import pytest
 import zenoh
 
-from buddybot.core import keys, registry
-from buddybot.core import messages as m
-from buddybot.core.errors import DuplicateNodeError, ServiceError
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import registry
+from buddybot.runtime.errors import DuplicateNodeError, ServiceError
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     LOOPBACK,
     Collector,
     Process,

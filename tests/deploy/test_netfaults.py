@@ -44,10 +44,10 @@ from typing import Any
 import pytest
 import zenoh
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     LOOPBACK,
     Process,
     buddybot_argv,
@@ -573,7 +573,7 @@ def tap_namespace(prefix: str) -> Iterator[TapHost]:
 
 DIAL_PROBE = """
 import sys, time, zenoh
-from buddybot.core.node import zenoh_config
+from buddybot.runtime.node import zenoh_config
 c = zenoh_config(connect=[sys.argv[1]], base_file=sys.argv[2])
 c.insert_json5("connect/timeout_ms", "30000")
 t0 = time.monotonic()

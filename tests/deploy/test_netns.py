@@ -18,10 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     Collector,
     Process,
     buddybot_argv,
@@ -97,7 +97,7 @@ def test_board_refuses_a_router_not_named_in_its_certificate(
     retry_until(listening, 15, what="router on the veth address")
     probe = (
         "import sys, zenoh\n"
-        "from buddybot.core.node import zenoh_config\n"
+        "from buddybot.runtime.node import zenoh_config\n"
         "c = zenoh_config(connect=[sys.argv[1]], base_file=sys.argv[2])\n"
         "c.insert_json5('connect/timeout_ms', '3000')\n"
         "try:\n"

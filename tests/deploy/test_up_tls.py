@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core.testing import LOOPBACK, Process, buddybot_argv, free_port
+from buddybot.tools.testing import LOOPBACK, Process, buddybot_argv, free_port
 from tests.core.test_up_process import reaped
 from tests.deploy.conftest import HostProfile
 

@@ -7,10 +7,10 @@ from collections.abc import Callable
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 
 pytestmark = pytest.mark.integration
 

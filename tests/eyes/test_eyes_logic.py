@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from buddybot.eyes import driver, kiosk, placement, wire
 from buddybot.eyes.placement import Display, PlacementError, Request, plan
 from buddybot.eyes.settings import EyeRendererSettings, EyesSettings

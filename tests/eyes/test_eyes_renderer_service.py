@@ -24,10 +24,10 @@ import aiohttp
 import psutil
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import (
     Process,
     buddybot_argv,
     free_port,

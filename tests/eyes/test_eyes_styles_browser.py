@@ -20,11 +20,11 @@ from typing import Any
 import numpy as np
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, buddybot_argv, free_port, retry_until, wait_port
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.eyes import driver, styles
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until, wait_port
 
 from ..conftest import ARTIFACTS
 from .conftest import screenshot

@@ -20,10 +20,10 @@ from typing import Any
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, free_port, wait_port
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, free_port, wait_port
 
 pytestmark = [pytest.mark.integration, pytest.mark.browser]
 

@@ -13,7 +13,7 @@ import random
 import msgspec
 import pytest
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 from buddybot.eyes import motion, wire
 from buddybot.eyes.motion import MotionConfig, MotionEvent, MotionScheduler
 from buddybot.eyes.renderer import motion_config

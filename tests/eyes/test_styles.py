@@ -10,11 +10,11 @@ from typing import Any
 import msgspec
 import pytest
 
-from buddybot.core import messages as m
-from buddybot.core.errors import ConfigError
-from buddybot.core.testing import buddybot_argv
+from buddybot.contract import messages as m
 from buddybot.eyes import styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
+from buddybot.runtime.errors import ConfigError
+from buddybot.tools.testing import buddybot_argv
 
 
 def write(tmp_path: Path, data: Any) -> Path:

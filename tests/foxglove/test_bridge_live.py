@@ -21,10 +21,10 @@ import msgspec
 import numpy as np
 import pytest
 
-from buddybot.core import channels, keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, buddybot_argv, free_port, retry_until
+from buddybot.contract import channels, keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
 
 from .ws_client import CallFailed, FoxgloveClient
 

@@ -10,14 +10,14 @@ import foxglove
 import psutil
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.doctor import serve_failure
-from buddybot.core.errors import ServeError
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.foxglove import logic
 from buddybot.foxglove.server import FoxgloveServer
 from buddybot.foxglove.service import urls
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.runtime.errors import ServeError
+from buddybot.tools.doctor import serve_failure
 
 
 def test_a_15_fps_camera_limited_to_10_gives_10_per_second() -> None:

@@ -6,9 +6,9 @@ import argparse
 
 import pytest
 
-from buddybot.core.errors import ConfigError
 from buddybot.radar import bridge
 from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.runtime.errors import ConfigError
 
 
 def parse(*argv: str) -> argparse.Namespace:

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import threading
 
-from buddybot.core.testing import retry_until
 from buddybot.radar.intake import Intake
+from buddybot.tools.testing import retry_until
 
 
 class Recorder:

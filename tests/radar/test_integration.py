@@ -14,13 +14,13 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import LOOPBACK, Collector, Process, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar import ld2410 as p
 from buddybot.radar.scenarios import NOBODY, SCENARIOS, Scenario, Target
 from buddybot.radar.sim import FRAME_PERIOD_S, PtySensor, SimulatedLD2410
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import LOOPBACK, Collector, Process, retry_until
 
 pytestmark = pytest.mark.integration
 

@@ -7,7 +7,7 @@ import random
 import msgspec
 import pytest
 
-from buddybot.core.messages import PresenceState, PresenceTarget
+from buddybot.contract.messages import PresenceState, PresenceTarget
 from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
 from buddybot.radar.scenarios import SCENARIOS
 

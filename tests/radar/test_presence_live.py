@@ -15,12 +15,12 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, buddybot_argv
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar.scenarios import Target
 from buddybot.radar.sim import PtySensor
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, buddybot_argv
 
 pytestmark = pytest.mark.integration
 

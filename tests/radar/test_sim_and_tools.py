@@ -12,8 +12,8 @@ import msgspec
 import pytest
 import serial
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.radar import ld2410 as p
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.convert import report_to_frame

@@ -15,8 +15,8 @@ import cv2
 import numpy as np
 
 from buddybot.camera.sim import compose, face_path
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, free_port, retry_until, write_tone
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, free_port, retry_until, write_tone
 
 Spawn = Callable[..., Process]
 

@@ -10,10 +10,10 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Collector, Process, Router, retry_until, run_service
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, Router, retry_until, run_service
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 

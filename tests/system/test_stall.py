@@ -24,10 +24,10 @@ from pathlib import Path
 import msgspec
 import pytest
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node
-from buddybot.core.testing import Process, retry_until
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, retry_until
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 

@@ -17,9 +17,10 @@ from pathlib import Path
 import psutil
 import pytest
 
-from buddybot.core.launch import SUPERVISOR_ENV, RestartPolicy, busy_message, child_env
-from buddybot.core.registry import available_services
-from buddybot.core.testing import (
+from buddybot.runtime.registry import available_services
+from buddybot.runtime.supervised import SUPERVISOR_ENV
+from buddybot.supervisor.launch import RestartPolicy, busy_message, child_env
+from buddybot.tools.testing import (
     Process,
     Router,
     buddybot_argv,

@@ -27,8 +27,8 @@ import pytest
 
 from buddybot import __version__
 from buddybot.cli import verb_module
-from buddybot.core.registry import available_services
-from buddybot.core.testing import Process, free_port, retry_until
+from buddybot.runtime.registry import available_services
+from buddybot.tools.testing import Process, free_port, retry_until
 
 pytestmark = pytest.mark.integration
 

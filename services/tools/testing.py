@@ -24,8 +24,8 @@ from typing import Any, Generic, TypeVar
 
 import numpy as np
 
-from buddybot.core import keys
-from buddybot.core.node import Node
+from buddybot.contract import keys
+from buddybot.runtime.node import Node
 
 T = TypeVar("T")
 LOOPBACK = "127.0.0.1"

@@ -20,18 +20,19 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from buddybot.core.config import ConfigBase, default_config, load_config, resolve_path
-from buddybot.core.errors import (
+from buddybot.contract.keys import DEFAULT_ROBOT, valid_robot_id
+from buddybot.runtime.config import ConfigBase, default_config, load_config, resolve_path
+from buddybot.runtime.errors import (
     EXIT_FAILURE,
     EXIT_OK,
     BuddyBotError,
     ConfigError,
     exit_status,
 )
-from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
-from buddybot.core.node import Node, install_signal_handlers
-from buddybot.core.sdnotify import Notifier
-from buddybot.core.session import route_zenoh_log
+from buddybot.runtime.node import Node, install_signal_handlers
+from buddybot.runtime.sdnotify import Notifier
+from buddybot.runtime.session import route_zenoh_log
+from buddybot.runtime.supervised import die_with_supervisor
 
 
 def add_common_arguments(parser: argparse.ArgumentParser) -> None:
@@ -132,7 +133,7 @@ def run_main(
     *, uses_config: bool = True,
 ) -> int:
     """Run a service's `run(ctx)` or a verb's `main(ctx)`: logging, signals, and
-    the one exit policy (`buddybot.core.errors.exit_status`).
+    the one exit policy (`buddybot.runtime.errors.exit_status`).
 
     A usage or config error prints one line and exits 2; any other of our
     errors (a failed call, no router) prints one line and exits 1; Ctrl-C and
@@ -140,8 +141,6 @@ def run_main(
     `uses_config=False`: the verb never reads the robot's configuration (`keys`,
     `schemas`), so a broken config file cannot stop it.
     """
-    from buddybot.core.launch import die_with_supervisor  # launch imports this module
-
     if not die_with_supervisor(os.environ):
         print(f"buddybot {name}: the `buddybot up` that started it is gone; not starting",
               file=sys.stderr)

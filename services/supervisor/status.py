@@ -19,10 +19,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.node import Node, Subscription
-from buddybot.core.rates import rate_hz
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node, Subscription
+from buddybot.runtime.rates import rate_hz
 
 
 @dataclass

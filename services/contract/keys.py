@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 import msgspec
 
-from buddybot.core import messages as m
+from buddybot.contract import messages as m
 
 PREFIX_ROOT = "buddybot"
 DEFAULT_ROBOT = "buddy"

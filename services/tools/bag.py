@@ -2,7 +2,7 @@
 
 `buddybot bag` (record, play, info) stands on this module; it is pure (no
 Zenoh), so the file format is tested without a router. The channels come
-from `core/channels.py`, the one place that says how a key looks in MCAP
+from `contract/channels.py`, the one place that says how a key looks in MCAP
 and in Foxglove:
 
 * one channel per concrete key (`buddybot/buddy/radar/0/frames`), its
@@ -45,8 +45,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from buddybot import __version__
-from buddybot.core import channels, keys
-from buddybot.core.errors import BuddyBotError
+from buddybot.contract import channels, keys
+from buddybot.runtime.errors import BuddyBotError
 
 METADATA_NAME = "buddybot"
 """The MCAP metadata record holding the robot id and the recorder's version."""

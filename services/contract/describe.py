@@ -20,8 +20,8 @@ from typing import Any
 import msgspec
 import msgspec.inspect as mi
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 
 
 def summarize(msg: m.Message, *, names: bool = True) -> str:
@@ -149,3 +149,29 @@ def _to_values(raw: Any, info: mi.Type, path: str) -> Any:
 
 def _join(path: str, name: str) -> str:
     return f"{path}.{name}" if path else name
+
+
+class MessageTextError(ValueError):
+    """A message typed by a person (JSON text) that is not a valid message."""
+
+
+def parse_message(topic_or_type: type[m.Message], text: str) -> m.Message:
+    """Validate user JSON against a message type; fills a missing `stamp_ns`.
+
+    Enum fields take a member's name (`"EYE_SLEEP"`) as well as its number.
+    Raises MessageTextError naming the offending field.
+    """
+    try:
+        raw = msgspec.json.decode(text or "{}")
+    except msgspec.DecodeError as exc:
+        raise MessageTextError(f"not valid JSON: {exc}") from None
+    if not isinstance(raw, dict):
+        raise MessageTextError(f"expected a JSON object for {topic_or_type.__name__}")
+    if "stamp_ns" in topic_or_type.__struct_fields__ and "stamp_ns" not in raw:
+        raw["stamp_ns"] = m.now_ns()
+    try:
+        raw = enum_values(raw, topic_or_type)
+        return msgspec.convert(raw, topic_or_type)
+    except (msgspec.ValidationError, ValueError) as exc:
+        text = str(exc).replace("$.", "").replace("`$`", "message")
+        raise MessageTextError(f"invalid {topic_or_type.__name__}: {text}") from None

@@ -32,7 +32,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 from urllib.parse import urlsplit
 
-from buddybot.core.config import DEFAULT_ENDPOINT, ConfigBase
+from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
 
 Level = Literal["OK", "WARN", "FAIL"]
 OK: Level = "OK"
@@ -342,8 +342,7 @@ def check_audio(settings: Any, sim: bool, in_use: bool = False) -> Check:
     if in_use:
         return Check("audio device", OK, f"{backend}: held by the running audio-player")
     try:
-        from buddybot.core import registry
-
+        from buddybot.runtime import registry
         entry = registry.service("audio-player")
         assert entry is not None
         opened = entry.device_opener()(settings)
@@ -542,9 +541,9 @@ def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
     Diagnostics values seen meanwhile are kept per node. `wait_values` (node ->
     a value name): for each such node that is alive, wait past the window (at
     most `timeout`) until its diagnostics carry that value (they come every 2 s)."""
-    from buddybot.core import keys
-    from buddybot.core import messages as m
-    from buddybot.core.node import Node, zenoh_config
+    from buddybot.contract import keys
+    from buddybot.contract import messages as m
+    from buddybot.runtime.node import Node, zenoh_config
 
     report = BusReport(endpoint)
     try:
@@ -665,8 +664,7 @@ def port_users(endpoint: str, zenoh_file: str | None, timeout: float,
 def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozenset[str]]:
     """Checks that ask the running robot, each bounded by `opts.timeout`; and the
     names of the live nodes (whose devices the quick checks must not open again)."""
-    from buddybot.core import keys
-
+    from buddybot.contract import keys
     streams: dict[str, str] = {}
     prefix = keys.prefix(opts.robot)
     if "radar-bridge" in opts.expected:

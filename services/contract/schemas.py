@@ -14,8 +14,8 @@ from typing import Any
 
 import msgspec
 
-from buddybot.core import keys
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 
 
 def generate() -> dict[str, str]:

@@ -47,16 +47,17 @@ import msgspec
 import zenoh
 import zenoh.ext
 
-from buddybot.core import keys, limits
-from buddybot.core import messages as m
-from buddybot.core.diagnostics import Diagnostics, RateLimitedLog
-from buddybot.core.errors import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import limits
+from buddybot.runtime.diagnostics import Diagnostics, RateLimitedLog
+from buddybot.runtime.errors import (
     CallError,
     DuplicateNodeError,
     NoReplyError,
     ServiceError,
 )
-from buddybot.core.handles import (
+from buddybot.runtime.handles import (
     HEARTBEAT_S,
     Delivery,
     Handle,
@@ -75,14 +76,14 @@ from buddybot.core.handles import (
     _Worker,
     error_text,
 )
-from buddybot.core.session import (
+from buddybot.runtime.session import (
     MAX_MESSAGE_BYTES,
     WAIT_BEFORE_CLOSE_US,
     live_instances,
     open_session,
     zenoh_config,
 )
-from buddybot.core.signals import install_signal_handlers
+from buddybot.runtime.signals import install_signal_handlers
 
 __all__ = [
     "HEARTBEAT_S", "MAX_MESSAGE_BYTES", "WAIT_BEFORE_CLOSE_US", "CallError", "Delivery",
@@ -618,6 +619,20 @@ class Node:
                           publishers=sorted(set(publishers)),
                           subscriptions=sorted(set(subscriptions)),
                           services=sorted(set(services)))
+
+    def node_infos(self, timeout: float) -> list[m.NodeInfo]:
+        """Every running node's own report (`declared()`), asked for over the bus;
+        replies that do not decode are skipped."""
+        found = []
+        for reply in self.query(self.key(keys.NODE_INFO, node="*"),
+                                keys.NODE_INFO.codec.encode(m.Trigger()), timeout=timeout):
+            if not reply.ok:
+                continue
+            try:
+                found.append(keys.NODE_INFO.codec.decode(reply.payload, m.NodeInfo))
+            except (msgspec.DecodeError, msgspec.ValidationError):
+                continue
+        return found
 
     def _serve_node_info(self) -> Queryable:
         """Every node answers `node_info/<name>` with `declared()`."""

@@ -24,7 +24,6 @@ the router and to every child.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import logging
 import os
 import signal
@@ -33,17 +32,18 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping, MutableMapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import IO
 
-from buddybot.core import registry
-from buddybot.core.backoff import Backoff
-from buddybot.core.config import DEFAULT_ENDPOINT
-from buddybot.core.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
-from buddybot.core.node import Node, zenoh_config
-from buddybot.core.service import ServiceContext
-from buddybot.core.status import StatusMonitor
+from buddybot.runtime import registry
+from buddybot.runtime.backoff import Backoff
+from buddybot.runtime.config import DEFAULT_ENDPOINT
+from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
+from buddybot.runtime.node import Node, zenoh_config
+from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.supervised import SUPERVISOR_ENV
+from buddybot.supervisor.status import StatusMonitor
 
 log = logging.getLogger("buddybot.up")
 
@@ -55,9 +55,6 @@ NO_RESTART_STATUS = frozenset({2})
 """Exit statuses that restarting cannot fix: a bad option or config, or a node of
 that name already running elsewhere (the same rule as `RestartPreventExitStatus=2`
 in the systemd units)."""
-SUPERVISOR_ENV = "BUDDYBOT_SUPERVISOR_PID"
-"""Set in each child's environment to the pid of the `up` that started it."""
-_PR_SET_PDEATHSIG = 1
 # Variables systemd sets for the unit's main process only: a child of `up` that
 # inherited them would answer for `up` (READY=1, watchdog pings).
 _SYSTEMD_ONLY = ("NOTIFY_SOCKET", "WATCHDOG_USEC", "WATCHDOG_PID")
@@ -86,34 +83,6 @@ class RestartPolicy:
         if status in self.no_restart:
             return None
         return self.backoff.after_run(ran_s)
-
-
-def die_with_supervisor(env: MutableMapping[str, str]) -> bool:
-    """In a child of `up`, first thing: have the kernel send SIGTERM when `up` dies.
-
-    The child sets this itself rather than through `preexec_fn`, which runs
-    Python between fork and exec in a multi-threaded parent (output pumps,
-    Zenoh) and can deadlock there. The price is a short window, from exec to
-    this call, in which the parent could die unnoticed; comparing the parent's
-    pid with the one `up` put in the environment closes it. PR_SET_PDEATHSIG
-    fires when the *thread* that forked us ends, so `up` starts every child
-    from its main thread, which lives as long as `up` does.
-
-    SIGTERM rather than SIGKILL: the child leaves the way Ctrl-C makes it
-    leave (the eye renderer closes its kiosk browsers, the player its device),
-    which takes about two seconds for the whole robot.
-
-    Returns False when the supervisor is already gone (the caller exits).
-    Without the variable (not started by `up`) nothing is done.
-    """
-    raw = env.pop(SUPERVISOR_ENV, "")  # not inherited by our own children
-    if not raw.isdigit():
-        return True
-    if sys.platform.startswith("linux"):
-        libc = ctypes.CDLL(None, use_errno=True)
-        if libc.prctl(_PR_SET_PDEATHSIG, int(signal.SIGTERM), 0, 0, 0) != 0:
-            log.warning("prctl(PR_SET_PDEATHSIG) failed: %s", os.strerror(ctypes.get_errno()))
-    return os.getppid() == int(raw)
 
 
 def child_env(env: Mapping[str, str], supervisor_pid: int) -> dict[str, str]:
@@ -403,8 +372,7 @@ def _busy(listen: list[str], zenoh_file: str | None) -> str | None:
 
 def _quick_doctor(ctx: ServiceContext, plan: UpPlan) -> None:
     """The quick doctor's one-line summary (its port check is `_busy`'s job)."""
-    from buddybot.core import doctor
-
+    from buddybot.tools import doctor
     opts = doctor.Options(sim=ctx.args.sim, endpoint=plan.connect[0], robot=ctx.robot,
                           zenoh_file=plan.zenoh_file)
     try:

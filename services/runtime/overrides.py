@@ -28,8 +28,8 @@ from typing import Any, TypeVar
 import msgspec
 import msgspec.inspect as mi
 
-from buddybot.core.config import config_type
-from buddybot.core.errors import ConfigError
+from buddybot.runtime.config import config_type
+from buddybot.runtime.errors import ConfigError
 
 S = TypeVar("S", bound=msgspec.Struct)
 

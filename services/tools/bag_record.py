@@ -15,8 +15,8 @@ import collections
 import threading
 from dataclasses import dataclass
 
-from buddybot.core import channels
-from buddybot.core.bag import BagWriter
+from buddybot.contract import channels
+from buddybot.tools.bag import BagWriter
 
 QUEUE_SAMPLES = 4096
 QUEUE_BYTES = 64 * 1024 * 1024

@@ -8,11 +8,12 @@ import threading
 import time
 from typing import TYPE_CHECKING, Any
 
-from buddybot.core import keys, limits
-from buddybot.core import messages as m
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime import limits
 
 if TYPE_CHECKING:
-    from buddybot.core.node import Node
+    from buddybot.runtime.node import Node
 
 log = logging.getLogger("buddybot.node")
 

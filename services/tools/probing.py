@@ -18,15 +18,12 @@ from __future__ import annotations
 import argparse
 import time
 
-import msgspec
-
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.describe import enum_values
-from buddybot.core.errors import UsageError
-from buddybot.core.node import Node
-from buddybot.core.service import ServiceContext
-from buddybot.core.session import RouterUnreachable, keys_intersect, zenoh_config
+from buddybot.contract import describe, keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import UsageError
+from buddybot.runtime.node import Node
+from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.session import RouterUnreachable, keys_intersect, zenoh_config
 
 CONNECT_TIMEOUT_S = 5.0
 """How long a probe waits for its router when no `--timeout` is given."""
@@ -118,22 +115,8 @@ def deadline(seconds: float | None) -> float:
 
 
 def parse_message(topic_or_type: type[m.Message], text: str) -> m.Message:
-    """Validate user JSON against a message type; fills a missing `stamp_ns`.
-
-    Enum fields take a member's name (`"EYE_SLEEP"`) as well as its number.
-    Raises UsageError naming the offending field.
-    """
+    """`describe.parse_message` for a verb: a bad message is a usage error (exit 2)."""
     try:
-        raw = msgspec.json.decode(text or "{}")
-    except msgspec.DecodeError as exc:
-        raise UsageError(f"not valid JSON: {exc}") from None
-    if not isinstance(raw, dict):
-        raise UsageError(f"expected a JSON object for {topic_or_type.__name__}")
-    if "stamp_ns" in topic_or_type.__struct_fields__ and "stamp_ns" not in raw:
-        raw["stamp_ns"] = m.now_ns()
-    try:
-        raw = enum_values(raw, topic_or_type)
-        return msgspec.convert(raw, topic_or_type)
-    except (msgspec.ValidationError, ValueError) as exc:
-        text = str(exc).replace("$.", "").replace("`$`", "message")
-        raise UsageError(f"invalid {topic_or_type.__name__}: {text}") from None
+        return describe.parse_message(topic_or_type, text)
+    except describe.MessageTextError as exc:
+        raise UsageError(str(exc)) from None

@@ -4,7 +4,7 @@ The file is decoded straight into typed msgspec structs, so an unknown
 key or a wrong type is found at start-up and reported with the key's
 path and the file's name (`ConfigError`, exit status 2), never discovered
 later as a silently ignored setting. Each service owns its table's
-struct in its own `settings.py` and names it in `buddybot.core.registry`;
+struct in its own `settings.py` and names it in `buddybot.runtime.registry`;
 this module only assembles them, on first use (`Config`), so importing
 the runtime imports no area.
 """
@@ -19,9 +19,9 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 
-from buddybot.core import registry
-from buddybot.core.errors import ConfigError
-from buddybot.core.keys import DEFAULT_ROBOT, valid_robot_id
+from buddybot.contract.keys import DEFAULT_ROBOT, valid_robot_id
+from buddybot.runtime import registry
+from buddybot.runtime.errors import ConfigError
 
 CONFIG_ENV = "BUDDYBOT_CONFIG"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"

@@ -27,9 +27,9 @@ from typing import Any
 
 import msgspec
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.schemas import with_enum_names
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.contract.schemas import with_enum_names
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"

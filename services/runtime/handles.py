@@ -20,15 +20,15 @@ import msgspec
 import zenoh
 import zenoh.ext
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.errors import (
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import (
     CallError,
     NoReplyError,
 )
 
 if TYPE_CHECKING:
-    from buddybot.core.node import Node
+    from buddybot.runtime.node import Node
 
 log = logging.getLogger("buddybot.node")
 

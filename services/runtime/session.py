@@ -25,8 +25,8 @@ from typing import Any, Literal
 import zenoh
 import zenoh.ext
 
-from buddybot.core import keys
-from buddybot.core.errors import BuddyBotError, ConfigError
+from buddybot.contract import keys
+from buddybot.runtime.errors import BuddyBotError, ConfigError
 
 log = logging.getLogger("buddybot.node")
 

@@ -31,10 +31,10 @@ from typing import Any, Generic, TypeVar
 import msgspec
 import msgspec.inspect as mi
 
-from buddybot.core import keys
-from buddybot.core import messages as m
-from buddybot.core.limits import clip
-from buddybot.core.overrides import describe_range, table_of
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.limits import clip
+from buddybot.runtime.overrides import describe_range, table_of
 
 S = TypeVar("S", bound=msgspec.Struct)
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from buddybot.core.describe import describe
+from buddybot.contract.describe import describe
 
 
 def decode(key: Any, payload: bytes) -> str:

@@ -1,9 +1,9 @@
 """Which services and tool verbs exist: adding one is one line here.
 
 A service module provides `add_arguments(parser)` and `run(ctx) -> int`
-(see `buddybot.core.service.ServiceContext`), and names its config table
+(see `buddybot.runtime.service.ServiceContext`), and names its config table
 and the msgspec struct that table decodes into: the configuration is
-assembled from these entries (`buddybot.core.config`), so the runtime in
+assembled from these entries (`buddybot.runtime.config`), so the runtime in
 `core/` never imports an area. Modules are imported only when used, so
 `buddybot --help` stays fast and a service whose optional dependency is
 missing does not break the others.

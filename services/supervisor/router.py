@@ -7,9 +7,9 @@ import threading
 
 import zenoh
 
-from buddybot.core.errors import ServiceError
-from buddybot.core.node import zenoh_config
-from buddybot.core.sdnotify import Notifier
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.node import zenoh_config
+from buddybot.runtime.sdnotify import Notifier
 
 log = logging.getLogger("buddybot.router")
 
@@ -25,8 +25,7 @@ def busy_port(listen: list[str], base_file: str | None = None) -> str | None:
     Zenoh router (with whose nodes) or a stranger, and which local process
     holds it when psutil can tell. Only TCP-based endpoints can be looked at.
     """
-    from buddybot.core import doctor
-
+    from buddybot.tools import doctor
     for endpoint in listen:
         if not endpoint.startswith(("tcp/", "tls/")) or not doctor.accepting(endpoint):
             continue

@@ -1,0 +1,2 @@
+"""The supervisor: `buddybot up` (launching and restarting services), its
+status line, and the embedded router. Built on the runtime."""

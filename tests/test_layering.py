@@ -1,0 +1,168 @@
+"""The package's layers, as a test: who may import whom.
+
+```
+cli ─────────────────────────────────────────────┐
+supervisor (up, status, router) ──┐              │
+tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, foxglove)
+                                  v              v
+                runtime (node, handles, config, params, service, ...)
+                                  v
+                contract (messages, keys, schemas, describe, channels)
+```
+
+An area imports only the runtime, the contract and itself, so an area can
+be lifted into its own repository; the runtime imports no tool, no
+supervisor and no area, so a service process loads only what it runs. The
+rule is a table (`ALLOWED`), checked statically (every `import` in the
+source, also the ones inside functions) and at run time (what loading the
+runtime really loads), so a lazy import that slips past is caught as well.
+"""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+SERVICES = Path(__file__).resolve().parents[1] / "services"
+AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglove")
+BASE = frozenset({"contract", "runtime"})
+ALLOWED: dict[str, frozenset[str]] = {
+    "contract": frozenset({"contract"}),
+    "runtime": BASE,
+    "tools": BASE | {"tools"},
+    "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
+    **{area: BASE | {area} for area in AREAS},
+    "cli": BASE | {"tools", "supervisor", "cli", *AREAS},
+    "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
+}
+"""Layer -> the layers its modules may import (a layer is a folder of `services/`)."""
+
+
+def imports_of(path: Path) -> set[str]:
+    """Every `buddybot...` module a file imports, anywhere in it."""
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.add(node.module)
+            if node.module == "buddybot":
+                found.update(f"buddybot.{a.name}" for a in node.names)
+    return {name for name in found if name.split(".")[0] == "buddybot"}
+
+
+def layer_of_module(module: str) -> str:
+    """`buddybot.runtime.node` -> `runtime`; `buddybot` itself -> ``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def layer_of_path(path: Path, root: Path) -> str:
+    rel = path.relative_to(root)
+    return rel.parts[0] if len(rel.parts) > 1 else ""
+
+
+def violations(root: Path) -> Iterator[str]:
+    """One line per import that crosses the layers the wrong way, under `root`."""
+    for path in sorted(root.rglob("*.py")):
+        layer = layer_of_path(path, root)
+        allowed = ALLOWED.get(layer)
+        if allowed is None:
+            yield f"{path.relative_to(root)}: folder {layer!r} is in no layer (add it to ALLOWED)"
+            continue
+        for module in sorted(imports_of(path)):
+            target = layer_of_module(module)
+            if target and target != "__version__" and target not in allowed:
+                yield f"{path.relative_to(root)} imports {module} ({layer} may import "\
+                      f"{', '.join(sorted(allowed))})"
+
+
+def test_every_import_follows_the_layers() -> None:
+    bad = list(violations(SERVICES))
+    assert not bad, "\n".join(bad)
+
+
+def test_every_folder_is_a_layer() -> None:
+    folders = {p.name for p in SERVICES.iterdir() if (p / "__init__.py").is_file()}
+    assert folders == set(ALLOWED) - {""}
+
+
+@pytest.mark.parametrize(("layer", "imported", "allowed"), [
+    ("runtime", "buddybot.tools.bag", False),
+    ("runtime", "buddybot.supervisor.launch", False),
+    ("runtime", "buddybot.camera.pipeline", False),
+    ("contract", "buddybot.runtime.node", False),
+    ("foxglove", "buddybot.cli.topics", False),
+    ("dashboard", "buddybot.tools.doctor", False),
+    ("eyes", "buddybot.audio.sounds", False),
+    ("tools", "buddybot.supervisor.launch", False),
+    ("eyes", "buddybot.runtime.node", True),
+    ("supervisor", "buddybot.tools.doctor", True),
+])
+def test_the_checker_catches_a_wrong_import(tmp_path: Path, layer: str, imported: str,
+                                            allowed: bool) -> None:
+    """The check itself can fail: a module planted in a copy of the layout that
+    imports across the layers is reported, naming the file and the import."""
+    for name in ALLOWED:
+        if name:
+            (tmp_path / name).mkdir()
+            (tmp_path / name / "__init__.py").write_text("")
+    (tmp_path / layer / "planted.py").write_text(f"def f() -> None:\n    import {imported}\n")
+    found = list(violations(tmp_path))
+    if allowed:
+        assert found == []
+    else:
+        assert len(found) == 1 and f"{layer}/planted.py imports {imported}" in found[0]
+
+
+def test_errors_is_a_leaf() -> None:
+    assert imports_of(SERVICES / "runtime" / "errors.py") == set()
+
+
+def test_node_imports_neither_the_config_nor_the_cli() -> None:
+    names = imports_of(SERVICES / "runtime" / "node.py")
+    assert not {n for n in names if n.startswith(("buddybot.runtime.config", "buddybot.cli"))}
+
+
+def loaded_after(code: str) -> list[str]:
+    """The `buddybot.*` modules a fresh interpreter holds after running `code`."""
+    show = "print(' '.join(sorted(m for m in sys.modules if m.startswith('buddybot.'))))"
+    probe = f"import sys\n{code}\n{show}\n"
+    return subprocess.run([sys.executable, "-c", probe], capture_output=True,
+                          text=True, check=True, timeout=60).stdout.split()
+
+
+@pytest.mark.integration
+def test_loading_the_runtime_loads_only_the_runtime_and_the_contract() -> None:
+    out = loaded_after("import buddybot.runtime.node, buddybot.runtime.service, "
+                       "buddybot.runtime.config")
+    assert "buddybot.runtime.node" in out  # the probe really ran
+    assert [n for n in out if layer_of_module(n) not in BASE] == []
+
+
+@pytest.mark.integration
+def test_reading_a_config_loads_only_the_settings_modules() -> None:
+    out = loaded_after("from buddybot.runtime.config import load_config\nload_config(None)")
+    loaded = {name for name in out if layer_of_module(name) in AREAS}
+    assert {f"buddybot.{a}.settings" for a in AREAS} <= loaded
+    assert {n for n in loaded if not n.endswith((".settings", *(f".{a}" for a in AREAS)))} == set()
+
+
+def test_node_is_the_only_door_to_zenoh() -> None:
+    """Services and tools use `Node` handles; only the runtime (the node, its
+    session and its handles) and the router process itself speak Zenoh."""
+    users = set()
+    for path in SERVICES.rglob("*.py"):
+        tree = ast.parse(path.read_text(), str(path))
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
+            if any(n == "zenoh" or n.startswith("zenoh.") for n in names):
+                users.add(path.relative_to(SERVICES).as_posix())
+    runtime = {"runtime/node.py", "runtime/session.py", "runtime/handles.py"}
+    assert users == runtime | {"supervisor/router.py"}
