@@ -38,12 +38,12 @@ from aiohttp import web
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime.endpoints import local_host, serve_failure
 from buddybot.runtime.errors import ServeError
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.tools.doctor import serve_failure
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -92,8 +92,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
         raise ServeError(serve_failure(s.host or "0.0.0.0", s.port,
                                        str(exc.strerror or exc))) from None
     port = runner.addresses[0][1] if runner.addresses else s.port
-    view_host = "127.0.0.1" if s.host in ("0.0.0.0", "", "::") else s.host
-    print(f"dashboard serving http://{view_host}:{port}/", flush=True)
+    print(f"dashboard serving http://{local_host(s.host)}:{port}/", flush=True)
 
     loop = asyncio.get_running_loop()
     mailbox = Mailbox(loop, board.deliver)

@@ -60,6 +60,7 @@ from buddybot.contract import messages as m
 from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.config import resolve_path
+from buddybot.runtime.endpoints import local_host
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
@@ -586,8 +587,7 @@ async def serve(ctx: ServiceContext, host: str, port: int,
         await runner.cleanup()
         raise StartupError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
     actual = runner.addresses[0][1] if runner.addresses else port
-    view_host = "127.0.0.1" if host in ("0.0.0.0", "", "::") else host
-    base = f"http://{view_host}:{actual}"
+    base = f"http://{local_host(host)}:{actual}"
     loop = asyncio.get_running_loop()
     inbox = Inbox(loop, hub.publish_batch)
     hub.start_motion(motion.MotionScheduler(motion_config(s), random.Random(), now_ms()))

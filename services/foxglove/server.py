@@ -23,8 +23,8 @@ from foxglove.websocket import Capability, ChannelView, Client, ServerListener, 
 
 from buddybot.contract import channels, keys
 from buddybot.foxglove import logic
+from buddybot.runtime.endpoints import serve_failure
 from buddybot.runtime.errors import ServeError
-from buddybot.tools.doctor import serve_failure
 
 SERVER_NAME = "buddybot"
 

@@ -37,6 +37,7 @@ from buddybot.foxglove import logic
 from buddybot.foxglove.options import add_arguments, settings_from
 from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.runtime.endpoints import is_wildcard, local_host
 from buddybot.runtime.handles import Publisher, Subscription
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
@@ -54,8 +55,7 @@ APP_URL = "https://app.foxglove.dev"
 
 def urls(host: str, port: int) -> tuple[str, str]:
     """(the WebSocket URL, the Foxglove app link that opens it) for a local viewer."""
-    view_host = "127.0.0.1" if host in ("", "0.0.0.0", "::") else host
-    ws = f"ws://{view_host}:{port}"
+    ws = f"ws://{local_host(host)}:{port}"
     return ws, f"{APP_URL}/?{urlencode({'ds': 'foxglove-websocket', 'ds.url': ws})}"
 
 
@@ -225,7 +225,7 @@ def run(ctx: ServiceContext) -> int:
     try:
         ws, app = urls(settings.host, server.port)
         print(f"foxglove bridge serving {ws}", flush=True)
-        where = "every interface" if settings.host in ("", "0.0.0.0", "::") else settings.host
+        where = "every interface" if is_wildcard(settings.host) else settings.host
         node = ctx.node()
         try:
             node.log.info("Foxglove: connect the app to %s (listening on %s), or open %s",

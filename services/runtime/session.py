@@ -26,6 +26,7 @@ import zenoh
 import zenoh.ext
 
 from buddybot.contract import keys
+from buddybot.runtime.endpoints import parse as parse_endpoint
 from buddybot.runtime.errors import BuddyBotError, ConfigError
 
 log = logging.getLogger("buddybot.node")
@@ -388,17 +389,19 @@ def _unreachable(what: str, error: BaseException, endpoints: list[str]) -> str:
 
 def _tcp_guess(endpoint: str) -> str | None:
     """What a TCP connection to a tcp/tls/ws endpoint's address says, if anything."""
-    proto, _, address = endpoint.partition("/")
-    if proto not in ("tcp", "tls", "ws") or ":" not in address:
-        return None
-    host, _, port = re.split(r"[?#]", address, maxsplit=1)[0].rpartition(":")
     try:
-        with socket.create_connection((host.strip("[]"), int(port)), timeout=0.5):
+        parsed = parse_endpoint(endpoint)
+    except ValueError:
+        return None
+    if parsed.proto not in ("tcp", "tls", "ws"):
+        return None
+    try:
+        with socket.create_connection((parsed.host, parsed.port), timeout=0.5):
             pass
-    except (OSError, ValueError) as exc:
-        return getattr(exc, "strerror", None) or str(exc)
-    return (f"a TCP connection opens at {host}:{port} but no Zenoh session follows "
-            f"(wrong protocol, e.g. {proto}/ to a listener of another kind, "
+    except OSError as exc:
+        return exc.strerror or str(exc)
+    return (f"a TCP connection opens at {parsed.address} but no Zenoh session follows "
+            f"(wrong protocol, e.g. {parsed.proto}/ to a listener of another kind, "
             "or TLS settings?)")
 
 

@@ -36,14 +36,15 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import IO
 
-from buddybot.runtime import registry
+from buddybot.runtime import endpoints, registry
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.config import DEFAULT_ENDPOINT
 from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
-from buddybot.runtime.node import Node, zenoh_config
+from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.supervised import SUPERVISOR_ENV
 from buddybot.supervisor.status import StatusMonitor
+from buddybot.tools import doctor
 
 log = logging.getLogger("buddybot.up")
 
@@ -51,6 +52,8 @@ GRACE_S = 5.0
 BACKOFF_MIN_S = 1.0
 BACKOFF_MAX_S = 30.0
 STABLE_S = 30.0
+PROBE_TIMEOUT_S = 3.0
+"""How long the look at a taken port waits for a Zenoh router to answer there."""
 NO_RESTART_STATUS = frozenset({2})
 """Exit statuses that restarting cannot fix: a bad option or config, or a node of
 that name already running elsewhere (the same rule as `RestartPreventExitStatus=2`
@@ -91,45 +94,6 @@ def child_env(env: Mapping[str, str], supervisor_pid: int) -> dict[str, str]:
     out.update(PYTHONUNBUFFERED="1")
     out[SUPERVISOR_ENV] = str(supervisor_pid)
     return out
-
-
-def connect_endpoint(listen: str) -> str:
-    """Where local services reach a router listening on `listen`."""
-    proto, _, addr = listen.partition("/")
-    host, _, port = addr.rpartition(":")
-    if host in ("0.0.0.0", "[::]", ""):
-        host = "127.0.0.1"
-    return f"{proto}/{host}:{port}"
-
-
-def _host_port(endpoint: str) -> tuple[str, int]:
-    _, _, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    return host.strip("[]"), int(port)
-
-
-def accepting(endpoint: str) -> bool:
-    """Whether something accepts TCP connections on `endpoint` right now."""
-    try:
-        with socket.create_connection(_host_port(endpoint), timeout=0.5):
-            return True
-    except (OSError, ValueError):
-        return False
-
-
-def probe_nodes(endpoint: str, timeout_s: float = 3.0, zenoh_file: str | None = None
-                ) -> list[str] | None:
-    """Live BuddyBot nodes (`robot/node`) behind a Zenoh router at `endpoint`,
-    or None when no Zenoh router answers there (`zenoh_file`: TLS settings)."""
-    config = zenoh_config(connect=[endpoint], base_file=zenoh_file)
-    config.insert_json5("connect/timeout_ms", str(int(timeout_s * 1000)))
-    try:
-        # A probe: it must not show up in the very list it asks for.
-        probe = Node("up-probe", connect=[endpoint], config=config, probe=True)
-    except Exception:  # ConnectionError: not a Zenoh router, or it would not talk to us (TLS)
-        return None
-    with probe:
-        return sorted(probe.node_instances(all_robots=True, timeout=timeout_s))
 
 
 def busy_message(listen: str, nodes: list[str] | None) -> str:
@@ -250,9 +214,13 @@ class UpPlan:
         return not self.listen
 
 
-def _is_loopback(endpoint: str) -> bool:
-    host = endpoint.partition("/")[2].rpartition(":")[0].strip("[]")
-    return host in ("127.0.0.1", "localhost", "::1")
+def default_listen(configured: list[str]) -> str:
+    """Where `up`'s router listens when not told: the configured connect endpoint
+    when it is on this machine's loopback (that is where the services look),
+    else the default endpoint."""
+    if configured and endpoints.endpoint_is_loopback(configured[0]):
+        return configured[0]
+    return DEFAULT_ENDPOINT
 
 
 def select_services(only: list[str] | None, known: list[registry.Entry],
@@ -292,11 +260,8 @@ def plan_up(ctx: ServiceContext) -> UpPlan:
         listen: list[str] = []
         connect = list(joined)
     else:
-        configured = ctx.config.zenoh.connect
-        default = configured[0] if configured and _is_loopback(configured[0]) \
-            else DEFAULT_ENDPOINT
-        listen = list(args.listen or [default])
-        connect = [connect_endpoint(listen[0])]
+        listen = list(args.listen or [default_listen(ctx.config.zenoh.connect)])
+        connect = [endpoints.connect_endpoint(listen[0])]
     extra: dict[str, list[str]] = {}
     if getattr(args, "eye_port", None) is not None:
         extra["eye-renderer"] = ["--port", str(args.eye_port)]
@@ -352,7 +317,7 @@ def _urls(ctx: ServiceContext, plan: UpPlan) -> list[str]:
         table = getattr(ctx.config, name, None)
         if name in names and table is not None:
             port = (getattr(ctx.args, option, None) if option else None) or table.port
-            host = "127.0.0.1" if table.host in ("0.0.0.0", "::", "") else table.host
+            host = endpoints.local_host(table.host)
             out.append(f"{name}: {scheme}://{host}:{port}/")
     return out
 
@@ -364,15 +329,15 @@ def _say(text: str) -> None:
 def _busy(listen: list[str], zenoh_file: str | None) -> str | None:
     """The refusal line if any of our router's ports is taken, else None."""
     for endpoint in listen:
-        local = connect_endpoint(endpoint)
-        if local.startswith(("tcp/", "tls/")) and accepting(local):
-            return busy_message(endpoint, probe_nodes(local, zenoh_file=zenoh_file))
+        if endpoints.accepting(endpoint):
+            nodes, _ = doctor.port_users(endpoints.connect_endpoint(endpoint), zenoh_file,
+                                         PROBE_TIMEOUT_S)
+            return busy_message(endpoint, nodes)
     return None
 
 
 def _quick_doctor(ctx: ServiceContext, plan: UpPlan) -> None:
     """The quick doctor's one-line summary (its port check is `_busy`'s job)."""
-    from buddybot.tools import doctor
     opts = doctor.Options(sim=ctx.args.sim, endpoint=plan.connect[0], robot=ctx.robot,
                           zenoh_file=plan.zenoh_file)
     try:
@@ -421,8 +386,8 @@ def up(ctx: ServiceContext) -> int:
     out, lock = sys.stdout, threading.Lock()
     _quick_doctor(ctx, plan)
     if plan.joins:
-        reachable = [e for e in plan.connect if not e.startswith(("tcp/", "tls/"))
-                     or accepting(e)]
+        reachable = [e for e in plan.connect if not endpoints.over_tcp(e)
+                     or endpoints.accepting(e)]
         if not reachable:
             _say(f"buddybot up: no router answers at {', '.join(plan.connect)} "
                  "(--connect joins a running router). Nothing started.")

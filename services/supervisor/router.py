@@ -7,9 +7,11 @@ import threading
 
 import zenoh
 
+from buddybot.runtime import endpoints
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import zenoh_config
 from buddybot.runtime.sdnotify import Notifier
+from buddybot.tools import doctor
 
 log = logging.getLogger("buddybot.router")
 
@@ -25,9 +27,8 @@ def busy_port(listen: list[str], base_file: str | None = None) -> str | None:
     Zenoh router (with whose nodes) or a stranger, and which local process
     holds it when psutil can tell. Only TCP-based endpoints can be looked at.
     """
-    from buddybot.tools import doctor
     for endpoint in listen:
-        if not endpoint.startswith(("tcp/", "tls/")) or not doctor.accepting(endpoint):
+        if not endpoints.accepting(endpoint):
             continue
         zlog = logging.getLogger("zenoh")
         level = zlog.level

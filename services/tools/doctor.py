@@ -21,7 +21,6 @@ import importlib.metadata
 import json
 import os
 import platform
-import re
 import socket
 import threading
 import time
@@ -32,6 +31,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Literal
 from urllib.parse import urlsplit
 
+from buddybot.runtime import endpoints
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
 
 Level = Literal["OK", "WARN", "FAIL"]
@@ -218,68 +218,6 @@ def versions() -> dict[str, str | None]:
     return out
 
 
-def host_port(endpoint: str) -> tuple[str, int]:
-    """(host, port) of a Zenoh endpoint `proto/host:port`; ValueError if it has none."""
-    _, _, addr = endpoint.partition("/")
-    host, _, port = addr.rpartition(":")
-    host = host.strip("[]")
-    if host in ("0.0.0.0", "::", ""):
-        host = "127.0.0.1"
-    return host, int(port.split("#")[0])
-
-
-def port_holder(endpoint: str) -> str | None:
-    """The local process listening on `endpoint`'s TCP port ("python3, pid 1234"),
-    when psutil can tell: only processes whose sockets we may read (our user's,
-    or all as root), and never one on another host. None otherwise."""
-    try:
-        host, port = host_port(endpoint)
-    except ValueError:
-        return None
-    try:
-        import psutil
-
-        conns = psutil.net_connections(kind="tcp")
-    except Exception:  # no psutil, or AccessDenied (macOS without root)
-        return None
-    for conn in conns:
-        addr = conn.laddr
-        if conn.status != psutil.CONN_LISTEN or not addr or addr.port != port:
-            continue
-        if addr.ip not in (host, f"::ffff:{host}", "0.0.0.0", "::"):
-            continue
-        if conn.pid is None:
-            return None
-        try:
-            return f"{psutil.Process(conn.pid).name()}, pid {conn.pid}"
-        except psutil.Error:
-            return f"pid {conn.pid}"
-    return None
-
-
-
-def serve_failure(host: str, port: int, error: str) -> str:
-    """The one line for a web or WebSocket server that cannot listen (the dashboard,
-    the Foxglove bridge); a taken port names its holder and the way out. `error`:
-    the OS's or the server library's reason (Foxglove's prefixes are dropped)."""
-    reason = error.removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
-    reason = re.sub(r" \(os error \d+\)$", "", reason)
-    if "in use" not in reason:
-        return f"cannot serve on {host}:{port}: {reason}"
-    holder = port_holder(f"tcp/{host}:{port}")
-    held = f" by {holder}" if holder else ""
-    return (f"cannot serve on {host}:{port}: the port is taken{held} ({reason}); stop it "
-            "or give --port another port")
-
-def accepting(endpoint: str, timeout: float = 0.5) -> bool:
-    """Whether something accepts TCP connections on `endpoint` (tcp or tls) right now."""
-    try:
-        with socket.create_connection(host_port(endpoint), timeout=timeout):
-            return True
-    except (OSError, ValueError):
-        return False
-
-
 def check_serial(sensors: Sequence[str], sim: bool) -> list[Check]:
     """Each configured radar's serial port present and usable."""
     if sim or not sensors:
@@ -359,9 +297,7 @@ def check_audio(settings: Any, sim: bool, in_use: bool = False) -> Check:
 def check_display(host: str, port: int, timeout: float) -> Check:
     """The eye renderer's page server answers `/healthz` at `host:port` (a
     wildcard host means this machine)."""
-    if host in ("0.0.0.0", "::", ""):
-        host = "127.0.0.1"
-    return check_display_url(_http_base(host, port), timeout)
+    return check_display_url(_http_base(endpoints.local_host(host), port), timeout)
 
 
 def check_display_url(base: str, timeout: float, where: str = "") -> Check:
@@ -382,15 +318,10 @@ def check_display_url(base: str, timeout: float, where: str = "") -> Check:
 # --- where the eye pages are (pure) ------------------------------------------------
 
 EYE_RENDERER = "eye-renderer"
-WILDCARD_HOSTS = ("", "0.0.0.0", "::", "[::]")
 
 
 def _http_base(host: str, port: int) -> str:
     return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
-
-
-def is_loopback(host: str) -> bool:
-    return host.lower() in ("localhost", "::1", "[::1]") or host.startswith("127.")
 
 
 def is_local_host(host: str, own_names: Iterable[str], own_addresses: Iterable[str]) -> bool:
@@ -399,8 +330,8 @@ def is_local_host(host: str, own_names: Iterable[str], own_addresses: Iterable[s
     Pure, and never asks DNS (a remote name that does not answer must not
     make doctor hang)."""
     h = host.strip("[]").lower().rstrip(".")
-    return (host in WILDCARD_HOSTS or is_loopback(h) or h in {n.lower() for n in own_names}
-            or h in set(own_addresses))
+    return (endpoints.is_wildcard(host) or endpoints.is_loopback(h)
+            or h in {n.lower() for n in own_names} or h in set(own_addresses))
 
 
 def plan_display(*, alive: bool, values: Mapping[str, Any] | None, config_host: str,
@@ -439,14 +370,14 @@ def plan_display(*, alive: bool, values: Mapping[str, Any] | None, config_host: 
             return Check("displays", WARN, f"{EYE_RENDERER} on {theirs} reports an unusable "
                          f"address {url!r}")
         listen = str(values.get("listen_host", ""))
-        if listen in WILDCARD_HOSTS:
+        if endpoints.is_wildcard(listen):
             return _http_base(theirs, port), f"{EYE_RENDERER} on {theirs}"
-        if is_loopback(listen):
+        if endpoints.is_loopback(listen):
             return Check("displays", WARN, f"{EYE_RENDERER} runs on {theirs} and serves only "
                          f"its own loopback ({url}): not reachable from here; run "
                          f"`buddybot doctor` on {theirs}")
         return _http_base(listen, port), f"{EYE_RENDERER} on {theirs}"
-    here = "127.0.0.1" if config_host in WILDCARD_HOSTS else config_host
+    here = endpoints.local_host(config_host)
     if alive:
         if config_port == 0:
             return Check("displays", WARN, f"{EYE_RENDERER} is running but did not say where "
@@ -646,7 +577,7 @@ def port_check(endpoint: str, zenoh_file: str | None, timeout: float,
                robot: str = "buddy") -> Check:
     """Who holds the router's port: nobody, a Zenoh router (with whose nodes), or not
     a Zenoh router at all."""
-    if not accepting(endpoint):
+    if not endpoints.accepting(endpoint):
         return judge_port(endpoint, False, None)
     return judge_port(endpoint, True, *port_users(endpoint, zenoh_file, timeout, robot))
 
@@ -658,7 +589,7 @@ def port_users(endpoint: str, zenoh_file: str | None, timeout: float,
     (`port_holder`). The one busy-port look shared by `doctor`, `up`'s quick
     doctor and `buddybot router`."""
     bus = probe_bus(endpoint, robot, zenoh_file, timeout, 0.0, {}, all_robots=True)
-    return (sorted(bus.live) if bus.reachable else None), port_holder(endpoint)
+    return (sorted(bus.live) if bus.reachable else None), endpoints.port_holder(endpoint)
 
 
 def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozenset[str]]:
@@ -675,8 +606,8 @@ def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozense
                     opts.window_s if streams else 0.0, streams, stop=opts.stop,
                     wait_values={EYE_RENDERER: "url"})
     error = bus.error
-    if not bus.reachable and opts.endpoint.startswith(("tcp/", "tls/")) \
-            and not accepting(opts.endpoint):
+    if not bus.reachable and endpoints.over_tcp(opts.endpoint) \
+            and not endpoints.accepting(opts.endpoint):
         error = "nothing listens there (is the router or `buddybot up` running?)"
     checks = [judge_router(opts.endpoint, bus.reachable, error)]
     if not bus.reachable:

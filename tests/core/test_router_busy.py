@@ -9,6 +9,7 @@ import subprocess
 
 import pytest
 
+from buddybot.runtime import endpoints
 from buddybot.runtime.node import Node
 from buddybot.tools import doctor
 from buddybot.tools.testing import LOOPBACK, buddybot_argv
@@ -52,9 +53,9 @@ def test_the_holder_is_found_by_psutil() -> None:
         holder.bind((LOOPBACK, 0))
         holder.listen()
         port = holder.getsockname()[1]
-        found = doctor.port_holder(f"tcp/{LOOPBACK}:{port}")
+        found = endpoints.port_holder(f"tcp/{LOOPBACK}:{port}")
     assert found is not None and found.endswith(f"pid {os.getpid()}")
-    assert doctor.port_holder(f"tcp/{LOOPBACK}:{port}") is None  # closed: nobody
+    assert endpoints.port_holder(f"tcp/{LOOPBACK}:{port}") is None  # closed: nobody
     assert doctor.describe_holder(None, "x, pid 1") == ("something that is not a Zenoh "
                                                          "router, process x, pid 1")
     assert doctor.describe_holder(["buddy/camera"]) == ("a Zenoh router (live nodes: "

@@ -16,8 +16,8 @@ from buddybot.foxglove import logic
 from buddybot.foxglove.server import FoxgloveServer
 from buddybot.foxglove.service import urls
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.runtime.endpoints import serve_failure
 from buddybot.runtime.errors import ServeError
-from buddybot.tools.doctor import serve_failure
 
 
 def test_a_15_fps_camera_limited_to_10_gives_10_per_second() -> None:

@@ -1,0 +1,161 @@
+"""Zenoh endpoints and local ports: what an endpoint says, and who is on its port.
+
+One reading of a locator (`tcp/127.0.0.1:7447`, `tls/host:port`,
+`tcp/[::1]:7447`, with `?...` or `#iface=lo` suffixes) for everything that
+must agree on it: `up` choosing and guarding its router's port, `buddybot
+router` refusing a taken one, `doctor` judging it, and the web servers (the
+dashboard, the Foxglove bridge) naming who holds theirs. The parsing and
+classifying functions are pure; `accepting` and `port_holder` are the two
+small looks at this machine (a TCP connect, psutil).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import re
+import socket
+from dataclasses import dataclass
+
+WILDCARD_HOSTS = frozenset({"", "0.0.0.0", "::", "[::]"})
+"""Hosts a server binds to serve every interface (this machine reaches it on loopback)."""
+LOCAL_HOST = "127.0.0.1"
+"""Where this machine reaches a server bound to a wildcard host."""
+TCP_PROTOCOLS = ("tcp", "tls")
+"""Zenoh transports over a TCP socket: the only ones a plain connect can look at."""
+
+
+@dataclass(frozen=True)
+class Endpoint:
+    """A Zenoh locator taken apart: `proto/host:port` and its suffix (`?...`, `#...`)."""
+
+    proto: str
+    host: str
+    """Without IPv6 brackets."""
+    port: int
+    suffix: str = ""
+
+    @property
+    def address(self) -> str:
+        """`host:port`, with brackets around an IPv6 host."""
+        return f"[{self.host}]:{self.port}" if ":" in self.host else f"{self.host}:{self.port}"
+
+
+def parse(endpoint: str) -> Endpoint:
+    """Take a locator apart; ValueError when it has no `proto/host:port` form."""
+    proto, slash, rest = endpoint.partition("/")
+    address, suffix = _split_suffix(rest)
+    host, colon, port = address.rpartition(":")
+    if not slash or not colon or not port.isdigit():
+        raise ValueError(f"not a host:port endpoint: {endpoint!r}")
+    return Endpoint(proto, host.strip("[]"), int(port), suffix)
+
+
+def _split_suffix(text: str) -> tuple[str, str]:
+    match = re.search(r"[?#]", text)
+    return (text, "") if match is None else (text[:match.start()], text[match.start():])
+
+
+def is_wildcard(host: str) -> bool:
+    return host in WILDCARD_HOSTS
+
+
+def local_host(host: str) -> str:
+    """The host this machine dials to reach a server bound on `host`."""
+    return LOCAL_HOST if is_wildcard(host) else host
+
+
+def is_loopback(host: str) -> bool:
+    """Whether `host` (a name or an address, IPv6 with or without brackets) is this
+    machine's loopback: `localhost`, all of 127.0.0.0/8, `::1`."""
+    h = host.strip("[]").lower().rstrip(".")
+    if h == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(h.split("%")[0]).is_loopback
+    except ValueError:
+        return False
+
+
+def endpoint_is_loopback(endpoint: str) -> bool:
+    """Whether a locator points at this machine's loopback (False when unparsable)."""
+    try:
+        return is_loopback(parse(endpoint).host)
+    except ValueError:
+        return False
+
+
+def over_tcp(endpoint: str) -> bool:
+    """Whether the endpoint's transport runs over TCP (so a plain connect can look)."""
+    return endpoint.partition("/")[0] in TCP_PROTOCOLS
+
+
+def host_port(endpoint: str) -> tuple[str, int]:
+    """(host, port) this machine dials for `endpoint` (a wildcard means loopback);
+    ValueError when it has none."""
+    parsed = parse(endpoint)
+    return local_host(parsed.host), parsed.port
+
+
+def connect_endpoint(listen: str) -> str:
+    """Where local services reach a router listening on `listen` (suffix kept)."""
+    try:
+        parsed = parse(listen)
+    except ValueError:
+        return listen
+    if not is_wildcard(parsed.host):
+        return listen
+    return f"{parsed.proto}/{LOCAL_HOST}:{parsed.port}{parsed.suffix}"
+
+
+def accepting(endpoint: str, timeout: float = 0.5) -> bool:
+    """Whether something accepts TCP connections on `endpoint` (tcp or tls) right now."""
+    if not over_tcp(endpoint):
+        return False
+    try:
+        with socket.create_connection(host_port(endpoint), timeout=timeout):
+            return True
+    except (OSError, ValueError):
+        return False
+
+
+def port_holder(endpoint: str) -> str | None:
+    """The local process listening on `endpoint`'s TCP port ("python3, pid 1234"),
+    when psutil can tell: only processes whose sockets we may read (our user's,
+    or all as root), and never one on another host. None otherwise."""
+    try:
+        host, port = host_port(endpoint)
+    except ValueError:
+        return None
+    try:
+        import psutil
+
+        conns = psutil.net_connections(kind="tcp")
+    except Exception:  # no psutil, or AccessDenied (macOS without root)
+        return None
+    for conn in conns:
+        addr = conn.laddr
+        if conn.status != psutil.CONN_LISTEN or not addr or addr.port != port:
+            continue
+        if addr.ip not in (host, f"::ffff:{host}", "0.0.0.0", "::"):
+            continue
+        if conn.pid is None:
+            return None
+        try:
+            return f"{psutil.Process(conn.pid).name()}, pid {conn.pid}"
+        except psutil.Error:
+            return f"pid {conn.pid}"
+    return None
+
+
+def serve_failure(host: str, port: int, error: str) -> str:
+    """The one line for a web or WebSocket server that cannot listen (the dashboard,
+    the Foxglove bridge); a taken port names its holder and the way out. `error`:
+    the OS's or the server library's reason (Foxglove's prefixes are dropped)."""
+    reason = error.removeprefix("FoxgloveError: ").removeprefix("Failed to bind port: ")
+    reason = re.sub(r" \(os error \d+\)$", "", reason)
+    if "in use" not in reason:
+        return f"cannot serve on {host}:{port}: {reason}"
+    holder = port_holder(f"tcp/{host}:{port}")
+    held = f" by {holder}" if holder else ""
+    return (f"cannot serve on {host}:{port}: the port is taken{held} ({reason}); stop it "
+            "or give --port another port")
