@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from buddybot.camera import frames
-from buddybot.camera.settings import CameraSettings
+from buddybot.camera.settings import DEFAULT_FPS, CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -32,7 +32,6 @@ from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.rates import RateCounter
 from buddybot.runtime.service import ServiceContext
 
-DEFAULT_FPS = 30.0
 MESSAGE_OVERHEAD = 256
 """Bytes of an Image message besides data and frame_id (MessagePack field names, numbers)."""
 

@@ -13,6 +13,9 @@ import msgspec
 MAX_SIDE = 16384
 """Largest image side the Image message carries (mirrors buddybot.camera.frames.MAX_SIDE;
 kept import-free here)."""
+DEFAULT_FPS = 30.0
+"""The camera's pace when `fps` is not set and the source says none (the simulation's,
+most webcams')."""
 
 
 class CameraSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

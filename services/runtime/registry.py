@@ -3,8 +3,8 @@
 A service module provides `add_arguments(parser)` and `run(ctx) -> int`
 (see `buddybot.runtime.service.ServiceContext`), and names its config table
 and the msgspec struct that table decodes into: the configuration is
-assembled from these entries (`buddybot.runtime.config`), so the runtime in
-`core/` never imports an area. Modules are imported only when used, so
+assembled from these entries (`buddybot.runtime.config`), so the runtime
+never imports an area. Modules are imported only when used, so
 `buddybot --help` stays fast and a service whose optional dependency is
 missing does not break the others.
 """
@@ -15,7 +15,10 @@ import importlib
 import importlib.util
 from dataclasses import dataclass
 from types import ModuleType
-from typing import Any
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from buddybot.runtime.health import DoctorHooks
 
 
 @dataclass(frozen=True)
@@ -27,9 +30,10 @@ class Entry:
     """The service's config table (`[radar_bridge]`), None for a tool."""
     settings: str | None = None
     """`module:Struct` the table decodes into (imported when a config is read)."""
-    device_check: str | None = None
-    """`module:function` that opens the service's device from its settings, for
-    `buddybot doctor` (imported only when doctor runs, so core stays area-free)."""
+    doctor: str | None = None
+    """`module:NAME` of the service's `health.DoctorHooks` (its device checks, the
+    packages it needs, its stream's rate), imported only when doctor runs, so
+    doctor stays area-free."""
     on_request: bool = False
     """Started by `up` only when asked (`up --foxglove`), never by default."""
 
@@ -43,12 +47,13 @@ class Entry:
     def load(self) -> ModuleType:
         return importlib.import_module(self.module)
 
-    def device_opener(self) -> Any:
-        """The `device_check` function (LookupError when the service names none)."""
-        if self.device_check is None:
-            raise LookupError(f"{self.name} has no device check")
-        module, _, name = self.device_check.partition(":")
-        return getattr(importlib.import_module(module), name)
+    def doctor_hooks(self) -> DoctorHooks | None:
+        """The service's part of doctor, None when it has none."""
+        if self.doctor is None:
+            return None
+        module, _, name = self.doctor.partition(":")
+        hooks: DoctorHooks = getattr(importlib.import_module(module), name)
+        return hooks
 
     def settings_type(self) -> type[Any]:
         """The msgspec struct of this service's config table."""
@@ -61,14 +66,17 @@ class Entry:
 
 SERVICES: tuple[Entry, ...] = (
     Entry("radar-bridge", "buddybot.radar.bridge", "LD2410 radars over serial -> frames",
-          "radar_bridge", "buddybot.radar.settings:RadarBridgeSettings"),
+          "radar_bridge", "buddybot.radar.settings:RadarBridgeSettings",
+          doctor="buddybot.radar.doctor:BRIDGE"),
     Entry("radar-presence", "buddybot.radar.presence_service", "radar frames -> presence",
           "radar_presence", "buddybot.radar.settings:RadarPresenceSettings"),
     Entry("camera", "buddybot.camera.capture", "capture camera frames and publish them",
-          "camera", "buddybot.camera.settings:CameraSettings"),
+          "camera", "buddybot.camera.settings:CameraSettings",
+          doctor="buddybot.camera.doctor:CAPTURE"),
     Entry("face-detector", "buddybot.camera.detector",
           "BlazeFace face detection -> face position",
-          "face_detector", "buddybot.camera.settings:FaceDetectorSettings"),
+          "face_detector", "buddybot.camera.settings:FaceDetectorSettings",
+          doctor="buddybot.camera.doctor:DETECTOR"),
     Entry("controller", "buddybot.controller.service", "social behaviour: eyes, gaze, greetings",
           "controller", "buddybot.controller.settings:ControllerSettings"),
     Entry("eyes", "buddybot.eyes.driver_service", "eye control -> direction, pupil, lids",
@@ -79,7 +87,7 @@ SERVICES: tuple[Entry, ...] = (
           "audio", "buddybot.audio.settings:AudioSettings"),
     Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)",
           "audio_player", "buddybot.audio.settings:AudioPlayerSettings",
-          device_check="buddybot.audio.player:open_device"),
+          doctor="buddybot.audio.doctor:PLAYER"),
     Entry("dashboard", "buddybot.dashboard.service", "live web page of what the robot perceives",
           "dashboard", "buddybot.dashboard.settings:DashboardSettings"),
     Entry("foxglove", "buddybot.foxglove.service",

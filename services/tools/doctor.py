@@ -12,14 +12,15 @@ robot. Two families:
 
 Pure where it can be: the functions that judge (`judge_rate`, `judge_nodes`,
 `judge_clock`...) take numbers and lists; the ones that look (`probe_bus`,
-`open_camera`...) are thin and kept apart.
+`port_users`...) are thin and kept apart. What is particular to a service (its
+devices, its packages, its stream's rate) is the service's own, lent through the
+registry (`runtime.health.DoctorHooks`).
 """
 
 from __future__ import annotations
 
 import importlib.metadata
 import json
-import os
 import platform
 import socket
 import threading
@@ -28,49 +29,27 @@ import urllib.error
 import urllib.request
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any, Literal
+from typing import Any
 from urllib.parse import urlsplit
 
-from buddybot.runtime import endpoints
+from buddybot.runtime import endpoints, registry
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
-
-Level = Literal["OK", "WARN", "FAIL"]
-OK: Level = "OK"
-WARN: Level = "WARN"
-FAIL: Level = "FAIL"
+from buddybot.runtime.health import FAIL, OK, WARN, Check, DoctorHooks
 
 CLOCK_MIN_EPOCH_S = 1_704_067_200.0
 """2024-01-01T00:00:00Z: a system clock before this was never set (no RTC, no NTP)."""
 CLOCK_SKEW_WARN_S = 2.0
 """A received stamp further than this from our clock: two hosts disagree on the time."""
-RADAR_HZ = 10.0
-"""An LD2410 reports about 10 times a second (the simulator too)."""
-CAMERA_DEFAULT_FPS = 30.0
-"""The camera's pace when `[camera] fps` is not set (the simulation's, most webcams')."""
 RATE_WARN_FRACTION = 0.5
 """A stream below this fraction of its expected rate is a warning."""
-VERSION_PACKAGES = (
+VERSION_PACKAGES: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("buddybot", ("buddybot",)),
     ("zenoh", ("eclipse-zenoh",)),
     ("msgspec", ("msgspec",)),
     ("numpy", ("numpy",)),
-    ("opencv", ("opencv-python-headless", "opencv-python", "opencv-contrib-python")),
-    ("ai-edge-litert", ("ai-edge-litert",)),
 )
-"""(shown name, distribution names to try): what a bug report needs to name."""
-
-
-@dataclass(frozen=True)
-class Check:
-    """One verdict: `name` says what was checked, `detail` what was found."""
-
-    name: str
-    level: Level
-    detail: str
-
-    @property
-    def failed(self) -> bool:
-        return self.level == FAIL
+"""(shown name, distribution names to try): what a bug report needs to name; each
+service adds its own (`DoctorHooks.packages`)."""
 
 
 # --- report -------------------------------------------------------------------------
@@ -205,9 +184,26 @@ def judge_versions(found: dict[str, str | None]) -> Check:
 # --- looking (thin) -----------------------------------------------------------------
 
 
+def service_hooks() -> list[tuple[registry.Entry, DoctorHooks]]:
+    """Every service's part of doctor, in the registry's order (the order of the
+    report's lines); a service whose module is not installed has none."""
+    found = []
+    for entry in registry.SERVICES:
+        try:
+            hooks = entry.doctor_hooks()
+        except ImportError:
+            continue
+        if hooks is not None:
+            found.append((entry, hooks))
+    return found
+
+
 def versions() -> dict[str, str | None]:
     out: dict[str, str | None] = {"python": platform.python_version()}
-    for shown, dists in VERSION_PACKAGES:
+    packages = list(VERSION_PACKAGES)
+    for _entry, hooks in service_hooks():
+        packages += hooks.packages
+    for shown, dists in packages:
         out[shown] = None
         for dist in dists:
             try:
@@ -216,82 +212,6 @@ def versions() -> dict[str, str | None]:
             except importlib.metadata.PackageNotFoundError:
                 continue
     return out
-
-
-def check_serial(sensors: Sequence[str], sim: bool) -> list[Check]:
-    """Each configured radar's serial port present and usable."""
-    if sim or not sensors:
-        return [Check("radar serial", OK, "simulated (no serial port needed)")]
-    checks = []
-    for i, url in enumerate(sensors):
-        name = f"radar serial {i}"
-        if "://" in url:
-            checks.append(Check(name, OK, f"{url}: network serial, not opened here"))
-        elif not os.path.exists(url):
-            checks.append(Check(name, FAIL, f"{url} does not exist (unplugged? wrong name?)"))
-        elif not os.access(url, os.R_OK | os.W_OK):
-            checks.append(Check(name, FAIL, f"{url}: no read/write permission "
-                                "(add the user to the dialout group)"))
-        else:
-            checks.append(Check(name, OK, f"{url} present"))
-    return checks
-
-
-def check_camera(source: str, sim: bool, in_use: bool = False,
-                 opener: Callable[[str], bool] | None = None) -> Check:
-    """The configured camera device opens (a file exists). Not in sim; not while the
-    camera service holds it (`in_use`)."""
-    if sim or not source:
-        return Check("camera device", OK, "simulated (no camera needed)")
-    if in_use:
-        return Check("camera device", OK, f"{source}: held by the running camera service")
-    if "://" in source:
-        return Check("camera device", OK, f"{source}: network stream, not opened here")
-    if not source.isdigit() and not source.startswith("/dev/") and "%" not in source:
-        if os.path.exists(source):
-            return Check("camera device", OK, f"{source}: file present")
-        return Check("camera device", FAIL, f"{source} does not exist")
-    opened = (opener or open_camera)(source)
-    if opened:
-        return Check("camera device", OK, f"{source} opens")
-    return Check("camera device", FAIL, f"{source} cannot be opened (unplugged, or in use "
-                 "by another program?)")
-
-
-def open_camera(source: str) -> bool:
-    """Open and release an OpenCV capture of `source` (an index or a device path)."""
-    try:
-        import cv2
-    except ImportError:
-        return False
-    cap = cv2.VideoCapture(int(source) if source.isdigit() else source)
-    try:
-        return bool(cap.isOpened())
-    finally:
-        cap.release()
-
-
-def check_audio(settings: Any, sim: bool, in_use: bool = False) -> Check:
-    """The audio player's backend opens a device ("null" is fine in sim)."""
-    backend = str(getattr(settings, "backend", "auto"))
-    if backend == "null":
-        return Check("audio device", OK if sim else WARN,
-                     "null backend: the robot plays silently")
-    if in_use:
-        return Check("audio device", OK, f"{backend}: held by the running audio-player")
-    try:
-        from buddybot.runtime import registry
-        entry = registry.service("audio-player")
-        assert entry is not None
-        opened = entry.device_opener()(settings)
-    except Exception as exc:  # AudioError, miniaudio errors: the message says why
-        return Check("audio device", OK if sim else FAIL, f"{backend}: {exc}")
-    try:
-        if opened.warning:
-            return Check("audio device", OK if sim else WARN, opened.warning)
-        return Check("audio device", OK, f"{backend}: opened ({opened.backend})")
-    finally:
-        opened.device.close()
 
 
 def check_display(host: str, port: int, timeout: float) -> Check:
@@ -557,16 +477,10 @@ def quick_checks(config: ConfigBase | None, config_error: str | None, opts: Opti
     `in_use`: services running now (their devices are not opened again)."""
     checks = [judge_config(config, config_error)]
     if config is not None:
-        sections = set(config.__struct_fields__)
-        if "radar_bridge" in sections:
-            sim = opts.sim or bool(getattr(config.radar_bridge, "sim", False))
-            checks += check_serial(list(config.radar_bridge.sensors), sim)
-        if "camera" in sections:
-            cam = config.camera
-            checks.append(check_camera(cam.source, opts.sim or bool(cam.sim),
-                                       "camera" in in_use))
-        if "audio_player" in sections:
-            checks.append(check_audio(config.audio_player, opts.sim, "audio-player" in in_use))
+        for entry, hooks in service_hooks():
+            settings = getattr(config, entry.table or "", None)
+            if hooks.devices is not None and settings is not None:
+                checks += hooks.devices(settings, opts.sim, entry.name in in_use)
     checks.append(judge_versions(versions()))
     if port:
         checks.append(port_check(opts.endpoint, opts.zenoh_file, opts.timeout, opts.robot))
@@ -596,12 +510,11 @@ def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozense
     """Checks that ask the running robot, each bounded by `opts.timeout`; and the
     names of the live nodes (whose devices the quick checks must not open again)."""
     from buddybot.contract import keys
-    streams: dict[str, str] = {}
+    rates = [hooks.rate(getattr(config, entry.table or "", None))
+             for entry, hooks in service_hooks()
+             if hooks.rate is not None and entry.name in opts.expected]
     prefix = keys.prefix(opts.robot)
-    if "radar-bridge" in opts.expected:
-        streams["radar frames"] = f"{prefix}/{keys.RADAR_FRAMES.wildcard()}"
-    if "camera" in opts.expected:
-        streams["camera images"] = f"{prefix}/{keys.CAMERA_IMAGE.wildcard()}"
+    streams = {rate.name: f"{prefix}/{rate.key}" for rate in rates}
     bus = probe_bus(opts.endpoint, opts.robot, opts.zenoh_file, opts.timeout,
                     opts.window_s if streams else 0.0, streams, stop=opts.stop,
                     wait_values={EYE_RENDERER: "url"})
@@ -613,14 +526,8 @@ def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozense
     if not bus.reachable:
         return checks, frozenset()
     checks.append(judge_nodes(opts.expected, bus.live))
-    if "radar frames" in streams:
-        checks.append(judge_rate("radar frames", bus.counts["radar frames"], bus.window_s,
-                                 RADAR_HZ))
-    if "camera images" in streams:
-        fps = float(getattr(config.camera, "fps", 0.0) or 0.0) if "camera" in set(
-            config.__struct_fields__) else 0.0
-        checks.append(judge_rate("camera images", bus.counts["camera images"], bus.window_s,
-                                 fps or CAMERA_DEFAULT_FPS))
+    checks += [judge_rate(rate.name, bus.counts[rate.name], bus.window_s, rate.hz)
+               for rate in rates]
     display = display_check(config, bus, EYE_RENDERER in opts.expected, opts.timeout)
     if display is not None:
         checks.append(display)

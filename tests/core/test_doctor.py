@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import json
-import os
 import socket
-from pathlib import Path
 
 import pytest
 
@@ -88,39 +86,6 @@ def test_versions_name_what_is_missing() -> None:
     assert check.level == WARN and "ai-edge-litert MISSING" in check.detail
 
 
-def test_serial_ports(tmp_path: Path) -> None:
-    present = tmp_path / "ttyUSB0"
-    present.write_bytes(b"")
-    locked = tmp_path / "ttyUSB1"
-    locked.write_bytes(b"")
-    locked.chmod(0o000)
-    checks = doctor.check_serial([str(present), str(tmp_path / "gone"), str(locked),
-                                  "socket://radar.local:4001"], sim=False)
-    assert [c.level for c in checks[:2]] == [OK, FAIL]
-    assert "does not exist" in checks[1].detail
-    if os.geteuid() != 0:  # root reads anything
-        assert checks[2].level == FAIL and "dialout" in checks[2].detail
-    assert checks[3].level == OK and "network" in checks[3].detail
-    assert doctor.check_serial(["/dev/nothing"], sim=True)[0].level == OK
-
-
-def test_camera_device() -> None:
-    assert doctor.check_camera("0", sim=True).level == OK
-    assert doctor.check_camera("0", sim=False, in_use=True).level == OK
-    assert doctor.check_camera("0", sim=False, opener=lambda _s: True).level == OK
-    refused = doctor.check_camera("/dev/video9", sim=False, opener=lambda _s: False)
-    assert refused.level == FAIL and "/dev/video9" in refused.detail
-    assert doctor.check_camera("/no/such/clip.mp4", sim=False).level == FAIL
-
-
-def test_audio_null_is_fine_in_sim_only() -> None:
-    class Null:
-        backend = "null"
-
-    assert doctor.check_audio(Null(), sim=True).level == OK
-    assert doctor.check_audio(Null(), sim=False).level == WARN
-
-
 def test_display_down_is_a_failure_not_a_hang() -> None:
     with socket.socket() as holder:  # a port we know nobody serves: bound, not listening
         holder.bind(("127.0.0.1", 0))
@@ -140,3 +105,16 @@ def test_quick_checks_need_no_robot() -> None:
     assert checks[-1].level == OK and "is free" in checks[-1].detail
     broken = doctor.quick_checks(None, "robot.toml: bad", opts, port=False)
     assert broken[0] == Check("config", FAIL, "robot.toml: bad")
+
+
+def test_the_services_lend_their_checks_in_the_registry_order() -> None:
+    """Radar, camera and audio checks come from their areas, in the report's order."""
+    with socket.socket() as holder:
+        holder.bind(("127.0.0.1", 0))
+        opts = doctor.Options(sim=True, endpoint=f"tcp/127.0.0.1:{holder.getsockname()[1]}")
+        checks = doctor.quick_checks(default_config(), None, opts)
+    assert [c.name for c in checks] == ["config", "radar serial", "camera device",
+                                        "audio device", "versions", "router port"]
+    assert list(doctor.versions()) == ["python", "buddybot", "zenoh", "msgspec", "numpy",
+                                       "opencv", "ai-edge-litert"]
+    assert "opencv" in checks[4].detail and "ai-edge-litert" in checks[4].detail
