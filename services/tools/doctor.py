@@ -241,7 +241,7 @@ EYE_RENDERER = "eye-renderer"
 
 
 def _http_base(host: str, port: int) -> str:
-    return f"http://[{host}]:{port}" if ":" in host else f"http://{host}:{port}"
+    return f"http://{endpoints.join_host_port(host, port)}"
 
 
 def is_local_host(host: str, own_names: Iterable[str], own_addresses: Iterable[str]) -> bool:

@@ -41,6 +41,7 @@ def test_up_and_doctor_read_an_endpoint_alike(locator: str, host: str, port: int
                                               loopback: bool) -> None:
     parsed = endpoints.parse(locator)
     assert (parsed.host, parsed.port) == (host, port)
+    assert f"{parsed.proto}/{parsed.address}{parsed.suffix}" == locator
     assert endpoints.endpoint_is_loopback(locator) is loopback
     # up: its router listens on the configured endpoint only when that is loopback
     assert (launch.default_listen([locator]) == locator) is loopback
