@@ -3,7 +3,7 @@
 A listen port that is already taken ends it at once with exit status 1 and
 one line naming the endpoint and who holds it (a Zenoh router with whose
 nodes, or a stranger, and the local process when psutil can tell): the same
-look as `doctor`'s router-port check (`core.router.busy_port`).
+look as `doctor`'s router-port check (`buddybot.supervisor.router.busy_port`).
 """
 
 from __future__ import annotations

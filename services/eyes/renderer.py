@@ -59,6 +59,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
+from buddybot.runtime import endpoints
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host
 from buddybot.runtime.errors import UsageError
@@ -443,7 +444,7 @@ def make_app(hub: Hub) -> web.Application:
     """
     files = _read_static()
     sockets: set[web.WebSocketResponse] = set()
-    names = wire.own_names(socket.gethostname())
+    names = endpoints.host_names(socket.gethostname())
 
     async def index(_request: web.Request) -> web.StreamResponse:
         raise web.HTTPFound("/eyes?eye=both")

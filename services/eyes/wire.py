@@ -165,13 +165,6 @@ def _origin_key(scheme: str, netloc: str) -> tuple[str, int] | None:
     return parts.hostname.lower(), port if port is not None else _DEFAULT_PORTS[scheme]
 
 
-def own_names(hostname: str) -> frozenset[str]:
-    """Names this machine answers to besides IP addresses (for `origin_allowed`)."""
-    name = hostname.lower().rstrip(".")
-    short = name.split(".")[0]
-    return frozenset(n for n in ("localhost", name, short, f"{short}.local") if n)
-
-
 def _is_ip(hostname: str) -> bool:
     try:
         ipaddress.ip_address(hostname)

@@ -164,3 +164,11 @@ def serve_failure(host: str, port: int, error: str) -> str:
     held = f" by {holder}" if holder else ""
     return (f"cannot serve on {host}:{port}: the port is taken{held} ({reason}); stop it "
             "or give --port another port")
+
+
+def host_names(hostname: str) -> frozenset[str]:
+    """The names a machine called `hostname` answers to without DNS: `localhost`,
+    the hostname, its first label and that label under `.local` (mDNS)."""
+    name = hostname.lower().rstrip(".")
+    short = name.split(".")[0]
+    return frozenset(n for n in ("localhost", name, short, f"{short}.local") if n)

@@ -313,11 +313,9 @@ def plan_display(*, alive: bool, values: Mapping[str, Any] | None, config_host: 
     return _http_base(here, config_port), "the config's address"
 
 
-def own_names() -> set[str]:
-    """This machine's names (no DNS): `localhost`, its hostname, short and `.local`."""
-    name = socket.gethostname().lower().rstrip(".")
-    short = name.split(".")[0]
-    return {n for n in ("localhost", name, short, f"{short}.local") if n}
+def own_names() -> frozenset[str]:
+    """This machine's names (no DNS)."""
+    return endpoints.host_names(socket.gethostname())
 
 
 def own_addresses() -> set[str]:

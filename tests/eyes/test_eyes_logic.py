@@ -15,6 +15,7 @@ from buddybot.contract import messages as m
 from buddybot.eyes import driver, kiosk, placement, wire
 from buddybot.eyes.placement import Display, PlacementError, Request, plan
 from buddybot.eyes.settings import EyeRendererSettings, EyesSettings
+from buddybot.runtime import endpoints
 
 A = m.ExpressionAction
 CURVE = driver.PupilCurve.from_points(driver.DEFAULT_PUPIL_CURVE)
@@ -313,7 +314,7 @@ def test_websocket_origin_rule(origin: str | None, host: str | None, allowed: li
     ("http://evil.example:8080", "evil.example:8080", False),
 ])
 def test_own_origin_must_name_this_machine(origin: str, host: str, ok: bool) -> None:
-    names = wire.own_names("Buddy.lan")
+    names = endpoints.host_names("Buddy.lan")
     assert names == {"localhost", "buddy.lan", "buddy", "buddy.local"}
     assert wire.origin_allowed(origin, host, (), names) is ok
     assert wire.origin_allowed("http://evil.example:8080", "evil.example:8080",
