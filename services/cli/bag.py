@@ -233,7 +233,7 @@ def play(ctx: ServiceContext, path: str) -> int:
     tty = sys.stderr.isatty()
     with node:
         publishers: dict[str, Publisher[Any]] = {
-            c.key: Publisher(node, c.topic, bag.with_robot(c.key, robot))
+            c.key: node.publisher_on(c.topic, bag.with_robot(c.key, robot))
             for c in selected if c.topic is not None}
         _wait_for_subscribers(list(publishers.values()), args.wait, ctx)
         while not ctx.stop.is_set():

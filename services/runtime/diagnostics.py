@@ -6,14 +6,12 @@ import collections
 import logging
 import threading
 import time
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Iterable
+from typing import Any
 
-from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime import limits
-
-if TYPE_CHECKING:
-    from buddybot.runtime.node import Node
+from buddybot.runtime.handles import Publisher
 
 log = logging.getLogger("buddybot.node")
 
@@ -51,16 +49,21 @@ class Diagnostics:
     `values` (plain numbers and strings), e.g. frames, reconnects.
     """
 
-    def __init__(self, node: Node, period_s: float, publish: bool = True) -> None:
-        """`publish=False` (probes): counters are kept but nothing is put on
-        the bus, so a probe stays invisible."""
-        self._node = node
+    def __init__(self, name: str, period_s: float,
+                 publisher: Publisher[m.DiagnosticStatus] | None,
+                 dropped: Callable[[], Iterable[tuple[str, int]]]) -> None:
+        """`name`: the node reported on. `publisher`: its `diagnostics/<node>`
+        publisher, or None (probes): counters are kept but nothing is put on
+        the bus, so a probe stays invisible. `dropped`: (label, count) of the
+        samples each worker of the node dropped so far, read at each report."""
+        self.name = name
         self._period = period_s
+        self._dropped = dropped
         self._lock = threading.Lock()
         self.level: m.DiagnosticLevel = "OK"
         self.message = "running"
         self.values: dict[str, m.DiagnosticValue] = {}
-        self._pub = node.publisher(keys.DIAGNOSTICS, node=node.name) if publish else None
+        self._pub = publisher
 
     def set(self, level: m.DiagnosticLevel, message: str) -> None:
         """Change the status; publishes at once when it differs."""
@@ -81,11 +84,10 @@ class Diagnostics:
             return
         # Samples a worker dropped for newer ones ("latest" delivery: expected) or
         # because its queue was full (a handler slower than its input).
-        workers = list(self._node._workers)  # handles may close meanwhile
-        dropped = {f"dropped {w.label}": w.dropped for w in workers if w.dropped}
+        dropped = {f"dropped {label}": n for label, n in self._dropped() if n}
         with self._lock:
             status = m.DiagnosticStatus(
-                stamp_ns=m.now_ns(), node=self._node.name, level=self.level,
+                stamp_ns=m.now_ns(), node=self.name, level=self.level,
                 message=self.message, values={**self.values, **dropped},
             )
         self._pub.put(status)

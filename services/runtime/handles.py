@@ -2,8 +2,10 @@
 
 Publishers, subscriptions, queryables and liveliness tokens; the workers
 that run slow handlers off Zenoh's thread; and the shapes of raw and
-decoded service replies. `Node` (node.py) creates them; nothing else
-needs a raw Zenoh session.
+decoded service replies. A handle is given its declared Zenoh entity and
+an `on_close` callback by whoever declared it (`Node`, node.py, the model
+being rclpy's publisher that receives its entity): it knows nothing of
+the node, so the dependency runs one way, node -> handle.
 """
 
 from __future__ import annotations
@@ -14,11 +16,10 @@ import threading
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Generic, Literal, Self, TypeVar
+from typing import Any, Generic, Literal, Self, TypeVar
 
 import msgspec
 import zenoh
-import zenoh.ext
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -27,24 +28,46 @@ from buddybot.runtime.errors import (
     NoReplyError,
 )
 
-if TYPE_CHECKING:
-    from buddybot.runtime.node import Node
-
 log = logging.getLogger("buddybot.node")
 
 T = TypeVar("T", bound=m.Message)
 Delivery = Literal["inline", "latest", "queue"]
 
-_CONGESTION = {"drop": zenoh.CongestionControl.DROP}
-_PRIORITY = {
-    "real_time": zenoh.Priority.REAL_TIME,
-    "interactive_high": zenoh.Priority.INTERACTIVE_HIGH,
-    "data": zenoh.Priority.DATA,
-    "background": zenoh.Priority.BACKGROUND,
-}
-
 
 # --- handles: what a node declared, closable one by one -------------------------------
+
+
+class Gate:
+    """Lets callbacks through until shut, once: the open/closed state of a handle.
+
+    Created before the Zenoh entity, so the callback given to Zenoh can be
+    guarded (Zenoh may start one while its entity is being undeclared, and
+    a latched history may arrive before the declaration returns), then
+    handed to the handle, whose `close()` shuts it.
+    """
+
+    def __init__(self) -> None:
+        self._open = True
+        self._lock = threading.Lock()
+
+    @property
+    def open(self) -> bool:
+        return self._open
+
+    def shut(self) -> bool:
+        """Shut the gate; True only for the call that shut it."""
+        with self._lock:
+            was_open, self._open = self._open, False
+        return was_open
+
+    def guard(self, callback: Callable[..., None]) -> Callable[..., None]:
+        """`callback`, called only while the gate is open."""
+
+        def guarded(*args: Any) -> None:
+            if self._open:
+                callback(*args)
+
+        return guarded
 
 
 class Handle:
@@ -53,53 +76,47 @@ class Handle:
     Services and tools stop listening to one key, or stop answering one
     service, without closing the whole node and without touching the raw
     Zenoh session (the model is rclpy's `destroy_subscription` and dimos'
-    disposables). `close()` is idempotent and thread-safe, removes the
-    handle from the node's bookkeeping and stops its worker thread, if any;
-    `Node.close()` closes whatever is still open. Usable as a context
-    manager.
+    disposables). `close()` is idempotent and thread-safe: it calls
+    `on_close(handle)` (the node forgets it), undeclares the entity and
+    stops the worker thread, if any; `Node.close()` closes whatever is
+    still open. Usable as a context manager.
     """
 
-    _first_on_node_close = False
+    first_on_node_close = False
     """Undeclared before the others when the node closes (advanced
     subscribers: zenoh-python #624)."""
     _drop_pending = True
     """Whether work still queued on the worker is dropped at close (samples)
     or done first (queries, which would otherwise be left without a reply)."""
 
-    def __init__(self, node: Node, key: str) -> None:
+    def __init__(self, key: str, entity: Any, on_close: Callable[[Handle], None], *,
+                 worker: Worker | None = None, gate: Gate | None = None) -> None:
+        """`entity`: the declared Zenoh entity (anything with `undeclare()`);
+        `worker`: the thread running its handler, stopped at close; `gate`:
+        the one guarding its callbacks, if any, shut at close."""
         self.key = key
         """The absolute key expression this handle was declared on."""
-        self._node = node
-        self._entity: Any = None
-        self._worker: _Worker | None = None
-        self._lock = threading.Lock()
-        self._closed = False
-
-    def _attach(self, entity: Any, worker: _Worker | None = None) -> None:
-        """Record the declared Zenoh entity and register with the node (last
-        step of a subclass constructor: a half-built handle is never closed)."""
+        self.worker = worker
+        """The thread running this handle's handler (None: inline)."""
         self._entity = entity
-        self._worker = worker
-        self._node._adopt(self)
+        self._on_close = on_close
+        self._gate = gate or Gate()
 
     @property
     def closed(self) -> bool:
-        return self._closed
+        return not self._gate.open
 
     def close(self) -> None:
         """Undeclare (safe twice, safe after the node closed); stop the worker."""
-        with self._lock:
-            if self._closed:
-                return
-            self._closed = True
-        self._node._forget(self)
-        if self._entity is not None:
-            try:
-                self._entity.undeclare()
-            except Exception as exc:  # ZError: already gone with its session
-                log.debug("undeclare %s failed: %s", self.key, exc)
-        if self._worker is not None:
-            self._worker.close(drop_pending=self._drop_pending)
+        if not self._gate.shut():
+            return
+        self._on_close(self)
+        try:
+            self._entity.undeclare()
+        except Exception as exc:  # ZError: already gone with its session
+            log.debug("undeclare %s failed: %s", self.key, exc)
+        if self.worker is not None:
+            self.worker.close(drop_pending=self._drop_pending)
 
     def __enter__(self) -> Self:
         return self
@@ -108,7 +125,7 @@ class Handle:
         self.close()
 
     def __repr__(self) -> str:
-        state = "closed" if self._closed else "open"
+        state = "closed" if self.closed else "open"
         return f"<{type(self).__name__} {self.key} {state}>"
 
 
@@ -116,44 +133,15 @@ class Subscription(Handle):
     """A subscriber (typed, raw, or a liveliness watch); deliveries stop at `close()`.
 
     Samples already queued for a worker are dropped; a callback already
-    running in Zenoh's thread finishes, none starts after `close()` returns.
+    running in Zenoh's thread finishes, none starts after `close()` returns
+    (the declarer guards it with the `gate` given here).
     """
 
-    def __init__(self, node: Node, key: str) -> None:
-        super().__init__(node, key)
-
-    def _declare(self, on_sample: Callable[[zenoh.Sample], None], *, history: str | None,
-                 worker: _Worker | None = None) -> None:
-        """Declare the subscriber. `history`: None (plain), "probe" (late joiners
-        get the latched value, nothing else is declared) or "full" (also
-        recovery and subscriber detection, as services use)."""
-        session = self._node._session
-
-        def guarded(sample: zenoh.Sample) -> None:
-            if not self._closed:
-                on_sample(sample)
-
-        try:
-            if history is None:
-                entity: Any = session.declare_subscriber(self.key, guarded)
-            else:
-                extra: dict[str, Any] = {}
-                if history == "full":
-                    extra = {"recovery": zenoh.ext.RecoveryConfig(periodic_queries=None,
-                                                                  heartbeat=True),
-                             "subscriber_detection": True}
-                entity = zenoh.ext.declare_advanced_subscriber(
-                    session, self.key, guarded,
-                    history=zenoh.ext.HistoryConfig(detect_late_publishers=True,
-                                                    max_samples=1),
-                    **extra,
-                )
-                self._first_on_node_close = True
-        except BaseException:
-            if worker is not None:
-                worker.close(drop_pending=True)
-            raise
-        self._attach(entity, worker)
+    def __init__(self, key: str, entity: Any, on_close: Callable[[Handle], None], *,
+                 gate: Gate, worker: Worker | None = None, advanced: bool = False) -> None:
+        """`advanced`: a zenoh.ext advanced subscriber, undeclared first."""
+        super().__init__(key, entity, on_close, worker=worker, gate=gate)
+        self.first_on_node_close = advanced
 
 
 class Queryable(Handle):
@@ -168,26 +156,9 @@ class Queryable(Handle):
 class Token(Handle):
     """A liveliness token: the key is alive while the token is open."""
 
-    def __init__(self, node: Node, key: str) -> None:
-        super().__init__(node, key)
-        self._attach(node._session.liveliness().declare_token(_key_expr(key)))
 
-
-class _Adopted(Handle):
+class Adopted(Handle):
     """A raw Zenoh entity handed to the node (benchmarks measuring bare Zenoh)."""
-
-    def __init__(self, node: Node, entity: Any) -> None:
-        super().__init__(node, str(getattr(entity, "key_expr", "?")))
-        self._attach(entity)
-
-
-def _key_expr(key: str) -> str:
-    """`key` checked as a Zenoh key expression: a ValueError naming it, not a ZError."""
-    try:
-        zenoh.KeyExpr(key)
-    except zenoh.ZError as exc:
-        raise ValueError(f"{key!r}: not a valid key expression: {exc}") from None
-    return key
 
 
 @dataclass(frozen=True)
@@ -215,43 +186,20 @@ class ServiceReply:
 # --- typed publishers ----------------------------------------------------------------
 
 
-HEARTBEAT_S = 0.5
-"""Period of a latched publisher's heartbeat after it published (miss detection)."""
-
-
 class Publisher(Handle, Generic[T]):
-    """Puts messages of one catalogue topic on one concrete key."""
+    """Puts messages of one catalogue topic on one concrete key.
 
-    def __init__(self, node: Node, topic: keys.Topic, key: str) -> None:
-        super().__init__(node, key)
+    `entity`: a Zenoh publisher declared with the topic's encoding and QoS
+    (an advanced one with a cache when the topic is latched).
+    """
+
+    def __init__(self, topic: keys.Topic, key: str, entity: Any,
+                 on_close: Callable[[Handle], None]) -> None:
+        super().__init__(key, entity, on_close)
         self.topic = topic
-        self._encoding = zenoh.Encoding(topic.encoding)
-        qos = topic.qos
-        options: dict[str, Any] = {
-            "encoding": self._encoding,
-            "congestion_control": _CONGESTION[qos.congestion],
-            "priority": _PRIORITY[qos.priority],
-            "express": qos.express,
-        }
-        self._plain: zenoh.Publisher | None = None
-        if topic.latched:
-            self._z: Any = zenoh.ext.declare_advanced_publisher(
-                node._session, key,
-                cache=zenoh.ext.CacheConfig(max_samples=topic.history),
-                publisher_detection=True,
-                # A sample dropped under congestion is noticed by the next
-                # heartbeat and fetched from the cache (state keys use DROP).
-                sample_miss_detection=zenoh.ext.MissDetectionConfig(
-                    heartbeat=None, sporadic_heartbeat=HEARTBEAT_S
-                ),
-                **options,
-            )
-        else:
-            self._plain = node._session.declare_publisher(key, **options)
-            self._z = self._plain
+        self._z = entity
         self._encode = topic.codec.encode
-        self._put = self._z.put
-        self._attach(self._z)
+        self._put = entity.put
 
     def put(self, msg: T) -> None:
         """Encode and put (the encoding was set once, at declaration)."""
@@ -263,9 +211,9 @@ class Publisher(Handle, Generic[T]):
 
     def has_subscribers(self) -> bool:
         """Whether anyone listens (a latched publisher always answers True)."""
-        if self._plain is None:
+        if self.topic.latched:
             return True
-        return _matching(self._plain)
+        return _matching(self._z)
 
 
 class RawPublisher(Handle):
@@ -275,16 +223,12 @@ class RawPublisher(Handle):
     is set once at declaration.
     """
 
-    def __init__(self, node: Node, key: str, encoding: str,
-                 priority: str = "data", express: bool = False) -> None:
-        super().__init__(node, key)
+    def __init__(self, key: str, encoding: str, entity: zenoh.Publisher,
+                 on_close: Callable[[Handle], None]) -> None:
+        super().__init__(key, entity, on_close)
         self.encoding = encoding
-        self._z = node._session.declare_publisher(
-            key, encoding=zenoh.Encoding(encoding), congestion_control=_CONGESTION["drop"],
-            priority=_PRIORITY[priority], express=express,
-        )
-        self._put = self._z.put
-        self._attach(self._z)
+        self._z = entity
+        self._put = entity.put
 
     def put(self, payload: bytes) -> None:
         self._put(payload)
@@ -326,7 +270,7 @@ def _matching(publisher: zenoh.Publisher) -> bool:
 # --- delivery workers ----------------------------------------------------------------
 
 
-class _Worker:
+class Worker:
     """Runs a handler on its own thread, fed by a latest slot or a bounded FIFO."""
 
     def __init__(self, name: str, handler: Callable[..., None], latest: bool, maxlen: int,
@@ -389,7 +333,7 @@ class _Worker:
             self._thread.join(timeout)
 
 
-def _raw_reply(reply: zenoh.Reply) -> RawReply:
+def raw_reply(reply: zenoh.Reply) -> RawReply:
     source = reply.replier_id  # the answering entity; its zid is its process
     replier = None if source is None else str(source.zid)
     if reply.ok is not None:
@@ -403,7 +347,7 @@ def _raw_reply(reply: zenoh.Reply) -> RawReply:
                     key=None, replier=replier)
 
 
-def _service_reply(replies: Iterator[RawReply], key: str, service: keys.Service,
+def service_reply(replies: Iterator[RawReply], key: str, service: keys.Service,
                    timeout: float) -> ServiceReply:
     """The first reply decoded with the service's reply type, or the CallError."""
     for reply in replies:
@@ -416,7 +360,8 @@ def _service_reply(replies: Iterator[RawReply], key: str, service: keys.Service,
     raise NoReplyError(key, f"no reply within {timeout:g} s (is the service running?)")
 
 
-def _error_payload(text: str) -> bytes:
+def error_payload(text: str) -> bytes:
+    """The payload of an error reply saying `text` (read back by `error_text`)."""
     return msgspec.json.encode(m.ErrorReply(error=text))
 
 

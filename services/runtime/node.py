@@ -41,7 +41,7 @@ import threading
 import time
 import uuid
 from collections.abc import Callable, Iterator
-from typing import Any, Literal, overload
+from typing import Any, Literal, TypeVar, overload
 
 import msgspec
 import zenoh
@@ -58,8 +58,9 @@ from buddybot.runtime.errors import (
     ServiceError,
 )
 from buddybot.runtime.handles import (
-    HEARTBEAT_S,
+    Adopted,
     Delivery,
+    Gate,
     Handle,
     Publisher,
     Queryable,
@@ -68,13 +69,11 @@ from buddybot.runtime.handles import (
     ServiceReply,
     Subscription,
     Token,
-    _Adopted,
-    _error_payload,
-    _key_expr,
-    _raw_reply,
-    _service_reply,
-    _Worker,
+    Worker,
+    error_payload,
     error_text,
+    raw_reply,
+    service_reply,
 )
 from buddybot.runtime.session import (
     MAX_MESSAGE_BYTES,
@@ -94,6 +93,28 @@ __all__ = [
 ]
 
 log = logging.getLogger("buddybot.node")
+
+H = TypeVar("H", bound=Handle)
+
+_CONGESTION = {"drop": zenoh.CongestionControl.DROP}
+_PRIORITY = {
+    "real_time": zenoh.Priority.REAL_TIME,
+    "interactive_high": zenoh.Priority.INTERACTIVE_HIGH,
+    "data": zenoh.Priority.DATA,
+    "background": zenoh.Priority.BACKGROUND,
+}
+
+HEARTBEAT_S = 0.5
+"""Period of a latched publisher's heartbeat after it published (miss detection)."""
+
+
+def _key_expr(key: str) -> str:
+    """`key` checked as a Zenoh key expression: a ValueError naming it, not a ZError."""
+    try:
+        zenoh.KeyExpr(key)
+    except zenoh.ZError as exc:
+        raise ValueError(f"{key!r}: not a valid key expression: {exc}") from None
+    return key
 
 
 # --- the node ----------------------------------------------------------------------
@@ -147,7 +168,6 @@ class Node:
         self.stop_event = stop_event or threading.Event()
         self._handles: list[Handle] = []
         self._handles_lock = threading.Lock()
-        self._workers: list[_Worker] = []
         self._threads: list[threading.Thread] = []
         self._closed = False
         self._warn = RateLimitedLog(self.log)
@@ -169,7 +189,9 @@ class Node:
         """This process's identity on the bus (its Zenoh session id)."""
         if unique:
             self._refuse_duplicate()
-        self.diagnostics = Diagnostics(self, diagnostics_period_s, publish=not probe)
+        self.diagnostics = Diagnostics(
+            name, diagnostics_period_s,
+            None if probe else self.publisher(keys.DIAGNOSTICS, node=name), self._dropped)
         self._token: Token | None = None
         if not probe:
             self._token = self.declare_token(
@@ -182,23 +204,26 @@ class Node:
 
     # -- bookkeeping of handles --
 
-    def _adopt(self, handle: Handle) -> None:
+    def _track(self, handle: H) -> H:
+        """Keep a handle just declared until it (or the node) closes; its
+        `on_close` is `_forget`."""
         with self._handles_lock:
             self._handles.append(handle)
-            if handle._worker is not None:
-                self._workers.append(handle._worker)
+        return handle
 
     def _forget(self, handle: Handle) -> None:
         with self._handles_lock:
             if handle in self._handles:
                 self._handles.remove(handle)
-            if handle._worker is not None and handle._worker in self._workers:
-                self._workers.remove(handle._worker)
+
+    def _dropped(self) -> list[tuple[str, int]]:
+        """(label, dropped samples) of each open handle's worker, for diagnostics."""
+        return [(h.worker.label, h.worker.dropped) for h in self.handles if h.worker]
 
     def _own(self, entity: Any) -> Handle:
         """Take a raw Zenoh entity into the node's bookkeeping (closed with the
         node). Only for benchmarks that measure bare Zenoh against the node."""
-        return _Adopted(self, entity)
+        return self._track(Adopted(str(getattr(entity, "key_expr", "?")), entity, self._forget))
 
     @property
     def handles(self) -> list[Handle]:
@@ -242,7 +267,8 @@ class Node:
     def declare_token(self, key: str) -> Token:
         """A liveliness token on an absolute key, alive until closed (or until
         this process dies: the router drops it then)."""
-        return Token(self, key)
+        entity = self._session.liveliness().declare_token(_key_expr(key))
+        return self._track(Token(key, entity, self._forget))
 
     def watch_node(
         self, name: str, on_change: Callable[[frozenset[str]], None]
@@ -270,15 +296,11 @@ class Node:
             except Exception as exc:
                 self._warn.warning(f"watch:{name}", "node watcher for %s failed: %r", name, exc)
 
-        handle = Subscription(self, self.key(keys.NODES, node=name))
-
-        def guarded(sample: zenoh.Sample) -> None:
-            if not handle.closed:
-                on_token(sample)
-
-        handle._attach(self._session.liveliness().declare_subscriber(
-            handle.key, guarded, history=True))
-        return handle
+        key = self.key(keys.NODES, node=name)
+        gate = Gate()
+        entity = self._session.liveliness().declare_subscriber(
+            key, gate.guard(on_token), history=True)
+        return self._track(Subscription(key, entity, self._forget, gate=gate))
 
     def live_instances(self, key: str, timeout: float = 2.0) -> set[str]:
         """Instance ids of the liveliness tokens matching `key` (an absolute
@@ -322,10 +344,36 @@ class Node:
     # -- publish / subscribe --
 
     def publisher(self, topic: keys.Topic, /, **params: str) -> Publisher[Any]:
-        key = self.key(topic, **params)
+        return self.publisher_on(topic, self.key(topic, **params))
+
+    def publisher_on(self, topic: keys.Topic, key: str) -> Publisher[Any]:
+        """A publisher of a catalogue topic on an absolute concrete key (`bag
+        play` puts recorded keys back, possibly on another robot's prefix)."""
         if "*" in key:
             raise ValueError(f"cannot publish on a wildcard key {key}")
-        return Publisher(self, topic, key)
+        qos = topic.qos
+        options: dict[str, Any] = {
+            "encoding": zenoh.Encoding(topic.encoding),
+            "congestion_control": _CONGESTION[qos.congestion],
+            "priority": _PRIORITY[qos.priority],
+            "express": qos.express,
+        }
+        entity: Any
+        if topic.latched:
+            entity = zenoh.ext.declare_advanced_publisher(
+                self._session, key,
+                cache=zenoh.ext.CacheConfig(max_samples=topic.history),
+                publisher_detection=True,
+                # A sample dropped under congestion is noticed by the next
+                # heartbeat and fetched from the cache (state keys use DROP).
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=None, sporadic_heartbeat=HEARTBEAT_S
+                ),
+                **options,
+            )
+        else:
+            entity = self._session.declare_publisher(key, **options)
+        return self._track(Publisher(topic, key, entity, self._forget))
 
     def raw_publisher(self, key: str, encoding: str) -> RawPublisher:
         """A publisher of already encoded bytes on an absolute key, which need
@@ -333,7 +381,11 @@ class Node:
         the receivers' decoders are the guard."""
         if "*" in key:
             raise ValueError(f"cannot publish on a wildcard key {key}")
-        return RawPublisher(self, _key_expr(key), encoding)
+        entity = self._session.declare_publisher(
+            _key_expr(key), encoding=zenoh.Encoding(encoding),
+            congestion_control=_CONGESTION["drop"], priority=_PRIORITY["data"], express=False,
+        )
+        return self._track(RawPublisher(key, encoding, entity, self._forget))
 
     def subscribe(
         self,
@@ -418,9 +470,8 @@ class Node:
                 on_error(exc)
 
         use_history = topic.latched if history is None else history
-        handle = Subscription(self, key)
-        handle._declare(on_sample, history="full" if use_history else None, worker=worker)
-        return handle
+        return self._subscriber(key, on_sample, history="full" if use_history else None,
+                                worker=worker)
 
     def subscribe_raw(
         self,
@@ -458,17 +509,46 @@ class Node:
             except Exception as exc:  # only inline handlers raise here
                 on_error(exc)
 
-        handle = Subscription(self, key_expr)
-        handle._declare(on_sample, history="probe" if history else None, worker=worker)
-        return handle
+        return self._subscriber(key_expr, on_sample, history="probe" if history else None,
+                                worker=worker)
+
+    def _subscriber(self, key: str, on_sample: Callable[[zenoh.Sample], None], *,
+                    history: str | None, worker: Worker | None) -> Subscription:
+        """Declare a subscriber and track its handle. `history`: None (plain),
+        "probe" (late joiners get the latched value, nothing else is declared)
+        or "full" (also recovery and subscriber detection, as services use).
+        The worker is stopped if the declaration fails."""
+        gate = Gate()
+        guarded = gate.guard(on_sample)
+        try:
+            if history is None:
+                entity: Any = self._session.declare_subscriber(key, guarded)
+            else:
+                extra: dict[str, Any] = {}
+                if history == "full":
+                    extra = {"recovery": zenoh.ext.RecoveryConfig(periodic_queries=None,
+                                                                  heartbeat=True),
+                             "subscriber_detection": True}
+                entity = zenoh.ext.declare_advanced_subscriber(
+                    self._session, key, guarded,
+                    history=zenoh.ext.HistoryConfig(detect_late_publishers=True,
+                                                    max_samples=1),
+                    **extra,
+                )
+        except BaseException:
+            if worker is not None:
+                worker.close(drop_pending=True)
+            raise
+        return self._track(Subscription(key, entity, self._forget, gate=gate, worker=worker,
+                                        advanced=history is not None))
 
     def _worker_for(self, delivery: Delivery, callback: Callable[..., None], queue_size: int,
-                    on_error: Callable[[BaseException], None], label: str) -> _Worker | None:
+                    on_error: Callable[[BaseException], None], label: str) -> Worker | None:
         """The worker thread of a non-inline delivery (owned by its handle)."""
         if delivery == "inline":
             return None
-        return _Worker(f"{self.name}:{label}", callback, delivery == "latest", queue_size,
-                       on_error, label=label)
+        return Worker(f"{self.name}:{label}", callback, delivery == "latest", queue_size,
+                      on_error, label=label)
 
     # -- services --
 
@@ -505,22 +585,24 @@ class Node:
                 self.diagnostics.increment("malformed")
                 text = limits.clip(exc)
                 self._warn.warning(f"bad:{key}", "refused malformed request on %s: %s", key, text)
-                query.reply_err(_error_payload(f"bad {service.request.__name__}: {text}"))
+                query.reply_err(error_payload(f"bad {service.request.__name__}: {text}"))
                 return
             try:
                 reply = handler(request)
             except Exception as exc:
                 self.log.exception("handler for %s failed", key)
-                query.reply_err(_error_payload(f"{type(exc).__name__}: {limits.clip(exc)}"))
+                query.reply_err(error_payload(f"{type(exc).__name__}: {limits.clip(exc)}"))
                 return
             query.reply(key, codec.encode(reply), encoding=reply_encoding)
 
         def on_error(exc: BaseException) -> None:
             self.log.error("query handling on %s failed: %r", key, exc)
 
-        worker = _Worker(f"{self.name}:{service.pattern}", answer, False, queue_size, on_error,
-                         label=service.pattern)
-        handle = Queryable(self, key)
+        worker = Worker(f"{self.name}:{service.pattern}", answer, False, queue_size, on_error,
+                        label=service.pattern)
+        # The gate only names the refusal below: on_query is not guarded by it,
+        # so a query arriving while the handle closes still gets an answer.
+        gate = Gate()
 
         def on_query(query: zenoh.Query) -> None:
             # Every query gets an answer: too large or too many at once are
@@ -530,15 +612,15 @@ class Node:
             if payload is not None and len(payload) > service.max_bytes:
                 self.diagnostics.increment("oversized")
                 with query:
-                    query.reply_err(_error_payload(
+                    query.reply_err(error_payload(
                         f"request too large: {len(payload)} bytes (limit {service.max_bytes})"))
                 return
             if not worker.offer(query):
                 self.diagnostics.increment("busy")
                 self._warn.warning(f"busy:{key}", "refused a request on %s: busy", key)
                 with query:
-                    query.reply_err(_error_payload(
-                        "service closing" if handle.closed else
+                    query.reply_err(error_payload(
+                        "service closing" if not gate.open else
                         f"busy: {queue_size} requests already waiting on {service.pattern}"))
 
         try:
@@ -546,8 +628,7 @@ class Node:
         except BaseException:
             worker.close()
             raise
-        handle._attach(queryable, worker)
-        return handle
+        return self._track(Queryable(key, queryable, self._forget, worker=worker, gate=gate))
 
     @overload
     def call(self, service: keys.Service, request: m.Message, *, timeout: float = ...,
@@ -575,7 +656,7 @@ class Node:
         codec = service.codec
         replies = self.query(key, codec.encode(request),
                              encoding=codec.encoding(service.request), timeout=timeout)
-        reply = _service_reply(replies, key, service, timeout)
+        reply = service_reply(replies, key, service, timeout)
         return reply if with_replier else reply.value
 
     def query(
@@ -592,7 +673,7 @@ class Node:
         if encoding is not None:
             options["encoding"] = zenoh.Encoding(encoding)
         replies = self._session.get(_key_expr(key), **options)
-        return (_raw_reply(reply) for reply in replies)
+        return (raw_reply(reply) for reply in replies)
 
     # -- introspection (`buddybot node info`, `buddybot topics`) --
 
@@ -674,8 +755,8 @@ class Node:
         self.stop_event.set()
         with self._handles_lock:
             left = list(reversed(self._handles))
-        ordered = ([h for h in left if h._first_on_node_close]
-                   + [h for h in left if not h._first_on_node_close and h is not self._token])
+        ordered = ([h for h in left if h.first_on_node_close]
+                   + [h for h in left if not h.first_on_node_close and h is not self._token])
         if self._token is not None:
             ordered.append(self._token)
         for handle in ordered:
