@@ -135,3 +135,13 @@ def test_an_unknown_event_is_an_error_not_ignored(
     controller, _node, _clock = rig
     with pytest.raises(AssertionError):
         controller._handle([("presence", (True,))])  # type: ignore[list-item]
+
+
+def test_an_unknown_command_is_an_error_not_played_as_a_sound(
+    rig: tuple[Controller, FakeNode, Clock],
+) -> None:
+    controller, node, _clock = rig
+    with pytest.raises(AssertionError):
+        controller._execute(["greeting"])  # type: ignore[list-item]
+    assert commanded(controller) == []
+    assert not any(pub.sent for pub in node.publishers.values())
