@@ -57,8 +57,8 @@ def run_jump(nets: tuple[FaceNet, FaceNet], photo: scenes.Photo,
     for i in range(frames):
         frame = a if i < BEFORE else b
         stamp = 1_700_000_000_000_000_000 + i * FRAME_NS
-        result = pipe.process(frame, stamp, defer_search=True)
-        pipe.search_if_due(frame, stamp)
+        result = pipe.process(frame, stamp, defer=True)
+        pipe.run_owed(result.owed)
         if i < BEFORE:
             assert result.point is not None, f"first face not published in frame {i}"
         else:
@@ -117,8 +117,8 @@ def test_a_face_walking_at_a_normal_pace_stays_crop_tracked(
     for i in range(20):
         z = 2.0 - 0.04 * i
         frame, _ = scenes.scene(scenes.grace_hopper(), z, 200 + 6 * i, 240)
-        result = pipe.process(frame, (i + 1) * FRAME_NS, defer_search=True)
-        pipe.search_if_due(frame, (i + 1) * FRAME_NS)
+        result = pipe.process(frame, (i + 1) * FRAME_NS, defer=True)
+        pipe.run_owed(result.owed)
         assert result.point is not None
         errors.append(abs(result.point[0] - z) / z)
     assert sum(pipe.gate_rejections.values()) == 0, pipe.gate_rejections
