@@ -4,7 +4,6 @@ for Zenoh, so this runs without a router."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
@@ -22,42 +21,9 @@ from buddybot.controller.events import (
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
 
+from .fakes import Clock, FakeNode
+
 A = m.ExpressionAction
-
-
-@dataclass
-class FakePublisher:
-    sent: list[Any] = field(default_factory=list)
-
-    def put(self, msg: Any) -> None:
-        self.sent.append(msg)
-
-
-@dataclass
-class FakeDiagnostics:
-    values: dict[str, Any] = field(default_factory=dict)
-
-    def increment(self, name: str) -> None:
-        self.values[name] = self.values.get(name, 0) + 1
-
-
-class FakeNode:
-    """Just what `Controller` uses before `start()`: publishers and diagnostics."""
-
-    def __init__(self) -> None:
-        self.publishers: dict[str, FakePublisher] = {}
-        self.diagnostics = FakeDiagnostics()
-
-    def publisher(self, topic: Any, **_params: str) -> FakePublisher:
-        return self.publishers.setdefault(topic.pattern, FakePublisher())
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 @pytest.fixture
