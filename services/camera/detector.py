@@ -136,7 +136,7 @@ def after_publishing(pipeline: FacePipeline, owed: Sequence[Owed], delay_s: floa
     whole-frame pass and the iris, when due (the pass's faces, or None).
 
     It first waits `delay_s` (`wait`: the node's stop event, so shutdown is not held
-    up): started at once, this work took a core while the face was still on its way
+    up): started at once, this work takes a core while the face is still on its way
     to the eyes (see `defer_after_ms`). With nothing owed there is no wait.
     """
     if not owed:
