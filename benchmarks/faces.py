@@ -28,7 +28,7 @@ changing size, 30 fps). Whole-frame detection: ours with the sparse and
 the dense full-range model and the short-range model, MediaPipe full and
 short range. Service path: `FacePipeline` as face-detector runs it (default
 settings: crop tracking, refinement, smoothing) on the same frames, in
-order: "image in -> face out" is `process(defer_search=True)`, the time
+order: "image in -> face out" is `process(defer=True)`, the time
 before the face can be published; "work per frame" adds what the service
 does after publishing (the whole-frame pass every `full_every_s`, the iris
 when due). Median and p95 per frame.
@@ -229,10 +229,9 @@ def speed(args: argparse.Namespace, peer: MediaPipePeer | None) -> None:
         # As face-detector runs it: the face is published after `process`; the
         # whole-frame pass (every full_every_s) and the iris come after that.
         t = time.perf_counter()
-        r = pipe.process(f, stamp, defer_search=True)
+        r = pipe.process(f, stamp, defer=True)
         t_out = time.perf_counter()
-        pipe.search_if_due(f, stamp)
-        pipe.iris_if_due(f)
+        pipe.run_owed(r.owed)
         t_done = time.perf_counter()
         times["service"].append((t_out - t) * 1000.0)
         times["service_work"].append((t_done - t) * 1000.0)

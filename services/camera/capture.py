@@ -62,9 +62,6 @@ def settings_from(ctx: ServiceContext) -> CameraSettings:
     return merged
 
 
-effective_settings = settings_from  # the name tests and older callers use
-
-
 class Capture:
     """The capture loop: open, read, stamp, encode, publish; reopen on failure."""
 

@@ -1,6 +1,8 @@
 """`buddybot run face-detector`: camera frames -> face position (the seed's camera_hld).
 
-Thin adapter around `pipeline.FacePipeline`. Frames arrive through a
+Thin adapter around `pipeline.FacePipeline`; each frame goes one way:
+decode -> decide (`process(defer=True)`) -> publish -> run the owed work
+(whole-frame pass, iris) after `defer_after_ms`. Frames arrive through a
 latest-value slot (`delivery="latest"`): inference always runs on the
 newest frame and stale ones are dropped, never queued. The face message
 keeps the image's `stamp_ns` and `frame_id`. Every processed frame also
@@ -14,7 +16,7 @@ from __future__ import annotations
 
 import argparse
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import cv2
 import numpy as np
@@ -24,9 +26,8 @@ from buddybot.camera import detections, draw, frames, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.iris import IrisNet
 from buddybot.camera.litert import ModelLoadError
-from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.pipeline import FacePipeline, FaceResult, Owed
 from buddybot.camera.settings import FaceDetectorSettings
-from buddybot.camera.tracking import PointSmoother
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.config import resolve_path
@@ -49,7 +50,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     option("--model-path", "model_path")
     for name in ("fx", "fy", "cx", "cy", "hfov_deg", "face_width_m", "min_score"):
         option("--" + name.replace("_", "-"), name)
-    # `--no-smoothing` and `--no-refine` as before, and now `--smoothing`/`--refine` too.
+    # Both spellings: `--smoothing`/`--no-smoothing`, `--refine`/`--no-refine`.
     option("--smoothing", "smoothing", action=argparse.BooleanOptionalAction)
     option("--refine", "refine", action=argparse.BooleanOptionalAction)
     option("--max-pixels", "max_pixels")
@@ -70,9 +71,6 @@ def settings_from(ctx: ServiceContext) -> FaceDetectorSettings:
     if problems:
         raise ConfigError("face_detector: " + "; ".join(problems))
     return merged
-
-
-effective_settings = settings_from  # the name tests and older callers use
 
 
 def load_nets(ctx: ServiceContext, s: FaceDetectorSettings) -> tuple[FaceNet, FaceNet | None]:
@@ -132,36 +130,20 @@ def load_irises(s: FaceDetectorSettings) -> IrisNet | None:
         raise ConfigError(f"iris (set iris = false to run without): {exc}") from None
 
 
-def deferred_work(pipeline: FacePipeline, bgr: np.ndarray, stamp_ns: int, delay_s: float,
-                  wait: Callable[[float], object]) -> list[bf.Detection] | None:
-    """What `process(defer_search=True)` put off, done after the face is published:
-    the whole-frame pass and the iris, when due (the pass's faces, or None).
+def after_publishing(pipeline: FacePipeline, owed: Sequence[Owed], delay_s: float,
+                     wait: Callable[[float], object]) -> list[bf.Detection] | None:
+    """Run the work `process(defer=True)` owed once the face is published: the
+    whole-frame pass and the iris, when due (the pass's faces, or None).
 
     It first waits `delay_s` (`wait`: the node's stop event, so shutdown is not held
-    up): started at once, this work took a core while the face was still on its way
-    to the eyes (see `defer_after_ms`).
+    up): started at once, this work takes a core while the face is still on its way
+    to the eyes (see `defer_after_ms`). With nothing owed there is no wait.
     """
-    if not pipeline.deferred_due():
+    if not owed:
         return None
     if delay_s > 0:
         wait(delay_s)
-    searched = pipeline.search_if_due(bgr, stamp_ns)
-    pipeline.iris_if_due(bgr)
-    return searched
-
-
-def apply_live(pipeline: FacePipeline, s: FaceDetectorSettings) -> None:
-    """Put changed live settings into a running pipeline (on the frame thread, between
-    frames). Thresholds and timings are read from `pipeline.s` on every frame; the
-    score threshold lives in the net, the switch delay in the tracker, and a new
-    smoothing filter restarts smoothing. Model, camera, intrinsics, iris and threads
-    are restart-only (settings.py marks them)."""
-    pipeline.s = s
-    net = pipeline.net
-    net.min_score = net.spec.min_score if s.min_score is None else s.min_score
-    pipeline.tracker.switch_after_s = s.switch_after_s
-    if (pipeline.smoother.min_cutoff, pipeline.smoother.beta) != (s.min_cutoff_hz, s.beta):
-        pipeline.smoother = PointSmoother(s.min_cutoff_hz, s.beta)
+    return pipeline.run_owed(owed)
 
 
 def run(ctx: ServiceContext) -> int:
@@ -182,30 +164,70 @@ def run(ctx: ServiceContext) -> int:
     debug_pub = node.publisher(keys.DEBUG_IMAGE, camera=settings.camera)
     log.info("face detector: %s model %s on LiteRT", settings.model, net.path)
 
-    def on_image(img: m.Image, _key: str) -> None:
-        nonlocal settings
-        if pending:
-            settings = pending.pop()
-            pending.clear()
-            apply_live(pipeline, settings)
+    def decode(img: m.Image) -> np.ndarray | None:
+        """The frame as BGR, or None when refused (counted and logged)."""
         try:
-            bgr = frames.decode_image(img, settings.max_pixels)
+            return frames.decode_image(img, settings.max_pixels)
         except frames.FrameRefused as refused:
             diag.increment(refused.reason)
             warn.warning(f"refused:{refused.reason}", "dropped image from %s: %s",
                          clip(img.frame_id, 60), refused.text)
-            return
-        # One wrong clock must not hold back every later frame (tracking and
-        # smoothing order by stamp) nor reach the controller: such a stamp
-        # becomes the arrival time. The node runtime does the same on arrival
-        # (same counter); this keeps the detector safe on its own.
+            return None
+
+    def stamp_of(img: m.Image) -> int:
+        """The image's stamp, or the arrival time when it is not plausible.
+
+        One wrong clock must not hold back every later frame (tracking and
+        smoothing order by stamp) nor reach the controller. The node runtime
+        does the same on arrival (same counter); this keeps the detector safe
+        on its own.
+        """
         stamp_ns, replaced = plausible_stamp(img.stamp_ns, m.now_ns())
         if replaced:
             diag.increment("stamps replaced")
             warn.warning("stamp", "image stamp %d is not plausible (now %d): using the "
                          "arrival time", img.stamp_ns, stamp_ns)
+        return stamp_ns
+
+    def publish(img: m.Image, bgr: np.ndarray, stamp_ns: int, result: FaceResult) -> None:
+        """The face first (the gaze's latency path), then every box of the frame,
+        also when there is no face (viewers clear their boxes)."""
+        if result.point is not None and result.target is not None:
+            x, y, z = result.point
+            face_pub.put(m.FacePosition(
+                stamp_ns=stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
+                confidence=min(max(result.target.score, 0.0), 1.0),
+            ))
+            diag.increment("faces")
+        diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)
+        faces_pub.put(detections.to_message(
+            result, stamp_ns, img.frame_id, bgr.shape[1], bgr.shape[0],
+            bystanders.current(result, stamp_ns, 2 * settings.full_every_s + 0.1)))
+
+    def publish_debug(img: m.Image, bgr: np.ndarray, stamp_ns: int, result: FaceResult,
+                      faces: list[bf.Detection]) -> None:
+        jpeg = draw.encode_jpeg(
+            draw.render(bgr, faces, result.target, result.estimate, result.measured),
+            settings.debug_jpeg_quality,
+        )
+        if jpeg is not None:
+            debug_pub.put(m.Image(stamp_ns=stamp_ns, frame_id=img.frame_id,
+                                  width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
+                                  data=jpeg))
+            diag.increment("debug_images")
+
+    def on_image(img: m.Image, _key: str) -> None:
+        nonlocal settings
+        if pending:
+            settings = pending.pop()
+            pending.clear()
+            pipeline.reconfigure(settings)
+        bgr = decode(img)
+        if bgr is None:
+            return
+        stamp_ns = stamp_of(img)
         t0 = time.perf_counter()
-        result = pipeline.process(bgr, stamp_ns, defer_search=True)
+        result = pipeline.process(bgr, stamp_ns, defer=True)
         if result.refused is not None:
             diag.increment(result.refused)
             warn.warning(f"refused:{result.refused}", "dropped frame %dx%d from %s",
@@ -215,24 +237,12 @@ def run(ctx: ServiceContext) -> int:
         if diag.level != "OK" or diag.message.startswith("waiting"):
             diag.set("OK", "detecting")
         diag.values["infer_ms"] = round((time.perf_counter() - t0) * 1000, 1)
-        if result.point is not None and result.target is not None:
-            x, y, z = result.point
-            face_pub.put(m.FacePosition(
-                stamp_ns=stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
-                confidence=min(max(result.target.score, 0.0), 1.0),
-            ))
-            diag.increment("faces")
-        diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)
-        # Every processed frame, also without a face (viewers clear their boxes);
-        # after the face, which is on the gaze-latency path and this is not.
-        faces_pub.put(detections.to_message(
-            result, stamp_ns, img.frame_id, bgr.shape[1], bgr.shape[0],
-            bystanders.current(result, stamp_ns, 2 * settings.full_every_s + 0.1)))
+        publish(img, bgr, stamp_ns, result)
         diag.values["target_changes"] = pipeline.tracker.target_changes
         if pipeline.gate_rejections:
             diag.values["track_rejected"] = sum(pipeline.gate_rejections.values())
-        searched = deferred_work(pipeline, bgr, stamp_ns, settings.defer_after_ms / 1000.0,
-                                 node.stop_event.wait)
+        searched = after_publishing(pipeline, result.owed, settings.defer_after_ms / 1000.0,
+                                    node.stop_event.wait)
         if searched is not None:
             bystanders.update(searched, result, stamp_ns)
         if result.estimate is not None and result.estimate.fusion is not None:
@@ -241,16 +251,8 @@ def run(ctx: ServiceContext) -> int:
             diag.values["iris_measurements"] = pipeline.iris_measurements
             diag.values["iris_accepted"] = pipeline.iris_accepted
         if debug_pub.has_subscribers():
-            faces = result.faces if searched is None else searched
-            jpeg = draw.encode_jpeg(
-                draw.render(bgr, faces, result.target, result.estimate, result.measured),
-                settings.debug_jpeg_quality,
-            )
-            if jpeg is not None:
-                debug_pub.put(m.Image(stamp_ns=stamp_ns, frame_id=img.frame_id,
-                                      width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
-                                      data=jpeg))
-                diag.increment("debug_images")
+            publish_debug(img, bgr, stamp_ns, result,
+                          result.faces if searched is None else searched)
 
     try:
         LiveSettings(settings, pending.append).serve(node)

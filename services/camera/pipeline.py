@@ -1,23 +1,29 @@
-"""One frame in, at most one face out, through stages visited once each, in order.
+"""One frame in, at most one face out, and the work owed once that face is published.
 
-    check -> detect -> choose -> measure -> geometry -> smooth (-> iris, later)
+    check -> track or search -> choose -> measure -> geometry -> smooth
 
 * check: the frame becomes HxWx3 uint8 BGR (grey and BGRA converted) or is
-  refused with a reason that is counted (`refused`); never an exception;
-* detect: either the crop track (the followed face re-found in its crop,
-  accepted only through `gate.TrackGate`) or a whole-frame search
-  (`facenet.FaceNet`: prepare -> infer -> decode);
+  refused with a reason that is counted (`refused`); never an exception.
+  This is the frame's only conversion: owed work carries the checked frame;
+* track or search: the followed face re-found in its crop (accepted only
+  through `gate.TrackGate`), or a whole-frame search (`facenet.FaceNet`:
+  prepare -> infer -> decode) when there is no track, the gate refused the
+  crop result, or a pass is due and the caller does not defer;
 * choose: which face is followed (`tracking.TargetTracker`);
 * measure: the chosen face detected again in its crop with the short-range
-  model for a precise size and eyes (the crop track already is that);
+  model for a precise size and eyes (a tracked face already is that);
 * geometry: distance cues and the 3-D point (`geometry.locate`);
-* smooth: One-Euro filters (`tracking.PointSmoother`);
-* iris (optional, `iris.IrisNet`): when the followed face is big enough and
-  the last measurement is `iris_every_s` old, its irises are measured and
-  the person's iris-to-eye ratio is held (`fusion.IrisCalibration`); the
-  geometry stage of every later frame uses it as a cue. It costs ~6 ms, so
-  it runs after the face is published (`iris_if_due`) unless the caller
-  does not defer (in-process use: it then runs at the end of `process`).
+* smooth: One-Euro filters (`tracking.PointSmoother`).
+
+Owed work (`process(..., defer=True)`, what the detector service does): a
+whole-frame pass that is due while the face was answered from its crop
+(`OwedSearch`), and the iris measurement (`OwedIris`, `iris.IrisNet`: when
+the followed face is big enough and the last measurement is `iris_every_s`
+old; ~6 ms) come back in `FaceResult.owed`, and the caller runs them with
+`run_owed` after publishing, off the gaze's latency path. Without `defer`
+both run inside `process` and nothing is owed. The iris measurement updates
+the person's held iris-to-eye ratio (`fusion.IrisCalibration`), a cue of
+every later frame's geometry.
 
 No Zenoh here (the service wires it to keys), so the whole chain is tested
 on real images in-process: `FacePipeline.process(bgr, stamp_ns)`.
@@ -26,7 +32,9 @@ on real images in-process: `FacePipeline.process(bgr, stamp_ns)`.
 from __future__ import annotations
 
 from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import assert_never
 
 import numpy as np
 
@@ -53,6 +61,26 @@ MEASURE_MAX_RATIO = 1.5
 factor is another (partial) face in the crop, not a better measure of this one."""
 
 
+@dataclass(frozen=True, eq=False)
+class OwedSearch:
+    """The whole-frame pass that was due when the frame was answered from the crop."""
+
+    bgr: np.ndarray
+    t: float
+
+
+@dataclass(frozen=True, eq=False)
+class OwedIris:
+    """The iris measurement of the followed face `measured` in this frame."""
+
+    bgr: np.ndarray
+    measured: bf.Detection
+    t: float
+
+
+Owed = OwedSearch | OwedIris
+
+
 @dataclass(frozen=True)
 class FaceResult:
     """What one frame gave: every face, the followed one and its point (ROS axes, m)."""
@@ -68,6 +96,8 @@ class FaceResult:
     """True when the face came from the crop track (no whole-frame pass this frame)."""
     refused: str | None = None
     """Why the frame was not processed ("bad_frames", "too_large"), else None."""
+    owed: tuple[Owed, ...] = ()
+    """Work put off until after publishing (`process(defer=True)`): for `run_owed`."""
 
 
 class FacePipeline:
@@ -84,7 +114,6 @@ class FacePipeline:
         self.iris_schedule = IrisSchedule(settings.iris_every_s, settings.iris_min_px)
         self.iris_held = IrisCalibration()
         """What the iris measurements of the followed person say (reset for a new one)."""
-        self._iris_owed: tuple[bf.Detection, float] | None = None
         self.iris_measurements = 0
         self.iris_accepted = 0
         self.s = settings
@@ -97,7 +126,6 @@ class FacePipeline:
         self._last: bf.Detection | None = None  # the followed face as last measured
         self._last_t = 0.0
         self._full_t = -np.inf  # when the whole frame was last searched
-        self._search_due = False  # a deferred whole-frame pass is owed
         self._jumped = False  # the gate refused this frame's crop result
         self.tracked = 0
         self.refined = 0
@@ -115,6 +143,20 @@ class FacePipeline:
             found = Intrinsics.resolve(width, height, s.fx, s.fy, s.cx, s.cy, s.hfov_deg)
             self._intrinsics[key] = found
         return found
+
+    def reconfigure(self, settings: FaceDetectorSettings) -> None:
+        """Take changed live settings (between frames, so no frame is processed half
+        with the old ones). Thresholds and timings are read from `self.s` on every
+        frame; the score threshold lives in the net, the switch delay in the tracker,
+        and a changed smoothing filter restarts smoothing. Model, camera, intrinsics,
+        iris and threads are restart-only (settings.py marks them)."""
+        self.s = settings
+        self.net.min_score = (self.net.spec.min_score if settings.min_score is None
+                              else settings.min_score)
+        self.tracker.switch_after_s = settings.switch_after_s
+        if (self.smoother.min_cutoff, self.smoother.beta) != (settings.min_cutoff_hz,
+                                                              settings.beta):
+            self.smoother = PointSmoother(settings.min_cutoff_hz, settings.beta)
 
     # -- stages ---------------------------------------------------------------
 
@@ -145,7 +187,6 @@ class FacePipeline:
     def _search(self, bgr: np.ndarray, t: float) -> list[bf.Detection]:
         """Stage 2b: every face in the whole frame."""
         self._full_t = t
-        self._search_due = False
         self.searches += 1
         return self.net.detect(bgr)
 
@@ -170,7 +211,8 @@ class FacePipeline:
         return locate(measured, k, self.s.face_width_m, eye_m, held)
 
     def _iris(self, bgr: np.ndarray, measured: bf.Detection, t: float) -> None:
-        """Stage 7: measure the irises; a plausible measurement updates the held ratio."""
+        """Measure the irises (owed work, or the end of an undeferred `process`);
+        a plausible measurement updates the held ratio."""
         assert self.irises is not None
         self.iris_schedule.ran(t)
         self.iris_measurements += 1
@@ -191,15 +233,14 @@ class FacePipeline:
 
     # -- entry points ---------------------------------------------------------
 
-    def process(self, frame: np.ndarray, stamp_ns: int, *,
-                defer_search: bool = False) -> FaceResult:
+    def process(self, frame: np.ndarray, stamp_ns: int, *, defer: bool = False) -> FaceResult:
         """The face to follow in this frame.
 
         Between whole-frame passes (`full_every_s`) the followed face is tracked in
-        its crop. When a pass is due it runs first, unless `defer_search`: then the
-        frame is answered from the crop and `search_if_due()` does the pass after
-        the caller has published, off the latency path. A crop result the gate does
-        not accept gets a whole-frame pass at once, before anything is published.
+        its crop. When a pass is due it runs first, unless `defer`: then the frame
+        is answered from the crop and the pass is owed (`FaceResult.owed`), like a
+        due iris measurement. A crop result the gate does not accept gets a
+        whole-frame pass at once, before anything is published.
         """
         checked = self._check(frame)
         if isinstance(checked, FaceResult):
@@ -208,10 +249,12 @@ class FacePipeline:
         t = stamp_ns * 1e-9
         due = not 0 < t - self._full_t < self.s.full_every_s
         self._jumped = False
-        tracked = self._track(bgr, t) if not due or defer_search else None
+        owed: list[Owed] = []
+        tracked = self._track(bgr, t) if not due or defer else None
         if tracked is not None:
             self.tracked += 1
-            self._search_due = due
+            if due:
+                owed.append(OwedSearch(bgr, t))
             self.tracker.follow(tracked, t)
             faces, target, measured, new_person = [tracked], tracked, tracked, False
         else:
@@ -231,47 +274,31 @@ class FacePipeline:
             self.iris_held.reset()
         where = self._geometry(bgr, measured)
         point = self._smooth(where.point, t, new_person)
-        self._iris_owed = None
         if self.irises is not None and self.iris_schedule.due(measured, t):
-            if defer_search:
-                self._iris_owed = (measured, t)
+            if defer:
+                owed.append(OwedIris(bgr, measured, t))
             else:
                 self._iris(bgr, measured, t)
         return FaceResult(faces, target, where.estimate, point, where.point, measured,
-                          tracked=tracked is not None)
+                          tracked=tracked is not None, owed=tuple(owed))
 
-    def deferred_due(self) -> bool:
-        """Whether the last deferred `process` left work for after publishing."""
-        return self._search_due or self._iris_owed is not None
-
-    def iris_if_due(self, frame: np.ndarray) -> bool:
-        """The iris measurement a deferred `process` put off (same frame); whether it ran."""
-        owed, self._iris_owed = self._iris_owed, None
-        if owed is None or self.irises is None:
-            return False
-        try:
-            bgr = frames.to_bgr8(np.asarray(frame), max_side=None)
-        except frames.FrameRefused:
-            return False
-        self._iris(bgr, *owed)
-        return True
-
-    def search_if_due(self, frame: np.ndarray, stamp_ns: int) -> list[bf.Detection] | None:
-        """The whole-frame pass a deferred `process` put off; None when none was due.
+    def run_owed(self, owed: Sequence[Owed]) -> list[bf.Detection] | None:
+        """Run the work a deferred `process` owed, in order; the faces of the
+        whole-frame pass, or None when none was owed.
 
         Target choice stays with the followed person while they are seen, so the
         pass only has to confirm them: a tracked face the whole-frame detector does
         not see is dropped, and the next frame searches the whole frame again.
         """
-        if not self._search_due:
-            return None
-        try:  # the frame `process` was given: a refusal was counted there already
-            bgr = frames.to_bgr8(np.asarray(frame), max_side=None)
-        except frames.FrameRefused:
-            self._search_due = False
-            return None
-        t = stamp_ns * 1e-9
-        faces = self._search(bgr, t)
-        if not self.tracker.observe(faces, t):
-            self._last = None
-        return faces
+        searched = None
+        for work in owed:
+            match work:
+                case OwedSearch(bgr=bgr, t=t):
+                    searched = self._search(bgr, t)
+                    if not self.tracker.observe(searched, t):
+                        self._last = None
+                case OwedIris(bgr=bgr, measured=measured, t=t):
+                    self._iris(bgr, measured, t)
+                case _:
+                    assert_never(work)
+        return searched

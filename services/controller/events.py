@@ -11,7 +11,8 @@ over.
 They live apart from `behaviour.py` because they are the service's plumbing
 (who posted what), while `Behaviour` keeps its plain method API (`presence`,
 `sound_reply`, ...) that the pure tests drive directly. Faces are not events:
-they go to a latest-value slot so a fast camera cannot fill the inbox.
+a face is decided in its Zenoh callback (the gaze's latency path), so a fast
+camera neither waits for the decision thread nor fills the inbox.
 """
 
 from __future__ import annotations

@@ -65,6 +65,9 @@ from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
 
+SoundCommand = PlaySound | CancelSound
+"""The commands the sound thread carries out (blocking audio calls)."""
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The option overrides its `[controller]` key (default: settings.py)."""
@@ -104,7 +107,7 @@ class Controller:
         self._lock = threading.Lock()
         """Guards `behaviour` and the publishers' order: the decision thread and the
         face callback both decide."""
-        self._sounds: queue.Queue[Command | None] = queue.Queue()
+        self._sounds: queue.Queue[SoundCommand | None] = queue.Queue()
         self._warn = RateLimitedLog(log)
         self._expression_pub = node.publisher(keys.EXPRESSION)
         self._control_pub = node.publisher(keys.EYE_CONTROL)
@@ -174,8 +177,7 @@ class Controller:
 
     def _decide(self) -> None:
         stop = self.node.stop_event
-        tick = self.settings.tick_s
-        next_tick = self.clock() + tick
+        next_tick = self.clock() + self.settings.tick_s
         while not stop.is_set():
             with self._cond:
                 while not self._inbox and not stop.is_set():
@@ -186,17 +188,24 @@ class Controller:
                 events = list(self._inbox)
                 self._inbox.clear()
             try:
-                with self._lock:
-                    self._handle(events)
-                    now = self.clock()
-                    if now >= next_tick:
-                        next_tick = now + tick
-                        self._execute(self.behaviour.tick(now))
-                        self._publish_diagnostics(now)
-                    self._publish_state(now)
+                next_tick = self.decision_step(events, next_tick)
             except Exception as exc:  # a bug must not stop the robot's behaviour
                 self.node.diagnostics.increment("decision_errors")
                 self._warn.warning("decide", "decision step failed: %r", exc)
+
+    def decision_step(self, events: list[Event], next_tick: float) -> float:
+        """Hand `events` to the behaviour, tick it when `next_tick` has come, publish
+        what changed; returns when the next tick is due. The decision thread runs
+        this, and pure tests drive it with a fake clock and node."""
+        with self._lock:
+            self._handle(events)
+            now = self.clock()
+            if now >= next_tick:
+                next_tick = now + self.settings.tick_s
+                self._execute(self.behaviour.tick(now))
+                self._publish_diagnostics(now)
+            self._publish_state(now)
+        return next_tick
 
     def _handle(self, events: list[Event]) -> None:
         b = self.behaviour
@@ -230,14 +239,21 @@ class Controller:
         self._execute(self.behaviour.face(arrived, gaze, msg.stamp_ns))
 
     def _execute(self, commands: list[Command]) -> None:
+        """Carry out the behaviour's commands. Exhaustive: a `Command` member without a
+        case fails type checking at `assert_never`, and at run time it raises instead
+        of being taken for a sound."""
         for cmd in commands:
-            if isinstance(cmd, Look):
-                self._control_pub.put(self._eye_control(cmd))
-            elif isinstance(cmd, SetExpression):
-                log.info("expression -> %s", cmd.action.name)
-                self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(), action=cmd.action))
-            else:
-                self._sounds.put(cmd)
+            match cmd:
+                case Look():
+                    self._control_pub.put(self._eye_control(cmd))
+                case SetExpression(action=action):
+                    log.info("expression -> %s", action.name)
+                    self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
+                                                                action=action))
+                case PlaySound() | CancelSound():
+                    self._sounds.put(cmd)
+                case _:
+                    assert_never(cmd)
 
     def _eye_control(self, cmd: Look) -> m.EyeControl:
         stamp = cmd.stamp_ns if cmd.stamp_ns is not None else m.now_ns()
@@ -273,32 +289,41 @@ class Controller:
     # -- sound thread --
 
     def _sound_worker(self) -> None:
-        timeout = self.settings.call_timeout_s
         while True:
             cmd = self._sounds.get()
             if cmd is None or self.node.stop_event.is_set():
                 return
-            if isinstance(cmd, PlaySound):
-                log.info("play_sound %r", cmd.sound)
+            self.call_audio(cmd)
+
+    def call_audio(self, cmd: SoundCommand) -> None:
+        """Make one blocking audio call and post its answer to the inbox; a failed
+        call is answered too (refused, not successful), so the behaviour never waits
+        for a reply that cannot come."""
+        timeout = self.settings.call_timeout_s
+        match cmd:
+            case PlaySound(sound=sound, request=request):
+                log.info("play_sound %r", sound)
                 try:
-                    reply = self.node.call(keys.PLAY_SOUND, m.PlaySound(sound=cmd.sound),
+                    reply = self.node.call(keys.PLAY_SOUND, m.PlaySound(sound=sound),
                                            timeout=timeout)
                     if not reply.accepted:
-                        log.warning("play_sound %r refused: %s", cmd.sound, reply.message)
-                    self._post(GoalReply(cmd.request, reply.accepted, reply.goal_id))
+                        log.warning("play_sound %r refused: %s", sound, reply.message)
+                    self._post(GoalReply(request, reply.accepted, reply.goal_id))
                 except Exception as exc:  # ServiceError, or Zenoh failing: always answer
                     self.node.diagnostics.increment("sound_call_failures")
-                    log.warning("play_sound %r failed: %s", cmd.sound, exc)
-                    self._post(GoalReply(cmd.request, False, ""))
-            elif isinstance(cmd, CancelSound):
-                log.info("cancel goal %s", cmd.goal_id)
+                    log.warning("play_sound %r failed: %s", sound, exc)
+                    self._post(GoalReply(request, False, ""))
+            case CancelSound(goal_id=goal_id):
+                log.info("cancel goal %s", goal_id)
                 try:
                     answer = self.node.call(keys.PLAY_SOUND_CANCEL,
-                                            m.CancelGoal(goal_id=cmd.goal_id), timeout=timeout)
-                    self._post(CancelReply(cmd.goal_id, answer.success))
+                                            m.CancelGoal(goal_id=goal_id), timeout=timeout)
+                    self._post(CancelReply(goal_id, answer.success))
                 except Exception as exc:
-                    log.warning("cancel of %s failed: %s", cmd.goal_id, exc)
-                    self._post(CancelReply(cmd.goal_id, False))
+                    log.warning("cancel of %s failed: %s", goal_id, exc)
+                    self._post(CancelReply(goal_id, False))
+            case _:
+                assert_never(cmd)
 
 
 def state_message(state: State, now: float, now_ns: int) -> m.ControllerState:

@@ -1,7 +1,7 @@
 """The eyes' own motion, decided once for the whole face (pure: no I/O, no clock).
 
-Every page used to run its own random timers, so a left-eye screen and a
-right-eye screen blinked at different moments and wandered apart. Here one
+Timers of its own in every page would make a left-eye screen and a
+right-eye screen blink at different moments and wander apart. So one
 `MotionScheduler` per renderer decides blinks, small fixational saccades,
 idle glances and `EYE_LOOK_RANDOM` glances, as timed events
 (`MotionEvent`: kind, start on the server clock in ms since the epoch,
@@ -25,7 +25,7 @@ What it models (human figures, each next to its constant below):
   followed (small), and all the time with EYE_LOOK_RANDOM (large).
 
 Saccade events carry an *offset* added to the commanded direction (the
-page eases toward the commanded direction as before); each saccade names
+page eases toward the commanded direction); each saccade names
 where it starts (`from_yaw`, `from_pitch`) and ends (`yaw`, `pitch`), so a
 page that missed earlier events still draws the same motion.
 """

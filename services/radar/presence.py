@@ -52,12 +52,6 @@ ESTABLISHED_S = 1.0  # a sensor heard this long ...
 ESTABLISHED_FRAMES = 5  # ... with this many frames is a real one (10 Hz: after ~1 s)
 
 
-PresenceRules = RadarPresenceSettings
-"""The rule's tuning is the `[radar_presence]` table itself: one struct, whose
-defaults and ranges (checked when a config or an option is read) live in
-settings.py; the reasons for each default are in docs/radar.md."""
-
-
 @dataclass(frozen=True)
 class Reading:
     """What the rule needs from one sensor frame."""
@@ -123,7 +117,10 @@ class PresenceTracker:
     `absence_hold_s` of fresh data with nobody in range.
     """
 
-    rules: PresenceRules = field(default_factory=PresenceRules)
+    rules: RadarPresenceSettings = field(default_factory=RadarPresenceSettings)
+    """The rule's tuning is the `[radar_presence]` table itself: its defaults and
+    ranges (checked when a config or an option is read) live in settings.py, the
+    reasons for each default in docs/radar.md."""
     presence: PresenceState | None = None
     target: PresenceTarget = PresenceTarget.MOVING
     _sensors: BoundedDict[str, _Sensor] = field(init=False)

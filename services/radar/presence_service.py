@@ -26,7 +26,7 @@ import time
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar.intake import Intake
-from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
+from buddybot.radar.presence import PresenceTracker, Reading, Verdict
 from buddybot.radar.settings import RadarPresenceSettings
 from buddybot.runtime.limits import clip, plausible_stamp
 from buddybot.runtime.node import Node
@@ -49,7 +49,7 @@ def settings_from(ctx: ServiceContext) -> RadarPresenceSettings:
 
 
 class PresenceService:
-    def __init__(self, node: Node, rules: PresenceRules) -> None:
+    def __init__(self, node: Node, rules: RadarPresenceSettings) -> None:
         self.node = node
         self.tracker = PresenceTracker(rules)
         self._lock = threading.Lock()
@@ -66,7 +66,7 @@ class PresenceService:
             max_trusted=rules.max_sensors, on_error=self._handler_failed,
             name="presence-intake")
 
-    def apply_settings(self, rules: PresenceRules) -> None:
+    def apply_settings(self, rules: RadarPresenceSettings) -> None:
         """A live parameter change (`buddybot param set radar-presence ...`): the
         tracker reads its rules on every frame and tick, so the next one uses
         them. `max_sensors` sized the tables at start: it is restart-only."""

@@ -1,9 +1,9 @@
-"""Faults and attacks on the audio services, through a real router (issue 11).
+"""Faults and attacks on the audio services, through a real router.
 
-Each test reproduces one finding of the attack on the running robot: a
-router killed and restarted, play_file asked for files outside the sounds,
-huge files, a burst of goals, a huge name, a fake player token. The robot
-must keep playing afterwards.
+Each test makes one attack on the running robot: a router killed and
+restarted, play_file asked for files outside the sounds, huge files, a
+burst of goals, a huge name, a fake player token. The robot must keep
+playing afterwards.
 """
 
 from __future__ import annotations
@@ -66,8 +66,8 @@ def play_until_success(probe: Node, status: Collector, sound: str,
 def test_goals_succeed_again_after_the_router_is_killed_and_restarted(
     tmp_path: Path, log_dir: Path
 ) -> None:
-    """Finding 1: after kill -9 of the router every goal was refused with "the audio
-    player is not running" for good, although the player was alive."""
+    """After kill -9 of the router, goals must not be refused with "the audio player
+    is not running" for good while the player is alive."""
     config, _ = beep_config(tmp_path, 0.3)
     cfg = tmp_path / "buddybot.toml"
     cfg.write_text(config)
@@ -112,8 +112,8 @@ def sound_box(tmp_path: Path) -> tuple[str, Path]:
 def test_play_file_refuses_everything_outside_the_sound_dirs_with_one_text(
     audio: Callable[..., Audio], probe: Node, tmp_path: Path
 ) -> None:
-    """Finding 2: play_file opened any readable path and its reply told whether a
-    file exists."""
+    """play_file must open no readable path outside the sound dirs, and its reply
+    must not tell whether such a file exists."""
     config, box = sound_box(tmp_path)
     (box / "escape.wav").symlink_to(tmp_path / "outside.wav")
     (box / "passwd.wav").symlink_to("/etc/passwd")
@@ -151,8 +151,8 @@ def peak_rss(pid: int) -> int:
 def test_too_long_or_too_large_files_are_refused_before_they_are_loaded(
     audio: Callable[..., Audio], probe: Node, tmp_path: Path
 ) -> None:
-    """Finding 2: a 30-minute WAV grew the player to 781 MB before being refused; a
-    2 GB file blocked it for 6.7 s."""
+    """Refused before loading: loading first grew the player to 781 MB for a
+    30-minute WAV, and a 2 GB file blocked it for 6.7 s."""
     config, box = sound_box(tmp_path)
     write_sparse_wav(box / "long.wav", 30 * 60)  # 30 min of 8 kHz mono: 14 MB
     with (box / "huge.wav").open("wb") as out:
@@ -177,7 +177,7 @@ def test_too_long_or_too_large_files_are_refused_before_they_are_loaded(
 def test_a_burst_of_200_goals_gets_exactly_one_answer_each(
     audio: Callable[..., Audio], probe: Node, tmp_path: Path
 ) -> None:
-    """Finding 3: 182 of 200 concurrent goals got no reply at all."""
+    """200 concurrent goals: not one may go without its reply."""
     config, _ = beep_config(tmp_path, 0.3)
     a = audio(config)
     send_goal(probe, "beep")
@@ -213,9 +213,9 @@ def test_a_burst_of_200_goals_gets_exactly_one_answer_each(
 def test_a_huge_sound_name_is_refused_and_logged_in_one_short_line(
     audio: Callable[..., Audio], probe: Node
 ) -> None:
-    """Finding 4: a 10 MB sound name wrote a 20 MB log line. The runtime now refuses
-    names over 256 characters and paths over 4096 at decode; whatever gets through
-    is clipped in replies and logs."""
+    """A 10 MB sound name must not write a 20 MB log line: the runtime refuses names
+    over 256 characters and paths over 4096 at decode; whatever gets through is
+    clipped in replies and logs."""
     a = audio()
     send_goal(probe, "nothing")  # both services answer
     assert a.player is not None and a.action is not None
@@ -246,8 +246,8 @@ def test_a_huge_sound_name_is_refused_and_logged_in_one_short_line(
 def test_a_fake_player_token_is_reported_and_cannot_hide_the_players_death(
     audio: Callable[..., Audio], probe: Node, tmp_path: Path
 ) -> None:
-    """Finding 5: another session declaring `nodes/audio-player/<x>` must not keep
-    goals waiting for a dead player."""
+    """Another session declaring `nodes/audio-player/<x>` must not keep goals
+    waiting for a dead player."""
     config, _ = beep_config(tmp_path, 10.0)
     a = audio(config)
     assert a.player is not None and a.action is not None

@@ -12,7 +12,7 @@ at a chosen pixel gives a frame whose true 3-D face position is known.
   sample data, saved in data/ so the tests need no matplotlib): held out,
   never used to choose a parameter.
 
-Hard scenes (issue 12: small and partial faces) put the same photos where
+Hard scenes (small and partial faces) put the same photos where
 detectors fail: 20-60 px faces (3.0-4.2 m and 1.5-2.7 m at fx 600), faces 25%
 and 50% outside each edge, two faces, dark, motion- and defocus-blurred
 and JPEG quality 20 frames, over backdrops from scikit-image's non-face
@@ -140,7 +140,7 @@ def truth(p: Placed, fx: float = 600.0, fy: float = 600.0, cx: float = WIDTH / 2
     return p.z_m, -(p.u - cx) * p.z_m / fx, -(p.v - cy) * p.z_m / fy
 
 
-# --- Hard scenes (issue 12) -------------------------------------------------------------
+# --- Hard scenes: small and partial faces -----------------------------------------------
 
 
 def scale_at(photo: Photo, z_m: float, fx: float = FX) -> float:

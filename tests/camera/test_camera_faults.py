@@ -1,4 +1,4 @@
-"""Faults and attacks on the camera services, through a real router (issue 11).
+"""Faults and attacks on the camera services, through a real router.
 
 A JPEG bomb, wrong clocks and odd frames sent to real `face-detector` and
 `camera` processes: each is refused or converted and counted, memory stays
@@ -315,10 +315,10 @@ def test_capture_refuses_unusable_frames_and_keeps_publishing(
 
 
 def test_a_face_jump_is_never_published_at_a_wrong_distance(probe: Node, spawn: Spawn) -> None:
-    """Issue 12 item 3 through a running detector (crop tracking and smoothing as in
-    service): a face 90 px wide at the upper left (1.0 m), then 150 px at the lower right
-    (0.6 m). Every published distance within 15% of the truth, and the new face published
-    for the first two frames after the jump (before the fix it was held back ~15 frames)."""
+    """The jump of test_jump.py through a running detector (crop tracking and smoothing
+    as in service): a face 90 px wide at the upper left (1.0 m), then 150 px at the lower
+    right (0.6 m). Every published distance within 15% of the truth, and the new face
+    published for the first two frames after the jump (not held back as a bystander)."""
     pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
     faces = Collector(probe, keys.FACE, camera="test")
     proc = spawn("face-detector", "--camera", "test")

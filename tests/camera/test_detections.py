@@ -65,8 +65,8 @@ def test_a_real_frame_gives_its_face_with_keypoints_distance_and_cues(
     pipe = FacePipeline(nets[0], FaceDetectorSettings(smoothing=False, full_every_s=0.25),
                         nets[1])
     frame, placed = scenes.scene(scenes.astronaut(), 1.0, 300, 240)
-    first = pipe.process(frame, STAMP, defer_search=True)
-    second = pipe.process(frame, STAMP + 33_000_000, defer_search=True)
+    first = pipe.process(frame, STAMP, defer=True)
+    second = pipe.process(frame, STAMP + 33_000_000, defer=True)
     assert first.estimate is not None and first.estimate.fusion is not None
     msg = received(detections.to_message(first, STAMP, "front", 640, 480))
 

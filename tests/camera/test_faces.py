@@ -6,6 +6,7 @@ astronaut was used to tune; grace_hopper is held out (see scenes.py).
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -17,7 +18,7 @@ from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.litert import ModelLoadError
-from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.pipeline import FacePipeline, OwedSearch
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.sim import SimCamera
 from tests.camera import scenes
@@ -236,14 +237,14 @@ def test_deferred_search_answers_from_the_crop_then_searches_off_the_latency_pat
     full: FaceNet, short: FaceNet
 ) -> None:
     """The detector service answers every frame after the first from the crop and does
-    the due whole-frame pass after publishing (`search_if_due`)."""
+    the due whole-frame pass after publishing (the owed work, `run_owed`)."""
     pipe = pipeline(full, short, full_every_s=0.25)
     searched = []
     for i in range(12):
         frame, _ = scenes.scene(scenes.astronaut(), 1.2, 200 + 8 * i, 240)
-        result = pipe.process(frame, (i + 1) * 33_000_000, defer_search=True)
+        result = pipe.process(frame, (i + 1) * 33_000_000, defer=True)
         assert result.point is not None and result.point[1] > 0
-        found = pipe.search_if_due(frame, (i + 1) * 33_000_000)
+        found = pipe.run_owed(result.owed)
         searched.append(None if found is None else len(found))
     assert pipe.tracked == 11  # only the very first frame waited for a whole-frame pass
     assert searched == [None if i != 8 else 1 for i in range(12)]
@@ -255,12 +256,14 @@ def test_deferred_search_drops_a_track_the_whole_frame_does_not_confirm(
     pipe = pipeline(full, short, full_every_s=0.25)
     frame, _ = scenes.scene(scenes.astronaut(), 1.2, 300, 240)
     for i in range(9):
-        pipe.process(frame, (i + 1) * 33_000_000, defer_search=True)
+        owed = pipe.process(frame, (i + 1) * 33_000_000, defer=True).owed
     assert pipe.tracked == 8
+    [search] = owed
+    assert isinstance(search, OwedSearch)
     # The due pass sees no face (here: an empty frame): the track is dropped ...
-    assert pipe.search_if_due(scenes.background(), 9 * 33_000_000) == []
+    assert pipe.run_owed([replace(search, bgr=scenes.background())]) == []
     # ... so the next frame is searched whole again instead of tracked.
-    result = pipe.process(frame, 10 * 33_000_000, defer_search=True)
+    result = pipe.process(frame, 10 * 33_000_000, defer=True)
     assert pipe.tracked == 8 and len(result.faces) == 1 and result.point is not None
 
 
@@ -280,17 +283,15 @@ def test_one_wrong_stamp_does_not_freeze_the_followed_face(full: FaceNet, short:
     t0 = 1_700_000_000_000_000_000
     left, _ = scenes.scene(scenes.grace_hopper(), 1.2, 220, 240)
     for i in range(8):
-        pipe.process(left, t0 + i * 33_000_000, defer_search=True)
-        pipe.search_if_due(left, t0 + i * 33_000_000)
+        pipe.run_owed(pipe.process(left, t0 + i * 33_000_000, defer=True).owed)
     wrong = t0 + wrong_ns if wrong_ns < 2**62 else wrong_ns
-    pipe.process(left, wrong, defer_search=True)
-    pipe.search_if_due(left, wrong)
+    pipe.run_owed(pipe.process(left, wrong, defer=True).owed)
     right, placed = scenes.scene(scenes.grace_hopper(), 1.2, 420, 240)
     ys = []
     for i in range(9, 25):  # half a second of frames with the person moved right
         stamp = t0 + i * 33_000_000
-        result = pipe.process(right, stamp, defer_search=True)
-        pipe.search_if_due(right, stamp)
+        result = pipe.process(right, stamp, defer=True)
+        pipe.run_owed(result.owed)
         if result.point is not None:
             ys.append(result.point[1])
     assert ys, "the moved face was never published"

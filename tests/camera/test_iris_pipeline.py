@@ -17,7 +17,7 @@ from buddybot.camera import blazeface as bf
 from buddybot.camera import draw, fusion, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.iris import IrisNet
-from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.pipeline import FacePipeline, OwedIris
 from buddybot.camera.settings import FaceDetectorSettings
 from tests.camera import scenes
 
@@ -81,11 +81,14 @@ def test_a_far_face_is_not_measured(parts) -> None:
 def test_deferred_processing_measures_only_after_publishing(parts) -> None:
     p = pipeline(parts)
     img = frames_at(scenes.astronaut(), 0.4, 1)[0]
-    first = p.process(img, 100_000_000_000, defer_search=True)
+    first = p.process(img, 100_000_000_000, defer=True)
     assert first.target is not None and p.iris_measurements == 0
-    assert p.iris_if_due(img) is True
+    [owed] = first.owed
+    assert isinstance(owed, OwedIris) and owed.measured is first.measured
+    assert p.run_owed(first.owed) is None  # no whole-frame pass was owed
     assert p.iris_measurements == 1
-    assert p.iris_if_due(img) is False  # owed once, not twice
+    second = p.process(img, 100_033_000_000, defer=True)  # within iris_every_s: not owed
+    assert not any(isinstance(work, OwedIris) for work in second.owed)
 
 
 def test_a_new_person_is_not_measured_with_the_last_ones_iris(parts) -> None:

@@ -1,7 +1,7 @@
-"""A face that jumps between two frames (issue 12 item 3), real LiteRT inference.
+"""A face that jumps between two frames, real LiteRT inference.
 
-Before the tracking gate, crop tracking published a face at 0.6 m as 1.67,
-2.38 and 3.67 m after such a jump, and then lost it for ~10 frames. The
+Without the tracking gate, crop tracking publishes a face at 0.6 m as 1.67,
+2.38 and 3.67 m after such a jump, and then loses it for ~10 frames. The
 requirement: no published distance more than 15% off the truth, and the
 face published again within 2 frames of the jump.
 """
@@ -57,8 +57,8 @@ def run_jump(nets: tuple[FaceNet, FaceNet], photo: scenes.Photo,
     for i in range(frames):
         frame = a if i < BEFORE else b
         stamp = 1_700_000_000_000_000_000 + i * FRAME_NS
-        result = pipe.process(frame, stamp, defer_search=True)
-        pipe.search_if_due(frame, stamp)
+        result = pipe.process(frame, stamp, defer=True)
+        pipe.run_owed(result.owed)
         if i < BEFORE:
             assert result.point is not None, f"first face not published in frame {i}"
         else:
@@ -76,8 +76,8 @@ def assert_recovered(published: list[tuple[float, float, float] | None], z: floa
 @pytest.mark.parametrize("name", PHOTOS)
 def test_upper_left_90px_to_lower_right_150px(nets: tuple[FaceNet, FaceNet],
                                               name: str) -> None:
-    """The issue's jump: 90 px (1.0 m) at the upper left, then 150 px (0.6 m) at the
-    lower right. Failed before: the new face was held back for switch_after_s."""
+    """90 px (1.0 m) at the upper left, then 150 px (0.6 m) at the lower right: the
+    new face must not be held back for switch_after_s as if it were a bystander."""
     pipe, published, z = run_jump(nets, PHOTOS[name](), (1.0, 130, 120), (0.6, 470, 330))
     assert_recovered(published, z)
     assert pipe.tracked >= BEFORE - 2  # crop tracking was really on before the jump
@@ -117,8 +117,8 @@ def test_a_face_walking_at_a_normal_pace_stays_crop_tracked(
     for i in range(20):
         z = 2.0 - 0.04 * i
         frame, _ = scenes.scene(scenes.grace_hopper(), z, 200 + 6 * i, 240)
-        result = pipe.process(frame, (i + 1) * FRAME_NS, defer_search=True)
-        pipe.search_if_due(frame, (i + 1) * FRAME_NS)
+        result = pipe.process(frame, (i + 1) * FRAME_NS, defer=True)
+        pipe.run_owed(result.owed)
         assert result.point is not None
         errors.append(abs(result.point[0] - z) / z)
     assert sum(pipe.gate_rejections.values()) == 0, pipe.gate_rejections

@@ -57,15 +57,14 @@ def test_unusable_frames_are_refused_and_counted(nets: tuple[FaceNet, FaceNet],
     result = pipe.process(frame, 1)
     assert result.refused == "bad_frames" and result.point is None and result.faces == []
     assert pipe.refused["bad_frames"] == 1
-    assert pipe.search_if_due(frame, 1) is None  # and the deferred pass does not count it twice
-    assert pipe.refused["bad_frames"] == 1
+    assert result.owed == ()  # nothing owed for a refused frame
 
 
 @pytest.mark.parametrize("shape", [(1, 1), (1, 5000), (5000, 1), (3, 7), (2161, 3841)])
 def test_any_size_is_processed(nets: tuple[FaceNet, FaceNet], shape: tuple[int, int]) -> None:
     pipe = pipeline(nets)
     frame = np.full((*shape, 3), 90, np.uint8)
-    result = pipe.process(frame, 1, defer_search=True)
+    result = pipe.process(frame, 1, defer=True)
     assert result.refused is None and result.point is None
 
 
@@ -77,8 +76,8 @@ def test_a_bad_frame_between_good_ones_does_not_disturb_tracking(
     points = []
     for i in range(12):
         frame = np.zeros((0, 0, 3), np.uint8) if i == 5 else good
-        result = pipe.process(frame, (i + 1) * 33_333_333, defer_search=True)
-        pipe.search_if_due(frame, (i + 1) * 33_333_333)
+        result = pipe.process(frame, (i + 1) * 33_333_333, defer=True)
+        pipe.run_owed(result.owed)
         if i != 5:
             assert result.point is not None
             points.append(result.point)

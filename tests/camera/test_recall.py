@@ -1,13 +1,13 @@
-"""Recall on hard scenes against MediaPipe's measured recall (issue 12, item 2).
+"""Recall on hard scenes against MediaPipe's measured recall.
 
-The goal of issue 12: find at least as many small (3-4 m) and partial
+The goal: find at least as many small (3-4 m) and partial
 (frame edge) faces as Google MediaPipe 0.10.21 finds on the same frames.
 MediaPipe cannot be imported here (it is a benchmark peer in its own
 virtualenv), so `benchmarks/faces.py` measured both on the scenes of
 `scenes.py`; its figures are written below and in docs/camera.md. Each
 family's floor is our measured count minus a small margin (a few faces,
 for numerical differences between machines), but for the small-face and
-edge families never below MediaPipe's count: where ours was below it, the
+edge families never below MediaPipe's count: where ours is below it, the
 test asks for MediaPipe's count and is a strict xfail naming the gap, so it
 flips to a failure (remove the mark) the day the detector closes it.
 
@@ -39,7 +39,7 @@ class Measured:
     ours: int
     mediapipe: int
     gated: bool
-    """Small-face or edge family: issue 12 asks for at least MediaPipe's recall."""
+    """Small-face or edge family: at least MediaPipe's recall is asked for."""
 
     @property
     def floor(self) -> int:
@@ -52,8 +52,7 @@ class Measured:
 # Whole-frame detection with the service's default model (the sparse full-range
 # BlazeFace, fed as MediaPipe feeds it: bilinear scaling, threshold 0.5) vs MediaPipe
 # model_selection=1 (min_detection_confidence 0.5); measured 2026-11-23 (figures in
-# docs/camera.md). Before (area-averaged input, threshold 0.6) ours found 17/48 at
-# edge25 against MediaPipe's 19, and this family was a strict xfail.
+# docs/camera.md).
 WHOLE_FRAME = {
     "far": Measured(72, 26, 21, gated=True),
     "small": Measured(72, 56, 47, gated=True),
@@ -77,7 +76,7 @@ def _param(family: str, m: Measured) -> object:
     if m.gated and m.ours < m.mediapipe:
         return pytest.param(family, marks=pytest.mark.xfail(strict=True, reason=(
             f"{family}: the default model found {m.ours}/{m.faces}, MediaPipe "
-            f"{m.mediapipe}/{m.faces}; issue 12 asks for at least MediaPipe's recall")))
+            f"{m.mediapipe}/{m.faces}; at least MediaPipe's recall is asked for")))
     return family
 
 

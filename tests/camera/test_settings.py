@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from buddybot.camera import capture, detector, models
-from buddybot.camera.pipeline import FacePipeline
+from buddybot.camera.pipeline import FacePipeline, OwedSearch
+from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.runtime.config import parse_config
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.service import ServiceContext
@@ -45,11 +47,11 @@ def test_typos_and_wrong_types_name_the_key(toml: str, key: str) -> None:
 def test_command_line_overrides_config() -> None:
     ctx = ctx_for(capture, "[camera]\nname = 'left'\nfps = 10.0\nencoding = 'jpeg'\n",
                   "--fps", "25")
-    s = capture.effective_settings(ctx)
+    s = capture.settings_from(ctx)
     assert (s.name, s.fps, s.encoding) == ("left", 25.0, "jpeg")
     ctx = ctx_for(detector, "[face_detector]\nfx = 500.0\nsmoothing = true\n",
                   "--fy", "510", "--no-smoothing", "--model", "short")
-    d = detector.effective_settings(ctx)
+    d = detector.settings_from(ctx)
     assert (d.fx, d.fy, d.smoothing, d.model) == (500.0, 510.0, False, "short")
 
 
@@ -67,16 +69,16 @@ def test_command_line_overrides_config() -> None:
 def test_impossible_values_are_config_errors(module: object, toml: str, argv: list[str],
                                              text: str) -> None:
     with pytest.raises(ConfigError, match=text):
-        module.effective_settings(ctx_for(module, toml, *argv))  # type: ignore[attr-defined]
+        module.settings_from(ctx_for(module, toml, *argv))  # type: ignore[attr-defined]
 
 
 def test_max_pixels_and_full_every_s_reach_the_detector() -> None:
-    d = detector.effective_settings(ctx_for(detector, ""))
+    d = detector.settings_from(ctx_for(detector, ""))
     assert d.max_pixels == 3840 * 2160 and d.full_every_s == 0.25
-    d = detector.effective_settings(ctx_for(
+    d = detector.settings_from(ctx_for(
         detector, "[face_detector]\nmax_pixels = 2000000\nfull_every_s = 0.0\n"))
     assert (d.max_pixels, d.full_every_s) == (2_000_000, 0.0)
-    d = detector.effective_settings(ctx_for(detector, "[face_detector]\nmax_pixels = 5\n",
+    d = detector.settings_from(ctx_for(detector, "[face_detector]\nmax_pixels = 5\n",
                                             "--max-pixels", "307200"))
     assert d.max_pixels == 307200
 
@@ -86,7 +88,7 @@ def test_max_pixels_and_full_every_s_reach_the_detector() -> None:
 FRAME_NS = 33_333_333
 
 
-def built(toml: str, *argv: str) -> tuple[object, FacePipeline]:
+def built(toml: str, *argv: str) -> tuple[FaceDetectorSettings, FacePipeline]:
     return detector.build(ctx_for(detector, "[face_detector]\n" + toml, *argv))
 
 
@@ -114,6 +116,19 @@ def test_min_score_decides_which_faces_count() -> None:
     assert score < 0.97
     _s, strict = built("min_score = 0.97")
     assert strict.net.min_score == 0.97 and strict.net.detect(img) == []
+
+
+def test_reconfigure_puts_live_settings_where_the_pipeline_reads_them() -> None:
+    """A live change reaches the net's threshold, the tracker and the smoother; an
+    unchanged filter keeps its state, and no min_score means the model's own again."""
+    s, pipe = built("min_score = 0.97")
+    smoother = pipe.smoother
+    pipe.reconfigure(msgspec.structs.replace(s, switch_after_s=2.5, face_width_m=0.2))
+    assert pipe.smoother is smoother and pipe.tracker.switch_after_s == 2.5
+    assert pipe.s.face_width_m == 0.2 and pipe.net.min_score == 0.97
+    pipe.reconfigure(msgspec.structs.replace(s, min_score=None, beta=5.0))
+    assert pipe.net.min_score == pipe.net.spec.min_score
+    assert pipe.smoother is not smoother and pipe.smoother.beta == 5.0
 
 
 def test_refine_off_measures_with_the_whole_frame_box() -> None:
@@ -203,22 +218,21 @@ def test_refine_input_px_sizes_the_crop_network() -> None:
     assert other.refiner is not other.net and other.net.spec.input_size == 128
 
 
-def test_defer_after_ms_is_waited_before_the_deferred_work_and_only_then() -> None:
-    """`defer_after_ms` reaches `deferred_work`: with a whole-frame pass owed, the wait
+def test_defer_after_ms_is_waited_before_the_owed_work_and_only_then() -> None:
+    """`defer_after_ms` reaches `after_publishing`: with a whole-frame pass owed, the wait
     comes first and then the pass runs; with nothing owed there is no wait at all."""
     s, pipe = built("defer_after_ms = 7.5\nfull_every_s = 0.5\niris = false")
     img, _ = scenes.scene(scenes.astronaut(), 1.0)
     waits: list[float] = []
-    pipe.process(img, FRAME_NS, defer_search=True)  # first frame: searched inline
-    assert not pipe.deferred_due()
-    assert detector.deferred_work(pipe, img, FRAME_NS, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
-                                  waits.append) is None
+    first = pipe.process(img, FRAME_NS, defer=True)  # first frame: searched inline
+    assert first.owed == ()
+    assert detector.after_publishing(pipe, first.owed, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
+                                     waits.append) is None
     assert waits == []
     t = 20 * FRAME_NS  # past full_every_s: a pass is due, answered from the crop
-    r = pipe.process(img, t, defer_search=True)
-    assert r.tracked and pipe.deferred_due()
+    r = pipe.process(img, t, defer=True)
+    assert r.tracked and [type(w) for w in r.owed] == [OwedSearch]
     searches = pipe.searches
-    faces = detector.deferred_work(pipe, img, t, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
-                                   waits.append)
+    faces = detector.after_publishing(pipe, r.owed, s.defer_after_ms / 1000,  # type: ignore[attr-defined]
+                                      waits.append)
     assert waits == [0.0075] and pipe.searches == searches + 1 and faces
-    assert not pipe.deferred_due()

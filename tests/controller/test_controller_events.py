@@ -4,7 +4,6 @@ for Zenoh, so this runs without a router."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from typing import Any
 
 import msgspec
@@ -22,42 +21,9 @@ from buddybot.controller.events import (
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
 
+from .fakes import Clock, FakeNode
+
 A = m.ExpressionAction
-
-
-@dataclass
-class FakePublisher:
-    sent: list[Any] = field(default_factory=list)
-
-    def put(self, msg: Any) -> None:
-        self.sent.append(msg)
-
-
-@dataclass
-class FakeDiagnostics:
-    values: dict[str, Any] = field(default_factory=dict)
-
-    def increment(self, name: str) -> None:
-        self.values[name] = self.values.get(name, 0) + 1
-
-
-class FakeNode:
-    """Just what `Controller` uses before `start()`: publishers and diagnostics."""
-
-    def __init__(self) -> None:
-        self.publishers: dict[str, FakePublisher] = {}
-        self.diagnostics = FakeDiagnostics()
-
-    def publisher(self, topic: Any, **_params: str) -> FakePublisher:
-        return self.publishers.setdefault(topic.pattern, FakePublisher())
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.t = 100.0
-
-    def __call__(self) -> float:
-        return self.t
 
 
 @pytest.fixture
@@ -135,3 +101,13 @@ def test_an_unknown_event_is_an_error_not_ignored(
     controller, _node, _clock = rig
     with pytest.raises(AssertionError):
         controller._handle([("presence", (True,))])  # type: ignore[list-item]
+
+
+def test_an_unknown_command_is_an_error_not_played_as_a_sound(
+    rig: tuple[Controller, FakeNode, Clock],
+) -> None:
+    controller, node, _clock = rig
+    with pytest.raises(AssertionError):
+        controller._execute(["greeting"])  # type: ignore[list-item]
+    assert commanded(controller) == []
+    assert not any(pub.sent for pub in node.publishers.values())

@@ -3,7 +3,7 @@
 The world is a radar, a camera, an audio action server (replies, status,
 device_free, cancel, possibly refusing) and another program that may
 occupy the speaker, all driven in arbitrary order and timing. After
-every step the invariants of issue 5 are checked on what the controller
+every step these invariants are checked on what the controller
 commanded:
 
 * never two greetings within the cooldown (also across controller restarts);
@@ -257,14 +257,13 @@ class World(RuleBasedStateMachine):
     def farewell_only_after_a_greeting(self) -> None:
         """Every farewell follows a greeting issued since the previous farewell.
 
-        Restated for restarts (it used to be switched off after any): a new
-        process owes nothing for the old one's greetings (that memory died), so
-        after a restart a farewell needs a greeting by the new process, with one
-        exception, `restart_may_owe`: the visitor was in range at the restart
-        and a sound had played less than a cooldown before, which the new
-        process takes for this visit's greeting. Before that was narrowed to
-        "in range at the restart", someone arriving during the recovery window
-        after a farewell got a second farewell.
+        Across restarts too: a new process owes nothing for the old one's
+        greetings (that memory died), so after a restart a farewell needs a
+        greeting by the new process, with one exception, `restart_may_owe`: the
+        visitor was in range at the restart and a sound had played less than a
+        cooldown before, which the new process takes for this visit's greeting.
+        Only "in range at the restart" may owe: someone arriving during the
+        recovery window after a farewell must not get a second farewell.
         """
         owed = False
         greeted_ever = False

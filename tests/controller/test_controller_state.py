@@ -1,12 +1,7 @@
-"""`controller/state`: what the behaviour reports (pure, fake clock) and, once, what
-a live controller publishes through the real router."""
+"""`controller/state`: what the behaviour reports (pure, fake clock) and the message
+it becomes. When the controller publishes it: test_controller_scenes.py."""
 
 from __future__ import annotations
-
-import itertools
-from collections.abc import Callable
-from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -14,8 +9,6 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.controller.behaviour import Phase, PlaySound, SoundKind, State
 from buddybot.controller.service import state_message
-from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process
 from tests.controller.test_controller_behaviour import Rig
 
 
@@ -197,33 +190,6 @@ def test_the_message_has_wall_clock_times_and_is_valid() -> None:
 def test_the_message_of_a_fresh_controller() -> None:
     msg = state_message(Rig(recover_s=0.5).b.state(1000.0), 1000.0, 5)
     assert (msg.phase, msg.waiting, msg.visit, msg.expression) == ("idle", "recovery", 0, None)
-
-
-# --- live --------------------------------------------------------------------------------
-
-
-@pytest.mark.integration
-def test_a_live_controller_publishes_its_state_on_change(
-    spawn: Callable[..., Process], probe: Node, stimulus: Any, fast_config: Path
-) -> None:
-    states = Collector[m.ControllerState](probe, keys.CONTROLLER_STATE)
-    spawn("controller", "--config", str(fast_config))
-    states.wait_for(lambda s: s.phase == "idle" and s.waiting == "nothing", 20,
-                    "the state after the recovery")
-
-    stimulus.presence(True)
-    noticed = states.wait_for(lambda s: s.phase == "noticed", 20, "phase noticed")
-    assert noticed.in_range and noticed.visit == 1 and noticed.waiting == "face"
-
-    stimulus.face()
-    engaged = states.wait_for(lambda s: s.phase == "engaged", 20, "phase engaged")
-    assert engaged.waiting == "dwell" and engaged.face_visible
-    assert 0.0 < engaged.waiting_s <= 0.5  # greet_dwell_s of FAST_CONFIG
-    # Published on change only: no two in a row say the same (stamp and countdown aside).
-    seen = [s for s in states.messages if s.stamp_ns <= engaged.stamp_ns]
-    same = [(a, b) for a, b in itertools.pairwise(seen)
-            if news(a) == news(b)]
-    assert same == []
 
 
 def news(s: m.ControllerState) -> tuple[object, ...]:

@@ -60,9 +60,9 @@ def test_direction_carries_the_target_distance_for_vergence(
     assert msgspec.json.decode(wire_text, type=m.EyesDirection) == out
 
 
-def test_direction_from_an_older_sender_without_a_distance_is_accepted() -> None:
-    old = b'{"stamp_ns": 5, "yaw": 1.0, "pitch": 2.0}'
-    assert msgspec.json.decode(old, type=m.EyesDirection).target_distance_cm is None
+def test_direction_without_a_distance_is_accepted() -> None:
+    bare = b'{"stamp_ns": 5, "yaw": 1.0, "pitch": 2.0}'
+    assert msgspec.json.decode(bare, type=m.EyesDirection).target_distance_cm is None
 
 
 # --- pupil ------------------------------------------------------------------------------

@@ -241,7 +241,7 @@ def test_a_window_that_exits_is_reopened(spawn: Callable[..., Process]) -> None:
     assert http(port, "/eyes?eye=both")[0] == 200 and proc.alive()
 
 
-# --- faults and attacks (issue 11) ------------------------------------------------------
+# --- faults and attacks ------------------------------------------------------------------
 
 
 def health(port: int) -> dict[str, Any]:

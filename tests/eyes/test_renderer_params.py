@@ -1,5 +1,5 @@
 """The eye-renderer's settings on `params/eye-renderer`, through `buddybot param`
-as a process (issue 13): listed like every service's, restart-only fields
+as a process: listed like every service's, restart-only fields
 refused naming the field, live looks reaching a connected page at once."""
 
 from __future__ import annotations

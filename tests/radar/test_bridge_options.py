@@ -42,6 +42,6 @@ def test_given_flags_win_over_the_config() -> None:
 ])
 def test_zero_or_negative_is_refused_naming_the_flag_not_replaced(
         argv: tuple[str, ...], flag: str) -> None:
-    # Before the fix `args.x or cfg.x` silently turned 0 into the config value.
+    # Not `args.x or cfg.x`, which silently turns 0 into the config value.
     with pytest.raises(ConfigError, match=flag):
         bridge.resolve_options(parse(*argv), RadarBridgeSettings())

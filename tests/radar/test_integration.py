@@ -527,7 +527,7 @@ def test_a_flood_of_fake_radar_ids_is_bounded_and_the_real_sensor_still_counts(
     pdiag.wait_for(lambda d: d.stamp_ns > done.stamp_ns + 3e9, 30, "time passing")
     assert [v.presence_state for v in presence.messages] == [IN], presence.messages
     worst = max(len(msgspec.json.encode(d)) for d in pdiag.messages)
-    assert worst < 2000, worst  # was 474 KB: one entry per invented sensor
+    assert worst < 2000, worst  # one entry per invented sensor would be ~474 KB
     last = pdiag.messages[-1]
     assert int(last.values["sensors"]) <= 16  # type: ignore[arg-type]
     stale = str(last.values.get("stale")).split(" (+")[0].split(", ")
@@ -553,7 +553,7 @@ def _near_and_empty() -> tuple[m.LD2410TargetDataFrame, m.LD2410TargetDataFrame]
 
 
 def test_presence_never_publishes_an_implausible_stamp(spawn: Spawn, probe: Node) -> None:
-    """One frame stamped 2**63-1 (and one 15 s ahead) used to become the stamp
+    """One frame stamped 2**63-1 (and one 15 s ahead) must not become the stamp
     of every later verdict."""
     presence = Collector(probe, keys.PRESENCE)
     pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
@@ -579,7 +579,7 @@ def test_presence_never_publishes_an_implausible_stamp(spawn: Spawn, probe: Node
     end = m.now_ns()
     stamps = [v.stamp_ns for v in presence.messages]
     assert all(start - 10**9 <= s <= end + 10**9 for s in stamps), stamps
-    # Counted by the runtime (which now replaces such stamps before any handler)
+    # Counted by the runtime (which replaces such stamps before any handler)
     # or, behind it, by radar-presence itself.
     d = pdiag.wait_for(lambda d: int(d.values.get("implausible_stamps") or 0)
                        + int(d.values.get("stamps replaced") or 0) >= 2, 20,
@@ -593,8 +593,8 @@ def test_presence_service_itself_replaces_implausible_stamps(
     """The service's own defence, whatever the runtime does before it: frames
     handed straight to its handler with stamps 2**63-1 and now+15 s; every
     verdict it publishes (through the router) is stamped plausibly."""
-    from buddybot.radar.presence import PresenceRules
     from buddybot.radar.presence_service import PresenceService
+    from buddybot.radar.settings import RadarPresenceSettings
 
     # Raw samples: a typed subscriber's runtime would itself replace a bad stamp.
     raw: list[bytes] = []
@@ -606,7 +606,7 @@ def test_presence_service_itself_replaces_implausible_stamps(
 
     sub = probe.subscribe_raw(probe.key(keys.PRESENCE), on_sample)
     node = node_factory("radar-presence-inproc")
-    service = PresenceService(node, PresenceRules(absence_hold_s=0.2))
+    service = PresenceService(node, RadarPresenceSettings(absence_hold_s=0.2))
     key = node.key(keys.RADAR_FRAMES, device="5")
     near, empty = _near_and_empty()
     start = m.now_ns()

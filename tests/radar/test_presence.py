@@ -8,8 +8,9 @@ import msgspec
 import pytest
 
 from buddybot.contract.messages import PresenceState, PresenceTarget
-from buddybot.radar.presence import PresenceRules, PresenceTracker, Reading, Verdict
+from buddybot.radar.presence import PresenceTracker, Reading, Verdict
 from buddybot.radar.scenarios import SCENARIOS
+from buddybot.radar.settings import RadarPresenceSettings
 
 IN, OUT = PresenceState.IN_RANGE, PresenceState.OUT_OF_RANGE
 MOVING, STANDING = PresenceTarget.MOVING, PresenceTarget.STANDING
@@ -25,8 +26,8 @@ NOBODY = Reading(0, 0)
 class Clock:
     """Feeds readings at 10 Hz and collects verdicts."""
 
-    def __init__(self, rules: PresenceRules | None = None) -> None:
-        self.tracker = PresenceTracker(rules or PresenceRules())
+    def __init__(self, rules: RadarPresenceSettings | None = None) -> None:
+        self.tracker = PresenceTracker(rules or RadarPresenceSettings())
         self.t = 0.0
         self.verdicts: list[Verdict] = []
 
@@ -51,7 +52,7 @@ class Clock:
 
 
 def test_seed_rule_nearest_valid_sensor_wins() -> None:
-    tracker = PresenceTracker(PresenceRules(range_m=2.0))
+    tracker = PresenceTracker(RadarPresenceSettings(range_m=2.0))
     assert tracker.update("0/0", at(300), 0.0, 1) is None
     # Sensor 1 has no target at a smaller distance: ignored (NO_TARGET).
     assert tracker.update("0/1", Reading(0, 50), 0.0, 2) is None
@@ -82,7 +83,7 @@ def test_standing_only_for_stationary_only(state: int, target: PresenceTarget) -
 
 
 def test_hysteresis_jitter_around_the_border_does_not_flap() -> None:
-    c = Clock(PresenceRules(range_m=2.0, exit_margin_m=0.3, absence_hold_s=0.0))
+    c = Clock(RadarPresenceSettings(range_m=2.0, exit_margin_m=0.3, absence_hold_s=0.0))
     for cm in [195, 205, 215, 190, 225, 229, 210, 199] * 5:
         c.feed(at(cm))
     assert c.states == [(IN, MOVING)]
@@ -95,7 +96,7 @@ def test_hysteresis_jitter_around_the_border_does_not_flap() -> None:
 
 
 def test_absence_hold_bridges_no_target_blips() -> None:
-    c = Clock(PresenceRules(absence_hold_s=3.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=3.0))
     c.feed(at(100))
     for _ in range(10):
         c.feed(NOBODY, 1.0)
@@ -109,7 +110,7 @@ def test_absence_hold_bridges_no_target_blips() -> None:
 
 
 def test_absence_hold_expires_on_ticks_without_frames_from_the_person() -> None:
-    c = Clock(PresenceRules(absence_hold_s=1.0, stale_after_s=5.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=1.0, stale_after_s=5.0))
     c.feed(at(100))
     c.feed(at(400), 0.1)  # walked out of range, sensor then quiet
     c.idle(1.2)
@@ -118,7 +119,7 @@ def test_absence_hold_expires_on_ticks_without_frames_from_the_person() -> None:
 
 
 def test_target_kind_change_needs_to_last() -> None:
-    c = Clock(PresenceRules(target_hold_s=1.0))
+    c = Clock(RadarPresenceSettings(target_hold_s=1.0))
     c.feed(at(100, 2))
     for _ in range(20):  # fidgeting: STATIONARY/BOTH flicker
         c.feed(at(100, 3), 0.3)
@@ -129,7 +130,7 @@ def test_target_kind_change_needs_to_last() -> None:
 
 
 def test_stale_sensor_is_excluded_not_taken_for_nobody() -> None:
-    rules = PresenceRules(absence_hold_s=1.0, stale_after_s=1.5)
+    rules = RadarPresenceSettings(absence_hold_s=1.0, stale_after_s=1.5)
     c = Clock(rules)
     c.feed(at(100), sensor="0/0")
     assert c.states == [(IN, MOVING)]
@@ -144,7 +145,7 @@ def test_stale_sensor_is_excluded_not_taken_for_nobody() -> None:
 
 
 def test_stale_sensors_last_person_does_not_keep_presence() -> None:
-    c = Clock(PresenceRules(absence_hold_s=0.5, stale_after_s=1.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.5, stale_after_s=1.0))
     c.feed(at(100), sensor="0/0")
     c.feed(NOBODY, sensor="0/1")
     for _ in range(30):  # only 0/1 keeps talking
@@ -153,7 +154,7 @@ def test_stale_sensors_last_person_does_not_keep_presence() -> None:
 
 
 def test_sensor_coming_back_is_used_again() -> None:
-    c = Clock(PresenceRules(absence_hold_s=0.5, stale_after_s=1.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.5, stale_after_s=1.0))
     c.feed(NOBODY, 0.5, sensor="0/0")
     c.idle(2.0)
     assert c.tracker.stale_sensors(c.t) == ["0/0"]
@@ -164,7 +165,7 @@ def test_sensor_coming_back_is_used_again() -> None:
 
 def test_unknown_start_says_out_of_range_after_the_hold() -> None:
     """A restarted service must contradict a stale latched IN_RANGE of its previous life."""
-    c = Clock(PresenceRules(absence_hold_s=2.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=2.0))
     c.feed(NOBODY, 1.9)
     assert c.verdicts == []
     c.feed(NOBODY, 0.2)
@@ -191,19 +192,19 @@ def test_zero_detection_distance_falls_back_to_the_reported_kind() -> None:
 def test_rules_refuse_nonsense(bad: dict[str, float]) -> None:
     """The rules are the `[radar_presence]` struct: its ranges refuse these at decode."""
     with pytest.raises(msgspec.ValidationError):
-        msgspec.convert(bad, PresenceRules)
+        msgspec.convert(bad, RadarPresenceSettings)
 
 
 @pytest.mark.parametrize("state", [4, 5, 6])
 def test_noise_detection_states_mean_no_target_not_silence(state: int) -> None:
     """LD2410C background-noise detection (states 4-6): fresh frames without a
     target, so the person leaves after the hold (a silent sensor would keep IN)."""
-    c = Clock(PresenceRules(absence_hold_s=1.0))
+    c = Clock(RadarPresenceSettings(absence_hold_s=1.0))
     c.feed(at(100))
     c.feed(Reading(state, 0), 1.5)
     assert c.states == [(IN, MOVING), (OUT, MOVING)]
     assert c.tracker.stale_sensors(c.t) == []
-    fresh = Clock(PresenceRules(absence_hold_s=1.0))
+    fresh = Clock(RadarPresenceSettings(absence_hold_s=1.0))
     fresh.feed(Reading(state, 50, 50, 50), 1.5)  # distances in such frames mean nothing
     assert fresh.states == [(OUT, MOVING)]
 
@@ -211,7 +212,7 @@ def test_noise_detection_states_mean_no_target_not_silence(state: int) -> None:
 def test_a_flood_of_invented_sensor_ids_is_bounded_and_changes_nothing() -> None:
     """28k fake sensors saying "nobody" between the real sensor's frames (10 Hz):
     the table stays at max_sensors, the real person stays present."""
-    c = Clock(PresenceRules(max_sensors=16))
+    c = Clock(RadarPresenceSettings(max_sensors=16))
     fake = 0
     for _ in range(100):  # 10 s of real frames
         c.feed(at(120), 0.1, sensor="0/0")
@@ -228,7 +229,7 @@ def test_a_flood_of_invented_sensor_ids_is_bounded_and_changes_nothing() -> None
 
 
 def test_room_is_made_from_the_newest_one_shot_ids() -> None:
-    tracker = PresenceTracker(PresenceRules(max_sensors=3))
+    tracker = PresenceTracker(RadarPresenceSettings(max_sensors=3))
     tracker.update("real", at(100), 0.0, 1)
     tracker.update("a", NOBODY, 0.0, 1)
     tracker.update("b", NOBODY, 0.1, 2)
@@ -244,7 +245,7 @@ def test_room_is_made_from_the_newest_one_shot_ids() -> None:
 
 
 def test_when_every_sensor_is_established_the_least_recently_heard_goes() -> None:
-    tracker = PresenceTracker(PresenceRules(max_sensors=2, stale_after_s=100.0))
+    tracker = PresenceTracker(RadarPresenceSettings(max_sensors=2, stale_after_s=100.0))
     for i in range(12):
         tracker.update("old", NOBODY, i * 0.1, i)
         tracker.update("real", at(100), i * 0.1 + 0.05, i)
@@ -255,7 +256,7 @@ def test_when_every_sensor_is_established_the_least_recently_heard_goes() -> Non
 
 def test_a_sensor_becomes_established_during_a_flood() -> None:
     """From its very first frame, in the middle of a flood of one-shot ids."""
-    tracker = PresenceTracker(PresenceRules(max_sensors=4))
+    tracker = PresenceTracker(RadarPresenceSettings(max_sensors=4))
     fake = 0
     t = 0.0
     for _ in range(15):
@@ -275,7 +276,7 @@ def test_a_sensor_becomes_established_during_a_flood() -> None:
 
 def test_one_frame_stamped_in_the_far_future_does_not_stamp_later_verdicts() -> None:
     """The verdict a tick causes carries the latest frame's stamp, not the largest seen."""
-    tracker = PresenceTracker(PresenceRules(absence_hold_s=1.0))
+    tracker = PresenceTracker(RadarPresenceSettings(absence_hold_s=1.0))
     poisoned = 2**63 - 1
     v = tracker.update("0/0", at(100), 0.0, poisoned)
     assert v is not None and v.stamp_ns == poisoned  # the frame that caused it (the
@@ -290,7 +291,7 @@ def test_one_frame_stamped_in_the_far_future_does_not_stamp_later_verdicts() -> 
     assert v.stamp_ns < 10 * 10**9
 
 
-def _run_scenario(name: str, seconds: float, rules: PresenceRules | None = None) -> Clock:
+def _run_scenario(name: str, seconds: float, rules: RadarPresenceSettings | None = None) -> Clock:
     scenario = SCENARIOS[name]
     rng = random.Random(3)
     c = Clock(rules)

@@ -272,7 +272,7 @@ def test_tool_errors_are_clear(sensor: PtySensor, tmp_path: Path) -> None:
     out = radar("info")
     assert out.returncode == 2 and "--port" in out.stderr
     # 0 is no serial speed: refused, not silently replaced by the config's 256000
-    # (a pty ignores the speed, so the old behaviour "worked" and hid the mistake).
+    # (a pty ignores the speed, so only this check can tell).
     out = radar("info", "--port", sensor.path, "--baudrate", "0")
     assert out.returncode == 2 and "--baudrate" in out.stderr
 
