@@ -107,10 +107,10 @@ def test_info_counts_and_rates(tmp_path: Path, capsys: pytest.CaptureFixture[str
     assert info.duration_s == pytest.approx(2.0)
     (channel,) = info.channels
     assert channel.count == 21 and channel.rate_hz(info.duration_s) == pytest.approx(10.5)
-    assert bag_cli.info(str(tmp_path / "r.mcap"), as_json=True) == 0
+    assert bag_cli.print_info(str(tmp_path / "r.mcap"), as_json=True) == 0
     shown = json.loads(capsys.readouterr().out)
     assert shown["channels"][0]["key"] == key and shown["messages"] == 21
-    assert bag_cli.info(str(tmp_path / "r.mcap"), as_json=False) == 0
+    assert bag_cli.print_info(str(tmp_path / "r.mcap"), as_json=False) == 0
     text = capsys.readouterr().out
     assert "Duration:   2.000 s" in text and key in text and "10.50 Hz" in text
 
