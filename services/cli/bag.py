@@ -33,10 +33,12 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
+from buddybot.cli import options, subverbs
+from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import channels, keys
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node, Publisher
-from buddybot.runtime.service import ServiceContext, add_common_arguments
+from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.session import RouterUnreachable, zenoh_config
 from buddybot.tools import bag, probing
 from buddybot.tools.bag_record import Recorder
@@ -47,59 +49,11 @@ PROGRESS_S = 1.0
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    actions = parser.add_subparsers(dest="action", metavar="ACTION", required=True)
-    rec = _action(actions, "record", "record the robot's keys to an MCAP file")
-    rec.add_argument("keys", nargs="*", metavar="KEY",
-                     help="keys to record (relative or absolute, wildcards allowed; "
-                          "default: every topic but images)")
-    rec.add_argument("-o", "--output", metavar="FILE", required=True,
-                     help="the MCAP file to write")
-    rec.add_argument("--duration", type=float, metavar="S",
-                     help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
-    rec.add_argument("--images", action="store_true",
-                     help="also record camera/*/image (JPEG-compressed)")
-    probing.add_timeout_argument(
-        rec, None, "here only the connection (--duration ends a recording)")
-    play = _action(actions, "play", "replay an MCAP file on the robot's keys")
-    play.add_argument("file", metavar="FILE")
-    play.add_argument("--rate", type=float, default=1.0, metavar="R",
-                      help="play R times as fast (default 1)")
-    play.add_argument("--loop", action="store_true", help="start again at the end, until stopped")
-    play.add_argument("--start", type=float, default=0.0, metavar="S",
-                      help="skip the first S seconds of the recording")
-    play.add_argument("--keys", nargs="+", action="extend", default=[], metavar="KEY",
-                      help="replay only these keys (relative or absolute, wildcards allowed)")
-    play.add_argument("--wait", type=float, default=1.0, metavar="S",
-                      help="wait up to S seconds for subscribers before the first message")
-    probing.add_timeout_argument(play, None, "here only the connection (a replay lasts its file)")
-    info_parser = _action(actions, "info", "describe an MCAP file: duration, channels, rates")
-    info_parser.add_argument("file", metavar="FILE")
-    info_parser.add_argument("--json", action="store_true", help="print JSON")
-
-
-def _action(actions: argparse._SubParsersAction[argparse.ArgumentParser], name: str,
-            help_text: str) -> argparse.ArgumentParser:
-    """An action's parser; the common options are accepted after the action too
-    (`bag play FILE --robot other`). Their defaults are suppressed here, so
-    one given before the action is not overwritten by this parser's default."""
-    sub = actions.add_parser(name, help=help_text, description=help_text)
-    add_common_arguments(sub)
-    for action in sub._actions:  # not set_defaults: it would store SUPPRESS itself
-        if action.dest in COMMON:
-            action.default = argparse.SUPPRESS
-    return sub
-
-
-COMMON = ("connect", "robot", "config", "log_level")
+    subverbs.add_subverbs(parser, SUBVERBS, metavar="ACTION")
 
 
 def main(ctx: ServiceContext) -> int:
-    args = ctx.args
-    if args.action == "record":
-        return record(ctx)
-    if args.action == "info":
-        return info(args.file, as_json=args.json)
-    return play(ctx, args.file)
+    return subverbs.run(ctx)
 
 
 # --- record -------------------------------------------------------------------------
@@ -127,6 +81,20 @@ def record_keys(robot: str, selected: list[str], images: bool) -> list[tuple[str
 
 def _megabytes(n: int) -> str:
     return f"{n / 1e6:.1f} MB"
+
+
+def _add_record(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("keys", nargs="*", metavar="KEY",
+                        help="keys to record (relative or absolute, wildcards allowed; "
+                             "default: every topic but images)")
+    parser.add_argument("-o", "--output", metavar="FILE", required=True,
+                        help="the MCAP file to write")
+    parser.add_argument("--duration", type=float, metavar="S",
+                        help="stop after S seconds (default: at Ctrl-C or SIGTERM)")
+    parser.add_argument("--images", action="store_true",
+                        help="also record camera/*/image (JPEG-compressed)")
+    options.add_timeout_argument(
+        parser, None, "here only the connection (--duration ends a recording)")
 
 
 def record(ctx: ServiceContext) -> int:
@@ -209,9 +177,26 @@ class PlayStats:
         return f"; late vs schedule p50 {statistics.median(ordered):.2f} ms, p95 {p95:.2f} ms"
 
 
-def play(ctx: ServiceContext, path: str) -> int:
+def _add_play(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="FILE")
+    parser.add_argument("--rate", type=float, default=1.0, metavar="R",
+                        help="play R times as fast (default 1)")
+    parser.add_argument("--loop", action="store_true",
+                        help="start again at the end, until stopped")
+    parser.add_argument("--start", type=float, default=0.0, metavar="S",
+                        help="skip the first S seconds of the recording")
+    parser.add_argument("--keys", nargs="+", action="extend", default=[], metavar="KEY",
+                        help="replay only these keys (relative or absolute, wildcards allowed)")
+    parser.add_argument("--wait", type=float, default=1.0, metavar="S",
+                        help="wait up to S seconds for subscribers before the first message")
+    options.add_timeout_argument(parser, None,
+                                 "here only the connection (a replay lasts its file)")
+
+
+def play(ctx: ServiceContext) -> int:
     """Check the whole file, then replay it; nothing is published from a bad file."""
     args = ctx.args
+    path = args.file
     if args.rate <= 0:
         raise UsageError("--rate must be positive")
     if args.start < 0:
@@ -323,7 +308,16 @@ def _time(ns: int) -> str:
     return f"{moment:%Y-%m-%d %H:%M:%S}.{ns % 1_000_000_000 // 1_000_000:03d} UTC ({ns})"
 
 
-def info(path: str, *, as_json: bool) -> int:
+def _add_info(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="FILE")
+    options.add_json_argument(parser)
+
+
+def info(ctx: ServiceContext) -> int:
+    return print_info(ctx.args.file, as_json=ctx.args.json)
+
+
+def print_info(path: str, *, as_json: bool) -> int:
     """Print a recording's summary, like `ros2 bag info` (reads the summary only)."""
     summary = bag.read_info(path)
     if as_json:
@@ -348,3 +342,10 @@ def info(path: str, *, as_json: bool) -> int:
                      f"{c.rate_hz(summary.duration_s):7.2f} Hz{note}")
     print("\n".join(lines))
     return 0
+
+
+SUBVERBS = (
+    SubVerb("record", "record the robot's keys to an MCAP file", _add_record, record),
+    SubVerb("play", "replay an MCAP file on the robot's keys", _add_play, play),
+    SubVerb("info", "describe an MCAP file: duration, channels, rates", _add_info, info),
+)

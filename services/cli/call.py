@@ -7,6 +7,7 @@ import sys
 
 import msgspec
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.contract.describe import summarize
@@ -21,10 +22,10 @@ REFUSAL_FIELDS = ("accepted", "success")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("key")
+    options.add_key_argument(parser, wildcards=False)
     parser.add_argument("request", nargs="?", default="{}",
                         help="JSON request (default {}); enum fields take names or numbers")
-    probing.add_timeout_argument(parser, 5.0, "connection and reply together")
+    options.add_timeout_argument(parser, 5.0, "connection and reply together")
     parser.add_argument("--raw", action="store_true",
                         help="enum fields of the reply as numbers, not names")
 

@@ -6,6 +6,7 @@ import argparse
 import json
 from typing import Any
 
+from buddybot.cli import options
 from buddybot.runtime.config import to_toml_dict
 from buddybot.runtime.service import ServiceContext
 
@@ -14,8 +15,7 @@ HELP = "print the effective configuration"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The common options (`--config`, `--robot`, `--connect`), and `--json`."""
-    parser.add_argument("--json", action="store_true",
-                        help="one JSON document instead of TOML (unset keys are null)")
+    options.add_json_argument(parser, "one JSON document instead of TOML (unset keys are null)")
 
 
 def main(ctx: ServiceContext) -> int:

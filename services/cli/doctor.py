@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 
+from buddybot.cli import options
 from buddybot.runtime.service import ServiceContext, add_common_arguments
 
 HELP = "check the robot: config, devices, versions, router, nodes, sensor rates, eyes, clock"
@@ -32,9 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the robot runs simulated: no radar, camera or audio hardware")
     parser.add_argument("--expect", action="append", metavar="NODE",
                         help="nodes that must be alive (repeatable; default: every service)")
-    parser.add_argument("--json", action="store_true", help="print the checks as JSON")
-    parser.add_argument("--timeout", type=_positive, default=3.0, metavar="S",
-                        help="give up on the router after S seconds (default 3)")
+    options.add_json_argument(parser, "print the checks as JSON")
+    options.add_timeout_argument(parser, 3.0, "give up on the router after S seconds",
+                                 connecting=False, kind=_positive)
     parser.add_argument("--window", type=_positive, default=2.0, metavar="S",
                         help="measure sensor rates over S seconds (default 2)")
 

@@ -9,6 +9,7 @@ import sys
 import threading
 import time
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract.describe import describe
 from buddybot.runtime.service import ServiceContext
@@ -18,9 +19,9 @@ HELP = "print decoded messages on KEY"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("key", help="key (prefix buddybot/<robot>/ optional; wildcards allowed)")
+    options.add_key_argument(parser)
     parser.add_argument("--count", "-n", type=int, default=0, help="exit after N messages")
-    probing.add_timeout_argument(parser, None, "exit after S seconds; exit 1 if nothing arrived")
+    options.add_timeout_argument(parser, None, "exit after S seconds; exit 1 if nothing arrived")
     parser.add_argument("--show-key", action="store_true",
                         help="print the key before each message")
     parser.add_argument("--raw", action="store_true",

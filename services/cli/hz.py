@@ -12,6 +12,7 @@ import time
 from collections import deque
 from typing import Any
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.runtime.rates import span_hz
 from buddybot.runtime.service import ServiceContext
@@ -21,13 +22,13 @@ HELP = "print the publishing rate of KEY"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("key")
+    options.add_key_argument(parser)
     parser.add_argument("--window", type=int, default=100, help="samples in the window")
     parser.add_argument("--duration", type=float, default=None,
                         help="exit after this many seconds")
-    probing.add_timeout_argument(parser, None, "exit 1 if nothing arrived within S")
-    parser.add_argument("--json", action="store_true",
-                        help="print one JSON document at exit instead of a line per second")
+    options.add_timeout_argument(parser, None, "exit 1 if nothing arrived within S")
+    options.add_json_argument(parser,
+                              "print one JSON document at exit instead of a line per second")
 
 
 def rate_stats(stamps: list[float]) -> dict[str, Any] | None:

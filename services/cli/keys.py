@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.runtime.service import ServiceContext
 
@@ -13,8 +14,7 @@ USES_CONFIG = False
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--json", action="store_true",
-                        help="one JSON document (the rows of schemas/keys.json)")
+    options.add_json_argument(parser, "one JSON document (the rows of schemas/keys.json)")
 
 
 def main(ctx: ServiceContext) -> int:

@@ -12,6 +12,8 @@ import argparse
 
 import msgspec
 
+from buddybot.cli import options, subverbs
+from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
@@ -22,11 +24,17 @@ HELP = "what a running node publishes, subscribes, serves, and its parameters"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("action", choices=("info",))
-    parser.add_argument("name", help="node name (see `buddybot nodes`)")
-    parser.add_argument("--timeout", type=float, default=5.0,
-                        help="seconds to wait for the node's answer (then exit 1)")
-    parser.add_argument("--json", action="store_true", help="print JSON")
+    subverbs.add_subverbs(parser, SUBVERBS)
+
+
+def main(ctx: ServiceContext) -> int:
+    return subverbs.run(ctx)
+
+
+def _add_info(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    options.add_answer_timeout(parser)
+    options.add_json_argument(parser)
 
 
 class Report(msgspec.Struct, kw_only=True):
@@ -53,9 +61,9 @@ def lines(report: Report) -> list[str]:
     return out
 
 
-def main(ctx: ServiceContext) -> int:
+def info(ctx: ServiceContext) -> int:
     args = ctx.args
-    name = args.name
+    name = args.node
     if not keys.valid_robot_id(name):
         raise UsageError(f"{name!r} is not a node name")
     with probing.probe(ctx) as node:
@@ -75,3 +83,6 @@ def main(ctx: ServiceContext) -> int:
     else:
         print("\n".join(lines(report)))
     return 0
+
+
+SUBVERBS = (SubVerb("info", HELP, _add_info, info),)

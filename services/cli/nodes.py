@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 
+from buddybot.cli import options
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing
 
@@ -14,10 +15,10 @@ HELP = "list live nodes (liveliness tokens)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-robots", action="store_true", help="every robot on the router")
-    probing.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S,
-                               "connection and liveliness query together")
-    parser.add_argument("--json", action="store_true",
-                        help='one JSON document: {"robot": ..., "nodes": {name: [instances]}}')
+    options.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S,
+                                 "connection and liveliness query together")
+    options.add_json_argument(
+        parser, 'one JSON document: {"robot": ..., "nodes": {name: [instances]}}')
 
 
 def main(ctx: ServiceContext) -> int:

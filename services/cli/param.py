@@ -20,6 +20,8 @@ from typing import Any
 
 import msgspec
 
+from buddybot.cli import options, subverbs
+from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
@@ -27,20 +29,14 @@ from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing
 
 HELP = "list, get, set, dump or load a running node's parameters (its settings)"
-OPS = ("list", "get", "set", "dump", "load")
-ARITY = {"list": 0, "get": 1, "set": 2, "dump": 0, "load": 1}
-USAGE = {"list": "", "get": " FIELD", "set": " FIELD VALUE", "dump": "", "load": " FILE"}
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("op", choices=OPS, help="what to do")
-    parser.add_argument("node", help="node name (see `buddybot nodes`)")
-    parser.add_argument("args", nargs="*", metavar="ARG",
-                        help="get FIELD | set FIELD VALUE (JSON, else a string) | load FILE")
-    parser.add_argument("--timeout", type=float, default=5.0,
-                        help="seconds to wait for the node's answer (then exit 1)")
-    parser.add_argument("--json", action="store_true", help="print JSON")
-    parser.add_argument("--output", "-o", metavar="FILE", help="dump: write FILE, not stdout")
+    subverbs.add_subverbs(parser, SUBVERBS, dest="op", shared=options.add_answer_timeout)
+
+
+def main(ctx: ServiceContext) -> int:
+    return subverbs.run(ctx)
 
 
 def parse_value(text: str) -> Any:
@@ -104,39 +100,85 @@ def load_table(path: str, table: str) -> dict[str, Any]:
     return values
 
 
-def main(ctx: ServiceContext) -> int:
-    args = ctx.args
-    if len(args.args) != ARITY[args.op]:
-        raise UsageError(f"usage: buddybot param {args.op} NODE{USAGE[args.op]}")
-    name = args.node
-    if args.op == "list":
-        reply = request(ctx, name, m.ParamRequest(op="list"))
-        if args.json:
-            print(msgspec.json.encode(reply.params).decode())
-        else:
-            print(f"[{reply.table}] of {reply.node}")
-            print("\n".join(table_lines(reply.params)))
-    elif args.op == "get":
-        reply = request(ctx, name, m.ParamRequest(op="get", name=args.args[0]))
-        info = reply.params[0]
-        print(msgspec.json.encode(info).decode() if args.json else _value(info.value))
-    elif args.op == "set":
-        field, text = args.args
-        reply = request(ctx, name, m.ParamRequest(op="set", values={field: parse_value(text)}))
-        now = reply.params[0].value if reply.params else None
-        state = "applied" if reply.changed else "unchanged"
-        print(f"{reply.table}.{field} = {_value(now)} ({state})")
-    elif args.op == "dump":
-        reply = request(ctx, name, m.ParamRequest(op="list"))
-        text = dump_toml(reply)
-        if args.output:
-            Path(args.output).write_bytes(text)
-        else:
-            sys.stdout.write(text.decode())
-    else:  # load
-        table = request(ctx, name, m.ParamRequest(op="list")).table
-        values = load_table(args.args[0], table)
-        reply = request(ctx, name, m.ParamRequest(op="set", values=values))
-        print(f"[{table}] loaded into {name}: "
-              + (", ".join(reply.changed) + " changed" if reply.changed else "nothing changed"))
+def _add_list(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    options.add_json_argument(parser)
+
+
+def _list(ctx: ServiceContext) -> int:
+    reply = request(ctx, ctx.args.node, m.ParamRequest(op="list"))
+    if ctx.args.json:
+        print(msgspec.json.encode(reply.params).decode())
+    else:
+        print(f"[{reply.table}] of {reply.node}")
+        print("\n".join(table_lines(reply.params)))
     return 0
+
+
+def _add_get(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    parser.add_argument("field", help="the parameter (a field of the node's settings)")
+    options.add_json_argument(parser)
+
+
+def _get(ctx: ServiceContext) -> int:
+    reply = request(ctx, ctx.args.node, m.ParamRequest(op="get", name=ctx.args.field))
+    info = reply.params[0]
+    print(msgspec.json.encode(info).decode() if ctx.args.json else _value(info.value))
+    return 0
+
+
+def _add_set(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    parser.add_argument("field", help="the parameter (a field of the node's settings)")
+    parser.add_argument("value", help="its new value: JSON, else a string")
+
+
+def _set(ctx: ServiceContext) -> int:
+    field, text = ctx.args.field, ctx.args.value
+    reply = request(ctx, ctx.args.node,
+                    m.ParamRequest(op="set", values={field: parse_value(text)}))
+    now = reply.params[0].value if reply.params else None
+    state = "applied" if reply.changed else "unchanged"
+    print(f"{reply.table}.{field} = {_value(now)} ({state})")
+    return 0
+
+
+def _add_dump(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    parser.add_argument("--output", "-o", metavar="FILE", help="write FILE, not stdout")
+
+
+def _dump(ctx: ServiceContext) -> int:
+    text = dump_toml(request(ctx, ctx.args.node, m.ParamRequest(op="list")))
+    if ctx.args.output:
+        Path(ctx.args.output).write_bytes(text)
+    else:
+        sys.stdout.write(text.decode())
+    return 0
+
+
+def _add_load(parser: argparse.ArgumentParser) -> None:
+    options.add_node_argument(parser)
+    parser.add_argument("file", help="a TOML file (its table of the node's settings is applied)")
+
+
+def _load(ctx: ServiceContext) -> int:
+    name = ctx.args.node
+    table = request(ctx, name, m.ParamRequest(op="list")).table
+    values = load_table(ctx.args.file, table)
+    reply = request(ctx, name, m.ParamRequest(op="set", values=values))
+    print(f"[{table}] loaded into {name}: "
+          + (", ".join(reply.changed) + " changed" if reply.changed else "nothing changed"))
+    return 0
+
+
+SUBVERBS = (
+    SubVerb("list", "every parameter: value, type, range, live or restart", _add_list, _list,
+            "NODE"),
+    SubVerb("get", "one parameter's value", _add_get, _get, "NODE FIELD"),
+    SubVerb("set", "change one parameter (live ones apply at once)", _add_set, _set,
+            "NODE FIELD VALUE"),
+    SubVerb("dump", "the node's table as TOML that --config accepts", _add_dump, _dump, "NODE"),
+    SubVerb("load", "apply the node's table of a TOML file", _add_load, _load, "NODE FILE"),
+)

@@ -8,6 +8,7 @@ import time
 
 import msgspec
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
@@ -18,7 +19,7 @@ HELP = "validate and publish one message on KEY"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("key")
+    options.add_key_argument(parser, wildcards=False)
     parser.add_argument("message", help="JSON object; stamp_ns defaults to now; enum fields "
                         'take names or numbers ({"action": "EYE_SLEEP"})')
     parser.add_argument("--rate", type=float, default=0.0, help="repeat at this rate (Hz)")
@@ -27,7 +28,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait", type=float, default=2.0,
                         help="seconds to wait for a subscriber before the first put "
                              "(none by then: a warning, and the message goes nowhere)")
-    probing.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S, "the connection")
+    options.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S, "the connection")
 
 
 def main(ctx: ServiceContext) -> int:

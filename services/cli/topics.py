@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import msgspec
 
+from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.service import ServiceContext
@@ -34,9 +35,9 @@ HELP = "keys seen on the robot with their rates, publishers and subscribers"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--timeout", type=float, default=3.0,
-                        help="seconds to listen (rates are measured over this window)")
-    parser.add_argument("--json", action="store_true", help="print JSON")
+    options.add_timeout_argument(parser, 3.0, "listen S seconds: rates are measured over "
+                                 "this window", connecting=False)
+    options.add_json_argument(parser)
 
 
 def key_intersects(a: str, b: str) -> bool:

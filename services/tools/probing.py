@@ -15,7 +15,6 @@ these human-facing edges only; the wire keeps integers.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 from buddybot.contract import describe, keys
@@ -27,16 +26,6 @@ from buddybot.runtime.session import RouterUnreachable, keys_intersect, zenoh_co
 
 CONNECT_TIMEOUT_S = 5.0
 """How long a probe waits for its router when no `--timeout` is given."""
-
-
-def add_timeout_argument(parser: argparse.ArgumentParser, default: float | None,
-                         what: str) -> None:
-    """`--timeout S`, on every probing verb: it bounds connecting to the router
-    too (CONNECT_TIMEOUT_S when not given). `what`: what else S limits."""
-    shown = f"default {default:g} s" if default else (
-        f"default: none, but the router must answer within {CONNECT_TIMEOUT_S:g} s")
-    parser.add_argument("--timeout", type=float, default=default, metavar="S",
-                        help=f"give up after S seconds, connecting included: {what} ({shown})")
 
 
 def probe(ctx: ServiceContext, timeout: float | None = None) -> Node:

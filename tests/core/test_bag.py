@@ -13,10 +13,8 @@ import numpy as np
 import pytest
 from mcap.writer import Writer
 
-from buddybot.cli import bag as bag_cli
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
-from buddybot.runtime.errors import UsageError
 from buddybot.tools import bag
 from buddybot.tools.bag_record import Recorder
 
@@ -95,24 +93,6 @@ def test_times_metadata_and_the_derived_annotations(every_topic: tuple[Path, dic
     assert all(not s for k, s in skipped.items() if k != annotations)
     assert info.messages == len(found) + 1
     assert annotations not in {p.key for p in bag.open_recording(path).messages()}
-
-
-def test_info_counts_and_rates(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    key = concrete_key(keys.PUPIL)
-    payload = keys.PUPIL.codec.encode(m.PupilControl(stamp_ns=m.now_ns(), dilation_percentage=5))
-    base = time.time_ns()
-    write_recording(tmp_path / "r.mcap", [(key, payload, base + i * 100_000_000)
-                                          for i in range(21)])
-    info = bag.read_info(tmp_path / "r.mcap")
-    assert info.duration_s == pytest.approx(2.0)
-    (channel,) = info.channels
-    assert channel.count == 21 and channel.rate_hz(info.duration_s) == pytest.approx(10.5)
-    assert bag_cli.info(str(tmp_path / "r.mcap"), as_json=True) == 0
-    shown = json.loads(capsys.readouterr().out)
-    assert shown["channels"][0]["key"] == key and shown["messages"] == 21
-    assert bag_cli.info(str(tmp_path / "r.mcap"), as_json=False) == 0
-    text = capsys.readouterr().out
-    assert "Duration:   2.000 s" in text and key in text and "10.50 Hz" in text
 
 
 def test_a_truncated_file_is_refused(every_topic: tuple[Path, dict, int],
@@ -257,21 +237,3 @@ def test_schedule_and_keys() -> None:
     assert bag.topic_of(key) is keys.FACES
     assert bag.topic_of("buddybot/buddy/audio/play_sound") is None  # a service
     assert bag.topic_of("buddybot/buddy/camera/*/faces") is None
-
-
-def test_record_keys_defaults_images_and_errors() -> None:
-    default = dict(bag_cli.record_keys("buddy", [], images=False))
-    assert "buddybot/buddy/camera/*/image" not in default
-    assert "buddybot/buddy/camera/*/debug_image" not in default
-    assert default["buddybot/buddy/radar/presence"] is True  # latched: with history
-    assert default["buddybot/buddy/radar/*/frames"] is False
-    assert len(default) == len(keys.TOPICS) - 2
-    with_images = dict(bag_cli.record_keys("buddy", [], images=True))
-    assert "buddybot/buddy/camera/*/image" in with_images
-    chosen = bag_cli.record_keys("buddy", ["radar/**", "eyes/expression"], images=False)
-    assert chosen == [("buddybot/buddy/radar/**", True),
-                      ("buddybot/buddy/eyes/expression", True)]
-    with pytest.raises(UsageError, match="no/such: matches no topic"):
-        bag_cli.record_keys("buddy", ["no/such"], images=False)
-    with pytest.raises(UsageError, match="audio/play_sound: matches no topic"):
-        bag_cli.record_keys("buddy", ["audio/play_sound"], images=False)  # a service

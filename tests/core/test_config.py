@@ -107,19 +107,6 @@ def test_cli_exits_2_naming_key_and_file(tmp_path: Path) -> None:
 
 
 @pytest.mark.integration
-def test_cli_config_prints_effective_config(tmp_path: Path) -> None:
-    path = tmp_path / "ok.toml"
-    path.write_text("[radar_presence]\nrange_m = 3.5\n")
-    result = subprocess.run(
-        [sys.executable, "-m", "buddybot", "config", "--config", str(path), "--robot", "zz"],
-        capture_output=True, text=True, timeout=60,
-    )
-    assert result.returncode == 0, result.stderr
-    assert "range_m = 3.5" in result.stdout
-    assert 'id = "zz"' in result.stdout
-
-
-@pytest.mark.integration
 def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
     """`[zenoh] config_file` resolves next to the TOML file; one Zenoh cannot parse stops
     the service with status 2 (the systemd units do not restart on it)."""

@@ -2,19 +2,14 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated
 
 import msgspec
 import pytest
 
-from buddybot.cli import param as param_cli
-from buddybot.cli import topics as topics_cli
 from buddybot.contract import messages as m
 from buddybot.radar.settings import RadarPresenceSettings
 from buddybot.runtime import registry
-from buddybot.runtime.config import parse_config
-from buddybot.runtime.errors import UsageError
 from buddybot.runtime.params import LiveSettings, ParamRefused, describe, is_live, validate
 
 
@@ -155,79 +150,3 @@ def test_handle_answers_list_get_set_and_errors() -> None:
     assert "allowed 0..2" in refused.error and not refused.unknown
     ok = holder.handle("n", m.ParamRequest(op="set", values={"gain": 0.25}))
     assert ok.changed == ["gain"] and ok.params[0].value == 0.25
-
-
-def test_parse_value_is_json_else_text() -> None:
-    assert param_cli.parse_value("1.5") == 1.5
-    assert param_cli.parse_value("true") is True
-    assert param_cli.parse_value('["a"]') == ["a"]
-    assert param_cli.parse_value("front") == "front"
-
-
-def test_dump_is_toml_the_config_accepts_and_load_reads_it_back(tmp_path: Path) -> None:
-    settings = RadarPresenceSettings(range_m=1.25)
-    reply = m.ParamReply(node="radar-presence", table="radar_presence",
-                         params=describe(settings))
-    path = tmp_path / "dump.toml"
-    path.write_bytes(param_cli.dump_toml(reply))
-    config = parse_config(path.read_bytes(), str(path))
-    assert config.section(RadarPresenceSettings) == settings
-    values: dict[str, Any] = param_cli.load_table(str(path), "radar_presence")
-    assert validate(RadarPresenceSettings(), values)[0] == settings
-
-
-def test_load_table_errors_are_usage_errors(tmp_path: Path) -> None:
-    with pytest.raises(UsageError, match="cannot read"):
-        param_cli.load_table(str(tmp_path / "missing.toml"), "t")
-    bad = tmp_path / "bad.toml"
-    bad.write_text("[t\n")
-    with pytest.raises(UsageError, match="not valid TOML"):
-        param_cli.load_table(str(bad), "t")
-    other = tmp_path / "other.toml"
-    other.write_text("[u]\na = 1\n")
-    with pytest.raises(UsageError, match=r"no \[t\] table"):
-        param_cli.load_table(str(other), "t")
-
-
-def test_table_lines_mark_live_and_restart() -> None:
-    lines = param_cli.table_lines(describe(Tuning()))
-    assert lines[0].startswith("gain") and lines[0].endswith("live")
-    assert next(x for x in lines if x.startswith("port")).endswith("restart")
-
-
-@pytest.mark.parametrize(("a", "b", "hit"), [
-    ("radar/0/frames", "radar/*/frames", True),
-    ("radar/0/frames", "radar/**", True),
-    ("radar/0/frames", "**", True),
-    ("radar/0/frames", "radar/1/frames", False),
-    ("camera/front/face", "camera/*/image", False),
-    ("a/b/c", "a/**/c", True),
-    ("a/c", "a/**/c", True),
-    ("a/b", "a/b/c", False),
-])
-def test_key_intersection(a: str, b: str, hit: bool) -> None:
-    assert topics_cli.key_intersects(a, b) is hit
-    assert topics_cli.key_intersects(b, a) is hit
-
-
-def test_topics_table_names_publishers_and_subscribers() -> None:
-    infos = [
-        m.NodeInfo(node="bridge", instance="1", publishers=["radar/0/frames"]),
-        m.NodeInfo(node="presence", instance="2", subscriptions=["radar/*/frames"],
-                   publishers=["radar/presence"]),
-    ]
-    rows = {r.key: r for r in topics_cli.table({"radar/0/frames": 20}, 2.0, infos)}
-    assert rows["radar/0/frames"].rate_hz == 10.0
-    assert rows["radar/0/frames"].publishers == ["bridge"]
-    assert rows["radar/0/frames"].subscribers == ["presence"]
-    assert rows["radar/0/frames"].type == "LD2410TargetDataFrameArray"
-    assert rows["radar/presence"].count == 0  # declared, silent in the window
-
-
-@pytest.mark.parametrize("entry", registry.SERVICES, ids=lambda e: e.name)
-def test_every_table_dumps_to_toml_the_config_reads_back(entry: registry.Entry) -> None:
-    kind = entry.settings_type()
-    assert entry.table is not None
-    reply = m.ParamReply(node=entry.name, table=entry.table, params=describe(kind()))
-    config = parse_config(param_cli.dump_toml(reply), "<dump>")
-    assert config.section(kind) == kind()

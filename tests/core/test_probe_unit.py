@@ -14,7 +14,6 @@ import time
 import msgspec
 import pytest
 
-from buddybot.cli.call import refusal
 from buddybot.contract import keys, schemas
 from buddybot.contract import messages as m
 from buddybot.contract.describe import describe, enum_values, summarize
@@ -94,14 +93,6 @@ def test_schemas_name_the_members_of_integer_enums() -> None:
 ])
 def test_catalogue_matches_names_unknown_keys(key: str, known: bool) -> None:
     assert bool(probing.catalogue_matches(key)) is known
-
-
-def test_refusals_are_failures() -> None:
-    assert refusal(m.TriggerReply(success=True)) is None
-    assert refusal(m.PlaySoundReply(goal_id="g", accepted=True)) is None
-    why = refusal(m.TriggerReply(success=False, message="nothing is playing"))
-    assert why == "success: false (nothing is playing)"
-    assert refusal(m.PlaySoundReply(goal_id="g", accepted=False)) == "accepted: false"
 
 
 # --- the bounded connection ---------------------------------------------------------

@@ -1,4 +1,5 @@
-"""`buddybot` tab completion (argcomplete) and `buddybot --version`.
+"""The `buddybot` command itself (`buddybot.cli`): a `--help` for every verb, `run
+SERVICE`, tab completion (argcomplete) and `buddybot --version`.
 
 The unit tests drive argcomplete's own protocol (`_ARGCOMPLETE`, `COMP_LINE`,
 `COMP_POINT`) on the real parser in-process; the integration test runs the
@@ -19,6 +20,8 @@ import argcomplete
 import pytest
 
 from buddybot import __version__, cli
+from buddybot.runtime.registry import SERVICES
+from tests.cli.process import bb
 
 IFS = "\013"
 """argcomplete's default separator between completions."""
@@ -96,3 +99,30 @@ def test_the_console_script_answers_the_shell_hook(tmp_path: Path) -> None:
                           env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     assert done.stdout.split(IFS) == ["echo "]
+
+
+VERBS = ["up", "router", "run", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
+         "radar"]
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("verb", VERBS)
+def test_every_verb_has_help(verb: str) -> None:
+    result = bb(verb, "--help")
+    assert result.returncode == 0, result.stderr
+    assert "usage: buddybot" in result.stdout
+    if verb not in ("run", "keys", "schemas"):
+        assert "--connect" in result.stdout
+
+
+@pytest.mark.integration
+def test_run_help_lists_every_service() -> None:
+    out = bb("run", "--help").stdout
+    for entry in SERVICES:
+        assert entry.name in out
+
+
+@pytest.mark.integration
+def test_unknown_service_is_refused() -> None:
+    result = bb("run", "teleporter")
+    assert result.returncode == 2 and "invalid choice" in result.stderr

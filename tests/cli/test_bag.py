@@ -1,4 +1,5 @@
-"""`buddybot bag` as processes on a real router: record, info, play and their failures."""
+"""`buddybot bag`: the verb's own parts, and as processes on a real router: record,
+info, play and their failures."""
 
 from __future__ import annotations
 
@@ -14,15 +15,50 @@ import cv2
 import numpy as np
 import pytest
 
+from buddybot.cli import bag as bag_cli
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
+from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
 from buddybot.tools import bag
 from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
+from tests.core.test_bag import concrete_key, samples, write_recording
 
-from .test_bag import concrete_key, samples, write_recording
 
-pytestmark = pytest.mark.integration  # a router and `buddybot bag` processes
+def test_info_counts_and_rates(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    key = concrete_key(keys.PUPIL)
+    payload = keys.PUPIL.codec.encode(m.PupilControl(stamp_ns=m.now_ns(), dilation_percentage=5))
+    base = time.time_ns()
+    write_recording(tmp_path / "r.mcap", [(key, payload, base + i * 100_000_000)
+                                          for i in range(21)])
+    info = bag.read_info(tmp_path / "r.mcap")
+    assert info.duration_s == pytest.approx(2.0)
+    (channel,) = info.channels
+    assert channel.count == 21 and channel.rate_hz(info.duration_s) == pytest.approx(10.5)
+    assert bag_cli.print_info(str(tmp_path / "r.mcap"), as_json=True) == 0
+    shown = json.loads(capsys.readouterr().out)
+    assert shown["channels"][0]["key"] == key and shown["messages"] == 21
+    assert bag_cli.print_info(str(tmp_path / "r.mcap"), as_json=False) == 0
+    text = capsys.readouterr().out
+    assert "Duration:   2.000 s" in text and key in text and "10.50 Hz" in text
+
+
+def test_record_keys_defaults_images_and_errors() -> None:
+    default = dict(bag_cli.record_keys("buddy", [], images=False))
+    assert "buddybot/buddy/camera/*/image" not in default
+    assert "buddybot/buddy/camera/*/debug_image" not in default
+    assert default["buddybot/buddy/radar/presence"] is True  # latched: with history
+    assert default["buddybot/buddy/radar/*/frames"] is False
+    assert len(default) == len(keys.TOPICS) - 2
+    with_images = dict(bag_cli.record_keys("buddy", [], images=True))
+    assert "buddybot/buddy/camera/*/image" in with_images
+    chosen = bag_cli.record_keys("buddy", ["radar/**", "eyes/expression"], images=False)
+    assert chosen == [("buddybot/buddy/radar/**", True),
+                      ("buddybot/buddy/eyes/expression", True)]
+    with pytest.raises(UsageError, match="no/such: matches no topic"):
+        bag_cli.record_keys("buddy", ["no/such"], images=False)
+    with pytest.raises(UsageError, match="audio/play_sound: matches no topic"):
+        bag_cli.record_keys("buddy", ["audio/play_sound"], images=False)  # a service
 
 
 class RawCollector:
@@ -86,6 +122,7 @@ def wait_recording(node: Node, key: str) -> None:
         retry_until(publisher.has_subscribers, 30, 0.05, f"a recorder subscribed to {key}")
 
 
+@pytest.mark.integration
 def test_record_info_play_round_trip(router: Router, quiet: Node, tmp_path: Path,
                                      bag_process: Callable[..., Process]) -> None:
     """Every topic published once is recorded, described and replayed byte for byte
@@ -136,6 +173,7 @@ def test_record_info_play_round_trip(router: Router, quiet: Node, tmp_path: Path
     assert not received.on(bag.annotations_key(concrete_key(keys.FACES)))
 
 
+@pytest.mark.integration
 def test_sigterm_finishes_the_file(quiet: Node, tmp_path: Path,
                                    bag_process: Callable[..., Process]) -> None:
     out = tmp_path / "term.mcap"
@@ -157,6 +195,7 @@ def test_sigterm_finishes_the_file(quiet: Node, tmp_path: Path,
     assert recording.info.metadata["robot"] == "buddy"
 
 
+@pytest.mark.integration
 def test_record_refuses_an_unknown_key(router: Router, tmp_path: Path) -> None:
     result = run_bag(router, "record", "-o", str(tmp_path / "x.mcap"), "radar/nope")
     assert result.returncode == 2
@@ -176,6 +215,7 @@ def pupil_recording(path: Path, n: int = 21, step_s: float = 0.1, robot: str = "
     return key
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("damage", ["truncated", "flipped"])
 def test_a_damaged_file_publishes_nothing(router: Router, quiet: Node, tmp_path: Path,
                                           damage: str) -> None:
@@ -206,6 +246,7 @@ def span(times: list[float]) -> float:
     return max(times) - min(times)
 
 
+@pytest.mark.integration
 def test_rate_start_and_robot(router: Router, quiet: Node, tmp_path: Path) -> None:
     path = tmp_path / "pupil.mcap"
     key = pupil_recording(path)  # 2.0 s
@@ -237,6 +278,7 @@ def test_rate_start_and_robot(router: Router, quiet: Node, tmp_path: Path) -> No
     assert received.count("buddybot/buddy/") == 0
 
 
+@pytest.mark.integration
 def test_loop_repeats_until_stopped(quiet: Node, tmp_path: Path,
                                     bag_process: Callable[..., Process]) -> None:
     path = tmp_path / "loop.mcap"
@@ -252,6 +294,7 @@ def test_loop_repeats_until_stopped(quiet: Node, tmp_path: Path,
     assert values[:10] == [0, 1, 2, 3, 4] * 2
 
 
+@pytest.mark.integration
 def test_latched_keys_reach_late_subscribers_and_unknown_channels_are_named(
         node_factory: Callable[..., Node], tmp_path: Path,
         bag_process: Callable[..., Process]) -> None:
