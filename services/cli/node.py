@@ -24,7 +24,13 @@ HELP = "what a running node publishes, subscribes, serves, and its parameters"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    subverbs.add_subverbs(parser, SUBVERBS)
+    subverbs.add_subverbs(parser, SUBVERBS, shared=_shared)
+
+
+def _shared(parser: argparse.ArgumentParser) -> None:
+    """Accepted before or after the sub-verb's name."""
+    options.add_answer_timeout(parser)
+    options.add_json_argument(parser)
 
 
 def main(ctx: ServiceContext) -> int:
@@ -33,8 +39,6 @@ def main(ctx: ServiceContext) -> int:
 
 def _add_info(parser: argparse.ArgumentParser) -> None:
     options.add_node_argument(parser)
-    options.add_answer_timeout(parser)
-    options.add_json_argument(parser)
 
 
 class Report(msgspec.Struct, kw_only=True):

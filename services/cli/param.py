@@ -1,6 +1,6 @@
 """`buddybot param list|get|set|dump|load NODE ...`: a running node's settings (`ros2 param`).
 
-The node answers `params/<node>` itself (`core.params.LiveSettings`), so
+The node answers `params/<node>` itself (`runtime.params.LiveSettings`), so
 what is shown is what it runs with, and a change is validated by the
 node against its own settings type. Fields marked live apply at once;
 the others are refused (change the config file and restart). `dump`
@@ -32,7 +32,15 @@ HELP = "list, get, set, dump or load a running node's parameters (its settings)"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    subverbs.add_subverbs(parser, SUBVERBS, dest="op", shared=options.add_answer_timeout)
+    subverbs.add_subverbs(parser, SUBVERBS, dest="op", shared=_shared)
+
+
+def _shared(parser: argparse.ArgumentParser) -> None:
+    """Options every sub-verb accepts, before or after its name (`--json` and
+    `-o` are read by the sub-verbs that print a table or write a file)."""
+    options.add_answer_timeout(parser)
+    options.add_json_argument(parser)
+    parser.add_argument("--output", "-o", metavar="FILE", help="dump: write FILE, not stdout")
 
 
 def main(ctx: ServiceContext) -> int:
@@ -102,7 +110,6 @@ def load_table(path: str, table: str) -> dict[str, Any]:
 
 def _add_list(parser: argparse.ArgumentParser) -> None:
     options.add_node_argument(parser)
-    options.add_json_argument(parser)
 
 
 def _list(ctx: ServiceContext) -> int:
@@ -118,7 +125,6 @@ def _list(ctx: ServiceContext) -> int:
 def _add_get(parser: argparse.ArgumentParser) -> None:
     options.add_node_argument(parser)
     parser.add_argument("field", help="the parameter (a field of the node's settings)")
-    options.add_json_argument(parser)
 
 
 def _get(ctx: ServiceContext) -> int:
@@ -146,7 +152,6 @@ def _set(ctx: ServiceContext) -> int:
 
 def _add_dump(parser: argparse.ArgumentParser) -> None:
     options.add_node_argument(parser)
-    parser.add_argument("--output", "-o", metavar="FILE", help="write FILE, not stdout")
 
 
 def _dump(ctx: ServiceContext) -> int:

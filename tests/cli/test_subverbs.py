@@ -53,7 +53,7 @@ def test_wrong_operands_get_one_usage_line(argv: list[str], line: str,
     (["node", "bogus", "x"], "argument action: invalid choice: 'bogus'"),
     (["bag", "play"], "buddybot bag play: error: the following arguments are required: FILE"),
     (["param", "list", "n", "--timeout", "x"], "argument --timeout: invalid float value: 'x'"),
-    (["param", "set", "n", "f", "v", "--json"], "unrecognized arguments: --json"),
+    (["param", "set", "n", "f", "v", "--colour"], "unrecognized arguments: --colour"),
 ])
 def test_other_usage_errors_are_argparse_s(argv: list[str], needle: str,
                                            capsys: pytest.CaptureFixture[str]) -> None:
@@ -68,7 +68,18 @@ def test_each_sub_verb_has_its_own_help(capsys: pytest.CaptureFixture[str]) -> N
         cli.main(["param", "dump", "--help"])
     out = capsys.readouterr().out
     assert out.startswith("usage: buddybot param dump") and "--output FILE" in out
-    assert "--json" not in out and "--connect" in out
+    assert "--connect" in out
+
+
+@pytest.mark.parametrize("argv", [
+    ["param", "--json", "list", "n"], ["param", "set", "n", "f", "v", "--json"],
+    ["param", "get", "--json", "n", "f"], ["param", "dump", "n", "-o", "x.toml"],
+    ["node", "--json", "info", "n"], ["node", "info", "n", "--json", "--timeout", "1"],
+])
+def test_options_shared_by_a_verb_parse_before_or_after_the_sub_verb(argv: list[str]) -> None:
+    """Command lines that worked before sub-verbs became sub-parsers still parse."""
+    parsed = cli.build_parser().parse_args(argv)
+    assert parsed.subverb_main is not None
 
 
 def test_a_verb_made_of_sub_verbs_runs_the_chosen_one() -> None:
