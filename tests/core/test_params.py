@@ -195,21 +195,6 @@ def test_table_lines_mark_live_and_restart() -> None:
     assert next(x for x in lines if x.startswith("port")).endswith("restart")
 
 
-@pytest.mark.parametrize(("a", "b", "hit"), [
-    ("radar/0/frames", "radar/*/frames", True),
-    ("radar/0/frames", "radar/**", True),
-    ("radar/0/frames", "**", True),
-    ("radar/0/frames", "radar/1/frames", False),
-    ("camera/front/face", "camera/*/image", False),
-    ("a/b/c", "a/**/c", True),
-    ("a/c", "a/**/c", True),
-    ("a/b", "a/b/c", False),
-])
-def test_key_intersection(a: str, b: str, hit: bool) -> None:
-    assert topics_cli.key_intersects(a, b) is hit
-    assert topics_cli.key_intersects(b, a) is hit
-
-
 def test_topics_table_names_publishers_and_subscribers() -> None:
     infos = [
         m.NodeInfo(node="bridge", instance="1", publishers=["radar/0/frames"]),
