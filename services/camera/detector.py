@@ -27,7 +27,7 @@ from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.tracking import PointSmoother
-from buddybot.contract import keys
+from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.errors import ConfigError
@@ -242,14 +242,14 @@ def run(ctx: ServiceContext) -> int:
             diag.values["iris_accepted"] = pipeline.iris_accepted
         if debug_pub.has_subscribers():
             faces = result.faces if searched is None else searched
-            jpeg = draw.encode_jpeg(
+            debug_jpeg = jpeg.encode(
                 draw.render(bgr, faces, result.target, result.estimate, result.measured),
                 settings.debug_jpeg_quality,
             )
-            if jpeg is not None:
+            if debug_jpeg is not None:
                 debug_pub.put(m.Image(stamp_ns=stamp_ns, frame_id=img.frame_id,
                                       width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
-                                      data=jpeg))
+                                      data=debug_jpeg))
                 diag.increment("debug_images")
 
     try:
