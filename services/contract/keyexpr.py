@@ -7,8 +7,9 @@ is verbatim: only the same chunk meets it, no wildcard does. Two
 expressions intersect when some concrete key belongs to both; a concrete
 key "matches" an expression exactly when they intersect.
 
-The CLI (`topics`, `echo`, `call`), the bag reader and the probes all ask
-this one question, so it is answered here, for strings, without a session.
+`buddybot topics`, the bag reader and the probes (which keys of the
+catalogue an `echo` or `hz` key can carry) all ask this one question, so
+it is answered here, for strings, without a session.
 """
 
 from __future__ import annotations
