@@ -20,7 +20,7 @@ import numpy as np
 from buddybot.camera import frames
 from buddybot.camera.settings import DEFAULT_FPS, CameraSettings
 from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
-from buddybot.contract import keys
+from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.config import resolve_path
@@ -93,13 +93,10 @@ class Capture:
 
     def _message(self, frame: np.ndarray, stamp_ns: int) -> m.Image | None:
         h, w = frame.shape[:2]
-        if self.s.encoding == "jpeg":
-            ok, buf = cv2.imencode(".jpg", frame, [cv2.IMWRITE_JPEG_QUALITY, self.s.jpeg_quality])
-            if not ok:
-                return None
-            data = buf.tobytes()
-        else:
-            data = np.ascontiguousarray(frame).tobytes()
+        data = (jpeg.encode(frame, self.s.jpeg_quality) if self.s.encoding == "jpeg"
+                else np.ascontiguousarray(frame).tobytes())
+        if data is None:
+            return None
         return m.Image(stamp_ns=stamp_ns, frame_id=self.frame_id, width=w, height=h,
                        encoding=self.s.encoding, data=data)
 

@@ -28,7 +28,7 @@ from buddybot.camera.iris import IrisNet
 from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline, FaceResult, Owed
 from buddybot.camera.settings import FaceDetectorSettings
-from buddybot.contract import keys
+from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.errors import ConfigError
@@ -206,14 +206,14 @@ def run(ctx: ServiceContext) -> int:
 
     def publish_debug(img: m.Image, bgr: np.ndarray, stamp_ns: int, result: FaceResult,
                       faces: list[bf.Detection]) -> None:
-        jpeg = draw.encode_jpeg(
+        data = jpeg.encode(
             draw.render(bgr, faces, result.target, result.estimate, result.measured),
             settings.debug_jpeg_quality,
         )
-        if jpeg is not None:
+        if data is not None:
             debug_pub.put(m.Image(stamp_ns=stamp_ns, frame_id=img.frame_id,
                                   width=bgr.shape[1], height=bgr.shape[0], encoding="jpeg",
-                                  data=jpeg))
+                                  data=data))
             diag.increment("debug_images")
 
     def on_image(img: m.Image, _key: str) -> None:

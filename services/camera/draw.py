@@ -47,8 +47,3 @@ def render(bgr: np.ndarray, faces: list[bf.Detection], target: bf.Detection | No
         cv2.putText(out, text, (10, h - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.5, _TARGET, 1,
                     cv2.LINE_AA)
     return out
-
-
-def encode_jpeg(bgr: np.ndarray, quality: int) -> bytes | None:
-    ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    return buf.tobytes() if ok else None

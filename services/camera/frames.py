@@ -18,7 +18,7 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from buddybot.camera import jpeg
+from buddybot.contract import jpeg
 from buddybot.contract import messages as m
 
 MAX_SIDE = 16384

@@ -49,7 +49,7 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
-    entry = probing.catalogue_entry(key)
+    entry = keys.lookup_absolute(key)
     if not isinstance(entry, keys.Service):
         raise UsageError(f"{args.key}: not a service of the catalogue (see `buddybot keys`)")
     request = probing.parse_message(entry.request, args.request)

@@ -39,7 +39,7 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     key = keys.absolute(ctx.robot, args.key)
-    entry = probing.catalogue_entry(key)
+    entry = keys.lookup_absolute(key)
     if not isinstance(entry, keys.Topic):
         raise UsageError(f"{args.key}: not a topic of the catalogue (see `buddybot keys`)")
     if "*" in key:

@@ -26,8 +26,9 @@ from dataclasses import dataclass, field
 import msgspec
 
 from buddybot.cli import options
-from buddybot.contract import keys
+from buddybot.contract import keyexpr, keys
 from buddybot.contract import messages as m
+from buddybot.runtime import rates
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing
 
@@ -38,24 +39,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     options.add_timeout_argument(parser, 3.0, "listen S seconds: rates are measured over "
                                  "this window", connecting=False)
     options.add_json_argument(parser)
-
-
-def key_intersects(a: str, b: str) -> bool:
-    """Whether two key expressions (`*` one chunk, `**` any chunks) share a key."""
-    return _match(a.split("/"), b.split("/"))
-
-
-def _match(a: list[str], b: list[str]) -> bool:
-    if not a or not b:
-        rest = a or b
-        return all(chunk == "**" for chunk in rest)
-    if a[0] == "**":
-        return _match(a[1:], b) or _match(a, b[1:])
-    if b[0] == "**":
-        return _match(a, b[1:]) or _match(a[1:], b)
-    if a[0] == "*" or b[0] == "*" or a[0] == b[0]:
-        return _match(a[1:], b[1:])
-    return False
 
 
 class TopicRow(msgspec.Struct, kw_only=True):
@@ -88,11 +71,11 @@ def table(counts: dict[str, int], window_s: float, infos: list[m.NodeInfo]) -> l
         entry = keys.lookup(key)
         rows.append(TopicRow(
             key=key, count=counts.get(key, 0),
-            rate_hz=round(counts.get(key, 0) / window_s, 2) if window_s > 0 else 0.0,
+            rate_hz=round(rates.count_hz(counts.get(key, 0), window_s), 2),
             publishers=sorted({i.node for i in infos
-                               if any(key_intersects(key, k) for k in i.publishers)}),
+                               if any(keyexpr.intersects(key, k) for k in i.publishers)}),
             subscribers=sorted({i.node for i in infos
-                                if any(key_intersects(key, k) for k in i.subscriptions)}),
+                                if any(keyexpr.intersects(key, k) for k in i.subscriptions)}),
             type=entry.type.__name__ if isinstance(entry, keys.Topic) else "",
         ))
     return rows

@@ -27,7 +27,7 @@ from typing import Any
 
 import msgspec
 
-from buddybot.contract import keys
+from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.contract.schemas import with_enum_names
 
@@ -145,20 +145,13 @@ def decode(topic: keys.Topic, payload: bytes | bytearray | memoryview) -> Any:
 
 def jpeg_bytes(image: m.Image, quality: int = JPEG_QUALITY) -> bytes:
     """The image as a JPEG file: `jpeg` passes through, `bgr8` is compressed."""
-    if image.encoding == "jpeg":
-        return image.data
-    import cv2
-    import numpy as np
-
-    expected = image.width * image.height * 3
-    if len(image.data) != expected:
-        raise ChannelError(f"bgr8 image {image.width}x{image.height} needs {expected} bytes, "
-                           f"has {len(image.data)}")
-    pixels = np.frombuffer(image.data, np.uint8).reshape(image.height, image.width, 3)
-    ok, buf = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, quality])
-    if not ok:
+    try:
+        data = jpeg.from_image(image, quality)
+    except jpeg.PixelsError as e:
+        raise ChannelError(str(e)) from None
+    if data is None:
         raise ChannelError("OpenCV could not compress the image")
-    return buf.tobytes()
+    return data
 
 
 def timestamp(stamp_ns: int) -> dict[str, int]:
@@ -191,35 +184,16 @@ def image_from_compressed(value: Any) -> m.Image:
         raise ChannelError(f"not a CompressedImage: {e}") from None
     if fmt != "jpeg":
         raise ChannelError(f"CompressedImage format {fmt!r}: only jpeg is replayed")
-    width, height = jpeg_size(data)
     try:
-        return msgspec.convert({"stamp_ns": stamp_ns, "frame_id": frame_id, "width": width,
-                                "height": height, "encoding": "jpeg", "data": data}, m.Image)
+        header = jpeg.read_header(data)
+    except jpeg.JpegError as e:
+        raise ChannelError(f"CompressedImage: {e}") from None
+    try:
+        return msgspec.convert({"stamp_ns": stamp_ns, "frame_id": frame_id,
+                                "width": header.width, "height": header.height,
+                                "encoding": "jpeg", "data": data}, m.Image)
     except msgspec.ValidationError as e:
         raise ChannelError(f"CompressedImage: {e}") from None
-
-
-def jpeg_size(data: bytes) -> tuple[int, int]:
-    """(width, height) from a JPEG's frame header, without decoding the pixels."""
-    i = 2
-    if data[:2] != b"\xff\xd8":
-        raise ChannelError("not a JPEG (no SOI marker)")
-    while i + 9 <= len(data):
-        if data[i] != 0xFF:
-            raise ChannelError("corrupt JPEG header")
-        marker = data[i + 1]
-        if marker == 0xFF:  # fill byte
-            i += 1
-            continue
-        length = int.from_bytes(data[i + 2:i + 4], "big")
-        if 0xC0 <= marker <= 0xCF and marker not in (0xC4, 0xC8, 0xCC):  # a SOFn
-            height = int.from_bytes(data[i + 5:i + 7], "big")
-            width = int.from_bytes(data[i + 7:i + 9], "big")
-            if width == 0 or height == 0:
-                raise ChannelError("JPEG with a zero size")
-            return width, height
-        i += 2 + length
-    raise ChannelError("JPEG without a frame header")
 
 
 # --- face boxes as Foxglove annotations ----------------------------------------

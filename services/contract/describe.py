@@ -45,8 +45,7 @@ def summarize(msg: m.Message, *, names: bool = True) -> str:
 
 def describe(key: str, payload: bytes, *, names: bool = True) -> str:
     """Decode a payload published on `key` (absolute) and summarize it."""
-    parts = keys.split_absolute(key)
-    entry = keys.lookup(parts[1]) if parts else None
+    entry = keys.lookup_absolute(key)
     if isinstance(entry, keys.Topic):
         try:
             return summarize(entry.codec.decode(payload, entry.type), names=names)

@@ -311,6 +311,13 @@ def lookup(relative_key: str) -> Topic | Service | None:
     return None
 
 
+def lookup_absolute(key: str) -> Topic | Service | None:
+    """The catalogue entry of an absolute key `buddybot/<robot>/<rest>` (None: a
+    foreign key, or one the catalogue does not know)."""
+    parts = split_absolute(key)
+    return lookup(parts[1]) if parts else None
+
+
 def key_table() -> list[dict[str, Any]]:
     """The catalogue as plain data (for `schemas/keys.json` and the README)."""
     rows: list[dict[str, Any]] = []

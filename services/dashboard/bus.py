@@ -16,10 +16,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import cv2
-import numpy as np
-
-from buddybot.contract import keys
+from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.dashboard import model
 from buddybot.dashboard.settings import DashboardSettings
@@ -167,21 +164,17 @@ class Bus:
         """On the subscription's worker: at most max_image_fps JPEGs, quality from settings."""
         if not self.limiter.allow(time.monotonic()):
             return
-        if msg.encoding == "jpeg":
-            jpeg = msg.data
-        else:
-            if len(msg.data) != msg.width * msg.height * 3:
-                self.images_bad += 1
-                _warn.warning("image", "dropped a bgr8 image of %d bytes (%dx%d needs %d)",
-                              len(msg.data), msg.width, msg.height, msg.width * msg.height * 3)
-                return
-            pixels = np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.width, 3)
-            ok, buf = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, self.s.jpeg_quality])
-            if not ok:
-                self.images_bad += 1
-                return
-            jpeg = buf.tobytes()
-        self.mailbox.put("image", model.pack_image(model.image_header(msg), jpeg))
+        try:
+            data = jpeg.from_image(msg, self.s.jpeg_quality)
+        except jpeg.PixelsError:
+            self.images_bad += 1
+            _warn.warning("image", "dropped a bgr8 image of %d bytes (%dx%d needs %d)",
+                          len(msg.data), msg.width, msg.height, msg.width * msg.height * 3)
+            return
+        if data is None:
+            self.images_bad += 1
+            return
+        self.mailbox.put("image", model.pack_image(model.image_header(msg), data))
 
     # -- buttons (called in a worker thread) --
 

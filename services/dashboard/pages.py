@@ -26,6 +26,7 @@ from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime.limits import BoundedDict, clip
 from buddybot.runtime.node import RateLimitedLog
+from buddybot.runtime.page_outbox import PageOutbox
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)
@@ -45,29 +46,22 @@ def now_s() -> float:
 # --- the pages -------------------------------------------------------------------------
 
 
-class Page:
-    """One connected page: its outbox and a wake-up event for its sender."""
+class Page(PageOutbox[tuple[str, Any]]):
+    """One connected page: its outbox (newest per slot, radar frames appended)
+    and its sender."""
 
     def __init__(self, transport: asyncio.Transport | None) -> None:
-        self.transport = transport
         self.outbox = model.Outbox()
-        self.wake = asyncio.Event()
+        super().__init__(transport, self.outbox.take)
         self.images_skipped = 0
 
     def put(self, slot: str, value: Any) -> None:
         self.outbox.put(slot, value)
-        self.wake.set()
+        self.wake()
 
     def put_frames(self, frames: list[dict[str, Any]]) -> None:
         self.outbox.put_frames(frames)
-        self.wake.set()
-
-    def unsent(self) -> int:
-        return 0 if self.transport is None else self.transport.get_write_buffer_size()
-
-    def cut(self) -> None:
-        if self.transport is not None:
-            self.transport.abort()
+        self.wake()
 
 
 class Board:
@@ -176,23 +170,19 @@ class Board:
 async def _sender(ws: web.WebSocketResponse, page: Page, board: Board) -> None:
     """Flush the page's outbox whenever something is in it; cut it when it stalls."""
     encode = msgspec.json.encode
-    try:
-        while not ws.closed:
-            await page.wake.wait()
-            page.wake.clear()
-            for slot, value in page.outbox.take():
-                async with asyncio.timeout(STALL_S):
-                    if slot == "image":
-                        await ws.send_bytes(value)
-                        board.images_sent += 1
-                    else:
-                        await ws.send_str(encode({"t": slot, "v": value}).decode())
-    except TimeoutError:
-        _warn.warning("stall", "page cut: it has not read for %.0f s", STALL_S)
-        page.cut()
-    except (ConnectionError, RuntimeError) as exc:  # closing transport
-        log.debug("page send failed: %r", exc)
 
+    async def send(item: tuple[str, Any]) -> None:
+        slot, value = item
+        if slot == "image":
+            await ws.send_bytes(value)
+            board.images_sent += 1
+        else:
+            await ws.send_str(encode({"t": slot, "v": value}).decode())
+
+    stalled = await page.send_until_closed(ws, send, lambda: STALL_S, log)
+    if stalled is not None:
+        _warn.warning("stall", "page cut: it has not read for %.0f s", stalled)
+        page.cut()
 
 
 # --- the web application ---------------------------------------------------------------

@@ -67,6 +67,7 @@ from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
 from buddybot.runtime.node import Node, RateLimitedLog
 from buddybot.runtime.overrides import given, merge, settings_option
+from buddybot.runtime.page_outbox import PageOutbox
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
 
@@ -176,8 +177,8 @@ CLOSE_TIMEOUT_S = 2.0
 """How long a close handshake may take before the connection is cut."""
 
 
-class Page:
-    """One connected page: its outbox (newest message per slot) and a wake-up event.
+class Page(PageOutbox[str]):
+    """One connected page: its outbox (newest message per slot) and its sender.
 
     The outbox is the page's whole send queue, so it is bounded by the number
     of slots (a handful) however fast samples arrive and however slowly the
@@ -186,27 +187,12 @@ class Page:
 
     def __init__(self, eye: str, transport: asyncio.Transport | None) -> None:
         self.eye = eye
-        self.transport = transport
         self.outbox = wire.LatestState()
-        self.wake = asyncio.Event()
-        self.cut_off = False
+        super().__init__(transport, self.outbox.take)
 
     def push(self, slot: str, text: str) -> None:
         self.outbox.put(slot, text)
-        self.wake.set()
-
-    def unsent(self) -> int:
-        """Bytes written for this page that it has not taken yet (beyond the kernel's)."""
-        return 0 if self.transport is None else self.transport.get_write_buffer_size()
-
-    def cut(self) -> bool:
-        """Drop the connection now, without a close handshake (which would have
-        to wait behind the data the page is not reading); True the first time."""
-        first = not self.cut_off
-        self.cut_off = True
-        if self.transport is not None:
-            self.transport.abort()
-        return first
+        self.wake()
 
 
 class Hub:
@@ -412,21 +398,10 @@ async def _sender(ws: web.WebSocketResponse, page: Page, hub: Hub) -> None:
     `hub.stall_s`, or more than SEND_BUFFER_MAX bytes waiting for it. A page
     that went away ends this task quietly (the reader side cleans up).
     """
-    stall_s = hub.stall_s
-    try:
-        while not ws.closed:
-            await page.wake.wait()
-            page.wake.clear()
-            for text in page.outbox.take():
-                if page.unsent() > SEND_BUFFER_MAX:
-                    raise TimeoutError
-                stall_s = hub.stall_s
-                async with asyncio.timeout(stall_s):
-                    await ws.send_str(text)
-    except TimeoutError:
-        hub.drop(page, f"it has not read what was sent for {stall_s:.1f} s")
-    except (ConnectionError, RuntimeError) as exc:  # closing transport
-        log.debug("page send failed: %r", exc)
+    stalled = await page.send_until_closed(ws, ws.send_str, lambda: hub.stall_s, log,
+                                           max_unsent=SEND_BUFFER_MAX)
+    if stalled is not None:
+        hub.drop(page, f"it has not read what was sent for {stalled:.1f} s")
 
 
 def _read_static() -> dict[str, bytes]:

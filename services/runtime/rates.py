@@ -2,7 +2,8 @@
 
 Two estimates, because the places that show a rate want different things:
 `rate_hz` counts arrivals in a fixed window (a sensor that stopped drops to
-0 Hz once the window passes, which the `up` status line must show), while
+0 Hz once the window passes, which the `up` status line must show; `count_hz`
+is the same for a count already made, as `topics` and `bag info` have), while
 `span_hz` measures from the first to the last arrival (steady and exact for a
 stream that is running: the camera's `fps`, `buddybot hz`). `RateCounter`
 keeps the sliding window for the latter.
@@ -14,9 +15,15 @@ from collections import deque
 from collections.abc import Iterable, Sequence
 
 
+def count_hz(count: int, window_s: float) -> float:
+    """`count` arrivals over a window of `window_s` seconds, per second (0 for an
+    empty window: a listener that heard nothing for no time measured nothing)."""
+    return count / window_s if window_s > 0 else 0.0
+
+
 def rate_hz(arrivals: Iterable[float], now: float, window_s: float = 3.0) -> float:
     """Messages per second over the last `window_s` seconds (0 when none arrived)."""
-    return sum(1 for t in arrivals if now - t <= window_s) / window_s
+    return count_hz(sum(1 for t in arrivals if now - t <= window_s), window_s)
 
 
 def span_hz(stamps: Sequence[float]) -> float | None:

@@ -416,12 +416,3 @@ def live_instances(session: zenoh.Session, key: str, timeout: float = 2.0) -> se
         if match is not None:
             found.add(match["instance"])
     return found
-
-
-def keys_intersect(a: str, b: str) -> bool | None:
-    """Whether two key expressions (wildcards allowed) share a key, by Zenoh's own
-    rule; None when `a` is not a valid key expression."""
-    try:
-        return bool(zenoh.KeyExpr.autocanonize(a).intersects(zenoh.KeyExpr.autocanonize(b)))
-    except zenoh.ZError:
-        return None

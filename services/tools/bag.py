@@ -27,7 +27,6 @@ half-way.
 from __future__ import annotations
 
 import os
-import re
 import zlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -45,7 +44,8 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from buddybot import __version__
-from buddybot.contract import channels, keys
+from buddybot.contract import channels, keyexpr, keys
+from buddybot.runtime import rates
 from buddybot.runtime.errors import BuddyBotError
 
 METADATA_NAME = "buddybot"
@@ -68,10 +68,7 @@ class BagError(BuddyBotError):
 
 def topic_of(key: str) -> keys.Topic | None:
     """The catalogue topic of a concrete absolute key (None: not one of ours)."""
-    parts = keys.split_absolute(key)
-    if parts is None or "*" in key:
-        return None
-    entry = keys.lookup(parts[1])
+    entry = None if "*" in key else keys.lookup_absolute(key)
     return entry if isinstance(entry, keys.Topic) else None
 
 
@@ -89,26 +86,17 @@ def with_robot(key: str, robot: str | None) -> str:
 
 
 def key_matches(expression: str, key: str) -> bool:
-    """Whether a concrete key is one of `expression`'s keys: `*` is one whole
-    chunk, `**` any number of chunks (the subset of Zenoh's key expressions
-    people type; recorded keys are concrete, so no intersection is needed)."""
-    return _chunks_match(expression.strip("/").split("/"), key.strip("/").split("/"))
+    """Whether a concrete key is one of `expression`'s keys, the expression as
+    people type it: slashes around it are ignored and a wildcard inside a
+    chunk (`cam*`) is Zenoh's `cam$*`."""
+    return keyexpr.intersects(_zenoh_form(expression), key.strip("/"))
 
 
-def _chunks_match(pattern: list[str], chunks: list[str]) -> bool:
-    if not pattern:
-        return not chunks
-    head, rest = pattern[0], pattern[1:]
-    if head == "**":
-        return any(_chunks_match(rest, chunks[i:]) for i in range(len(chunks) + 1))
-    if not chunks:
-        return False
-    if head == "*" or head == chunks[0]:
-        return _chunks_match(rest, chunks[1:])
-    if "*" in head:  # `cam*`: a chunk with a wildcard inside (Zenoh writes `cam$*`)
-        regex = ".*".join(re.escape(p) for p in head.replace("$*", "*").split("*"))
-        return re.fullmatch(regex, chunks[0]) is not None and _chunks_match(rest, chunks[1:])
-    return False
+def _zenoh_form(typed: str) -> str:
+    chunks = typed.strip("/").split("/")
+    return "/".join(c if c in (keyexpr.STAR, keyexpr.DOUBLE_STAR) or "*" not in c
+                    else c.replace(keyexpr.CHUNK_STAR, "*").replace("*", keyexpr.CHUNK_STAR)
+                    for c in chunks)
 
 
 # --- writing ------------------------------------------------------------------------
@@ -239,7 +227,8 @@ class ChannelInfo:
     """Why it is not replayed: "" (it is), "derived", or the reason it is unknown."""
 
     def rate_hz(self, duration_s: float) -> float:
-        return self.count / duration_s if duration_s > 0 and self.count > 1 else 0.0
+        """Messages per second over the recording (0 for a single message: no rate)."""
+        return rates.count_hz(self.count, duration_s) if self.count > 1 else 0.0
 
 
 @dataclass(frozen=True)

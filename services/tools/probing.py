@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import time
 
-from buddybot.contract import describe, keys
+from buddybot.contract import describe, keyexpr, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.session import RouterUnreachable, keys_intersect, zenoh_config
+from buddybot.runtime.session import RouterUnreachable, zenoh_config
 
 CONNECT_TIMEOUT_S = 5.0
 """How long a probe waits for its router when no `--timeout` is given."""
@@ -46,24 +46,14 @@ def left(end: float, floor: float = 0.05) -> float:
     return max(floor, end - time.monotonic())
 
 
-def catalogue_entry(key: str) -> keys.Topic | keys.Service | None:
-    """The catalogue entry an absolute key belongs to (None: not in the catalogue)."""
-    parts = keys.split_absolute(key)
-    return keys.lookup(parts[1]) if parts else None
-
-
 def catalogue_matches(key: str) -> list[keys.Topic | keys.Service]:
     """Catalogue entries whose keys intersect `key` (an absolute key expression,
     wildcards allowed): empty means the key can never carry a BuddyBot message."""
-    found: list[keys.Topic | keys.Service] = []
+    if not keyexpr.valid(key):
+        return []
     entries: tuple[keys.Topic | keys.Service, ...] = (*keys.TOPICS, *keys.SERVICES)
-    for entry in entries:
-        meets = keys_intersect(key, f"{keys.PREFIX_ROOT}/*/{entry.wildcard()}")
-        if meets is None:
-            return []
-        if meets:
-            found.append(entry)
-    return found
+    return [entry for entry in entries
+            if keyexpr.intersects(key, f"{keys.PREFIX_ROOT}/*/{entry.wildcard()}")]
 
 
 def silence_reason(node: Node, key: str, timeout: float = 2.0) -> str:
@@ -94,7 +84,7 @@ def _robot_nodes(node: Node, robot: str, timeout: float) -> list[str]:
 
 
 def is_latched(key: str) -> bool:
-    entry = catalogue_entry(key)
+    entry = keys.lookup_absolute(key)
     return isinstance(entry, keys.Topic) and entry.latched
 
 

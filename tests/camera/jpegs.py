@@ -10,7 +10,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from buddybot.camera import jpeg
+from buddybot.contract import jpeg
 
 
 def encode(bgr: np.ndarray, quality: int = 85, progressive: bool = False) -> bytes:

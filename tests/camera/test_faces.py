@@ -21,6 +21,7 @@ from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline, OwedSearch
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.sim import SimCamera
+from buddybot.contract import jpeg
 from tests.camera import scenes
 
 PHOTOS: dict[str, Callable[[], scenes.Photo]] = {
@@ -184,8 +185,8 @@ def test_debug_rendering_draws_on_a_copy(full: FaceNet, short: FaceNet) -> None:
     result = pipeline(full, short).process(img, 1)
     out = draw.render(img, result.faces, result.target, result.estimate, result.measured)
     assert out.shape == img.shape and not np.array_equal(out, img)
-    jpeg = draw.encode_jpeg(out, 80)
-    assert jpeg is not None and cv2.imdecode(np.frombuffer(jpeg, np.uint8), 1).shape == img.shape
+    data = jpeg.encode(out, 80)
+    assert data is not None and cv2.imdecode(np.frombuffer(data, np.uint8), 1).shape == img.shape
 
 
 def test_a_file_that_is_not_a_model_is_refused(tmp_path: Path) -> None:
@@ -270,8 +271,8 @@ def test_deferred_search_drops_a_track_the_whole_frame_does_not_confirm(
 @pytest.mark.parametrize("shape", [(1, 400, 3), (400, 1, 3), (1, 1, 3), (2000, 30, 3)])
 def test_odd_frame_shapes_render_a_debug_image(shape: tuple[int, int, int]) -> None:
     img = np.full(shape, 128, np.uint8)
-    jpeg = draw.encode_jpeg(draw.render(img, [], None, None), 80)
-    assert jpeg is not None and cv2.imdecode(np.frombuffer(jpeg, np.uint8), 1).shape == shape
+    data = jpeg.encode(draw.render(img, [], None, None), 80)
+    assert data is not None and cv2.imdecode(np.frombuffer(data, np.uint8), 1).shape == shape
 
 
 @pytest.mark.parametrize("wrong_ns", [2**63 - 1, 15_000_000_000], ids=["max", "15s-ahead"])

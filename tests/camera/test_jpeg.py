@@ -1,4 +1,5 @@
-"""The JPEG frame-header reader (pure) on real files and on crafted ones."""
+"""JPEG files (contract/jpeg.py): the frame-header reader on real, crafted and fuzzed
+bytes, and bgr8 frames compressed into files that reader accepts."""
 
 from __future__ import annotations
 
@@ -7,10 +8,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from PIL import Image as PilImage
 
-from buddybot.camera import jpeg
 from buddybot.camera.sim import face_path
+from buddybot.contract import jpeg
+from buddybot.contract import messages as m
 from tests.camera import jpegs
 
 DATA = Path(__file__).parent / "data"
@@ -119,3 +123,49 @@ def test_random_bytes_never_raise_anything_but_jpeg_error() -> None:
         except jpeg.JpegError:
             continue
         assert header.width > 0 and header.height > 0
+
+
+MARKERS = st.sampled_from([b"\xff\xc0", b"\xff\xc2", b"\xff\xc4", b"\xff\xd0", b"\xff\xd9",
+                           b"\xff\xda", b"\xff\xe0", b"\xff\xff", b"\xff\x00", b"\x00\x0b"])
+
+
+@settings(max_examples=600, deadline=None)
+@given(st.lists(st.one_of(MARKERS, st.binary(max_size=12)), max_size=12).map(b"".join))
+def test_fuzzed_headers_raise_only_jpeg_error(body: bytes) -> None:
+    """Whatever follows SOI, the reader refuses it with a reason or returns a
+    header a decoder can trust the size of."""
+    try:
+        header = jpeg.read_header(b"\xff\xd8" + body)
+    except jpeg.JpegError:
+        return
+    assert header.width > 0 and header.height > 0 and header.components in (1, 3, 4)
+    assert header.marker in jpeg.SOF_MARKERS
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 70), st.integers(1, 70), st.integers(1, 100))
+def test_an_encoded_frame_has_its_size_in_its_header(width: int, height: int,
+                                                      quality: int) -> None:
+    bgr = np.random.default_rng(width * height).integers(0, 255, (height, width, 3), np.uint8)
+    data = jpeg.encode(bgr, quality)
+    assert data is not None
+    assert jpeg.read_header(data) == jpeg.JpegHeader(width, height, 3, False, 0xC0)
+
+
+def _image(encoding: str, data: bytes, width: int = 4, height: int = 2) -> m.Image:
+    return m.Image(stamp_ns=1, frame_id="c", width=width, height=height, encoding=encoding,
+                   data=data)
+
+
+def test_an_image_message_becomes_a_jpeg_file() -> None:
+    compressed = jpeg.from_image(_image("bgr8", bytes(range(24))), 90)
+    assert compressed is not None
+    header = jpeg.read_header(compressed)
+    assert (header.width, header.height) == (4, 2)
+    assert jpeg.from_image(_image("jpeg", compressed), 10) is compressed  # passed through
+
+
+@pytest.mark.parametrize("size", [0, 23, 25])
+def test_a_bgr8_image_of_the_wrong_size_is_refused(size: int) -> None:
+    with pytest.raises(jpeg.PixelsError, match=f"4x2 needs 24 bytes, has {size}"):
+        jpeg.from_image(_image("bgr8", bytes(size)), 90)

@@ -1,4 +1,4 @@
-"""`buddybot topics`: key intersection, the table, and the verb against real services."""
+"""`buddybot topics`: the table and the verb against real services."""
 
 from __future__ import annotations
 
@@ -15,21 +15,6 @@ from buddybot.tools.testing import Process, retry_until
 from tests.cli.process import bb_on, wait_params
 
 Spawn = Callable[..., Process]
-
-
-@pytest.mark.parametrize(("a", "b", "hit"), [
-    ("radar/0/frames", "radar/*/frames", True),
-    ("radar/0/frames", "radar/**", True),
-    ("radar/0/frames", "**", True),
-    ("radar/0/frames", "radar/1/frames", False),
-    ("camera/front/face", "camera/*/image", False),
-    ("a/b/c", "a/**/c", True),
-    ("a/c", "a/**/c", True),
-    ("a/b", "a/b/c", False),
-])
-def test_key_intersection(a: str, b: str, hit: bool) -> None:
-    assert topics_cli.key_intersects(a, b) is hit
-    assert topics_cli.key_intersects(b, a) is hit
 
 
 def test_topics_table_names_publishers_and_subscribers() -> None:

@@ -22,6 +22,19 @@ def test_prefix_and_absolute() -> None:
     assert keys.split_absolute("other/thing") is None
 
 
+@pytest.mark.parametrize(("key", "entry"), [
+    ("buddybot/r2/camera/front/image", keys.CAMERA_IMAGE),
+    ("buddybot/buddy/audio/play_sound", keys.PLAY_SOUND),
+    ("buddybot/buddy/camera/*/faces", keys.FACES),
+    ("buddybot/buddy/eyes/unknown", None),
+    ("buddybot/buddy", None),
+    ("other/buddy/radar/presence", None),
+    ("radar/presence", None),
+])
+def test_lookup_absolute(key: str, entry: keys.Topic | keys.Service | None) -> None:
+    assert keys.lookup_absolute(key) is entry
+
+
 @pytest.mark.parametrize("bad", ["", "a/b", "*", "**", "a b", "x$"])
 def test_bad_robot_ids_are_refused(bad: str) -> None:
     with pytest.raises(ValueError, match="robot id"):

@@ -7,7 +7,7 @@ from collections import deque
 
 import pytest
 
-from buddybot.runtime.rates import RateCounter, rate_hz, span_hz
+from buddybot.runtime.rates import RateCounter, count_hz, rate_hz, span_hz
 
 
 def test_rate_counts_only_the_window() -> None:
@@ -19,6 +19,17 @@ def test_rate_counts_only_the_window() -> None:
 def test_rate_drops_to_zero_when_the_sender_stops() -> None:
     assert rate_hz([1.0, 1.1, 1.2], now=10.0, window_s=3.0) == 0.0
     assert rate_hz([], now=10.0) == 0.0
+
+
+@pytest.mark.parametrize(("count", "window_s", "hz"), [
+    (30, 3.0, 10.0),
+    (0, 3.0, 0.0),
+    (5, 0.0, 0.0),
+    (5, -1.0, 0.0),
+    (1, 0.5, 2.0),
+])
+def test_count_over_a_window(count: int, window_s: float, hz: float) -> None:
+    assert count_hz(count, window_s) == hz
 
 
 def test_span_is_one_over_the_mean_gap() -> None:

@@ -1,21 +1,31 @@
-"""A JPEG's size read from its header, before anything is decoded (pure).
+"""JPEG files: the size read from the header before anything is decoded, and
+bgr8 frames compressed into them; written once for the camera, the
+dashboard and the recordings.
 
 A decoder allocates the whole frame its header announces: a 700-byte file
 that claims 20000x20000 pixels makes OpenCV allocate 1.2 GB and spend
 seconds filling it. So the face detector reads the frame header (the SOF
 marker segment) first and refuses oversized or inconsistent files before
-`cv2.imdecode` sees them.
+`cv2.imdecode` sees them; a replayed recording's images get their size the
+same way.
 
 The walk is strict on purpose: from SOI, marker segment after marker
 segment by their lengths, until the first SOF. Anything else (garbage
 between segments, a scan or EOI before the frame header, a truncated
 segment) is refused, so a file accepted here has exactly the frame header
-libjpeg will use.
+libjpeg will use. Reading the header is pure; compressing imports OpenCV
+when first asked, so a process that never compresses never loads it.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from buddybot.contract import messages as m
+
+if TYPE_CHECKING:
+    import numpy as np
 
 SOI, EOI, SOS = 0xD8, 0xD9, 0xDA
 SOF_MARKERS = frozenset({0xC0, 0xC1, 0xC2, 0xC3, 0xC5, 0xC6, 0xC7,
@@ -28,6 +38,10 @@ STANDALONE = frozenset({0x01, *range(0xD0, 0xD8)})
 
 class JpegError(ValueError):
     """The bytes are not a JPEG whose frame header can be trusted."""
+
+
+class PixelsError(ValueError):
+    """A bgr8 image whose data is not the width x height x 3 bytes it says."""
 
 
 @dataclass(frozen=True)
@@ -101,3 +115,31 @@ def _frame_header(data: bytes | memoryview, pos: int, length: int, code: int) ->
         raise JpegError(f"frame header of {length} bytes is too short for {components} "
                         "components")
     return JpegHeader(width, height, components, code in PROGRESSIVE, code)
+
+
+# --- compressing ----------------------------------------------------------------------
+
+
+def encode(bgr: np.ndarray, quality: int) -> bytes | None:
+    """A bgr8 frame (height x width x 3 bytes) as a JPEG file of `quality` (1-100);
+    None when OpenCV refuses the frame."""
+    import cv2
+
+    ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, quality])
+    return buf.tobytes() if ok else None
+
+
+def from_image(image: m.Image, quality: int) -> bytes | None:
+    """An `Image` message as a JPEG file: `jpeg` passes through untouched, `bgr8`
+    is compressed (None when OpenCV refuses it). Raises `PixelsError` when the
+    bgr8 data does not hold the size the message states."""
+    if image.encoding == "jpeg":
+        return image.data
+    import numpy as np
+
+    expected = image.width * image.height * 3
+    if len(image.data) != expected:
+        raise PixelsError(f"bgr8 image {image.width}x{image.height} needs {expected} bytes, "
+                          f"has {len(image.data)}")
+    return encode(np.frombuffer(image.data, np.uint8).reshape(image.height, image.width, 3),
+                  quality)
