@@ -33,13 +33,14 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import Any
 
-from buddybot.cli import options, subverbs
+from buddybot.cli import subverbs
 from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import channels, keys
+from buddybot.runtime import options
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node, Publisher
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.session import RouterUnreachable, zenoh_config
+from buddybot.runtime.session import CONNECT_TIMEOUT_S, RouterUnreachable, zenoh_config
 from buddybot.tools import bag, probing
 from buddybot.tools.bag_record import Recorder
 
@@ -248,7 +249,7 @@ def _play_node(ctx: ServiceContext, robot: str) -> Node:
     """The player's node: seen by `nodes` (it publishes on the robot's keys), but
     giving up on the router after --timeout like a probe instead of waiting."""
     limit = ctx.args.timeout if ctx.args.timeout and ctx.args.timeout > 0 \
-        else probing.CONNECT_TIMEOUT_S
+        else CONNECT_TIMEOUT_S
     config = zenoh_config(connect=ctx.connect, base_file=ctx.config.zenoh.config_file,
                           connect_timeout_s=limit)
     if getattr(ctx.args, "log_level", "INFO") == "INFO":  # its "node up" line is noise here

@@ -7,10 +7,10 @@ import sys
 
 import msgspec
 
-from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.contract.describe import summarize
+from buddybot.runtime import options
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing

@@ -6,7 +6,7 @@ import argparse
 import json
 from typing import Any
 
-from buddybot.cli import options
+from buddybot.runtime import options
 from buddybot.runtime.config import to_toml_dict
 from buddybot.runtime.service import ServiceContext
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 
-from buddybot.cli import options
+from buddybot.runtime import options
 from buddybot.runtime.service import ServiceContext, add_common_arguments
 
 HELP = "check the robot: config, devices, versions, router, nodes, sensor rates, eyes, clock"

@@ -9,10 +9,11 @@ import sys
 import threading
 import time
 
-from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract.describe import describe
+from buddybot.runtime import options
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 from buddybot.tools import probing
 
 HELP = "print decoded messages on KEY"
@@ -63,7 +64,7 @@ def main(ctx: ServiceContext) -> int:
     stopped = False  # Ctrl-C (closing the node sets ctx.stop too: look before)
     with probing.probe(ctx, args.timeout) as node:
         node.subscribe_raw(key, on_sample, history=probing.is_latched(key) or "*" in key)
-        hint_at = time.monotonic() + probing.CONNECT_TIMEOUT_S
+        hint_at = time.monotonic() + CONNECT_TIMEOUT_S
         while not done.is_set() and not ctx.stop.is_set() and time.monotonic() < end:
             done.wait(0.1)
             if args.timeout is None and count == 0 and time.monotonic() > hint_at:

@@ -12,10 +12,11 @@ import time
 from collections import deque
 from typing import Any
 
-from buddybot.cli import options
 from buddybot.contract import keys
+from buddybot.runtime import options
 from buddybot.runtime.rates import span_hz
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 from buddybot.tools import probing
 
 HELP = "print the publishing rate of KEY"
@@ -74,7 +75,7 @@ def main(ctx: ServiceContext) -> int:
     period = 0.1 if args.json else 1.0  # --json prints once: only check the deadlines
     with probing.probe(ctx, args.timeout) as node:
         node.subscribe_raw(key, on_sample)
-        hint_at = (time.monotonic() + probing.CONNECT_TIMEOUT_S
+        hint_at = (time.monotonic() + CONNECT_TIMEOUT_S
                    if args.timeout is None else float("inf"))
         while not ctx.stop.wait(period) and time.monotonic() < end:
             with lock:

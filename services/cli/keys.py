@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from buddybot.cli import options
 from buddybot.contract import keys
+from buddybot.runtime import options
 from buddybot.runtime.service import ServiceContext
 
 HELP = "list the key catalogue"

@@ -6,8 +6,9 @@ import argparse
 import json
 import sys
 
-from buddybot.cli import options
+from buddybot.runtime import options
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 from buddybot.tools import probing
 
 HELP = "list live nodes (liveliness tokens)"
@@ -15,7 +16,7 @@ HELP = "list live nodes (liveliness tokens)"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--all-robots", action="store_true", help="every robot on the router")
-    options.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S,
+    options.add_timeout_argument(parser, CONNECT_TIMEOUT_S,
                                  "connection and liveliness query together")
     options.add_json_argument(
         parser, 'one JSON document: {"robot": ..., "nodes": {name: [instances]}}')

@@ -20,10 +20,11 @@ from typing import Any
 
 import msgspec
 
-from buddybot.cli import options, subverbs
+from buddybot.cli import subverbs
 from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import options
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing

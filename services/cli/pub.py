@@ -8,11 +8,12 @@ import time
 
 import msgspec
 
-from buddybot.cli import options
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import options
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 from buddybot.tools import probing
 
 HELP = "validate and publish one message on KEY"
@@ -28,7 +29,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--wait", type=float, default=2.0,
                         help="seconds to wait for a subscriber before the first put "
                              "(none by then: a warning, and the message goes nowhere)")
-    options.add_timeout_argument(parser, probing.CONNECT_TIMEOUT_S, "the connection")
+    options.add_timeout_argument(parser, CONNECT_TIMEOUT_S, "the connection")
 
 
 def main(ctx: ServiceContext) -> int:

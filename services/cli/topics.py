@@ -25,10 +25,9 @@ from dataclasses import dataclass, field
 
 import msgspec
 
-from buddybot.cli import options
 from buddybot.contract import keyexpr, keys
 from buddybot.contract import messages as m
-from buddybot.runtime import rates
+from buddybot.runtime import options, rates
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing
 

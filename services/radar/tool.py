@@ -31,6 +31,7 @@ from buddybot.radar import ld2410
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
 from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.runtime import options
 from buddybot.runtime.errors import DeviceError, UsageError
 from buddybot.runtime.limits import clip
 from buddybot.runtime.overrides import merge, settings_option
@@ -48,9 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_argument("--port", metavar="URL",
                         help="pyserial URL of the sensor (default: first [radar_bridge] sensor)")
     settings_option(common, "--baudrate", struct=RadarBridgeSettings, field="baudrate")
-    common.add_argument("--timeout", type=float, default=1.0,
-                        help="seconds to wait for each ACK (default 1.0)")
-    common.add_argument("--json", action="store_true", help="print results as JSON")
+    options.add_timeout_argument(common, 1.0, "seconds to wait for each ACK", connecting=False,
+                                 metavar=None, shown="default 1.0")
+    options.add_json_argument(common, "print results as JSON")
     common.add_argument("--config", metavar="FILE", default=argparse.SUPPRESS,
                         help="TOML config file (default: $BUDDYBOT_CONFIG)")
     verbs = parser.add_subparsers(dest="action", metavar="ACTION", required=True)

@@ -276,6 +276,8 @@ WAIT_BEFORE_CLOSE_US = 100_000
 """Zenoh's `wait_before_close` (microseconds) for router and clients."""
 MAX_MESSAGE_BYTES = keys.IMAGE_MESSAGE_BYTES
 """Zenoh's `max_message_size`: nothing larger than the largest image we accept."""
+CONNECT_TIMEOUT_S = 5.0
+"""How long a probe waits for its router when no `--timeout` is given."""
 
 
 def zenoh_config(

@@ -22,10 +22,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.session import RouterUnreachable, zenoh_config
-
-CONNECT_TIMEOUT_S = 5.0
-"""How long a probe waits for its router when no `--timeout` is given."""
+from buddybot.runtime.session import CONNECT_TIMEOUT_S, RouterUnreachable, zenoh_config
 
 
 def probe(ctx: ServiceContext, timeout: float | None = None) -> Node:

@@ -1,12 +1,15 @@
-"""The options several verbs share (`buddybot.cli.options`): one spelling, one way of
-saying the default, and the same parsing everywhere."""
+"""The options several verbs share (`buddybot.runtime.options`): one spelling, one way of
+saying the default, and the same parsing everywhere, `buddybot radar` included."""
 
 from __future__ import annotations
+
+import argparse
 
 import pytest
 
 from buddybot import cli
-from buddybot.tools.probing import CONNECT_TIMEOUT_S
+from buddybot.radar import tool
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 
 
 def help_of(*argv: str, capsys: pytest.CaptureFixture[str]) -> str:
@@ -56,3 +59,14 @@ def test_a_publication_key_takes_no_wildcard_in_its_help(
         capsys: pytest.CaptureFixture[str]) -> None:
     assert "wildcards allowed" in help_of("echo", capsys=capsys)
     assert "wildcards allowed" not in help_of("pub", capsys=capsys)
+
+
+def test_the_radar_verb_keeps_its_own_spelling_of_the_shared_options(
+        capsys: pytest.CaptureFixture[str]) -> None:
+    text = help_of("radar", "info", capsys=capsys)
+    assert "--timeout TIMEOUT seconds to wait for each ACK (default 1.0)" in text
+    assert "--json print results as JSON" in text
+    parser = argparse.ArgumentParser()
+    tool.add_arguments(parser)
+    assert parser.parse_args(["info", "--json"]).json is True
+    assert parser.parse_args(["info"]).timeout == 1.0

@@ -2,7 +2,9 @@
 
 A verb adds them with these helpers, so `--timeout` is always `S` seconds
 with its default said the same way, `--json` is a flag, and a KEY or NODE
-operand is named and explained alike in every `--help`.
+operand is named and explained alike in every `--help`. They sit in the
+runtime, next to `service.add_common_arguments`, so an area's own verb
+(`buddybot radar`) takes them as well as the verbs of `buddybot.cli`.
 """
 
 from __future__ import annotations
@@ -10,19 +12,22 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-from buddybot.tools.probing import CONNECT_TIMEOUT_S
+from buddybot.runtime.session import CONNECT_TIMEOUT_S
 
 
 def add_timeout_argument(parser: argparse.ArgumentParser, default: float | None, what: str,
-                         *, connecting: bool = True,
-                         kind: Callable[[str], float] = float) -> None:
+                         *, connecting: bool = True, kind: Callable[[str], float] = float,
+                         metavar: str | None = "S", shown: str | None = None) -> None:
     """`--timeout S`. `what`: what S limits. `connecting`: S bounds connecting to
     the router too (a probe: CONNECT_TIMEOUT_S when not given); `kind` parses
-    and checks the value (argparse's one-line error, exit 2, when it refuses)."""
+    and checks the value (argparse's one-line error, exit 2, when it refuses).
+    `metavar` and `shown` spell S and the default for a verb that talks to no
+    router and says them its own way (`buddybot radar`: TIMEOUT, "default 1.0")."""
     lead = "give up after S seconds, connecting included: " if connecting else ""
-    shown = f"default {default:g} s" if default else (
-        f"default: none, but the router must answer within {CONNECT_TIMEOUT_S:g} s")
-    parser.add_argument("--timeout", type=kind, default=default, metavar="S",
+    if shown is None:
+        shown = f"default {default:g} s" if default else (
+            f"default: none, but the router must answer within {CONNECT_TIMEOUT_S:g} s")
+    parser.add_argument("--timeout", type=kind, default=default, metavar=metavar,
                         help=f"{lead}{what} ({shown})")
 
 
