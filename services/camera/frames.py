@@ -20,10 +20,7 @@ import numpy as np
 
 from buddybot.contract import jpeg
 from buddybot.contract import messages as m
-
-MAX_SIDE = 16384
-"""The `Image` message's limit on width and height (messages.py): a larger
-frame would be refused as malformed by every subscriber."""
+from buddybot.contract.messages import MAX_SIDE
 
 FRAME_ID_MAX = 256
 """Characters of `frame_id`: it is copied into every face message, so an image

@@ -10,9 +10,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
-MAX_SIDE = 16384
-"""Largest image side the Image message carries (mirrors buddybot.camera.frames.MAX_SIDE;
-kept import-free here)."""
+from buddybot.contract.messages import MAX_SIDE
+
 DEFAULT_FPS = 30.0
 """The camera's pace when `fps` is not set and the source says none (the simulation's,
 most webcams')."""

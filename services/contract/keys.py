@@ -54,6 +54,13 @@ def split_absolute(key: str) -> tuple[str, str] | None:
     return parts[1], parts[2]
 
 
+def relative(robot: str, key: str) -> str:
+    """A key of `robot` without its `buddybot/<robot>/` prefix; any other key
+    (another robot's, a foreign one, one already relative) unchanged."""
+    parts = split_absolute(key)
+    return parts[1] if parts is not None and parts[0] == robot else str(key)
+
+
 # --- codecs ------------------------------------------------------------------
 
 

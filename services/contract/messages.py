@@ -115,6 +115,10 @@ class PresenceDetection(Message):
 
 # --- camera ----------------------------------------------------------------
 
+MAX_SIDE = 16384
+"""Largest width or height of an image the messages carry: a larger frame is
+refused as malformed by every subscriber, so the camera refuses it first."""
+
 
 class Image(Message):
     """A camera frame. `bgr8`: raw rows of BGR bytes; `jpeg`: a JPEG file.
@@ -122,8 +126,8 @@ class Image(Message):
 
     stamp_ns: StampNs
     frame_id: FrameId
-    width: Annotated[int, msgspec.Meta(gt=0, le=16384)]
-    height: Annotated[int, msgspec.Meta(gt=0, le=16384)]
+    width: Annotated[int, msgspec.Meta(gt=0, le=MAX_SIDE)]
+    height: Annotated[int, msgspec.Meta(gt=0, le=MAX_SIDE)]
     encoding: Literal["bgr8", "jpeg"]
     data: bytes
 
@@ -192,8 +196,8 @@ class FaceDetections(Message):
 
     stamp_ns: StampNs
     frame_id: FrameId
-    width: Annotated[int, msgspec.Meta(gt=0, le=16384, description="image width, px")]
-    height: Annotated[int, msgspec.Meta(gt=0, le=16384, description="image height, px")]
+    width: Annotated[int, msgspec.Meta(gt=0, le=MAX_SIDE, description="image width, px")]
+    height: Annotated[int, msgspec.Meta(gt=0, le=MAX_SIDE, description="image height, px")]
     faces: Annotated[list[FaceBox], msgspec.Meta(max_length=64)] = msgspec.field(
         default_factory=list)
     tracked: bool = False

@@ -338,8 +338,7 @@ class Node:
         return f"{self.prefix}/{rel}"
 
     def relative(self, key: str) -> str:
-        key = str(key)
-        return key[len(self.prefix) + 1:] if key.startswith(self.prefix + "/") else key
+        return keys.relative(self.robot, key)
 
     # -- publish / subscribe --
 

@@ -35,6 +35,7 @@ from urllib.parse import urlsplit
 from buddybot.runtime import endpoints, registry
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
 from buddybot.runtime.health import FAIL, OK, WARN, Check, DoctorHooks
+from buddybot.runtime.rates import count_hz
 
 CLOCK_MIN_EPOCH_S = 1_704_067_200.0
 """2024-01-01T00:00:00Z: a system clock before this was never set (no RTC, no NTP)."""
@@ -145,7 +146,7 @@ def judge_nodes(expected: Iterable[str], live: dict[str, set[str]]) -> Check:
 
 def judge_rate(name: str, count: int, window_s: float, expected_hz: float) -> Check:
     """A stream's measured rate against what it should be."""
-    hz = count / window_s if window_s > 0 else 0.0
+    hz = count_hz(count, window_s)
     text = f"{hz:.1f} Hz over {window_s:.1f} s (expected ~{expected_hz:g} Hz)"
     if count == 0:
         return Check(name, FAIL, f"nothing received in {window_s:.1f} s "
