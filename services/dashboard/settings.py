@@ -11,6 +11,8 @@ from typing import Annotated
 
 import msgspec
 
+from buddybot.runtime.endpoints import Host, Port
+
 
 class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """`[dashboard]`: the live dashboard page and its server.
@@ -23,11 +25,11 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     """
 
     # Loopback by default: anyone who can open the page can press its buttons.
-    host: Annotated[str, msgspec.Meta(
-        max_length=253, description="address the page is served on (empty or 0.0.0.0: every "
+    host: Annotated[Host, msgspec.Meta(
+        description="address the page is served on (empty or 0.0.0.0: every "
         "interface, so a laptop on the robot's network can open it)")] = "127.0.0.1"
-    port: Annotated[int, msgspec.Meta(
-        ge=0, le=65535, description="HTTP port (0: any free port)")] = 8090
+    port: Annotated[Port, msgspec.Meta(
+        description="HTTP port (0: any free port)")] = 8090
     # The face detector's default camera ([face_detector] camera); kept as a
     # literal because areas do not import each other.
     camera: Annotated[str, msgspec.Meta(
@@ -52,8 +54,8 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
         "on the dashboard's host)")] = ""
     # `buddybot up --eye-port` moves the eye pages without changing the config:
     # `up` can hand the same port to the dashboard with --eye-port.
-    eye_port: Annotated[int, msgspec.Meta(
-        ge=0, le=65535, description="port of the eye renderer for the derived eye URL "
+    eye_port: Annotated[Port, msgspec.Meta(
+        description="port of the eye renderer for the derived eye URL "
         "(0: [eye_renderer] port)")] = 0
     params_period_s: Annotated[float, msgspec.Meta(
         ge=0.5, le=60.0, description="seconds between reads of radar-presence's live "

@@ -10,10 +10,12 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from buddybot.eyes.driver import DEFAULT_PUPIL_CURVE
+from buddybot.runtime.endpoints import Host, Port
+
 
 def _default_curve() -> list[list[float]]:
-    # Same values as buddybot.eyes.driver.DEFAULT_PUPIL_CURVE (kept import-free here).
-    return [[30.0, 75.0], [100.0, 55.0], [300.0, 30.0]]
+    return [list(point) for point in DEFAULT_PUPIL_CURVE]
 
 
 class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -49,11 +51,11 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
     """
 
     # Loopback by default: a tablet or phone as an eye needs host = "0.0.0.0".
-    host: Annotated[str, msgspec.Meta(
-        max_length=253, description="address the pages are served on (empty: every "
+    host: Annotated[Host, msgspec.Meta(
+        description="address the pages are served on (empty: every "
         "interface; 0.0.0.0 lets a tablet or phone be an eye)")] = "127.0.0.1"
-    port: Annotated[int, msgspec.Meta(
-        ge=0, le=65535, description="HTTP port (0: any free port)")] = 8080
+    port: Annotated[Port, msgspec.Meta(
+        description="HTTP port (0: any free port)")] = 8080
     # Open kiosk Chromium windows (false = only serve the pages).
     browser: Annotated[bool, msgspec.Meta(
         description="open kiosk Chromium windows (false: only serve the pages)")] = True

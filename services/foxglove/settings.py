@@ -11,17 +11,19 @@ from typing import Annotated
 
 import msgspec
 
+from buddybot.runtime.endpoints import Host, Port
+
 
 class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """`[foxglove]`: the Foxglove WebSocket bridge."""
 
     # Loopback by default: anyone who can connect can call the bridge's services.
-    host: Annotated[str, msgspec.Meta(
-        max_length=253, description="address the WebSocket server listens on (0.0.0.0: "
+    host: Annotated[Host, msgspec.Meta(
+        description="address the WebSocket server listens on (0.0.0.0: "
         "every interface, so the Foxglove app on a laptop can connect)")] = "127.0.0.1"
     # Foxglove's own default port, the one the app proposes.
-    port: Annotated[int, msgspec.Meta(
-        ge=0, le=65535, description="WebSocket port (0: any free port)")] = 8765
+    port: Annotated[Port, msgspec.Meta(
+        description="WebSocket port (0: any free port)")] = 8765
     images: Annotated[bool, msgspec.Meta(
         description="offer camera images (as foxglove.CompressedImage) while a client "
         "watches them")] = True

@@ -6,7 +6,9 @@ must agree on it: `up` choosing and guarding its router's port, `buddybot
 router` refusing a taken one, `doctor` judging it, and the web servers (the
 dashboard, the Foxglove bridge) naming who holds theirs. The parsing and
 classifying functions are pure; `accepting` and `port_holder` are the two
-small looks at this machine (a TCP connect, psutil).
+small looks at this machine (a TCP connect, psutil). `Host` and `Port` are
+the config fields of a server's address (`[dashboard]`, `[eye_renderer]`,
+`[foxglove]`), bounded alike.
 """
 
 from __future__ import annotations
@@ -15,6 +17,9 @@ import ipaddress
 import re
 import socket
 from dataclasses import dataclass
+from typing import Annotated
+
+import msgspec
 
 WILDCARD_HOSTS = frozenset({"", "0.0.0.0", "::", "[::]"})
 """Hosts a server binds to serve every interface (this machine reaches it on loopback)."""
@@ -22,6 +27,11 @@ LOCAL_HOST = "127.0.0.1"
 """Where this machine reaches a server bound to a wildcard host."""
 TCP_PROTOCOLS = ("tcp", "tls")
 """Zenoh transports over a TCP socket: the only ones a plain connect can look at."""
+
+Host = Annotated[str, msgspec.Meta(max_length=253)]
+"""A config field: the address a server binds (a DNS name is at most 253 characters)."""
+Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
+"""A config field: a TCP port (0: the system picks a free one, or the field's own meaning)."""
 
 
 @dataclass(frozen=True)
