@@ -40,8 +40,8 @@ service path over sequences (a walk 0.6-4 m, faces leaving by each edge),
 against MediaPipe full range on the same frames. The test thresholds in
 tests/camera/test_recall.py come from these figures.
 
-The older sections (distance accuracy, head turn, jitter, end to end) are
-kept; `--skip` leaves any section out.
+The other sections (distance accuracy, head turn, jitter, end to end) run
+too; `--skip` leaves any section out.
 """
 
 from __future__ import annotations
@@ -72,8 +72,6 @@ from buddybot.camera.sim import SimCamera  # noqa: E402
 from buddybot.contract import keys  # noqa: E402
 from buddybot.contract import messages as m  # noqa: E402
 from tests.camera import scenes  # noqa: E402
-
-Box = scenes.Box
 
 PEER_SCRIPT = textwrap.dedent('''
     # Runs in MediaPipe's virtualenv. Requests on stdin, answers on stdout (see faces.py).
@@ -131,7 +129,7 @@ class MediaPipePeer:
             [str(python), "-c", "import importlib.metadata as m; print(m.version('mediapipe'))"],
             capture_output=True, text=True, check=False).stdout.strip()
 
-    def detect(self, bgr: np.ndarray, model: int) -> tuple[float, list[Box]]:
+    def detect(self, bgr: np.ndarray, model: int) -> tuple[float, list[scenes.Box]]:
         """(milliseconds inside the peer, boxes in pixels) for one frame."""
         assert self.proc.stdin is not None and self.proc.stdout is not None
         h, w = bgr.shape[:2]

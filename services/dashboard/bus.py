@@ -39,7 +39,7 @@ NODES_REFRESH_S = 2.0
 
 
 class Mailbox(LoopInbox[tuple[str, Any]]):
-    """Samples from Zenoh's threads to the event loop (`core.loop_inbox`): newest
+    """Samples from Zenoh's threads to the event loop (`runtime.loop_inbox`): newest
     per slot, radar frames appended (bounded); batches `min_interval_s` apart."""
 
     def __init__(self, loop: asyncio.AbstractEventLoop,

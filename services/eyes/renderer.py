@@ -362,7 +362,7 @@ class Inbox(LoopInbox[m.Message]):
     """Samples from Zenoh's threads to the event loop, newest per slot.
 
     A sample only replaces the pending one of its slot and at most one
-    wake-up is ever queued (`core.loop_inbox`), so the loop's work per turn
+    wake-up is ever queued (`runtime.loop_inbox`), so the loop's work per turn
     is bounded by the number of slots, whatever the sample rate: handing
     each sample over on its own once gave pages 17 s old gaze. Batches are
     at least `min_interval_s` apart (2 ms: many times the page's frame rate).

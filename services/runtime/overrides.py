@@ -9,7 +9,7 @@ config file produced, validating each value with the field's own
 annotation (a value out of range is a `ConfigError` naming the flag, the
 key, the allowed range and the value).
 
-Why "given" means "not None": `args.x or cfg.x` once turned `--baudrate 0`
+Why "given" means "not None": `args.x or cfg.x` would turn `--baudrate 0`
 and `--device-id 0` into the config value. Every bound option defaults to
 None, so 0, "" and False are values like any other.
 

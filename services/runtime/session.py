@@ -35,7 +35,8 @@ log = logging.getLogger("buddybot.node")
 class RouterUnreachable(BuddyBotError, ConnectionError):
     """No router answered within a probe's connect timeout (exit status 1).
 
-    Also a ConnectionError, so callers that caught the old error still do."""
+    Also a ConnectionError: it is one, and code that waits for a router
+    without caring whose error it is (`up`'s status probe) catches it as such."""
 
 
 # --- Zenoh's own log, routed into ours ---------------------------------------------

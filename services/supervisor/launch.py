@@ -8,7 +8,7 @@ them all: SIGTERM first, SIGKILL for any still alive after a grace period.
 Two faults are guarded against. A supervisor killed with SIGKILL cannot stop
 its children, so each child asks the kernel for SIGTERM when its parent dies
 (`die_with_supervisor`, PR_SET_PDEATHSIG); without it the router and the nine
-services lived on as orphans. And a second `up` on a port where a robot
+services would live on as orphans. And a second `up` on a port where a robot
 already runs refuses to start instead of joining it (two robots on one bus,
 with a status line counting the other robot's nodes as its own). Our router is
 ready only when it says so itself (sd_notify READY=1 on a socket of ours), so a

@@ -9,7 +9,7 @@
 "use strict";
 
 window.EyePose = (() => {
-  // ExpressionAction order (core/messages.py), as the style's poses name them.
+  // ExpressionAction order (contract/messages.py), as the style's poses name them.
   const NAMES = ["AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR"];
   const NUM = ["width", "height", "roundness", "top_lid", "top_lid_angle", "bottom_lid",
     "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "beat", "spin"];
