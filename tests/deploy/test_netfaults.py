@@ -66,6 +66,11 @@ from tests.deploy.conftest import (
     veth_namespace,
 )
 
+# One xdist worker runs every test of the "timing" group, so no two of them overlap:
+# they bound delays and gaps that two at once on two cores would stretch, and they
+# change the host's one network stack (namespaces, TAP and veth devices, routes).
+pytestmark = pytest.mark.xdist_group("timing")
+
 CUT_S = 10.0  # how long the cable stays out
 RECOVERY_S = 1.0  # the promise: state right again this long after the link is back
 SILENT_RECOVERY_S = 2.0

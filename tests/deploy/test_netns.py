@@ -31,7 +31,10 @@ from buddybot.tools.testing import (
 )
 from tests.deploy.conftest import HostProfile, Namespace, make_certs, veth_namespace
 
-pytestmark = pytest.mark.integration
+# One xdist worker runs every test of the "timing" group, so no two of them overlap:
+# they bound delays and gaps that two at once on two cores would stretch,
+# and they change the host's one network stack (namespaces, veth pairs, routes).
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("timing")]
 
 
 @pytest.fixture

@@ -31,7 +31,10 @@ from buddybot.tools.testing import Process, retry_until
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 
-pytestmark = pytest.mark.integration  # a router and the robot's processes
+# One xdist worker runs every test of the "timing" group, so no two of them overlap:
+# they bound delays and gaps that two at once on two cores would stretch.
+pytestmark = [pytest.mark.integration,  # a router and the robot's processes
+              pytest.mark.xdist_group("timing")]
 
 MAX_GAP_S = 1.0
 """The bound asserted here. The target is 200 ms (met on a quiet machine, see
