@@ -33,6 +33,11 @@ INTEGRATION_FIXTURES = frozenset({
     "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
+TIMING = pytest.mark.xdist_group("timing")
+"""For tests that bound delays, gaps or frame times, or that change the host's one
+network stack (namespaces, veth and TAP devices): pytest-xdist (`--dist loadgroup`)
+runs them all on one worker, so no two of them overlap and stretch each other's
+times on a two-core machine."""
 TESTS = Path(__file__).resolve().parent
 TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "tools" / "testing.py"
 

@@ -55,6 +55,7 @@ from buddybot.tools.testing import (
     retry_until,
     wait_port,
 )
+from tests.conftest import TIMING
 from tests.deploy.conftest import (
     HOSTS,
     ZENOH_DIR,
@@ -66,10 +67,7 @@ from tests.deploy.conftest import (
     veth_namespace,
 )
 
-# One xdist worker runs every test of the "timing" group, so no two of them overlap:
-# they bound delays and gaps that two at once on two cores would stretch, and they
-# change the host's one network stack (namespaces, TAP and veth devices, routes).
-pytestmark = pytest.mark.xdist_group("timing")
+pytestmark = TIMING  # network namespaces, recovery times under a bound
 
 CUT_S = 10.0  # how long the cable stays out
 RECOVERY_S = 1.0  # the promise: state right again this long after the link is back

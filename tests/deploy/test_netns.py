@@ -29,12 +29,10 @@ from buddybot.tools.testing import (
     retry_until,
     wait_port,
 )
+from tests.conftest import TIMING
 from tests.deploy.conftest import HostProfile, Namespace, make_certs, veth_namespace
 
-# One xdist worker runs every test of the "timing" group, so no two of them overlap:
-# they bound delays and gaps that two at once on two cores would stretch,
-# and they change the host's one network stack (namespaces, veth pairs, routes).
-pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("timing")]
+pytestmark = [pytest.mark.integration, TIMING]  # network namespaces
 
 
 @pytest.fixture
