@@ -1,11 +1,29 @@
 #!/usr/bin/env bash
-# The test command: set up, lint, check schemas, run every test.
+# The test command: set up, lint, check schemas, run the tests.
+#
+#   scripts/test.sh            every test, three per CPU core at a time (pytest-xdist)
+#   scripts/test.sh --quick    lint and the pure tests only (no router, process
+#                              or browser: -m "not integration and not browser")
+#   scripts/test.sh ARGS...    extra ARGS go to pytest (after --quick, too)
+#
+# Three workers per core: most tests wait on routers, processes and Chromium,
+# not on the CPU. `-n N` in ARGS sets the number of workers, `-n 0` runs
+# in one process. Every run ends with its 15 slowest tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+quick=false
+if [ "${1:-}" = --quick ]; then
+    quick=true
+    shift
+fi
 scripts/setup.sh test  # runtime + the `test` extra
-scripts/chromium.sh || true
+$quick || scripts/test-packages.sh || true
 .venv/bin/ruff check services tests benchmarks
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
 MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
 .venv/bin/python -m buddybot schemas --check
-exec .venv/bin/python -m pytest "$@"
+pytest=(.venv/bin/python -m pytest --durations=15)
+if $quick; then
+    exec "${pytest[@]}" -n "$(nproc)" -m "not integration and not browser" "$@"
+fi
+exec "${pytest[@]}" -n "$(($(nproc) * 3))" --dist loadgroup "$@"

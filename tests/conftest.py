@@ -33,6 +33,11 @@ INTEGRATION_FIXTURES = frozenset({
     "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
+TIMING = pytest.mark.xdist_group("timing")
+"""For tests that bound delays, gaps or frame times, or that change the host's one
+network stack (namespaces, veth and TAP devices): pytest-xdist (`--dist loadgroup`)
+runs them all on one worker, so no two of them overlap and stretch each other's
+times on a two-core machine."""
 TESTS = Path(__file__).resolve().parent
 TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "tools" / "testing.py"
 
@@ -46,6 +51,18 @@ def missing_markers(item: pytest.Item) -> list[str]:
     if used & BROWSER_FIXTURES and item.get_closest_marker("browser") is None:
         need.append("browser (it uses the browser fixture)")
     return need
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Tests with a router, processes or a browser first, the pure ones after.
+
+    They take seconds each, the pure ones milliseconds: started first, the slow
+    ones overlap on the pytest-xdist workers and the pure ones fill the gaps at
+    the end, instead of one worker finishing a long system test alone."""
+    def pure(item: pytest.Item) -> bool:
+        return not (item.get_closest_marker("integration") or item.get_closest_marker("browser"))
+
+    items.sort(key=pure)  # stable: each part keeps its collection order
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -54,7 +54,8 @@ def write_silent_mp3(path: Path, frames: int = 40) -> Path:
 def convert_with_sox(src: Path, dst: Path) -> Path:
     """FLAC / Ogg Vorbis copies of a WAV (sox is a test-only tool)."""
     if shutil.which("sox") is None:
-        pytest.skip("sox is not installed (needed to make FLAC/Ogg test files)")
+        pytest.skip("sox is not installed (needed to make FLAC/Ogg test files; "
+                    "scripts/test-packages.sh installs it)")
     subprocess.run(["sox", str(src), str(dst)], check=True, capture_output=True)
     return dst
 

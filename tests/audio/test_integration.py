@@ -182,7 +182,8 @@ def test_refuse_policy_refuses_while_busy(audio, probe, tmp_path) -> None:
     assert final(a, first.goal_id).state == "CANCELED"
 
 
-@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")
+@pytest.mark.skipif(shutil.which("espeak-ng") is None,
+                    reason="espeak-ng not installed (scripts/test-packages.sh installs it)")
 def test_a_sound_configured_as_text_is_spoken(audio, probe) -> None:
     a = audio('[audio.sounds]\nhello = "say:Hello, nice to see you"\n')
     reply = send_goal(probe, "hello")

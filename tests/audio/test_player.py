@@ -126,6 +126,7 @@ def test_new_sound_replaces_the_playing_one(player_factory, make_wav) -> None:
     assert np.array_equal(rec.samples()[-short.shape[0]:], short)
 
 
+@pytest.mark.integration  # runs sox (a process) to make the FLAC and Ogg files
 @pytest.mark.parametrize("suffix", [".flac", ".ogg"])
 def test_flac_and_ogg_decode_to_the_right_length(tmp_path: Path, suffix: str) -> None:
     src = write_wav(tmp_path / "src.wav", tone(0.5))
@@ -194,7 +195,8 @@ def test_volume_is_applied(player_factory, make_wav) -> None:
     assert np.array_equal(rec.samples(), expected)
 
 
-@pytest.mark.skipif(shutil.which("espeak-ng") is None, reason="espeak-ng not installed")
+@pytest.mark.skipif(shutil.which("espeak-ng") is None,
+                    reason="espeak-ng not installed (scripts/test-packages.sh installs it)")
 def test_text_to_speech_sound(player_factory) -> None:
     player, rec = player_factory({"hello": "say:Hello"})
     track = player.play("hello")

@@ -55,6 +55,7 @@ from buddybot.tools.testing import (
     retry_until,
     wait_port,
 )
+from tests.conftest import TIMING
 from tests.deploy.conftest import (
     HOSTS,
     ZENOH_DIR,
@@ -65,6 +66,8 @@ from tests.deploy.conftest import (
     skip_without_namespaces,
     veth_namespace,
 )
+
+pytestmark = TIMING  # network namespaces, recovery times under a bound
 
 CUT_S = 10.0  # how long the cable stays out
 RECOVERY_S = 1.0  # the promise: state right again this long after the link is back

@@ -29,9 +29,10 @@ from buddybot.tools.testing import (
     retry_until,
     wait_port,
 )
+from tests.conftest import TIMING
 from tests.deploy.conftest import HostProfile, Namespace, make_certs, veth_namespace
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, TIMING]  # network namespaces
 
 
 @pytest.fixture

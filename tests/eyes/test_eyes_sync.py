@@ -25,7 +25,9 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, free_port, wait_port
 
-pytestmark = [pytest.mark.integration, pytest.mark.browser]
+from ..conftest import TIMING
+
+pytestmark = [pytest.mark.integration, pytest.mark.browser, TIMING]  # frame times
 
 FRAME_MS = 17.0
 """One frame at 60 Hz: two screens blinking within it blink together."""

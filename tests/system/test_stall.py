@@ -29,9 +29,11 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, retry_until
 
+from ..conftest import TIMING
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 
-pytestmark = pytest.mark.integration  # a router and the robot's processes
+pytestmark = [pytest.mark.integration,  # a router and the robot's processes
+              TIMING]  # gaps under a bound
 
 MAX_GAP_S = 1.0
 """The bound asserted here. The target is 200 ms (met on a quiet machine, see

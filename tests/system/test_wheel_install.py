@@ -30,7 +30,9 @@ from buddybot.cli import verb_module
 from buddybot.runtime.registry import available_services
 from buddybot.tools.testing import Process, free_port, retry_until
 
-pytestmark = pytest.mark.integration
+# One xdist worker runs the whole module: its wheel and virtualenv (module fixtures)
+# are then built once, not once per worker.
+pytestmark = [pytest.mark.integration, pytest.mark.xdist_group("wheel")]
 
 REPO = Path(__file__).resolve().parents[2]
 SOURCE_ONLY = {"audio/sounds/make_sounds.sh"}
