@@ -52,12 +52,6 @@ def direction_from_control(control: m.EyeControl) -> m.EyesDirection:
 
 # --- pupil -------------------------------------------------------------------------
 
-DEFAULT_PUPIL_CURVE: tuple[tuple[float, float], ...] = ((30.0, 75.0), (100.0, 55.0), (300.0, 30.0))
-"""(distance cm, dilation % of the iris) points: 30 cm (face close to the robot)
--> 75 %, 1 m (normal conversation) -> 55 %, 3 m (across the room) -> 30 %; flat
-beyond both ends. Chosen so the change is visible over the radar's 0.3..3 m
-range and steepest where people usually stand."""
-
 
 @dataclass(frozen=True)
 class PupilCurve:

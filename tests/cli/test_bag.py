@@ -22,7 +22,7 @@ from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
 from buddybot.tools import bag
 from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
-from tests.core.test_bag import concrete_key, samples, write_recording
+from tests.tools.test_bag import concrete_key, samples, write_recording
 
 
 def test_info_counts_and_rates(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

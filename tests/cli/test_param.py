@@ -19,7 +19,7 @@ from buddybot.runtime.errors import UsageError
 from buddybot.runtime.params import describe, validate
 from buddybot.tools.testing import Process
 from tests.cli.process import bb_on, wait_params
-from tests.core.test_params import Tuning
+from tests.runtime.test_params import Tuning
 
 
 def test_parse_value_is_json_else_text() -> None:

@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 
 from buddybot.tools.testing import LOOPBACK, Process, buddybot_argv, free_port
-from tests.core.test_up_process import reaped
 from tests.deploy.conftest import HostProfile
+from tests.supervisor.test_launch import reaped
 
 pytestmark = pytest.mark.integration
 

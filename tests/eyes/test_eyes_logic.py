@@ -14,11 +14,11 @@ from hypothesis import strategies as st
 from buddybot.contract import messages as m
 from buddybot.eyes import driver, kiosk, placement, wire
 from buddybot.eyes.placement import Display, PlacementError, Request, plan
-from buddybot.eyes.settings import EyeRendererSettings, EyesSettings
+from buddybot.eyes.settings import DEFAULT_PUPIL_CURVE, EyeRendererSettings, EyesSettings
 from buddybot.runtime import endpoints
 
 A = m.ExpressionAction
-CURVE = driver.PupilCurve.from_points(driver.DEFAULT_PUPIL_CURVE)
+CURVE = driver.PupilCurve.from_points(DEFAULT_PUPIL_CURVE)
 
 
 def control(
@@ -109,7 +109,7 @@ def test_bad_curves_are_refused_with_a_reason(points: list[list[float]], message
 
 
 def test_settings_default_curve_matches_driver_default() -> None:
-    assert [tuple(p) for p in EyesSettings().pupil_curve] == list(driver.DEFAULT_PUPIL_CURVE)
+    assert [tuple(p) for p in EyesSettings().pupil_curve] == list(DEFAULT_PUPIL_CURVE)
 
 
 def test_pupil_keeps_stamp_and_handles_unknown_distance() -> None:

@@ -22,7 +22,7 @@ import pytest
 
 from buddybot.contract import keys, schemas
 from buddybot.contract import messages as m
-from tests.core.test_messages import sample_messages
+from tests.contract.test_messages import sample_messages
 
 ROOT = Path(__file__).resolve().parents[2]
 COMMITTED = ROOT / "schemas"

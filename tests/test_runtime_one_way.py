@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-RUNTIME = Path(__file__).resolve().parents[2] / "services" / "runtime"
+RUNTIME = Path(__file__).resolve().parents[1] / "services" / "runtime"
 NODE_MODULE = "buddybot.runtime.node"
 
 

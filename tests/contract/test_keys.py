@@ -22,6 +22,23 @@ def test_prefix_and_absolute() -> None:
     assert keys.split_absolute("other/thing") is None
 
 
+@pytest.mark.parametrize(("key", "rel"), [
+    ("buddybot/r2/camera/front/image", "camera/front/image"),
+    ("buddybot/r2/eyes/*", "eyes/*"),
+    ("buddybot/other/camera/front/image", "buddybot/other/camera/front/image"),
+    ("elsewhere/r2/camera/front/image", "elsewhere/r2/camera/front/image"),
+    ("camera/front/image", "camera/front/image"),
+    ("buddybot/r2", "buddybot/r2"),
+])
+def test_relative_strips_only_this_robots_prefix(key: str, rel: str) -> None:
+    assert keys.relative("r2", key) == rel
+
+
+def test_relative_undoes_absolute() -> None:
+    for entry in (*keys.TOPICS, *keys.SERVICES):
+        assert keys.relative("r2", keys.absolute("r2", entry.pattern)) == entry.pattern
+
+
 @pytest.mark.parametrize(("key", "entry"), [
     ("buddybot/r2/camera/front/image", keys.CAMERA_IMAGE),
     ("buddybot/buddy/audio/play_sound", keys.PLAY_SOUND),

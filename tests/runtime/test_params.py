@@ -1,16 +1,25 @@
-"""Live parameters without processes: the live marks, validation, the holder, the CLI helpers."""
+"""Live parameters: the live marks, validation, the holder, the CLI helpers, and (through a
+real router) a running service answering `params/<node>` with a valid message (the `param`
+verb's tests are tests/cli/test_param.py)."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Annotated
 
 import msgspec
 import pytest
 
+from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar.settings import RadarPresenceSettings
 from buddybot.runtime import registry
+from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings, ParamRefused, describe, is_live, validate
+from buddybot.tools.testing import Process
+from tests.cli.process import wait_params
+
+Spawn = Callable[..., Process]
 
 
 class Tuning(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -150,3 +159,12 @@ def test_handle_answers_list_get_set_and_errors() -> None:
     assert "allowed 0..2" in refused.error and not refused.unknown
     ok = holder.handle("n", m.ParamRequest(op="set", values={"gain": 0.25}))
     assert ok.changed == ["gain"] and ok.params[0].value == 0.25
+
+
+@pytest.mark.integration
+def test_a_reply_is_a_valid_message(spawn: Spawn, endpoint: str, probe: Node) -> None:
+    spawn("radar-presence")
+    wait_params(endpoint, "radar-presence")
+    reply = probe.call(keys.PARAMS, m.ParamRequest(op="get", name="range_m"),
+                       node="radar-presence")
+    assert isinstance(reply, m.ParamReply) and reply.params[0].value == 2.0

@@ -12,7 +12,7 @@ import pytest
 
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
-from tests.core.test_messages import sample_messages
+from tests.contract.test_messages import sample_messages
 
 
 def _sample(msg_type: type) -> m.Message:
