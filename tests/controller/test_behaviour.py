@@ -395,7 +395,7 @@ def test_seed_mode_all_timings_zero() -> None:
     assert [c.sound for c in plays(out)] == ["farewell"]
 
 
-# --- restart recovery ----------------------------------------------------------------
+# --- restart recovery ------------------------------------------------------------------
 
 
 def test_recovery_waits_then_publishes_the_current_state_once() -> None:
@@ -474,7 +474,7 @@ def test_recovery_recent_sound_while_nobody_there_still_blocks_a_quick_regreet()
     assert r.sounds() == ["greeting"]
 
 
-# --- the state it reports (`controller/state`) ----------------------------------------
+# --- the state it reports (`controller/state`) -----------------------------------------
 
 
 def state(r: Rig) -> State:
@@ -488,7 +488,7 @@ def greet(r: Rig) -> str:
     return r.accept(r.last(PlaySound))  # type: ignore[arg-type]
 
 
-# --- why the controller waits ------------------------------------------------------------
+# --- why the controller waits ----------------------------------------------------------
 
 
 def test_nobody_there_waits_for_nothing() -> None:

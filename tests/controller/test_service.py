@@ -332,7 +332,7 @@ def test_the_state_is_published_at_start_and_then_on_change_only() -> None:
     assert [(a, b) for a, b in itertools.pairwise(s.states()) if news(a) == news(b)] == []
 
 
-# --- the message -------------------------------------------------------------------------
+# --- the message -----------------------------------------------------------------------
 
 
 def test_the_message_has_wall_clock_times_and_is_valid() -> None:
@@ -362,7 +362,7 @@ def news(s: m.ControllerState) -> tuple[object, ...]:
                  if f not in ("stamp_ns", "waiting_s"))
 
 
-# --- its settings -----------------------------------------------------------------------
+# --- its settings ----------------------------------------------------------------------
 
 
 def test_service_config_errors_name_the_key() -> None:
@@ -381,7 +381,7 @@ def test_service_config_errors_name_the_key() -> None:
     assert ok.controller.greet_dwell_s == 2.5
 
 
-# --- as a process behind the router ------------------------------------------------------
+# --- as a process behind the router ----------------------------------------------------
 
 
 def expressions(col: Collector[m.ScreenExpression]) -> list[X]:

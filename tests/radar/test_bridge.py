@@ -67,7 +67,7 @@ def test_zero_or_negative_is_refused_naming_the_flag_not_replaced(
         bridge.resolve_options(parse(*argv), RadarBridgeSettings())
 
 
-# --- the process ------------------------------------------------------------------------
+# --- the process -----------------------------------------------------------------------
 
 
 @pytest.mark.integration

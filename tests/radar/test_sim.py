@@ -88,7 +88,7 @@ def test_sim_background_noise_detection_reports_states_4_to_6() -> None:
     assert p.decode_auto_thresholds_status(status.data) == "completed"
 
 
-# --- on a real pseudo-terminal ----------------------------------------------------------
+# --- on a real pseudo-terminal ---------------------------------------------------------
 
 
 def test_unplug_and_replug_behind_the_same_path(sensor: PtySensor) -> None:
