@@ -5,7 +5,7 @@ it was (`FaceNet.refine`). When that face leaves the square between two
 frames (a quick step in, or another person arriving), the crop can still
 hold *something* face-like near its middle: the edge of the new face, an
 ear, a half-hidden face. Published unchecked, such a find put a face at
-0.6 m at 1.67, 2.38 and 3.67 m (tests/camera/test_jump.py).
+0.6 m at 1.67, 2.38 and 3.67 m (tests/camera/test_pipeline.py).
 
 A head cannot change size or place in the image faster than it can move.
 At distance Z a face W metres wide is w = fx W / Z pixels; moving at v m/s

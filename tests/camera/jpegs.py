@@ -1,4 +1,5 @@
-"""Real JPEGs and crafted ones for the header tests and the bomb tests.
+"""Real JPEGs and crafted ones for the header tests and the bomb tests, and the
+pixels of a published image.
 
 A "bomb" is a genuine small JPEG whose frame header (SOF) is rewritten to
 claim a huge size: a decoder trusts the header, allocates the whole frame
@@ -11,6 +12,7 @@ import cv2
 import numpy as np
 
 from buddybot.contract import jpeg
+from buddybot.contract import messages as m
 
 
 def encode(bgr: np.ndarray, quality: int = 85, progressive: bool = False) -> bytes:
@@ -44,3 +46,10 @@ def bomb(width: int = 20000, height: int = 20000) -> bytes:
     rng = np.random.default_rng(7)
     small = rng.integers(0, 255, (16, 16, 3), dtype=np.uint8)
     return with_size(encode(small, quality=50), width, height)
+
+
+def bgr_of(msg: m.Image) -> np.ndarray:
+    """The pixels of an image message, bgr8 or JPEG."""
+    if msg.encoding == "bgr8":
+        return np.frombuffer(msg.data, np.uint8).reshape(msg.height, msg.width, 3)
+    return cv2.imdecode(np.frombuffer(msg.data, np.uint8), cv2.IMREAD_COLOR)

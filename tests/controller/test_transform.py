@@ -134,26 +134,3 @@ def test_angles_stay_in_the_message_ranges(p: tuple[float, float, float]) -> Non
     assert -math.pi <= g.yaw <= math.pi
     assert -math.pi / 2 <= g.pitch <= math.pi / 2
     assert g.distance_cm == approx(math.hypot(*p) * 100.0)
-
-
-def test_service_config_errors_name_the_key() -> None:
-    import msgspec
-
-    from buddybot.controller.service import camera_transform
-    from buddybot.controller.settings import ControllerSettings
-    from buddybot.runtime.config import parse_config
-    from buddybot.runtime.errors import ConfigError
-
-    bad_nan = msgspec.convert({"camera_to_eyes": {"rpy_rad": [0.0, 0.0, 0.0]}},
-                              ControllerSettings)
-    bad_nan.camera_to_eyes.rpy_rad = (math.nan, 0.0, 0.0)
-    with pytest.raises(ConfigError, match="camera_to_eyes"):
-        camera_transform(bad_nan)
-    with pytest.raises(ConfigError, match="camera"):
-        camera_transform(msgspec.convert({"camera": "a/b"}, ControllerSettings))
-    with pytest.raises(ConfigError, match="translation_m"):
-        parse_config("[controller.camera_to_eyes]\ntranslation_m = [0.0, 1.0]\n")
-    with pytest.raises(ConfigError, match="greet_dwel"):
-        parse_config("[controller]\ngreet_dwel_s = 1.0\n")
-    ok = parse_config("[controller]\ngreet_dwell_s = 2.5\n")
-    assert ok.controller.greet_dwell_s == 2.5

@@ -1,0 +1,304 @@
+"""The radar bridge (`buddybot run radar-bridge`): its command line merged over
+`[radar_bridge]` (pure), and, marked `integration`, the process reading simulated
+LD2410s on real ptys and serial-over-TCP through a real router: unplug and replug,
+missing sensors, dropped links, garbage, noise detection, firmware differences."""
+
+from __future__ import annotations
+
+import argparse
+import random
+import socket
+import threading
+import time
+from collections.abc import Callable
+
+import pytest
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.radar import bridge
+from buddybot.radar import ld2410 as p
+from buddybot.radar.scenarios import SCENARIOS, Target
+from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.radar.sim import FRAME_PERIOD_S, PtySensor, SimulatedLD2410
+from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import LOOPBACK, Collector, Process, retry_until
+from tests.radar.rig import diag_value, frames_of, standing, wait_more_frames
+
+IN, OUT = m.PresenceState.IN_RANGE, m.PresenceState.OUT_OF_RANGE
+Spawn = Callable[..., Process]
+
+
+def parse(*argv: str) -> argparse.Namespace:
+    parser = argparse.ArgumentParser()
+    bridge.add_arguments(parser)
+    return parser.parse_args(argv)
+
+
+def test_flags_not_given_take_the_config() -> None:
+    cfg = RadarBridgeSettings(sensors=["/dev/ttyUSB1"], device_id=3, baudrate=115200,
+                              sim_speed=2.5)
+    opts = bridge.resolve_options(parse(), cfg)
+    assert (opts.urls, opts.device_id, opts.baudrate, opts.sim_scenario) == (
+        ["/dev/ttyUSB1"], 3, 115200, None)
+
+
+def test_given_flags_win_over_the_config() -> None:
+    cfg = RadarBridgeSettings(device_id=3, baudrate=115200, sim_speed=2.5)
+    opts = bridge.resolve_options(
+        parse("--sim", "--sim-speed", "0.5", "--device-id", "0", "--baudrate", "9600"), cfg)
+    # device_id 0 is a real id: it must not fall back to the config's 3.
+    assert (opts.device_id, opts.baudrate, opts.sim_scenario, opts.sim_speed) == (
+        0, 9600, "visit", 0.5)
+
+
+@pytest.mark.parametrize(("argv", "flag"), [
+    (("--sim", "--sim-speed", "0"), "--sim-speed"),   # would freeze the scenario
+    (("--sim", "--sim-speed", "-1"), "--sim-speed"),
+    (("--sensor", "/dev/ttyUSB0", "--baudrate", "0"), "--baudrate"),
+    (("--sensor", "/dev/ttyUSB0", "--device-id", "-1"), "--device-id"),
+])
+def test_zero_or_negative_is_refused_naming_the_flag_not_replaced(
+        argv: tuple[str, ...], flag: str) -> None:
+    # Not `args.x or cfg.x`, which silently turns 0 into the config value.
+    with pytest.raises(ConfigError, match=flag):
+        bridge.resolve_options(parse(*argv), RadarBridgeSettings())
+
+
+# --- the process -----------------------------------------------------------------------
+
+
+@pytest.mark.integration
+def test_unplug_and_replug_is_survived_and_the_other_sensor_goes_on(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    a = sensors("visit", "ttyA")
+    b = sensors("nobody", "ttyB")
+    frames = Collector(probe, keys.RADAR_FRAMES, device="4")
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    bridge = spawn("radar-bridge", "--sensor", a.path, "--sensor", b.path, "--device-id", "4")
+    wait_more_frames(frames, 0, 5, 30)
+    wait_more_frames(frames, 1, 5)
+
+    diag.clear()
+    a.unplug()
+    down = diag.wait_for(lambda d: diag_value(d, "radar0.connected") is False, 20,
+                         "radar 0 reported down")
+    assert down.level == "WARN" and "radar 0" in down.message
+    wait_more_frames(frames, 1, 10)  # the other sensor goes on meanwhile
+    diag.clear()
+
+    a.replug()
+    up = diag.wait_for(lambda d: diag_value(d, "radar0.connected") is True, 30,
+                       "radar 0 back")
+    assert up.level == "OK"
+    assert int(diag_value(up, "radar0.reconnects")) >= 1  # type: ignore[arg-type]
+    assert int(diag_value(up, "reconnects")) >= 1  # type: ignore[arg-type]
+    wait_more_frames(frames, 0, 10)
+    assert bridge.alive()
+
+
+@pytest.mark.integration
+def test_bridge_sim_option_publishes_engineering_frames_at_10_hz(spawn: Spawn,
+                                                                   probe: Node) -> None:
+    frames = Collector(probe, keys.RADAR_FRAMES, device="3")
+    spawn("radar-bridge", "--sim", "--device-id", "3")
+    first = frames.wait_for(timeout=30, what="first frame")
+    frames.wait_count(len(frames.messages) + 30, timeout=20)
+    msgs = frames.messages[-30:]
+    span_s = (msgs[-1].stamp_ns - msgs[0].stamp_ns) / 1e9
+    assert 29 / span_s > 5.0, span_s  # ~10 Hz on a busy machine, never once a second
+    frame = first.sensors[0]
+    assert first.device_id == 3 and frame.radar_id == 0
+    assert frame.moving_gate_energy is not None and len(frame.moving_gate_energy) == 9
+
+
+@pytest.mark.integration
+def test_bridge_reports_a_missing_sensor_and_reads_the_others(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    good = sensors("nobody")
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    # A short path the message shows whole (a long one is clipped): a folder that
+    # never exists, so no test, parallel or not, can make it appear.
+    missing = "/nonexistent/ttyUSB-not-here"
+    bridge = spawn("radar-bridge", "--sensor", missing, "--sensor", good.path)
+    wait_more_frames(frames, 1, 10, 30)
+    d = diag.wait_for(lambda d: d.level == "WARN" and missing in d.message, 20, "missing named")
+    assert "cannot open" in str(diag_value(d, "radar0.error"))
+    assert frames_of(frames, 0) == 0
+    assert bridge.alive()
+
+
+class TcpSensor:
+    """An ESP32/ser2net-style serial-over-TCP bridge: a simulated LD2410 behind a socket."""
+
+    def __init__(self) -> None:
+        self.sim = SimulatedLD2410(SCENARIOS["nobody"])
+        self.server = socket.create_server((LOOPBACK, 0))
+        self.port = self.server.getsockname()[1]
+        self.connections = 0
+        self.drop = threading.Event()
+        self.stop = threading.Event()
+        self.thread = threading.Thread(target=self._serve, daemon=True)
+        self.thread.start()
+
+    def _serve(self) -> None:
+        self.server.settimeout(0.2)
+        while not self.stop.is_set():
+            try:
+                conn, _ = self.server.accept()
+            except TimeoutError:
+                continue
+            self.connections += 1
+            self.drop.clear()
+            with conn:
+                while not (self.stop.is_set() or self.drop.is_set()):
+                    try:
+                        conn.sendall(self.sim.report(0.0, time.monotonic()))
+                    except OSError:
+                        break
+                    self.stop.wait(FRAME_PERIOD_S)
+
+    def close(self) -> None:
+        self.stop.set()
+        self.thread.join(5)
+        self.server.close()
+
+
+@pytest.mark.integration
+def test_tcp_sensor_drop_is_retried(spawn: Spawn, probe: Node) -> None:
+    tcp = TcpSensor()
+    try:
+        frames = Collector(probe, keys.RADAR_FRAMES)
+        diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+        spawn("radar-bridge", "--sensor", f"socket://{LOOPBACK}:{tcp.port}")
+        wait_more_frames(frames, 0, 5, 30)
+        tcp.drop.set()  # the TCP connection drops (Wi-Fi gone, ser2net restarted)
+        diag.wait_for(lambda d: int(diag_value(d, "reconnects") or 0) >= 1, 30, "reconnect")
+        wait_more_frames(frames, 0, 5)
+        assert tcp.connections >= 2
+    finally:
+        tcp.close()
+
+
+@pytest.mark.integration
+def test_report_frame_bytes_on_the_wire_match_what_the_bridge_publishes(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """16-bit distances with a 0x0A byte (266 cm) survive the whole serial path."""
+    sensor = sensors(lambda t, rng: Target(3, 266, 40, 300, 100, 256), engineering=False)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    spawn("radar-bridge", "--sensor", sensor.path)
+    msg = frames.wait_for(timeout=30, what="frame")
+    f = msg.sensors[0]
+    assert (f.target_state, f.movement_distance, f.movement_energy) == (3, 266, 40)
+    assert (f.stationary_distance, f.stationary_energy, f.detection_distance) == (300, 100, 256)
+    assert b"\x0a" in p.encode_report(p.Report(3, 266, 40, 300, 100, 256))
+
+
+@pytest.mark.integration
+def test_a_line_of_pure_garbage_is_reported_with_a_hint(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """What a sensor at another baud rate looks like: bytes, never a valid frame."""
+
+    def garbage(t: float, rng: random.Random) -> Target:
+        return Target(garbage=bytes(rng.randrange(256) for _ in range(20)), corrupt=True)
+
+    sensor = sensors(garbage)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    bridge = spawn("radar-bridge", "--sensor", sensor.path)
+    d = diag.wait_for(lambda d: "wrong baud rate" in str(diag_value(d, "radar0.error")), 30,
+                      "garbage reported")
+    assert int(diag_value(d, "bad_frames")) > 0  # type: ignore[arg-type]
+    assert frames.messages == []
+    assert bridge.alive()
+
+
+class Phase:
+    """A scenario whose scene the test sets: `phase.target = Target(...)`."""
+
+    def __init__(self, target: Target) -> None:
+        self.target = target
+
+    def __call__(self, t: float, rng: random.Random) -> Target:
+        return self.target
+
+
+@pytest.mark.integration
+def test_noise_detection_and_unusual_frames_never_reopen_the_port(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """LD2410C background-noise detection sends target states 4-6 for as long as
+    it measures (here > silence_timeout_s): valid frames, published, "no target"
+    for presence, and no reopening of the port. Nor do well-formed frames with a
+    state nobody knows (9): the line works, the content is unusual."""
+    phase = Phase(standing(0.0, random.Random()))
+    sensor = sensors(phase)
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    presence = Collector(probe, keys.PRESENCE)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    bridge = spawn("radar-bridge", "--sensor", sensor.path)
+    spawn("radar-presence", "--absence-hold-s", "0.5")
+    presence.wait_for(lambda v: v.presence_state == IN, 30, "IN_RANGE")
+
+    phase.target = Target(p.STATE_NOISE_DETECTING)
+    measuring = m.now_ns()
+    presence.wait_for(lambda v: v.presence_state == OUT, 30, "OUT_OF_RANGE while measuring noise")
+    retry_until(lambda: sum(f.target_state == m.TargetState.NOISE_DETECTING
+                            for msg in frames.messages for f in msg.sensors) >= 40, 30,
+                what="4 s of NOISE_DETECTING frames published")
+    d = diag.wait_for(lambda d: d.values.get("radar0.noise_detection") == "in progress", 20,
+                      "noise detection in diagnostics")
+    # Fresh data saying "no target", not a silent sensor.
+    pd = pdiag.wait_for(lambda x: x.stamp_ns > measuring + 2e9, 20, "presence diagnostics")
+    assert pd.level == "OK", pd
+
+    phase.target = Target(9)  # framing intact, a state we do not know
+    d = diag.wait_for(lambda d: int(d.values.get("radar0.unusual_frames") or 0) >= 40, 30,
+                      "4 s of unusual frames counted")
+    phase.target = Target(p.STATE_NOISE_DETECTION_SUCCEEDED)
+    wait_more_frames(frames, 0, 5)
+    phase.target = standing(0.0, random.Random())
+    presence.wait_for(lambda v: v.presence_state == IN and v.stamp_ns > d.stamp_ns, 30,
+                      "IN_RANGE again")
+    last = diag.wait_for(lambda x: x.stamp_ns > d.stamp_ns, 20, "diagnostics after it all")
+    assert int(last.values["reconnects"]) == 0, last  # type: ignore[arg-type]
+    assert all(x.values.get("radar0.connected") is True for x in diag.messages
+               if x.stamp_ns > presence.messages[0].stamp_ns), "the port was reopened"
+    assert int(last.values["bad_frames"]) == 0  # type: ignore[arg-type]
+    states = {f.target_state for msg in frames.messages for f in msg.sensors}
+    assert {m.TargetState.NOISE_DETECTING, m.TargetState.NOISE_DETECTION_SUCCEEDED} <= states
+    assert bridge.alive()
+
+
+@pytest.mark.integration
+def test_light_level_and_out_pin_only_from_firmware_that_has_them(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """V1.07 sends two bytes where V2.x has light level and OUT pin (a real
+    module said "OUT pin 33"): the bridge asks the firmware at connect."""
+    from buddybot.radar.sim import FIRMWARE_V2
+
+    v1 = sensors("nobody", "ttyV1", aux_bytes=(120, 33))
+    v2 = sensors("nobody", "ttyV2", firmware=FIRMWARE_V2, aux_bytes=(130, 1))
+    odd = sensors("nobody", "ttyOdd", firmware=FIRMWARE_V2, aux_bytes=(140, 7))
+    frames = Collector(probe, keys.RADAR_FRAMES)
+    diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
+    spawn("radar-bridge", "--sensor", v1.path, "--sensor", v2.path, "--sensor", odd.path)
+    for radar_id in (0, 1, 2):
+        wait_more_frames(frames, radar_id, 5, 30)
+    by_id = {f.radar_id: f for msg in frames.messages for f in msg.sensors}
+    assert (by_id[0].light_level, by_id[0].out_pin) == (None, None)
+    assert (by_id[1].light_level, by_id[1].out_pin) == (130, 1)
+    assert (by_id[2].light_level, by_id[2].out_pin) == (140, None)
+    assert by_id[0].moving_gate_energy is not None  # still engineering frames
+    d = diag.wait_for(lambda d: int(d.values.get("radar2.bad_out_pin") or 0) >= 5, 20,
+                      "refused OUT pins counted")
+    assert d.values["radar0.firmware"] == "V1.07.22091615"
+    assert d.values["radar1.firmware"] == "V2.04.23022511"
+    assert d.values["radar0.bad_out_pin"] == 0 and d.values["radar1.bad_out_pin"] == 0
+    # The firmware query ran inside enable/end configuration, and reporting resumed.
+    for s in (v1, v2, odd):
+        assert s.sim.commands[:3] == [p.CMD_ENABLE_CONFIG, p.CMD_READ_FIRMWARE,
+                                      p.CMD_END_CONFIG]
+        assert not s.sim.config_mode
