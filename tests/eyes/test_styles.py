@@ -1,20 +1,328 @@
-"""Eye styles as data (services/eyes/styles.py): the built-in file, user files, errors."""
+"""Eye styles (services/eyes/styles.py): as data, pure (the built-in file, user files,
+errors), and in a real Chromium: every expression distinct, gaze, lids, vergence, restyling.
+
+The browser tests run real processes as in production (router, eyes driver, eye-renderer
+with `--style`), the page in Debian's headless Chromium. Everything asserted there is
+measured in screenshots (pixels); `window.eyes` only says when the
+animation has arrived. Screenshots of every expression in each style are
+saved under the artifacts folder (BUDDYBOT_ARTIFACTS, else test-artifacts/)
+in eyes-styles/ for a person to look at (docs/images/eyes-contact-sheet.png
+is made the same way by scripts/eyes_contact_sheet.py).
+"""
 
 from __future__ import annotations
 
+import itertools
 import json
 import subprocess
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import msgspec
+import numpy as np
 import pytest
 
+from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.eyes import styles, wire
+from buddybot.eyes import driver, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.errors import ConfigError
-from buddybot.tools.testing import buddybot_argv
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until, wait_port
+
+from ..conftest import ARTIFACTS
+from .conftest import screenshot
+
+A = m.ExpressionAction
+W, H = 480, 240
+SHOTS = ARTIFACTS / "eyes-styles"
+STYLES = ["glow", "eyeball"]
+DISTINCT = 3.0
+"""Mean absolute difference (0..255, over every pixel and channel) two
+expressions' screenshots must at least have; the closest built-in pairs
+are ~6 (eyeball GRIN / SAD) and ~8 (glow AWAKE / LOOK_RANDOM), the same
+pose twice ~0."""
+
+
+def start(spawn: Callable[..., Process], style: str) -> int:
+    port = free_port()
+    spawn("eye-renderer", "--port", str(port), "--no-browser", "--style", style)
+    wait_port(port, 30)
+    return port
+
+
+def open_page(browser: Any, port: int, eye: str = "both") -> Any:
+    page = browser.new_page(viewport={"width": W, "height": H})
+    page.goto(f"http://127.0.0.1:{port}/eyes?eye={eye}&blink=0&saccade=0")
+    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
+                           timeout=20_000)
+    return page
+
+
+def settled(page: Any) -> None:
+    """The pose change is over and gaze, lids and vergence are at their targets."""
+    page.wait_for_function(
+        """() => {
+          const e = window.eyes, c = e.cur, t = e.target, near = (a, b) => Math.abs(a - b) < 0.05;
+          return c.poseT >= 1 && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
+            && Math.abs(c.verg - e.vergenceGoal()) < 0.003
+            && Math.abs(c.rest - (t.expression === 1 ? 1 : 0)) < 0.003
+            && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top)
+                                        && near(c.lids[s].bottom, t.lids[s].bottom));
+        }""", timeout=15_000)
+
+
+def shot(page: Any, name: str | None = None) -> np.ndarray:
+    return screenshot(page, SHOTS, name)
+
+
+def express(probe: Node, page: Any, action: A, stamp: int) -> None:
+    """Publish an expression (the driver adds its lids) and wait until it is drawn."""
+    probe.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp, action=action))
+    # The driver's lids come on their own topic, maybe after the expression.
+    lids = driver.DEFAULT_LIDS[action].left
+    page.wait_for_function(
+        f"window.eyes.target.expression === {int(action)} "
+        f"&& window.eyes.target.lids.left.top === {lids.top} "
+        f"&& window.eyes.target.lids.right.bottom === {lids.bottom}", timeout=20_000)
+    settled(page)
+
+
+def look(page: Any, yaw: float, pitch: float, distance_cm: float | None = None) -> None:
+    """A direction message as the renderer forwards it (with the driver's
+    target_distance_cm when given), straight into the page."""
+    msg: dict[str, Any] = {"stamp_ns": 1, "yaw": yaw, "pitch": pitch}
+    if distance_cm is not None:
+        msg["target_distance_cm"] = distance_cm
+    page.evaluate("(t) => window.eyes.receive(t)", json.dumps({"topic": "direction", "msg": msg}))
+    settled(page)
+
+
+def eye_mask(img: np.ndarray, style: str) -> np.ndarray:
+    """What moves with the gaze: the glowing shape, or the eyeball's black pupil."""
+    if style == "glow":
+        return img.max(axis=2) > 90
+    return img.max(axis=2) < 12
+
+
+def centroid_x(mask: np.ndarray) -> float:
+    xs = np.nonzero(mask)[1]
+    assert len(xs) > 30, "nothing to measure"
+    return float(xs.mean())
+
+
+def visible_height(img: np.ndarray, style: str) -> int:
+    """Rows of the robot's right eye (viewer's left half) showing any eye: glow or sclera."""
+    half = img[:, : W // 2]
+    mask = half.max(axis=2) > 90 if style == "glow" else half.min(axis=2) > 225
+    return int((mask.sum(axis=1) > 3).sum())
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+@pytest.mark.parametrize("style", STYLES)
+def test_every_expression_looks_different(browser: Any, spawn: Callable[..., Process],
+                                          probe: Node, style: str) -> None:
+    spawn("eyes")
+    page = open_page(browser, start(spawn, style))
+    images = {}
+    for stamp, action in enumerate(A, start=1):
+        express(probe, page, action, stamp)
+        images[action] = shot(page, f"{style}_{styles.EXPRESSIONS[int(action)]}").astype(float)
+    for a, b in itertools.combinations(A, 2):
+        diff = float(np.abs(images[a] - images[b]).mean())
+        assert diff > DISTINCT, f"{style}: {a.name} and {b.name} look alike ({diff:.2f})"
+    # Hearts are pink-red, stars yellow: the colour of the shape, not only its outline.
+    love, star = images[A.ANIMATE_LOVE], images[A.ANIMATE_STAR]
+    assert ((love[..., 2] > 180) & (love[..., 1] < 120)).sum() > 1500
+    assert ((star[..., 2] > 180) & (star[..., 1] > 150) & (star[..., 0] < 120)).sum() > 1500
+    # Asleep: almost nothing lit (a glow style shows a thin line, an eyeball a lash line).
+    awake_lit = (images[A.EYE_AWAKE].max(axis=2) > 90).sum()
+    assert (images[A.EYE_SLEEP].max(axis=2) > 90).sum() < 0.1 * awake_lit
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+@pytest.mark.parametrize("style", STYLES)
+def test_gaze_moves_the_eyes_and_lids_follow(browser: Any, spawn: Callable[..., Process],
+                                             probe: Node, style: str) -> None:
+    spawn("eyes")
+    page = open_page(browser, start(spawn, style))
+    look(page, 0, 0)
+    x0 = centroid_x(eye_mask(shot(page), style))
+    look(page, 30, 0)
+    robot_left = shot(page, f"{style}_yaw+30")
+    look(page, -30, 0)
+    robot_right = shot(page, f"{style}_yaw-30")
+    # +yaw is the robot's left: the viewer's right (+x).
+    assert centroid_x(eye_mask(robot_left, style)) > x0 + 15
+    assert centroid_x(eye_mask(robot_right, style)) < x0 - 15
+    if style == "glow":
+        # Curiosity: the eye on the side looked at is the larger one.
+        lit = robot_left.max(axis=2) > 90
+        assert lit[:, W // 2:].sum() > 1.1 * lit[:, : W // 2].sum()
+    # Drowsy lids follow the gaze: looking up shows more eye than looking down.
+    express(probe, page, A.EYE_SLEEPY, 1)
+    look(page, 0, 25)
+    up = visible_height(shot(page, f"{style}_sleepy_up"), style)
+    look(page, 0, -25)
+    down = visible_height(shot(page, f"{style}_sleepy_down"), style)
+    assert up > down + 4, (up, down)
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+@pytest.mark.parametrize("style", STYLES)
+def test_grin_and_sleepy_lids_narrow_the_eye(browser: Any, spawn: Callable[..., Process],
+                                             probe: Node, style: str) -> None:
+    spawn("eyes")
+    page = open_page(browser, start(spawn, style))
+    heights = {}
+    for stamp, action in enumerate((A.EYE_AWAKE, A.EYE_GRIN, A.EYE_SLEEPY), start=1):
+        express(probe, page, action, stamp)
+        heights[action] = visible_height(shot(page), style)
+    awake = heights[A.EYE_AWAKE]
+    assert awake > 0.3 * H, heights
+    assert heights[A.EYE_GRIN] < 0.85 * awake, heights
+    assert heights[A.EYE_SLEEPY] < 0.8 * awake, heights
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+@pytest.mark.parametrize("style", STYLES)
+def test_a_near_person_makes_the_eyes_converge(browser: Any, spawn: Callable[..., Process],
+                                               style: str) -> None:
+    page = open_page(browser, start(spawn, style))
+
+    def eye_gap() -> float:
+        mask = eye_mask(shot(page), style)
+        return (centroid_x(mask[:, W // 2:]) + W // 2) - centroid_x(mask[:, : W // 2])
+
+    look(page, 0, 0, 300)
+    far = eye_gap()
+    look(page, 0, 0, 30)
+    near = eye_gap()
+    look(page, 0, 0, None)     # distance unknown: no vergence
+    unknown = eye_gap()
+    assert near < far - 8, (near, far)
+    assert abs(unknown - far) < 1.5, (unknown, far)
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+def test_asleep_only_the_glow_breathes(browser: Any, spawn: Callable[..., Process],
+                                       probe: Node) -> None:
+    spawn("eyes")
+    page = open_page(browser, start(spawn, "glow"))
+    express(probe, page, A.EYE_SLEEP, 1)
+    look(page, 30, 10)                         # asleep, the eyes do not follow
+    brightness, columns = [], []
+    for _ in range(9):                         # 4 s: one breath at ~0.25 Hz
+        img = shot(page).astype(float)
+        brightness.append(img.max(axis=2).mean())
+        columns.append(centroid_x(img.max(axis=2) > 40))
+        page.wait_for_timeout(500)
+    assert max(brightness) > 1.15 * min(brightness), brightness
+    assert max(columns) - min(columns) < 1.0, columns    # nothing else moves
+    assert abs(columns[0] - W / 2) < 2.0, columns           # resting in the middle
+    page.close()
+
+
+def param(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(buddybot_argv("param", *args, "--connect", endpoint, "--timeout", "10"),
+                          capture_output=True, text=True, timeout=60)
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+def test_a_live_style_change_restyles_the_page(browser: Any, spawn: Callable[..., Process],
+                                               endpoint: str) -> None:
+    port = start(spawn, "glow")
+    page = open_page(browser, port)
+    settled(page)
+    white = int((shot(page).min(axis=2) > 225).sum())
+    assert page.evaluate("window.eyes.cfg.style.kind") == "glow" and white < 50
+
+    def changed() -> bool:
+        result = param(endpoint, "set", "eye-renderer", "style", '"eyeball"')
+        return result.returncode == 0
+
+    retry_until(changed, 30, 0.5, "eye-renderer params")
+    page.wait_for_function("window.eyes.cfg.style.kind === 'eyeball'", timeout=20_000)
+    settled(page)
+    assert int((shot(page, "live_restyled_eyeball").min(axis=2) > 225).sum()) > 0.1 * W * H
+    assert page.evaluate("window.eyes.stats.connects") == 1      # restyled in place
+
+    refused = param(endpoint, "set", "eye-renderer", "style", '"sparkly"')
+    assert refused.returncode == 1
+    assert "no such style (known: eyeball, glow)" in refused.stderr
+    assert page.evaluate("window.eyes.cfg.style.kind") == "eyeball"
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+def test_the_driver_passes_the_distance_and_the_eyes_converge(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    """End to end: eyes/control's target_distance_cm -> driver -> eyes/direction ->
+    renderer -> page, measured as the gap between the two glowing eyes."""
+    spawn("eyes")
+    page = open_page(browser, start(spawn, "glow"))
+    pub = probe.publisher(keys.EYE_CONTROL)
+    gaps = {}
+    for stamp, cm in enumerate((300, 30), start=1):
+        control = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)
+
+        def arrived(control: m.EyeControl = control, cm: int = cm) -> bool:
+            pub.put(control)
+            return bool(page.evaluate("window.eyes.target.distance") == cm)
+
+        retry_until(arrived, 20, 0.2, f"distance {cm} cm on the page")
+        settled(page)
+        mask = eye_mask(shot(page), "glow")
+        gaps[cm] = (centroid_x(mask[:, W // 2:]) + W // 2) - centroid_x(mask[:, : W // 2])
+    assert gaps[30] < gaps[300] - 8, gaps
+    page.close()
+
+
+@pytest.mark.integration
+@pytest.mark.browser
+def test_a_glow_blink_squashes_and_stretches(browser: Any, spawn: Callable[..., Process],
+                                             tmp_path: Any) -> None:
+    """Halfway through a (slowed-down) blink the glow eye is flatter and wider."""
+    cfg = tmp_path / "eyes.toml"      # no spontaneous blink in the way
+    cfg.write_text("[eye_renderer]\nblink_interval_min_s = 60\nblink_interval_max_s = 120\n")
+    port = free_port()
+    spawn("eye-renderer", "--port", str(port), "--no-browser", "--config", str(cfg))
+    wait_port(port, 30)
+    page = browser.new_page(viewport={"width": W, "height": H})
+    page.goto(f"http://127.0.0.1:{port}/eyes?eye=left&saccade=0")
+    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
+                           timeout=20_000)
+    settled(page)
+
+    def box() -> tuple[int, int]:
+        ys, xs = np.nonzero(shot(page).max(axis=2) > 90)
+        return int(np.ptp(xs)), int(np.ptp(ys))
+
+    width0, height0 = box()
+    start = page.evaluate("window.eyes.serverTime()") + 300
+    blink = {"kind": "blink", "start_ms": start, "duration_ms": 3000,
+             "params": {"close_ms": 1500, "open_ms": 1500, "cause": "test"}}
+    page.evaluate("(t) => window.eyes.receive(t)", json.dumps({"topic": "motion", "msg": blink}))
+    page.wait_for_function(f"window.eyes.serverTime() > {start + 1100}", timeout=10_000)
+    width, height = box()
+    assert height < 0.75 * height0, (height, height0)
+    assert width > width0 + 4, (width, width0)
+    page.close()
+
+
+# --- styles as data -------------------------------------------------------------------
 
 
 def write(tmp_path: Path, data: Any) -> Path:

@@ -1,6 +1,8 @@
-"""`buddybot run eye-renderer` as a real process: HTTP, WebSocket, placement, kiosk windows.
+"""`buddybot run eye-renderer` as a real process: HTTP, WebSocket, placement, kiosk windows,
+its settings on `params/eye-renderer` through `buddybot param` (restart-only fields refused
+naming the field, live looks reaching a connected page at once), and its inbox (pure).
 
-The page itself is exercised in a real browser in test_eyes_browser.py;
+The page itself is exercised in a real browser in test_eye_page.py;
 here a plain aiohttp WebSocket client checks what the server pushes.
 """
 
@@ -12,6 +14,7 @@ import os
 import shutil
 import signal
 import socket
+import subprocess
 import threading
 import time
 import urllib.error
@@ -26,6 +29,8 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.eyes.renderer import Inbox
+from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import (
     Process,
@@ -35,8 +40,6 @@ from buddybot.tools.testing import (
     stuck_websocket,
     wait_port,
 )
-
-pytestmark = pytest.mark.integration
 
 NO_DISPLAY = {"DISPLAY": "", "WAYLAND_DISPLAY": ""}
 
@@ -73,6 +76,7 @@ async def ws_collect(port: int, until: Callable[[list[dict[str, Any]]], bool],
     return got
 
 
+@pytest.mark.integration
 def test_pages_and_static_files_are_served(spawn: Callable[..., Process]) -> None:
     _proc, port = start_renderer(spawn, "--no-browser")
     status, body = http(port, "/eyes?eye=left")
@@ -88,6 +92,7 @@ def test_pages_and_static_files_are_served(spawn: Callable[..., Process]) -> Non
     assert json.loads(http(port, "/healthz")[1])["clients"] == 0
 
 
+@pytest.mark.integration
 def test_websocket_gets_hello_state_and_updates(
     spawn: Callable[..., Process], probe: Node
 ) -> None:
@@ -126,6 +131,7 @@ def test_websocket_gets_hello_state_and_updates(
                                         "target_distance_cm": 80.0}
 
 
+@pytest.mark.integration
 def test_malformed_samples_and_client_junk_are_survived(
     spawn: Callable[..., Process], probe: Node
 ) -> None:
@@ -155,6 +161,7 @@ def test_malformed_samples_and_client_junk_are_survived(
     assert proc.alive()
 
 
+@pytest.mark.integration
 def test_no_display_without_placement_serves_pages_with_a_warning(
     spawn: Callable[..., Process]
 ) -> None:
@@ -164,6 +171,7 @@ def test_no_display_without_placement_serves_pages_with_a_warning(
     assert proc.alive()
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(("args", "message"), [
     (["--eyes", "left"], "no display found"),
     (["--display", "800x480+0+0", "--eyes", "both"], "2 eyes configured (left, right) but only 1"),
@@ -185,6 +193,7 @@ def test_impossible_placement_exits_with_a_clear_error(
         proc.stop()
 
 
+@pytest.mark.integration
 def test_bad_renderer_config_is_refused(tmp_path: Path) -> None:
     cfg = tmp_path / "bad.toml"
     cfg.write_text('[eye_renderer]\niris_color = "blue"\n')
@@ -197,6 +206,7 @@ def test_bad_renderer_config_is_refused(tmp_path: Path) -> None:
         proc.stop()
 
 
+@pytest.mark.integration
 @pytest.mark.browser
 def test_kiosk_windows_open_one_page_per_display(spawn: Callable[..., Process]) -> None:
     """Two (given) displays -> two browser processes, left and right page connected.
@@ -229,6 +239,7 @@ def test_kiosk_windows_open_one_page_per_display(spawn: Callable[..., Process]) 
                                 for b in browsers), 30, 0.2, "kiosk windows gone")
 
 
+@pytest.mark.integration
 def test_a_window_that_exits_is_reopened(spawn: Callable[..., Process]) -> None:
     """A browser that dies at once (here `false`) is reopened with a backoff; the
     renderer itself stays up and keeps serving."""
@@ -308,6 +319,7 @@ class Flood:
         return self.last
 
 
+@pytest.mark.integration
 def test_foreign_origin_websocket_is_refused_with_403(
     spawn: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -344,6 +356,7 @@ def test_foreign_origin_websocket_is_refused_with_403(
     assert proc.alive()
 
 
+@pytest.mark.integration
 def test_pages_over_max_pages_are_refused_with_a_reason(
     spawn: Callable[..., Process], tmp_path: Path
 ) -> None:
@@ -378,6 +391,7 @@ def test_pages_over_max_pages_are_refused_with_a_reason(
     assert proc.alive()
 
 
+@pytest.mark.integration
 def test_a_page_that_stops_reading_is_dropped(
     spawn: Callable[..., Process], probe: Node
 ) -> None:
@@ -419,6 +433,7 @@ def test_a_page_that_stops_reading_is_dropped(
     assert proc.alive()
 
 
+@pytest.mark.integration
 def test_flood_and_stuck_pages_leave_a_real_page_fresh(
     spawn: Callable[..., Process], probe: Node
 ) -> None:
@@ -476,3 +491,146 @@ def test_flood_and_stuck_pages_leave_a_real_page_fresh(
     assert info["clients"] <= 16 and info["refused"] >= 60 - 15, info
     assert flood.count > 1000, flood.count
     assert proc.alive()
+
+
+# --- settings on `params/eye-renderer`, through `buddybot param` ---------------------------
+
+
+RESTART = {"host", "port", "browser", "browser_path", "eyes", "left_display", "right_display",
+           "style_file"}
+"""Where the pages are served and the kiosk windows: decided once at start."""
+
+
+LIVE_HERE = {"iris_color", "max_yaw_deg", "max_pitch_deg", "max_pages", "page_stall_s",
+             "allowed_origins"}
+"""Live fields this file checks (the motion's knobs are live too, tested with it)."""
+
+
+def bb(endpoint: str, *args: str, timeout: str = "10") -> subprocess.CompletedProcess[str]:
+    return subprocess.run(buddybot_argv(*args, "--connect", endpoint, "--timeout", timeout),
+                          capture_output=True, text=True, timeout=60)
+
+
+def start(spawn: Callable[..., Process], endpoint: str) -> int:
+    """An eye-renderer serving pages only, answering on `params/eye-renderer`."""
+    _, port = start_renderer(spawn, "--no-browser")
+    retry_until(lambda: bb(endpoint, "param", "list", "eye-renderer",
+                           timeout="1").returncode == 0, 30, 0.2, "eye-renderer params")
+    return port
+
+
+@pytest.mark.integration
+def test_list_shows_every_field_and_restart_only_ones_are_refused(
+        spawn: Callable[..., Process], endpoint: str) -> None:
+    port = start(spawn, endpoint)
+    listed = bb(endpoint, "param", "list", "eye-renderer")
+    assert listed.returncode == 0, listed.stderr
+    assert listed.stdout.splitlines()[0] == "[eye_renderer] of eye-renderer"
+    rows = {line.split()[0]: line for line in listed.stdout.splitlines()[1:]}
+    assert set(rows) == set(EyeRendererSettings.__struct_fields__)
+    assert rows["port"].split()[1] == str(port) and rows["port"].endswith("restart")
+    assert rows["iris_color"].endswith("live")
+    as_json = {p["name"]: p for p in json.loads(
+        bb(endpoint, "param", "list", "eye-renderer", "--json").stdout)}
+    assert {name for name, p in as_json.items() if not p["live"]} == RESTART
+    assert {name for name, p in as_json.items() if p["live"]} >= LIVE_HERE
+    assert as_json["browser"]["value"] is False  # what it runs with: --no-browser
+
+    for field, value in (("port", str(free_port())), ("host", "0.0.0.0"),
+                         ("browser", "true"), ("left_display", "2")):
+        refused = bb(endpoint, "param", "set", "eye-renderer", field, value)
+        assert refused.returncode == 1, refused.stderr
+        assert f"eye_renderer.{field} needs a restart" in refused.stderr
+        assert "Traceback" not in refused.stderr
+        assert len(refused.stderr.strip().splitlines()) == 1, refused.stderr
+    assert bb(endpoint, "param", "get", "eye-renderer", "port").stdout.strip() == str(port)
+    out_of_range = bb(endpoint, "param", "set", "eye-renderer", "max_yaw_deg", "120")
+    assert out_of_range.returncode == 1 and "allowed > 0 and <= 90" in out_of_range.stderr
+
+
+async def hello_after_change(port: int, change: Callable[[], None],
+                             timeout: float = 20.0) -> list[dict[str, Any]]:
+    """Connect a page, wait for its first hello, make `change`, and collect until a
+    second hello arrives."""
+    got: list[dict[str, Any]] = []
+    async with aiohttp.ClientSession() as session, session.ws_connect(
+            f"http://127.0.0.1:{port}/ws?eye=both") as ws, asyncio.timeout(timeout):
+        first = json.loads((await ws.receive()).data)
+        assert first["topic"] == "hello" and first["msg"]["iris_color"] == "#2f7fd0"
+        await asyncio.get_running_loop().run_in_executor(None, change)
+        while sum(x["topic"] == "hello" for x in got) < 1:
+            got.append(json.loads((await ws.receive()).data))
+    return [first, *got]
+
+
+@pytest.mark.integration
+def test_live_looks_reach_a_connected_page(spawn: Callable[..., Process], endpoint: str,
+                                           probe: Node) -> None:
+    port = start(spawn, endpoint)
+
+    def change() -> None:
+        result = bb(endpoint, "param", "set", "eye-renderer", "iris_color", '"#a05a2c"')
+        assert result.returncode == 0, result.stderr
+        assert "(applied)" in result.stdout
+
+    got = asyncio.run(hello_after_change(port, change))
+    hellos = [x["msg"] for x in got if x["topic"] == "hello"]
+    assert hellos[-1]["iris_color"] == "#a05a2c"
+    assert hellos[-1]["server_id"] == hellos[0]["server_id"]  # the same server, restyled
+    reply = probe.call(keys.PARAMS, m.ParamRequest(op="get", name="iris_color"),
+                       node="eye-renderer")
+    assert isinstance(reply, m.ParamReply) and reply.params[0].value == "#a05a2c"
+
+
+@pytest.mark.integration
+def test_a_lower_page_limit_applies_to_the_next_page(spawn: Callable[..., Process],
+                                                     endpoint: str) -> None:
+    port = start(spawn, endpoint)
+    assert bb(endpoint, "param", "set", "eye-renderer", "max_pages", "1").returncode == 0
+
+    async def two_pages() -> tuple[str, int | None]:
+        async with aiohttp.ClientSession() as session, session.ws_connect(
+                f"http://127.0.0.1:{port}/ws?eye=left") as first, asyncio.timeout(20):
+            hello = json.loads((await first.receive()).data)["topic"]
+            async with session.ws_connect(f"http://127.0.0.1:{port}/ws?eye=right") as second:
+                msg = await second.receive()
+                assert msg.type == aiohttp.WSMsgType.CLOSE, msg
+                return hello, second.close_code
+
+    # The change goes through the renderer's event loop: retried until it took effect.
+    def refused() -> bool:
+        hello, code = asyncio.run(two_pages())
+        return hello == "hello" and code == 1013
+
+    retry_until(refused, 20, 0.2, "a second page refused with code 1013")
+
+
+def test_inbox_hands_the_loop_only_the_newest_per_slot() -> None:
+    """A flood from another thread reaches the loop as a few small batches with
+    the newest value of each slot, in arrival order; nothing queues per sample."""
+    batches: list[list[m.Message]] = []
+
+    async def scenario() -> Inbox:
+        loop = asyncio.get_running_loop()
+        done = asyncio.Event()
+        inbox = Inbox(loop, lambda batch: (batches.append(batch), done.set()))
+
+        def flood() -> None:
+            for i in range(20_000):
+                inbox.put(m.EyesDirection(stamp_ns=i, yaw=i % 90, pitch=0.0))
+                if i % 1000 == 0:
+                    inbox.put(m.PupilControl(stamp_ns=i, dilation_percentage=i % 100))
+            inbox.put(m.EyesDirection(stamp_ns=99_999, yaw=1.0, pitch=2.0))
+
+        await loop.run_in_executor(None, flood)
+        while not batches or batches[-1][-1].stamp_ns != 99_999:
+            done.clear()
+            await asyncio.wait_for(done.wait(), 10)
+        return inbox
+
+    inbox = asyncio.run(scenario())
+    assert inbox.received == 20_000 + 20 + 1
+    assert sum(len(b) for b in batches) + inbox.coalesced == inbox.received
+    assert all(len(b) <= 2 for b in batches)          # one per slot, never a backlog
+    assert len(batches) < 2_000                      # not one wake-up per sample
+    assert batches[-1][-1] == m.EyesDirection(stamp_ns=99_999, yaw=1.0, pitch=2.0)

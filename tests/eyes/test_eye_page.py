@@ -42,7 +42,7 @@ SHOTS = ARTIFACTS / "eyes"
 
 def start_renderer(spawn: Callable[..., Process], port: int | None = None) -> tuple[Process, int]:
     """A renderer in the eyeball style: these tests measure its white sclera and
-    black pupil (the glow style, the default, is tested in test_eyes_styles_browser)."""
+    black pupil (the glow style, the default, is tested in test_styles.py)."""
     port = port or free_port()
     proc = spawn("eye-renderer", "--port", str(port), "--no-browser", "--style", "eyeball")
     wait_port(port, 30)

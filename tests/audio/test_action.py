@@ -1,4 +1,5 @@
-"""Both audio services as real processes, a real router, the real miniaudio null device.
+"""`buddybot run audio` (the `audio/play_sound` action server) with its player: both
+services as real processes, a real router, the real miniaudio null device.
 
 The player writes every sample it hands to the device to a tap file, so a
 test can check the produced audio against the file it asked for.
@@ -17,7 +18,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.errors import ServiceError
 from buddybot.tools.testing import retry_until
 
-from .conftest import RATE, beep_config, final, send_goal, tone, write_wav
+from .conftest import beep_config, final, send_goal, tone, write_wav
 
 pytestmark = pytest.mark.integration
 
@@ -66,41 +67,6 @@ def test_cancel_ends_playback_at_once(audio, probe, tmp_path) -> None:
     # ...and what was handed over is the file's beginning, far from its end.
     assert 0 < len(produced) < samples.shape[0] // 2
     assert np.array_equal(produced, samples[: len(produced)])
-
-
-def test_player_stop_pause_resume(audio, probe, tmp_path) -> None:
-    samples = tone(1.0)
-    path = write_wav(tmp_path / "direct.wav", samples)
-    a = audio('[audio.sounds]\ndirect = "direct.wav"\n', action=False)  # allows tmp_path
-    ok = retry_until(lambda: probe.call(keys.PLAY_FILE, m.PlayAudioFile(path=str(path))),
-                     what="play_file answered")
-    assert ok.success and "(1.000 s)" in ok.message, ok
-    retry_until(lambda: len(a.tap_samples()) > RATE // 10, what="some audio")
-    paused = probe.call(keys.AUDIO_PAUSE, m.Trigger())
-    assert paused.success
-    held = len(a.tap_samples())
-    time.sleep(0.4)  # the scenario: stay paused a while (not a synchronisation)
-    assert len(a.tap_samples()) == held
-    assert [b.data for b in a.free.messages][-1] is False  # paused is still busy
-    assert probe.call(keys.AUDIO_RESUME, m.Trigger()).success
-    a.free.wait_for(lambda b: b.data and b.stamp_ns > 0 and len(a.free.messages) >= 3,
-                    what="free after the end")
-    assert [b.data for b in a.free.messages] == [True, False, True]
-    assert not probe.call(keys.AUDIO_RESUME, m.Trigger()).success  # nothing paused
-    assert not probe.call(keys.AUDIO_PAUSE, m.Trigger()).success  # nothing playing
-    # stop while playing: free at once, the rest never handed over
-    assert probe.call(keys.PLAY_FILE, m.PlayAudioFile(path=str(path))).success
-    retry_until(lambda: len(a.tap_samples()) > samples.shape[0] + RATE // 20, what="audio")
-    stopped = probe.call(keys.AUDIO_STOP, m.Trigger())
-    assert stopped.success and stopped.message == "stopped"
-    at_stop = len(a.tap_samples())
-    a.free.wait_for(lambda b: len(a.free.messages) >= 5 and b.data, what="free after stop")
-    assert probe.call(keys.AUDIO_STOP, m.Trigger()).message == "nothing was playing"
-    a.player.stop()
-    produced = a.tap_samples()
-    assert len(produced) == at_stop < 2 * samples.shape[0]
-    assert np.array_equal(produced[: samples.shape[0]], samples)  # first play, whole
-    assert np.array_equal(produced[samples.shape[0]:], samples[: at_stop - samples.shape[0]])
 
 
 def test_bad_sounds_are_refused_or_aborted_naming_the_file(audio, probe, tmp_path) -> None:

@@ -1,4 +1,5 @@
-"""The bridge as a real process between a real router and a Foxglove WebSocket client.
+"""`buddybot run foxglove` (services/foxglove/service.py): the URLs it prints (pure), and
+the bridge as a real process between a real router and a Foxglove WebSocket client.
 
 The client speaks the Foxglove protocol itself (`ws_client.py`), as the
 app does: it reads the advertised channels, subscribes, and decodes the
@@ -23,12 +24,11 @@ import pytest
 
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
+from buddybot.foxglove.service import urls
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
 
 from .ws_client import CallFailed, FoxgloveClient
-
-pytestmark = pytest.mark.integration
 
 PREFIX = "buddybot/buddy"
 PRESENCE = f"{PREFIX}/radar/presence"
@@ -109,6 +109,7 @@ async def until_received(client: FoxgloveClient, sub_id: int, publish: Callable[
     return got[0][1]
 
 
+@pytest.mark.integration
 def test_keys_annotations_images_and_services_reach_a_foxglove_client(
         bridge: int, probe: Node) -> None:
     presence_pub = probe.publisher(keys.PRESENCE)
@@ -186,6 +187,7 @@ async def until_received_channel(client: FoxgloveClient, topic: str,
         await client.pump(0.3)
 
 
+@pytest.mark.integration
 def test_images_are_compressed_rate_limited_and_pulled_only_while_watched(
         bridge: int, probe: Node) -> None:
     source = ImageSource(probe)
@@ -237,6 +239,7 @@ def test_images_are_compressed_rate_limited_and_pulled_only_while_watched(
         source.close()
 
 
+@pytest.mark.integration
 def test_a_busy_port_exits_1_with_one_line(endpoint: str) -> None:
     with socket.socket() as taken:
         taken.bind(("127.0.0.1", 0))
@@ -252,3 +255,11 @@ def test_a_busy_port_exits_1_with_one_line(endpoint: str) -> None:
     assert lines[0].startswith(f"buddybot foxglove: cannot serve on 127.0.0.1:{port}: the "
                                "port is taken by ")
     assert f"pid {os.getpid()} (Address already in use)" in lines[0]
+
+
+def test_urls_name_a_reachable_host_and_open_the_app_on_it() -> None:
+    ws, app = urls("0.0.0.0", 8765)
+    assert ws == "ws://127.0.0.1:8765"
+    assert app == ("https://app.foxglove.dev/?ds=foxglove-websocket"
+                   "&ds.url=ws%3A%2F%2F127.0.0.1%3A8765")
+    assert urls("buddy.local", 9000)[0] == "ws://buddy.local:9000"
