@@ -17,7 +17,7 @@ from buddybot.contract import jpeg
 from buddybot.contract import messages as m
 from tests.camera import jpegs
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "camera" / "data"
 REAL = [DATA / "grace_hopper.jpg", face_path()]
 
 
