@@ -38,7 +38,19 @@ TIMING = pytest.mark.xdist_group("timing")
 network stack (namespaces, veth and TAP devices): pytest-xdist (`--dist loadgroup`)
 runs them all on one worker, so no two of them overlap and stretch each other's
 times on a two-core machine."""
+QUIET = pytest.mark.quiet
+"""For tests that measure frame times in a browser (two pages drawing one blink
+together): even one other busy worker on a two-core machine delays Chromium's
+frames by tens of ms. `scripts/test.sh` runs them alone (`--phase quiet`, one
+process), before everything else runs in parallel (`--phase rest`)."""
 TESTS = Path(__file__).resolve().parent
+
+
+def pytest_addoption(parser: pytest.Parser) -> None:
+    parser.addoption(
+        "--phase", choices=("all", "quiet", "rest"), default="all",
+        help="all: every selected test; quiet: only those marked `quiet` (run them "
+             "on an otherwise idle machine); rest: all but those (scripts/test.sh)")
 TESTING_MODULE = Path(__file__).resolve().parents[1] / "services" / "tools" / "testing.py"
 
 
@@ -53,12 +65,22 @@ def missing_markers(item: pytest.Item) -> list[str]:
     return need
 
 
-def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Tests with a router, processes or a browser first, the pure ones after.
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Keep the tests of this `--phase`, then order them: tests with a router,
+    processes or a browser first, the pure ones after.
 
     They take seconds each, the pure ones milliseconds: started first, the slow
     ones overlap on the pytest-xdist workers and the pure ones fill the gaps at
     the end, instead of one worker finishing a long system test alone."""
+    phase = config.getoption("phase")
+    if phase != "all":
+        keep = [i for i in items if (i.get_closest_marker("quiet") is not None) == (
+            phase == "quiet")]
+        dropped = [i for i in items if i not in keep]
+        if dropped:
+            config.hook.pytest_deselected(items=dropped)
+        items[:] = keep
+
     def pure(item: pytest.Item) -> bool:
         return not (item.get_closest_marker("integration") or item.get_closest_marker("browser"))
 

@@ -39,7 +39,11 @@ def test_goal_succeeds_after_the_sounds_length_and_the_samples_match(
     assert [s.state for s in mine][:2] == ["ACCEPTED", "PLAYING"]
     progress = [s.progress for s in mine if s.state == "PLAYING"]
     assert progress == sorted(progress) and len(progress) >= 3
-    a.free.wait_for(lambda b: not b.data, what="device busy")
+    busy = a.free.wait_for(lambda b: not b.data, what="device busy")
+    # The goal's final status and `device_free` are two keys: wait for the device
+    # to be free again after the busy flag, then check nothing came after.
+    a.free.wait_for(lambda b: b.data and b.stamp_ns > busy.stamp_ns, timeout=15,
+                    what="device free again")
     flags = [b.data for b in a.free.messages]
     assert flags[-2:] == [False, True], flags
     a.player.stop()  # the tap file is complete once the player exited

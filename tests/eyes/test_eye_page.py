@@ -30,7 +30,7 @@ from buddybot.tools.testing import (
     wait_port,
 )
 
-from ..conftest import ARTIFACTS, TIMING
+from ..conftest import ARTIFACTS, QUIET
 from .conftest import screenshot
 
 pytestmark = [pytest.mark.integration, pytest.mark.browser]
@@ -214,7 +214,7 @@ def test_screenshots_of_every_expression(
     page.close()
 
 
-@TIMING  # blink and saccade durations
+@QUIET  # blink and saccade durations
 def test_page_blinks_and_saccades_on_its_own(
     browser: Any, spawn: Callable[..., Process]
 ) -> None:

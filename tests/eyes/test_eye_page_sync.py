@@ -25,9 +25,9 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, free_port, wait_port
 
-from ..conftest import TIMING
+from ..conftest import QUIET
 
-pytestmark = [pytest.mark.integration, pytest.mark.browser, TIMING]  # frame times
+pytestmark = [pytest.mark.integration, pytest.mark.browser, QUIET]  # frame times
 
 FRAME_MS = 17.0
 """One frame at 60 Hz: two screens blinking within it blink together."""
