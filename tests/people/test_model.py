@@ -218,7 +218,8 @@ def test_the_state_of_a_person() -> None:
 
 def test_left_carries_the_final_state() -> None:
     m = PeopleModel(SETTINGS)
-    events = [e for i in [radar(0.0, 1.0), radar_out(1.0), tick(9.0)] for e in m.step(i)]
+    inputs: list[Input] = [radar(0.0, 1.0), radar_out(1.0), tick(9.0)]
+    events = [e for i in inputs for e in m.step(i)]
     assert isinstance(events[-1], Left)
     assert events[-1].person.engagement is Engagement.GONE
     assert events[-1].person.seen_by is Sensor.NONE

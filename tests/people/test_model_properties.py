@@ -218,9 +218,12 @@ TestPeopleModelProperties = World.TestCase
 SOURCES = st.sampled_from(["radar", "camera", "both"])
 
 
-def sighting(start: int, source: str, length: int, distance: float) -> list[Input]:
+Sample = RadarSeen | FaceSeen
+
+
+def sighting(start: int, source: str, length: int, distance: float) -> list[Sample]:
     """Someone shown by `source` from `start` for `length` ns (faces at 10/s)."""
-    inputs: list[Input] = []
+    inputs: list[Sample] = []
     if source in ("radar", "both"):
         inputs.append(RadarSeen(start, True, distance))
     if source in ("camera", "both"):
@@ -232,10 +235,10 @@ def sighting(start: int, source: str, length: int, distance: float) -> list[Inpu
 
 
 @st.composite
-def timelines(draw: st.DrawFn) -> tuple[list[Input], int]:
+def timelines(draw: st.DrawFn) -> tuple[list[Sample], int]:
     """Sightings with gaps between them, and how many of the gaps are long enough
     (with both sensors lost for at least `absence_hold_s`) to end a visit."""
-    inputs: list[Input] = []
+    inputs: list[Sample] = []
     t, long_gaps = ns(10.0), 0
     for n in range(draw(st.integers(1, 6))):
         if n:
@@ -261,7 +264,7 @@ def run(inputs: list[Input]) -> list[PersonEvent]:
 @settings(max_examples=300, deadline=None)
 @given(timelines())
 def test_a_gap_shorter_than_the_absence_hold_is_the_same_person(
-        timeline: tuple[list[Input], int]) -> None:
+        timeline: tuple[list[Sample], int]) -> None:
     inputs, long_gaps = timeline
     events = run([*inputs, Tick(inputs[-1].stamp_ns + TIMEOUT + ABSENCE)])
     assert [e.person_id for e in events if isinstance(e, Arrived)] == \
@@ -273,7 +276,7 @@ def test_a_gap_shorter_than_the_absence_hold_is_the_same_person(
 @settings(max_examples=300, deadline=None)
 @given(timelines(), st.lists(st.integers(0, ns(40.0)), max_size=30), st.data())
 def test_how_often_ticks_come_changes_no_event(
-        timeline: tuple[list[Input], int], offsets: list[int], data: st.DataObject) -> None:
+        timeline: tuple[list[Sample], int], offsets: list[int], data: st.DataObject) -> None:
     """Ticks anywhere between the samples (never ahead of the next one) leave the
     events, their order and their stamps as they are."""
     inputs, _ = timeline

@@ -9,33 +9,34 @@ from buddybot.people.zones import Zone, zone_after, zone_of
 
 S = PeopleSettings(intimate_limit_m=0.45, personal_limit_m=1.2, social_limit_m=3.6,
                    zone_margin_m=0.1)
-I, P, SO, PU = Zone.INTIMATE, Zone.PERSONAL, Zone.SOCIAL, Zone.PUBLIC
+INT, PER, SOC, PUB = Zone.INTIMATE, Zone.PERSONAL, Zone.SOCIAL, Zone.PUBLIC
 
 
 @pytest.mark.parametrize(("distance_m", "zone"), [
-    (0.0, I), (0.44, I), (0.45, P), (1.19, P), (1.2, SO), (3.59, SO), (3.6, PU), (50.0, PU)])
+    (0.0, INT), (0.44, INT), (0.45, PER), (1.19, PER), (1.2, SOC), (3.59, SOC), (3.6, PUB),
+    (50.0, PUB)])
 def test_zone_of(distance_m: float, zone: Zone) -> None:
     assert zone_of(distance_m, S) is zone
 
 
 @pytest.mark.parametrize(("current", "distance_m", "zone"), [
-    (P, 1.25, P),   # past the limit, not by the margin
-    (P, 1.3, SO),   # by the margin
-    (SO, 1.15, SO),
-    (SO, 1.09, P),
-    (I, 0.5, I),
-    (I, 0.55, P),
-    (P, 0.36, P),
-    (P, 0.34, I),
-    (SO, 3.65, SO),
-    (SO, 3.7, PU),
-    (PU, 3.55, PU),
-    (PU, 3.49, SO),
-    (I, 3.65, SO),  # a jump: every limit crossed needs the margin, the last one too
-    (I, 3.7, PU),
-    (PU, 0.3, I),
-    (PU, 0.4, P),
-    (SO, 2.0, SO),
+    (PER, 1.25, PER),  # past the limit, not by the margin
+    (PER, 1.3, SOC),  # by the margin
+    (SOC, 1.15, SOC),
+    (SOC, 1.09, PER),
+    (INT, 0.5, INT),
+    (INT, 0.55, PER),
+    (PER, 0.36, PER),
+    (PER, 0.34, INT),
+    (SOC, 3.65, SOC),
+    (SOC, 3.7, PUB),
+    (PUB, 3.55, PUB),
+    (PUB, 3.49, SOC),
+    (INT, 3.65, SOC),  # a jump: every limit crossed needs the margin, the last one too
+    (INT, 3.7, PUB),
+    (PUB, 0.3, INT),
+    (PUB, 0.4, PER),
+    (SOC, 2.0, SOC),
 ])
 def test_zone_after(current: Zone, distance_m: float, zone: Zone) -> None:
     assert zone_after(current, distance_m, S) is zone
