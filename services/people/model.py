@@ -291,19 +291,18 @@ class PeopleModel:
         at = self._now
         seen = self._seen_by(at)
         source = Sensor.CAMERA if face is not None else Sensor.RADAR
-        measured = distance_m is not None and source in seen
         # The radar's distance counts only while the camera does not see the face.
-        if source is Sensor.RADAR and Sensor.CAMERA in seen:
-            measured = False
+        trusted = Sensor.CAMERA if Sensor.CAMERA in seen else Sensor.RADAR
+        measured = distance_m if source is trusted and source in seen else None
         out: list[PersonEvent] = []
         track = self._track
         if track is None:
-            if not measured or distance_m is None:
+            if measured is None:
                 return []
-            track = self._arrive(stamp, distance_m, seen)
+            track = self._arrive(stamp, measured, seen)
             out.append(Arrived(track.id, stamp, track.person()))
-        elif measured and distance_m is not None:
-            out += self._move(track, stamp, distance_m)
+        elif measured is not None:
+            out += self._move(track, stamp, measured)
         if face is not None and Sensor.CAMERA in seen:
             track.yaw_rad, track.pitch_rad = face.yaw_rad, face.pitch_rad
         return out + self._evaluate(at, stamp)

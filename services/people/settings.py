@@ -25,26 +25,19 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     personal_limit_m: Limit = 1.2
     # Hall's social zone ends at 3.6 m (12 ft): beyond it nobody is talking to the robot.
     social_limit_m: Limit = 3.6
-    # The face distance wobbles by a few % (~0.1 m at the social limit), so a person
-    # standing on a limit stays in one zone; 0.15 m is a third of the narrowest zone.
+    # Above the face distance's wobble (~0.1 m at the social limit), a third of the intimate zone.
     zone_margin_m: Annotated[float, msgspec.Meta(
         ge=0.0, le=2.0, description="metres: a zone is left only this far past its limit")
     ] = 0.15
-    # Several frames at any usable camera rate (the detector sends only when it sees
-    # a face): a missed detection or a blink does not lose the camera's view.
+    # Several frames at any usable camera rate: a missed detection does not lose the face.
     face_timeout_s: Annotated[float, msgspec.Meta(
         gt=0.0, le=3600.0,
         description="seconds: a face older than this no longer counts as seen")] = 0.5
-    # A glance in passing lasts well under a second; someone who looks at the robot
-    # from social distance for 1 s means it (the controller greets after as long).
+    # A glance in passing lasts under a second (the controller greets after as long).
     engage_dwell_s: Hold = 1.0
-    # Looking at a phone or a step back for a moment keeps the engagement; 2 s
-    # without the face in the social zone ends it.
+    # A look at a phone or a step back for a moment keeps the engagement.
     disengage_hold_s: Hold = 2.0
-    # A visitor who turns away or steps out of both sensors' view for a few seconds
-    # is the same person; 5 s is below the simulated visitor's ~10 s between visits,
-    # so each demo visit is a new person. (The radar reports OUT_OF_RANGE already
-    # after its own absence hold.)
+    # Out of view for a moment is the same visit; below the simulated ~10 s between visits.
     absence_hold_s: Hold = 5.0
 
     def __post_init__(self) -> None:
