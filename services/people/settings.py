@@ -1,0 +1,46 @@
+"""The people model's settings (pure msgspec struct, no config table yet).
+
+Zone limits follow Hall's proxemics (the far edge of each zone, metres);
+timings are seconds. The reason for each default is next to it.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import msgspec
+
+Limit = Annotated[float, msgspec.Meta(
+    gt=0.0, le=20.0, description="metres: far edge of a zone (a room is within 20 m)")]
+Hold = Annotated[float, msgspec.Meta(
+    ge=0.0, le=3600.0, description="seconds: how long a condition must last (0: at once)")]
+
+
+class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """Zones (with hysteresis) and the timings of presence and engagement."""
+
+    # Hall's intimate zone ends at 45 cm (18 in): closer is touching distance.
+    intimate_limit_m: Limit = 0.45
+    # Hall's personal zone ends at 1.2 m (4 ft): a conversation with a friend.
+    personal_limit_m: Limit = 1.2
+    # Hall's social zone ends at 3.6 m (12 ft): beyond it nobody is talking to the robot.
+    social_limit_m: Limit = 3.6
+    # Above the face distance's wobble (~0.1 m at the social limit), a third of the intimate zone.
+    zone_margin_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=2.0, description="metres: a zone is left only this far past its limit")
+    ] = 0.15
+    # Several frames at any usable camera rate: a missed detection does not lose the face.
+    face_timeout_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0,
+        description="seconds: a face older than this no longer counts as seen")] = 0.5
+    # A glance in passing lasts under a second (the controller greets after as long).
+    engage_dwell_s: Hold = 1.0
+    # A look at a phone or a step back for a moment keeps the engagement.
+    disengage_hold_s: Hold = 2.0
+    # Out of view for a moment is the same visit; below the simulated ~10 s between visits.
+    absence_hold_s: Hold = 5.0
+
+    def __post_init__(self) -> None:
+        if not self.intimate_limit_m < self.personal_limit_m < self.social_limit_m:
+            raise ValueError("zone limits must grow: intimate_limit_m < personal_limit_m "
+                             "< social_limit_m")
