@@ -260,6 +260,17 @@ CONTROLLER_STATE = Topic(
     "controller/state", "engagement phase, visit, sounds, why the controller waits; on change",
     type=m.ControllerState, qos=STATE, latched=True,
 )
+PEOPLE_STATE = Topic(
+    "people/state", "persons present: distance, zone, engagement; on change",
+    type=m.PeopleState, qos=STATE, latched=True,
+)
+PEOPLE_EVENTS = Topic(
+    "people/events", "every arrival, zone change, engagement change and departure",
+    type=m.PersonEvent, qos=STREAM,
+)
+"""Not latched, so STREAM and not STATE (which is always latched): a late joiner must
+not take an old ARRIVED for a new one. An event lost under congestion is not
+fetched again; `people/state` (latched) is what converges."""
 PLAY_SOUND = Service(
     "audio/play_sound", "action goal: play a named sound",
     request=m.PlaySound, reply=m.PlaySoundReply,
@@ -300,7 +311,8 @@ NODE_INFO = Service(
 
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
-    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
+    PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
     PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS,

@@ -357,6 +357,55 @@ class ControllerState(Message):
     last_farewell_ns: StampNs | None = None
 
 
+# --- people ------------------------------------------------------------------
+
+Zone = Literal["INTIMATE", "PERSONAL", "SOCIAL", "PUBLIC"]
+"""Hall's proxemic zone, near to far (docs/people.md)."""
+SeenBy = Literal["NONE", "RADAR", "CAMERA", "BOTH"]
+"""Which sensors show a person now; NONE while missed but not yet gone."""
+Engagement = Literal["NONE", "ENGAGING", "ENGAGED", "DISENGAGING", "GONE"]
+PersonEventKind = Literal["ARRIVED", "ZONE_CHANGED", "ENGAGEMENT_CHANGED", "LEFT"]
+PersonId = Annotated[int, msgspec.Meta(ge=1, description="visits since start, never reused")]
+Yaw = Annotated[float, msgspec.Meta(ge=-3.15, le=3.15, description="rad, + = robot's left")]
+Pitch = Annotated[float, msgspec.Meta(ge=-1.58, le=1.58, description="rad, + = up")]
+MAX_PEOPLE = 64
+"""Most persons one `PeopleState` carries (the sensors show one today)."""
+
+
+class Person(Message):
+    """One person present, as the people service sees them now."""
+
+    id: PersonId
+    distance_m: Metres
+    zone: Zone
+    seen_by: SeenBy
+    zone_since_ns: StampNs
+    arrived_ns: StampNs
+    engagement: Engagement
+    engagement_since_ns: StampNs
+    yaw_rad: Yaw | None = None
+    pitch_rad: Pitch | None = None
+    name: Annotated[str, msgspec.Meta(max_length=256)] | None = None
+
+
+class PeopleState(Message):
+    """Every person present: latched, published on change."""
+
+    stamp_ns: StampNs
+    people: Annotated[list[Person], msgspec.Meta(max_length=MAX_PEOPLE)] = msgspec.field(
+        default_factory=list)
+
+
+class PersonEvent(Message):
+    """Something happened to one person; `zone` and `engagement` are theirs after it."""
+
+    stamp_ns: StampNs
+    person_id: PersonId
+    kind: PersonEventKind
+    zone: Zone
+    engagement: Engagement
+
+
 # --- system ----------------------------------------------------------------
 
 
@@ -463,6 +512,9 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     PupilControl,
     EyeLidControl,
     ControllerState,
+    Person,
+    PeopleState,
+    PersonEvent,
     PlaySound,
     PlaySoundReply,
     PlaySoundStatus,

@@ -1,7 +1,10 @@
-"""The people model's settings (pure msgspec struct, no config table yet).
+"""Config table `[people]` (pure msgspec struct).
 
 Zone limits follow Hall's proxemics (the far edge of each zone, metres);
-timings are seconds. The reason for each default is next to it.
+timings are seconds. The reason for each default is next to it. The zone
+and timing fields are live (`buddybot param set people ...`): the model
+reads its settings on every input and tick. `camera` and `tick_s` are read
+once at start.
 """
 
 from __future__ import annotations
@@ -11,14 +14,21 @@ from typing import Annotated
 import msgspec
 
 Limit = Annotated[float, msgspec.Meta(
-    gt=0.0, le=20.0, description="metres: far edge of a zone (a room is within 20 m)")]
+    gt=0.0, le=20.0, description="metres: far edge of a zone (a room is within 20 m)",
+    extra={"live": True})]
 Hold = Annotated[float, msgspec.Meta(
-    ge=0.0, le=3600.0, description="seconds: how long a condition must last (0: at once)")]
+    ge=0.0, le=3600.0, description="seconds: how long a condition must last (0: at once)",
+    extra={"live": True})]
 
 
 class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
-    """Zones (with hysteresis) and the timings of presence and engagement."""
+    """`[people]`: the camera followed, zones (with hysteresis), and the timings of
+    presence and engagement."""
 
+    # The controller's default camera: both follow the same face.
+    camera: Annotated[str, msgspec.Meta(
+        min_length=1, max_length=64, description="camera whose followed face is read")
+    ] = "front"
     # Hall's intimate zone ends at 45 cm (18 in): closer is touching distance.
     intimate_limit_m: Limit = 0.45
     # Hall's personal zone ends at 1.2 m (4 ft): a conversation with a friend.
@@ -27,18 +37,22 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     social_limit_m: Limit = 3.6
     # Above the face distance's wobble (~0.1 m at the social limit), a third of the intimate zone.
     zone_margin_m: Annotated[float, msgspec.Meta(
-        ge=0.0, le=2.0, description="metres: a zone is left only this far past its limit")
-    ] = 0.15
+        ge=0.0, le=2.0, description="metres: a zone is left only this far past its limit",
+        extra={"live": True})] = 0.15
     # Several frames at any usable camera rate: a missed detection does not lose the face.
     face_timeout_s: Annotated[float, msgspec.Meta(
         gt=0.0, le=3600.0,
-        description="seconds: a face older than this no longer counts as seen")] = 0.5
+        description="seconds: a face older than this no longer counts as seen",
+        extra={"live": True})] = 0.5
     # A glance in passing lasts under a second (the controller greets after as long).
     engage_dwell_s: Hold = 1.0
     # A look at a phone or a step back for a moment keeps the engagement.
     disengage_hold_s: Hold = 2.0
     # Out of view for a moment is the same visit; below the simulated ~10 s between visits.
     absence_hold_s: Hold = 5.0
+    # Timers fire within a tick of their deadline: 50 ms is below what a person notices.
+    tick_s: Annotated[float, msgspec.Meta(
+        ge=0.005, le=1.0, description="seconds: period of the timers (ticks)")] = 0.05
 
     def __post_init__(self) -> None:
         if not self.intimate_limit_m < self.personal_limit_m < self.social_limit_m:
