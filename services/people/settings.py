@@ -30,11 +30,11 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         min_length=1, max_length=64, description="camera whose followed face is read")
     ] = "front"
     # Hall's intimate zone ends at 45 cm (18 in): closer is touching distance.
-    intimate_limit_m: Limit = 0.45
+    intimate_limit_m: Annotated[Limit, msgspec.Meta(examples=[0.4])] = 0.45
     # Hall's personal zone ends at 1.2 m (4 ft): a conversation with a friend.
-    personal_limit_m: Limit = 1.2
+    personal_limit_m: Annotated[Limit, msgspec.Meta(examples=[1.5])] = 1.2
     # Hall's social zone ends at 3.6 m (12 ft): beyond it nobody is talking to the robot.
-    social_limit_m: Limit = 3.6
+    social_limit_m: Annotated[Limit, msgspec.Meta(examples=[4.0])] = 3.6
     # Above the face distance's wobble (~0.1 m at the social limit), a third of the intimate zone.
     zone_margin_m: Annotated[float, msgspec.Meta(
         ge=0.0, le=2.0, description="metres: a zone is left only this far past its limit",
