@@ -39,6 +39,7 @@ ALLOWED: dict[str, frozenset[str]] = {
     "tools": BASE | {"tools"},
     "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
     **{area: BASE | {area} for area in AREAS},
+    "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
     "cli": BASE | {"tools", "supervisor", "cli", *AREAS},
     "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
 }
