@@ -1,0 +1,23 @@
+"""SDK test helpers: bots connected to the test router, closed afterwards."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+
+import pytest
+
+from buddybot.sdk import Bot
+
+
+@pytest.fixture
+def bot_factory(endpoint: str) -> Iterator[Callable[..., Bot]]:
+    made: list[Bot] = []
+
+    def make(**kwargs: object) -> Bot:
+        bot = Bot.connect(connect=[endpoint], timeout=10.0, **kwargs)  # type: ignore[arg-type]
+        made.append(bot)
+        return bot
+
+    yield make
+    for bot in reversed(made):
+        bot.close()
