@@ -14,7 +14,8 @@ def bot_factory(endpoint: str) -> Iterator[Callable[..., Bot]]:
     made: list[Bot] = []
 
     def make(**kwargs: object) -> Bot:
-        bot = Bot.connect(connect=[endpoint], timeout=10.0, **kwargs)  # type: ignore[arg-type]
+        kwargs.setdefault("timeout", 10.0)
+        bot = Bot.connect(connect=[endpoint], **kwargs)  # type: ignore[arg-type]
         made.append(bot)
         return bot
 
