@@ -11,9 +11,9 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.runtime.errors import CallError, NoReplyError
 from buddybot.runtime.node import Node
-from buddybot.sdk.errors import NoService, Refused, SdkError
+from buddybot.sdk.calls import call
+from buddybot.sdk.errors import Refused
 
 
 class Params:
@@ -26,15 +26,9 @@ class Params:
         if not keys.valid_robot_id(node_name):
             raise ValueError(f"{node_name!r} is not a node name")
         limit = self.timeout if timeout is None else timeout
-        key = keys.PARAMS.key(node=node_name)
-        try:
-            reply: m.ParamReply = self.node.call(keys.PARAMS, request, timeout=limit,
-                                                 node=node_name)
-        except NoReplyError:
-            raise NoService(f"node {node_name} did not answer on {key} within {limit:g} s "
-                            "(not running, or it exposes no parameters)") from None
-        except CallError as exc:
-            raise SdkError(f"{key}: {exc.reason}") from None
+        reply: m.ParamReply = call(self.node, keys.PARAMS, request, limit,
+                                   hint=f"node {node_name} is not running, or it exposes no "
+                                   "parameters", node=node_name)
         if reply.error:
             raise Refused(f"{node_name}: {reply.error}")
         return reply

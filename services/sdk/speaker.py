@@ -17,10 +17,10 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.runtime.errors import CallError, NoReplyError
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
-from buddybot.sdk.errors import NoService, Refused, SdkError, TimedOut
+from buddybot.sdk.calls import call
+from buddybot.sdk.errors import Refused, TimedOut
 from buddybot.sdk.params import Params
 
 WAIT_S = 120.0
@@ -109,14 +109,9 @@ class Speaker:
     def play(self, sound: str, timeout: float | None = None) -> SoundHandle:
         """Start a sound of `[audio.sounds]`; Refused with the action's reason."""
         limit = self.timeout if timeout is None else timeout
-        try:
-            reply: m.PlaySoundReply = self.node.call(keys.PLAY_SOUND, m.PlaySound(sound=sound),
-                                                     timeout=limit)
-        except NoReplyError:
-            raise NoService(f"no audio service answered on {keys.PLAY_SOUND.pattern} within "
-                            f"{limit:g} s (`buddybot run audio`)") from None
-        except CallError as exc:
-            raise SdkError(f"{keys.PLAY_SOUND.pattern}: {exc.reason}") from None
+        reply: m.PlaySoundReply = call(
+            self.node, keys.PLAY_SOUND, m.PlaySound(sound=sound), limit,
+            hint="is the audio service running? `buddybot run audio`")
         if not reply.accepted:
             raise Refused(reply.message)
         handle = SoundHandle(self, reply.goal_id, sound)
@@ -138,14 +133,8 @@ class Speaker:
         return self.play(name, timeout)
 
     def cancel(self, goal_id: str, timeout: float) -> None:
-        try:
-            self.node.call(keys.PLAY_SOUND_CANCEL, m.CancelGoal(goal_id=goal_id),
-                           timeout=timeout)
-        except NoReplyError:
-            raise NoService(f"no audio service answered on {keys.PLAY_SOUND_CANCEL.pattern} "
-                            f"within {timeout:g} s") from None
-        except CallError as exc:
-            raise SdkError(f"{keys.PLAY_SOUND_CANCEL.pattern}: {exc.reason}") from None
+        call(self.node, keys.PLAY_SOUND_CANCEL, m.CancelGoal(goal_id=goal_id), timeout,
+             hint="is the audio service running?")
 
     def close(self) -> None:
         self._status.close()

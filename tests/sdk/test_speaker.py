@@ -100,5 +100,5 @@ def test_a_configured_text_is_spoken(audio: Callable[..., Audio],  # noqa: F811
 @pytest.mark.integration
 def test_without_an_audio_service_play_says_so(bot_factory: Callable[..., Bot]) -> None:
     bot = bot_factory(timeout=0.5)
-    with pytest.raises(NoService, match="no audio service answered"):
+    with pytest.raises(NoService, match=r"nobody answered on audio/play_sound within 0\.5 s"):
         bot.play("greeting")
