@@ -11,14 +11,14 @@ import pytest
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused
 from buddybot.tools.testing import Process
-from tests.sdk.test_people import _start_people
+from tests.sdk.conftest import start_people
 
 pytestmark = pytest.mark.integration
 
 
 def test_get_and_set_a_live_parameter(spawn: Callable[..., Process], probe: Node,
                                       bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
-    _start_people(spawn, probe, tmp_path)
+    start_people(spawn, probe, tmp_path)
     bot = bot_factory()
     assert bot.params.get("people", "absence_hold_s") == 60.0
     assert bot.params.set("people", "engage_dwell_s", 0.5) is True

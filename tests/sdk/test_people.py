@@ -18,6 +18,7 @@ from buddybot.sdk import Bot, Event, EventStream, Person, SdkError, TimedOut
 from buddybot.sdk.people import KINDS, PeopleView, check_kinds
 from buddybot.tools.testing import Collector, Process
 from tests.people.test_service import Visitor
+from tests.sdk.conftest import start_people
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
@@ -153,20 +154,11 @@ def test_async_iteration_gets_events_pushed_from_another_thread() -> None:
 # --- a real people service ---------------------------------------------------------------
 
 
-def _start_people(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> Process:
-    state = Collector[m.PeopleState](probe, keys.PEOPLE_STATE)
-    config = tmp_path / "people.toml"
-    config.write_text("[people]\nabsence_hold_s = 60\n")
-    proc = spawn("people", "--config", str(config))
-    state.wait_for(lambda s: s.people == [], 30, "the first, empty, people/state")
-    return proc
-
-
 @pytest.mark.integration
 def test_a_person_arriving_now_is_a_live_event(spawn: Callable[..., Process], probe: Node,
                                               bot_factory: Callable[..., Bot],
                                               tmp_path: Path) -> None:
-    _start_people(spawn, probe, tmp_path)
+    start_people(spawn, probe, tmp_path)
     bot = bot_factory()
     assert bot.people.now() == ()
     got: list[Event] = []
@@ -185,7 +177,7 @@ def test_a_bot_connected_later_gets_the_arrival_replayed(spawn: Callable[..., Pr
                                                         probe: Node,
                                                         bot_factory: Callable[..., Bot],
                                                         tmp_path: Path) -> None:
-    _start_people(spawn, probe, tmp_path)
+    start_people(spawn, probe, tmp_path)
     events = Collector[m.PersonEvent](probe, keys.PEOPLE_EVENTS)
     stamp = Visitor(probe).presence(True, 2.0)
     events.wait_for(lambda e: e.kind == "ARRIVED", 30, "ARRIVED")
