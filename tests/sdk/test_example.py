@@ -51,7 +51,7 @@ def test_the_example_greets_a_visitor(spawn: Callable[..., Process], probe: Node
     program = Process([sys.executable, str(script), "--connect", endpoint, "--config",
                        str(config)], "greeter", log_dir)
     try:
-        program.wait_for_output("present now: []", 30)
+        program.wait_for_output("watching; present now: []", 30)
         Visitor(probe).presence(True, 1.0)
         status.wait_for(lambda s: s.state == "SUCCEEDED", 60, "the greeting spoken")
         assert program.alive() and "not spoken" not in program.output()

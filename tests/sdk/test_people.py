@@ -7,6 +7,7 @@ import asyncio
 import threading
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -16,7 +17,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, Event, EventStream, Person, SdkError, TimedOut
 from buddybot.sdk.people import KINDS, PeopleView, check_kinds
-from buddybot.tools.testing import Collector, Process
+from buddybot.tools.testing import Collector, Process, retry_until
 from tests.people.test_service import Visitor
 from tests.sdk.conftest import start_people
 
@@ -165,8 +166,12 @@ def test_a_person_arriving_now_is_a_live_event(spawn: Callable[..., Process], pr
     done = threading.Event()
     bot.on("ARRIVED", lambda e: (got.append(e), done.set()))
     stream = bot.events("ARRIVED")
-    stamp = Visitor(probe).presence(True, 1.0)
-    event = bot.wait_for("ARRIVED", timeout=30)
+    with ThreadPoolExecutor(1) as pool:
+        waiting = pool.submit(bot.wait_for, "ARRIVED", None, 30)
+        # The person must arrive after wait_for subscribed, or it would be replayed.
+        retry_until(lambda: len(bot.people._streams) == 3, 10, what="wait_for subscribed")
+        stamp = Visitor(probe).presence(True, 1.0)
+        event = waiting.result(60)
     assert (event.replayed, event.stamp_ns, event.person.id) == (False, stamp, 1)
     assert stream.get(30).stamp_ns == stamp
     assert done.wait(30) and got[0].stamp_ns == stamp
