@@ -11,6 +11,7 @@ robot's nodes and publishes nothing on its own.
 from __future__ import annotations
 
 import argparse
+import threading
 import time
 from collections.abc import Callable, Iterable
 from typing import Any
@@ -43,6 +44,8 @@ class Bot:
         self.params = Params(node, timeout)
         self._people: People | None = None
         self._speaker: Speaker | None = None
+        self._lock = threading.Lock()
+        """Opens `people` and `speaker` once, on first use from any thread."""
 
     @classmethod
     def connect(cls, connect: list[str] | None = None, config: str | None = None,
@@ -73,9 +76,10 @@ class Bot:
     @property
     def people(self) -> People:
         """Who is there (`bot.people.now()`), from `people/state`."""
-        if self._people is None:
-            self._people = People(self.node, self.timeout)
-        return self._people
+        with self._lock:
+            if self._people is None:
+                self._people = People(self.node, self.timeout)
+            return self._people
 
     def events(self, *kinds: str, timeout: float | None = None) -> EventStream:
         """Person events of `kinds` (all when none): first the people present now
@@ -94,8 +98,9 @@ class Bot:
         accepts; TimedOut naming what was waited for."""
         check_kinds((kind,))
         what = f"{kind} event{' matching ' + repr(predicate) if predicate else ''}"
+        end = time.monotonic() + timeout
         with self.people.events((kind,), timeout) as stream:
-            return _first(stream, predicate, timeout, f"no {what} within {timeout:g} s "
+            return _first(stream, predicate, end, f"no {what} within {timeout:g} s "
                           f"(robot {self.robot})")
 
     def person(self, person_id: int) -> Person | None:
@@ -106,9 +111,11 @@ class Bot:
 
     @property
     def speaker(self) -> Speaker:
-        if self._speaker is None:
-            self._speaker = Speaker(self.node, self.params, self.timeout)
-        return self._speaker
+        """Sounds through the `audio/play_sound` action (opened on first use)."""
+        with self._lock:
+            if self._speaker is None:
+                self._speaker = Speaker(self.node, self.params, self.timeout)
+            return self._speaker
 
     def play(self, sound: str) -> SoundHandle:
         """Play a sound of `[audio.sounds]` by name; Refused, NoService."""
@@ -134,9 +141,9 @@ class Bot:
         self.close()
 
 
-def _first(stream: EventStream, predicate: Callable[[Event], bool] | None, timeout: float,
+def _first(stream: EventStream, predicate: Callable[[Event], bool] | None, end: float,
            why: str) -> Event:
-    end = time.monotonic() + timeout
+    """The first event of `stream` that `predicate` accepts before `end` (monotonic)."""
     while True:
         left = end - time.monotonic()
         try:
