@@ -105,7 +105,7 @@ def record(ctx: ServiceContext) -> int:
         raise UsageError("--duration must be positive")
     wanted = record_keys(ctx.robot, args.keys, args.images)
     tty = sys.stderr.isatty()
-    with probing.probe(ctx, args.timeout) as node:
+    with ctx.probe(args.timeout) as node:
         recorder = Recorder(bag.BagWriter(args.output, robot=ctx.robot))
 
         def on_sample(key: str, payload: bytes, _encoding: str) -> None:

@@ -54,7 +54,7 @@ def main(ctx: ServiceContext) -> int:
         raise UsageError(f"{args.key}: not a service of the catalogue (see `buddybot keys`)")
     request = probing.parse_message(entry.request, args.request)
     end = probing.deadline(args.timeout)
-    with probing.probe(ctx, args.timeout) as node:
+    with ctx.probe(args.timeout) as node:
         remaining = round(probing.left(end, 0.1), 1) if args.timeout else 5.0
         reply = node.call_key(key, entry, request, timeout=remaining)
     print(summarize(reply, names=not args.raw) if isinstance(reply, m.Message)

@@ -62,7 +62,7 @@ def main(ctx: ServiceContext) -> int:
 
     why = ""
     stopped = False  # Ctrl-C (closing the node sets ctx.stop too: look before)
-    with probing.probe(ctx, args.timeout) as node:
+    with ctx.probe(args.timeout) as node:
         node.subscribe_raw(key, on_sample, history=probing.is_latched(key) or "*" in key)
         hint_at = time.monotonic() + CONNECT_TIMEOUT_S
         while not done.is_set() and not ctx.stop.is_set() and time.monotonic() < end:

@@ -73,7 +73,7 @@ def main(ctx: ServiceContext) -> int:
     end = probing.deadline(args.duration)
     why = ""
     period = 0.1 if args.json else 1.0  # --json prints once: only check the deadlines
-    with probing.probe(ctx, args.timeout) as node:
+    with ctx.probe(args.timeout) as node:
         node.subscribe_raw(key, on_sample)
         hint_at = (time.monotonic() + CONNECT_TIMEOUT_S
                    if args.timeout is None else float("inf"))

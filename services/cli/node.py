@@ -19,7 +19,6 @@ from buddybot.contract import messages as m
 from buddybot.runtime import options
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
 from buddybot.runtime.service import ServiceContext
-from buddybot.tools import probing
 
 HELP = "what a running node publishes, subscribes, serves, and its parameters"
 
@@ -71,7 +70,7 @@ def info(ctx: ServiceContext) -> int:
     name = args.node
     if not keys.valid_robot_id(name):
         raise UsageError(f"{name!r} is not a node name")
-    with probing.probe(ctx) as node:
+    with ctx.probe() as node:
         try:
             info: m.NodeInfo = node.call(keys.NODE_INFO, m.Trigger(), timeout=args.timeout,
                                          node=name)

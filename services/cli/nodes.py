@@ -31,7 +31,7 @@ def main(ctx: ServiceContext) -> int:
     """
     args = ctx.args
     end = probing.deadline(args.timeout)
-    with probing.probe(ctx, args.timeout) as node:
+    with ctx.probe(args.timeout) as node:
         found = node.node_instances(all_robots=args.all_robots, timeout=probing.left(end))
     if args.json:
         print(json.dumps({"robot": "*" if args.all_robots else ctx.robot,

@@ -27,7 +27,6 @@ from buddybot.contract import messages as m
 from buddybot.runtime import options
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
 from buddybot.runtime.service import ServiceContext
-from buddybot.tools import probing
 
 HELP = "list, get, set, dump or load a running node's parameters (its settings)"
 
@@ -60,7 +59,7 @@ def request(ctx: ServiceContext, node_name: str, req: m.ParamRequest) -> m.Param
     """One call to `params/<node>`; ServiceError (exit 1) when nobody answers."""
     if not keys.valid_robot_id(node_name):
         raise UsageError(f"{node_name!r} is not a node name")
-    with probing.probe(ctx) as node:
+    with ctx.probe() as node:
         try:
             reply: m.ParamReply = node.call(keys.PARAMS, req, timeout=ctx.args.timeout,
                                             node=node_name)

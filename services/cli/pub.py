@@ -47,7 +47,7 @@ def main(ctx: ServiceContext) -> int:
         raise UsageError(f"{args.key}: cannot publish on a wildcard key")
     msg = probing.parse_message(entry.type, args.message)
     sent = 0
-    with probing.probe(ctx, args.timeout) as node, \
+    with ctx.probe(args.timeout) as node, \
             node.raw_publisher(key, entry.encoding) as publisher:
         # Give discovery a moment so the first put reaches existing subscribers.
         if not publisher.wait_for_subscribers(args.wait, ctx.stop) and not ctx.stop.is_set():

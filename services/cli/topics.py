@@ -29,7 +29,6 @@ from buddybot.contract import keyexpr, keys
 from buddybot.contract import messages as m
 from buddybot.runtime import options, rates
 from buddybot.runtime.service import ServiceContext
-from buddybot.tools import probing
 
 HELP = "keys seen on the robot with their rates, publishers and subscribers"
 
@@ -84,7 +83,7 @@ def main(ctx: ServiceContext) -> int:
     args = ctx.args
     prefix = keys.prefix(ctx.robot)
     traffic = Traffic()
-    with probing.probe(ctx) as node:
+    with ctx.probe() as node:
         start = time.monotonic()
         node.subscribe_raw(f"{prefix}/**", traffic.on_sample)
         infos = node.node_infos(min(args.timeout, 5.0))

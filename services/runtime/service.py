@@ -31,7 +31,12 @@ from buddybot.runtime.errors import (
 )
 from buddybot.runtime.node import Node, install_signal_handlers
 from buddybot.runtime.sdnotify import Notifier
-from buddybot.runtime.session import route_zenoh_log
+from buddybot.runtime.session import (
+    CONNECT_TIMEOUT_S,
+    RouterUnreachable,
+    route_zenoh_log,
+    zenoh_config,
+)
 from buddybot.runtime.supervised import die_with_supervisor
 
 
@@ -108,6 +113,22 @@ class ServiceContext:
                 return None
 
         return await asyncio.to_thread(opener)
+
+    def probe(self, timeout: float | None = None) -> Node:
+        """A probe node on the robot's router, or RouterUnreachable (exit 1) when
+        none answers within `timeout` (default CONNECT_TIMEOUT_S); Ctrl-C aborts.
+
+        Tools and programs use it: unlike a service they must never hang on a
+        missing router, and a probe declares nothing that makes it a node of
+        the robot (see `Node(probe=True)`)."""
+        limit = timeout if timeout and timeout > 0 else CONNECT_TIMEOUT_S
+        config = zenoh_config(connect=self.connect, base_file=self.config.zenoh.config_file,
+                              connect_timeout_s=limit)
+        try:
+            return Node(self.name, robot=self.robot, connect=self.connect, config=config,
+                        stop_event=self.stop, probe=True)
+        except RouterUnreachable as exc:
+            raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
 
 
 def resolve(args: argparse.Namespace, name: str) -> ServiceContext:

@@ -1,6 +1,6 @@
 """What the probing verbs (`buddybot echo|hz|pub|call|nodes`) share.
 
-A probe opens a `Node` with `probe=True`: it talks only through the node's
+A probe (`ServiceContext.probe`) opens a `Node` with `probe=True`: it talks only through the node's
 handles, declares no liveliness token and publishes no diagnostics (a
 probe is not a node of the robot). Keys may omit the `buddybot/<robot>/`
 prefix and may contain wildcards; messages are decoded with the
@@ -21,21 +21,6 @@ from buddybot.contract import describe, keyexpr, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
-from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.session import CONNECT_TIMEOUT_S, RouterUnreachable, zenoh_config
-
-
-def probe(ctx: ServiceContext, timeout: float | None = None) -> Node:
-    """A probe node on the robot's router, or RouterUnreachable (exit 1) when
-    none answers within `timeout` (default CONNECT_TIMEOUT_S); Ctrl-C aborts."""
-    limit = timeout if timeout and timeout > 0 else CONNECT_TIMEOUT_S
-    config = zenoh_config(connect=ctx.connect, base_file=ctx.config.zenoh.config_file,
-                          connect_timeout_s=limit)
-    try:
-        return Node(ctx.name, robot=ctx.robot, connect=ctx.connect, config=config,
-                    stop_event=ctx.stop, probe=True)
-    except RouterUnreachable as exc:
-        raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
 
 
 def left(end: float, floor: float = 0.05) -> float:

@@ -124,7 +124,7 @@ def test_a_probe_without_router_fails_fast_naming_endpoint_and_reason() -> None:
                          connect=[endpoint])
     started = time.monotonic()
     with pytest.raises(session.RouterUnreachable) as caught:
-        probing.probe(ctx, 0.5)
+        ctx.probe(0.5)
     assert time.monotonic() - started < 5
     text = str(caught.value)
     assert endpoint in text and "refused" in text.lower() and "0.5 s" in text

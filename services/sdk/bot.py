@@ -1,0 +1,154 @@
+"""`Bot`: a program's connection to one robot, and the door to what it offers.
+
+`Bot.connect()` resolves the router and the robot exactly like every
+`buddybot` tool (`--connect`, then `[zenoh] connect` of `--config` or
+$BUDDYBOT_CONFIG, then the default; the same for `--robot`), and gives up
+after `timeout` seconds with `NoRouter` instead of waiting forever as a
+service does. The node is a probe: the program is not listed among the
+robot's nodes and publishes nothing on its own.
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+from collections.abc import Callable, Iterable
+from typing import Any
+
+from buddybot.runtime.node import Node
+from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
+from buddybot.runtime.session import RouterUnreachable
+from buddybot.sdk.errors import NoRouter, TimedOut
+from buddybot.sdk.params import Params
+from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
+from buddybot.sdk.speaker import SoundHandle, Speaker
+
+TIMEOUT_S = 5.0
+"""Default bound of the connect and of every call."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The standard `--connect`, `--robot`, `--config` and `--log-level` flags,
+    for `Bot.from_args`."""
+    add_common_arguments(parser)
+
+
+class Bot:
+    """One robot, seen from a program. Use it as a context manager, or `close()`."""
+
+    def __init__(self, node: Node, timeout: float = TIMEOUT_S) -> None:
+        self.node = node
+        self.robot = node.robot
+        self.timeout = timeout
+        self.params = Params(node, timeout)
+        self._people: People | None = None
+        self._speaker: Speaker | None = None
+        self._lock = threading.Lock()
+        """Opens `people` and `speaker` once, on first use from any thread."""
+
+    @classmethod
+    def connect(cls, connect: list[str] | None = None, config: str | None = None,
+                robot: str | None = None, name: str = "app",
+                timeout: float = TIMEOUT_S) -> Bot:
+        """Join the robot's router; NoRouter (naming the endpoints) after `timeout` s."""
+        args = argparse.Namespace(connect=connect, config=config, robot=robot)
+        return cls._open(args, name, timeout)
+
+    @classmethod
+    def from_args(cls, args: argparse.Namespace, name: str = "app",
+                  timeout: float = TIMEOUT_S) -> Bot:
+        """`connect` with the flags of `add_arguments`; sets up logging at `--log-level`."""
+        setup_logging(getattr(args, "log_level", None) or "INFO")
+        return cls._open(args, name, timeout)
+
+    @classmethod
+    def _open(cls, args: argparse.Namespace, name: str, timeout: float) -> Bot:
+        ctx = resolve(args, name)
+        try:
+            node = ctx.probe(timeout)
+        except RouterUnreachable as exc:
+            raise NoRouter(str(exc), list(ctx.connect)) from None
+        return cls(node, timeout)
+
+    # -- people --
+
+    @property
+    def people(self) -> People:
+        """Who is there (`bot.people.now()`), from `people/state`."""
+        with self._lock:
+            if self._people is None:
+                self._people = People(self.node, self.timeout)
+            return self._people
+
+    def events(self, *kinds: str, timeout: float | None = None) -> EventStream:
+        """Person events of `kinds` (all when none): first the people present now
+        (ARRIVED, `replayed=True`), then the changes as they come."""
+        return self.people.events(kinds, timeout)
+
+    def on(self, kind: str | Iterable[str], callback: Callable[[Event], Any]) -> EventStream:
+        """Call `callback(event)` for each event of `kind` until the returned
+        stream is closed (on its own thread)."""
+        kinds = (kind,) if isinstance(kind, str) else tuple(kind)
+        return self.people.on(kinds, callback)
+
+    def wait_for(self, kind: str, predicate: Callable[[Event], bool] | None = None,
+                 timeout: float = 30.0) -> Event:
+        """The first event of `kind` (replayed ones included) that `predicate`
+        accepts; TimedOut naming what was waited for."""
+        check_kinds((kind,))
+        what = f"{kind} event{' matching ' + repr(predicate) if predicate else ''}"
+        end = time.monotonic() + timeout
+        with self.people.events((kind,), timeout) as stream:
+            return _first(stream, predicate, end, f"no {what} within {timeout:g} s "
+                          f"(robot {self.robot})")
+
+    def person(self, person_id: int) -> Person | None:
+        """The person with this id, if present now."""
+        return next((p for p in self.people.now() if p.id == person_id), None)
+
+    # -- speaker --
+
+    @property
+    def speaker(self) -> Speaker:
+        """Sounds through the `audio/play_sound` action (opened on first use)."""
+        with self._lock:
+            if self._speaker is None:
+                self._speaker = Speaker(self.node, self.params, self.timeout)
+            return self._speaker
+
+    def play(self, sound: str) -> SoundHandle:
+        """Play a sound of `[audio.sounds]` by name; Refused, NoService."""
+        return self.speaker.play(sound)
+
+    def say(self, text: str) -> SoundHandle:
+        """Speak `text`, configured in `[audio.sounds]` as `say:<text>`; Refused, NoService."""
+        return self.speaker.say(text)
+
+    # -- lifetime --
+
+    def close(self) -> None:
+        if self._people is not None:
+            self._people.close()
+        if self._speaker is not None:
+            self._speaker.close()
+        self.node.close()
+
+    def __enter__(self) -> Bot:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _first(stream: EventStream, predicate: Callable[[Event], bool] | None, end: float,
+           why: str) -> Event:
+    """The first event of `stream` that `predicate` accepts before `end` (monotonic)."""
+    while True:
+        left = end - time.monotonic()
+        try:
+            event = stream.get(max(0.0, left))
+        except TimedOut:
+            raise TimedOut(why) from None
+        if predicate is None or predicate(event):
+            return event

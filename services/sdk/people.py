@@ -1,0 +1,317 @@
+"""Persons and their events, as a program sees them.
+
+Two sources, one view. `people/state` (latched) says who is there now;
+`people/events` (a stream, not latched) says what changes. A program that
+subscribes gets both, told apart: first the state present at subscription,
+each person as an ARRIVED with `replayed=True` and their real arrival time
+(in the past), then the live events (`replayed=False`).
+
+The two keys arrive on separate workers, in either order. `PeopleView`
+(pure) keeps them consistent: a live ARRIVED not yet in the state counts
+as present, a live LEFT hides a person the state still lists, so a
+subscription made between an event and the next state neither misses the
+person nor sees them twice.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, replace
+from typing import Any
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.sdk.errors import NoService, SdkError, TimedOut
+
+KINDS: tuple[str, ...] = ("ARRIVED", "ZONE_CHANGED", "ENGAGEMENT_CHANGED", "LEFT")
+"""Every event kind, in the order a visit goes through them."""
+
+log = logging.getLogger("buddybot.sdk")
+
+
+@dataclass(frozen=True)
+class Person:
+    """One person. Fields the event alone does not carry (distance, direction,
+    arrival) come from the latest `people/state` and are None when unknown."""
+
+    id: int
+    zone: str
+    engagement: str
+    distance_m: float | None = None
+    seen_by: str | None = None
+    arrived_ns: int | None = None
+    yaw_rad: float | None = None
+    pitch_rad: float | None = None
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class Event:
+    """Something that happened to a person (`kind` is one of `KINDS`).
+
+    `replayed`: synthesized from the state present when the subscription was
+    made (an ARRIVED stamped with the person's arrival), not a change now."""
+
+    kind: str
+    person: Person
+    stamp_ns: int
+    replayed: bool = False
+
+
+def person_from(msg: m.Person) -> Person:
+    return Person(id=msg.id, zone=msg.zone, engagement=msg.engagement,
+                  distance_m=msg.distance_m, seen_by=msg.seen_by, arrived_ns=msg.arrived_ns,
+                  yaw_rad=msg.yaw_rad, pitch_rad=msg.pitch_rad, name=msg.name)
+
+
+def check_kinds(kinds: Iterable[str]) -> frozenset[str]:
+    """The kinds asked for (all when none), or ValueError naming the valid ones."""
+    wanted = frozenset(kinds) or frozenset(KINDS)
+    unknown = sorted(wanted - set(KINDS))
+    if unknown:
+        raise ValueError(f"unknown event kind(s) {', '.join(unknown)} "
+                         f"(known: {', '.join(KINDS)})")
+    return wanted
+
+
+class PeopleView:
+    """Who is present, from the latched state and the live events (pure)."""
+
+    def __init__(self) -> None:
+        self.has_state = False
+        self._state: dict[int, Person] = {}
+        self._arrived: dict[int, Person] = {}
+        """Live ARRIVED whose person the state does not list yet."""
+        self._left: set[int] = set()
+        """Live LEFT whose person the state still lists."""
+
+    def on_state(self, msg: m.PeopleState) -> None:
+        self.has_state = True
+        self._state = {p.id: person_from(p) for p in msg.people}
+        for pid in list(self._arrived):
+            if pid in self._state:
+                del self._arrived[pid]
+        self._left &= set(self._state)
+
+    def on_event(self, msg: m.PersonEvent) -> Event:
+        """The live event, its person completed from what is known of them."""
+        known = self._state.get(msg.person_id) or self._arrived.get(msg.person_id)
+        person = (Person(id=msg.person_id, zone=msg.zone, engagement=msg.engagement)
+                  if known is None else replace(known, zone=msg.zone,
+                                                engagement=msg.engagement))
+        if msg.kind == "ARRIVED" and msg.person_id not in self._state:
+            person = replace(person, arrived_ns=msg.stamp_ns)
+            self._arrived[msg.person_id] = person
+        elif msg.kind == "LEFT":
+            self._arrived.pop(msg.person_id, None)
+            if msg.person_id in self._state:
+                self._left.add(msg.person_id)
+        elif msg.person_id in self._arrived:
+            self._arrived[msg.person_id] = person
+        return Event(kind=msg.kind, person=person, stamp_ns=msg.stamp_ns)
+
+    def present(self) -> tuple[Person, ...]:
+        """Everyone present now, by id."""
+        found = {pid: p for pid, p in self._state.items() if pid not in self._left}
+        found.update(self._arrived)
+        return tuple(found[pid] for pid in sorted(found))
+
+    def replay(self, kinds: frozenset[str]) -> list[Event]:
+        """The events that stand for the present state: an ARRIVED per person,
+        stamped with their arrival, when ARRIVED is asked for."""
+        if "ARRIVED" not in kinds:
+            return []
+        return [Event(kind="ARRIVED", person=p, stamp_ns=p.arrived_ns or 0, replayed=True)
+                for p in self.present()]
+
+
+class EventStream:
+    """A subscription to person events: a disposable, iterable both ways.
+
+    `for event in stream` and `async for event in stream` end when the
+    stream is closed (`close()`, `unsubscribe()`, `with`, or the bot
+    closing); `get(timeout)` waits for one event at most `timeout` seconds.
+    """
+
+    def __init__(self, kinds: frozenset[str],
+                 on_close: Callable[[EventStream], None] | None = None) -> None:
+        self.kinds = kinds
+        self._items: deque[Event] = deque()
+        self._cond = threading.Condition()
+        self._closed = False
+        self._on_close = on_close
+        self._replayed_ids: set[int] = set()
+        self._waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Future[None]]] = []
+
+    @property
+    def closed(self) -> bool:
+        return self._closed
+
+    def push(self, event: Event) -> None:
+        """Queue `event` when its kind is wanted (a live ARRIVED of a person
+        already replayed to this stream is the same arrival: dropped)."""
+        if event.kind not in self.kinds:
+            return
+        if event.replayed:
+            self._replayed_ids.add(event.person.id)
+        elif event.kind == "ARRIVED" and event.person.id in self._replayed_ids:
+            return
+        with self._cond:
+            if self._closed:
+                return
+            self._items.append(event)
+            self._cond.notify_all()
+        self._wake_async()
+
+    def get(self, timeout: float) -> Event:
+        """The next event; TimedOut after `timeout` s, SdkError once closed."""
+        end = time.monotonic() + timeout
+        with self._cond:
+            while not self._items:
+                if self._closed:
+                    raise SdkError("the event stream is closed")
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise TimedOut(f"no {'/'.join(sorted(self.kinds))} event within "
+                                   f"{timeout:g} s")
+                self._cond.wait(left)
+            return self._items.popleft()
+
+    def close(self) -> None:
+        with self._cond:
+            if self._closed:
+                return
+            self._closed = True
+            self._cond.notify_all()
+        self._wake_async()
+        if self._on_close is not None:
+            self._on_close(self)
+
+    unsubscribe = close
+
+    def __enter__(self) -> EventStream:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def __iter__(self) -> EventStream:
+        return self
+
+    def __next__(self) -> Event:
+        with self._cond:
+            while not self._items and not self._closed:
+                self._cond.wait()
+            if not self._items:
+                raise StopIteration
+            return self._items.popleft()
+
+    def __aiter__(self) -> EventStream:
+        return self
+
+    async def __anext__(self) -> Event:
+        loop = asyncio.get_running_loop()
+        while True:
+            future: asyncio.Future[None] = loop.create_future()
+            with self._cond:
+                if self._items:
+                    return self._items.popleft()
+                if self._closed:
+                    raise StopAsyncIteration
+                self._waiters.append((loop, future))
+            await future
+
+    def _wake_async(self) -> None:
+        with self._cond:
+            waiters, self._waiters = self._waiters, []
+        for loop, future in waiters:
+            loop.call_soon_threadsafe(_resolve, future)
+
+
+def _resolve(future: asyncio.Future[None]) -> None:
+    if not future.done():
+        future.set_result(None)
+
+
+class People:
+    """`bot.people`: the view kept current from the bus, and the streams fed from it."""
+
+    def __init__(self, node: Node, timeout: float) -> None:
+        self.timeout = timeout
+        self._view = PeopleView()
+        self._lock = threading.Condition()
+        self._streams: list[EventStream] = []
+        self._handles = [
+            node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
+            node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
+        ]
+
+    def _on_state(self, msg: m.PeopleState, _key: str) -> None:
+        with self._lock:
+            self._view.on_state(msg)
+            self._lock.notify_all()
+
+    def _on_event(self, msg: m.PersonEvent, _key: str) -> None:
+        with self._lock:
+            event = self._view.on_event(msg)
+            for stream in list(self._streams):
+                stream.push(event)
+
+    def _wait_state(self, timeout: float | None) -> None:
+        """Block (lock held) until the first state came, or NoService."""
+        limit = self.timeout if timeout is None else timeout
+        if not self._lock.wait_for(lambda: self._view.has_state, limit):
+            raise NoService(f"no {keys.PEOPLE_STATE.pattern} within {limit:g} s: is the "
+                            "people service running (`buddybot run people`)?")
+
+    def now(self, timeout: float | None = None) -> tuple[Person, ...]:
+        """Everyone present now (waits for the first state up to `timeout`)."""
+        with self._lock:
+            self._wait_state(timeout)
+            return self._view.present()
+
+    def events(self, kinds: Iterable[str] = (), timeout: float | None = None) -> EventStream:
+        """A stream of `kinds` (all when empty): the replayed state, then live events."""
+        wanted = check_kinds(kinds)
+        stream = EventStream(wanted, on_close=self._forget)
+        with self._lock:
+            self._wait_state(timeout)
+            for event in self._view.replay(wanted):
+                stream.push(event)
+            self._streams.append(stream)
+        return stream
+
+    def on(self, kinds: Iterable[str], callback: Callable[[Event], Any],
+           timeout: float | None = None) -> EventStream:
+        """Call `callback(event)` on a thread of its own for each event until the
+        returned stream is closed; a failing callback is logged, never fatal."""
+        stream = self.events(kinds, timeout)
+
+        def run() -> None:
+            for event in stream:
+                try:
+                    callback(event)
+                except Exception:
+                    log.exception("event callback %r failed on %s", callback, event)
+
+        threading.Thread(target=run, name="sdk-events", daemon=True).start()
+        return stream
+
+    def _forget(self, stream: EventStream) -> None:
+        with self._lock:
+            if stream in self._streams:
+                self._streams.remove(stream)
+
+    def close(self) -> None:
+        with self._lock:
+            streams = list(self._streams)
+        for stream in streams:
+            stream.close()
+        for handle in self._handles:
+            handle.close()

@@ -1,0 +1,104 @@
+"""`buddybot.sdk.speaker`: the spoken-sound lookup and the handle (pure), and, marked
+`integration`, real `audio` and `audio-player` services on the null device: a sound
+plays to SUCCEEDED, a cancel ends it CANCELED, an unknown name is refused."""
+
+from __future__ import annotations
+
+import asyncio
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from buddybot.contract import messages as m
+from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
+from buddybot.sdk.speaker import Speaker, spoken_sound
+from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
+
+# --- pure ----------------------------------------------------------------------------------
+
+
+def test_the_spoken_sound_is_the_entry_that_says_the_text() -> None:
+    sounds = {"beep": "beep.wav", "hello": "say: Hello there ", "bye": "say:Bye"}
+    assert spoken_sound(sounds, "Hello there") == "hello"
+    assert spoken_sound(sounds, " Bye") == "bye"
+    assert spoken_sound(sounds, "beep.wav") is None
+    assert spoken_sound(sounds, "Hello") is None
+
+
+def _handle() -> SoundHandle:
+    return SoundHandle(Speaker.__new__(Speaker), "g1", "beep")
+
+
+def test_a_handle_follows_its_goal_to_the_first_final_state() -> None:
+    handle = _handle()
+    handle.update(m.PlaySoundStatus(goal_id="g1", state="PLAYING", progress=0.5))
+    assert (handle.state, handle.done) == ("PLAYING", False)
+    with pytest.raises(TimedOut, match=r"'beep' \(goal g1\) still PLAYING after 0\.01 s"):
+        handle.wait(0.01)
+    handle.update(m.PlaySoundStatus(goal_id="g1", state="CANCELED", message="preempted"))
+    handle.update(m.PlaySoundStatus(goal_id="g1", state="SUCCEEDED"))
+    assert handle.wait(0.01) == "CANCELED" and handle.message == "preempted"
+
+
+# --- real audio services -------------------------------------------------------------------
+
+
+@pytest.mark.integration
+def test_a_sound_plays_to_its_end(audio: Callable[..., Audio],  # noqa: F811
+                                  bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 0.4)
+    audio(config)
+    bot = bot_factory()
+    handle = bot.play("beep")
+    assert handle.wait(30) == "SUCCEEDED", handle.message
+
+    async def again() -> str:
+        return await bot.play("beep")
+
+    assert asyncio.run(again()) == "SUCCEEDED"
+
+
+@pytest.mark.integration
+def test_a_canceled_sound_ends_canceled(audio: Callable[..., Audio],  # noqa: F811
+                                        bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 10.0)
+    a = audio(config)
+    bot = bot_factory()
+    handle = bot.play("beep")
+    a.status.wait_for(lambda s: s.goal_id == handle.goal_id and s.state == "PLAYING",
+                      what="PLAYING")
+    assert handle.cancel(30) == "CANCELED" and handle.done
+
+
+@pytest.mark.integration
+def test_unknown_sounds_and_texts_are_refused_with_the_reason(
+        audio: Callable[..., Audio], bot_factory: Callable[..., Bot],  # noqa: F811
+        tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 0.3)
+    audio(config)
+    bot = bot_factory()
+    with pytest.raises(Refused, match="unknown sound 'fanfare'"):
+        bot.play("fanfare")
+    with pytest.raises(Refused, match=r"no \[audio.sounds\] entry is say:Good night"):
+        bot.say("Good night")
+
+
+@pytest.mark.integration
+def test_a_configured_text_is_spoken(audio: Callable[..., Audio],  # noqa: F811
+                                     bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
+    if shutil.which("espeak-ng") is None:
+        pytest.skip("espeak-ng is not installed (scripts/test-packages.sh installs it)")
+    config, _ = beep_config(tmp_path, 0.3, hi="say:Hi")
+    audio(config)
+    bot = bot_factory()
+    handle = bot.say("Hi")
+    assert handle.sound == "hi" and handle.wait(60) == "SUCCEEDED", handle.message
+
+
+@pytest.mark.integration
+def test_without_an_audio_service_play_says_so(bot_factory: Callable[..., Bot]) -> None:
+    bot = bot_factory(timeout=0.5)
+    with pytest.raises(NoService, match=r"nobody answered on audio/play_sound within 0\.5 s"):
+        bot.play("greeting")
