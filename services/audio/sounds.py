@@ -12,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from buddybot.contract.messages import TTS_PREFIX
+
 PACKAGE_DIR = Path(__file__).resolve().parent
-TTS_PREFIX = "say:"
 SUPPORTED_SUFFIXES = (".wav", ".flac", ".mp3", ".ogg", ".oga")
 
 

@@ -277,6 +277,11 @@ GoalState = Literal["ACCEPTED", "PLAYING", "SUCCEEDED", "CANCELED", "ABORTED"]
 TERMINAL_GOAL_STATES: frozenset[str] = frozenset({"SUCCEEDED", "CANCELED", "ABORTED"})
 
 
+TTS_PREFIX = "say:"
+"""How a value of `[audio.sounds]` marks a text to speak instead of a file
+(`hello = "say:Hello!"`): the audio service and the SDK read the table alike."""
+
+
 class PlaySound(Message):
     """Goal of the `audio/play_sound` action: a sound name from [audio.sounds]."""
 

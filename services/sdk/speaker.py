@@ -17,6 +17,7 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.contract.messages import TTS_PREFIX
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
 from buddybot.sdk.calls import call
@@ -25,8 +26,6 @@ from buddybot.sdk.params import Params
 
 WAIT_S = 120.0
 """How long `wait()` and `await handle` wait for a sound's end by default."""
-TTS_PREFIX = "say:"
-"""How `[audio.sounds]` marks a text to speak (services/audio/sounds.py)."""
 
 
 def spoken_sound(sounds: dict[str, str], text: str) -> str | None:
