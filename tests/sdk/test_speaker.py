@@ -12,8 +12,10 @@ from pathlib import Path
 import pytest
 
 from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
 from buddybot.sdk.speaker import Speaker, spoken_sound
+from buddybot.tools.testing import retry_until
 from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
 
 # --- pure ----------------------------------------------------------------------------------
@@ -45,11 +47,26 @@ def test_a_handle_follows_its_goal_to_the_first_final_state() -> None:
 # --- real audio services -------------------------------------------------------------------
 
 
+@pytest.fixture
+def ready_audio(audio: Callable[..., Audio], probe: Node  # noqa: F811
+                ) -> Callable[..., Audio]:
+    """`audio`, returning once the action server answers `audio/play_sound` (the
+    player's device_free alone says nothing about it; on a busy machine the action
+    server can take seconds longer to declare its queryable)."""
+    def start(config: str) -> Audio:
+        started = audio(config)
+        retry_until(lambda: any(i.node == "audio" and "audio/play_sound" in i.services
+                                for i in probe.node_infos(1.0)),
+                    30, 0.2, "the audio action server answering")
+        return started
+    return start
+
+
 @pytest.mark.integration
-def test_a_sound_plays_to_its_end(audio: Callable[..., Audio],  # noqa: F811
+def test_a_sound_plays_to_its_end(ready_audio: Callable[..., Audio],
                                   bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
     config, _ = beep_config(tmp_path, 0.4)
-    audio(config)
+    ready_audio(config)
     bot = bot_factory()
     handle = bot.play("beep")
     assert handle.wait(30) == "SUCCEEDED", handle.message
@@ -61,10 +78,10 @@ def test_a_sound_plays_to_its_end(audio: Callable[..., Audio],  # noqa: F811
 
 
 @pytest.mark.integration
-def test_a_canceled_sound_ends_canceled(audio: Callable[..., Audio],  # noqa: F811
+def test_a_canceled_sound_ends_canceled(ready_audio: Callable[..., Audio],
                                         bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
     config, _ = beep_config(tmp_path, 10.0)
-    a = audio(config)
+    a = ready_audio(config)
     bot = bot_factory()
     handle = bot.play("beep")
     a.status.wait_for(lambda s: s.goal_id == handle.goal_id and s.state == "PLAYING",
@@ -74,10 +91,10 @@ def test_a_canceled_sound_ends_canceled(audio: Callable[..., Audio],  # noqa: F8
 
 @pytest.mark.integration
 def test_unknown_sounds_and_texts_are_refused_with_the_reason(
-        audio: Callable[..., Audio], bot_factory: Callable[..., Bot],  # noqa: F811
+        ready_audio: Callable[..., Audio], bot_factory: Callable[..., Bot],
         tmp_path: Path) -> None:
     config, _ = beep_config(tmp_path, 0.3)
-    audio(config)
+    ready_audio(config)
     bot = bot_factory()
     with pytest.raises(Refused, match="unknown sound 'fanfare'"):
         bot.play("fanfare")
@@ -86,12 +103,12 @@ def test_unknown_sounds_and_texts_are_refused_with_the_reason(
 
 
 @pytest.mark.integration
-def test_a_configured_text_is_spoken(audio: Callable[..., Audio],  # noqa: F811
+def test_a_configured_text_is_spoken(ready_audio: Callable[..., Audio],
                                      bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
     if shutil.which("espeak-ng") is None:
         pytest.skip("espeak-ng is not installed (scripts/test-packages.sh installs it)")
     config, _ = beep_config(tmp_path, 0.3, hi="say:Hi")
-    audio(config)
+    ready_audio(config)
     bot = bot_factory()
     handle = bot.say("Hi")
     assert handle.sound == "hi" and handle.wait(60) == "SUCCEEDED", handle.message
