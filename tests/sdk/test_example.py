@@ -13,7 +13,7 @@ import pytest
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process
+from buddybot.tools.testing import Collector, Process, retry_until
 from tests.people.test_service import Visitor
 
 DOC = Path(__file__).resolve().parents[2] / "docs" / "sdk.md"
@@ -46,6 +46,9 @@ def test_the_example_greets_a_visitor(spawn: Callable[..., Process], probe: Node
     spawn("audio-player", "--config", str(config))
     state.wait_for(lambda s: s.people == [], 30, "the people service up")
     free.wait_for(lambda b: b.data, 30, "the player up")
+    retry_until(lambda: any(i.node == "audio" and "audio/play_sound" in i.services
+                            for i in probe.node_infos(1.0)),
+                30, 0.2, "the audio action server answering")
     script = tmp_path / "greeter.py"
     script.write_text(example_code())
     program = Process([sys.executable, str(script), "--connect", endpoint, "--config",
