@@ -35,11 +35,11 @@ from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 pytestmark = [pytest.mark.integration,  # a router and the robot's processes
               TIMING]  # gaps under a bound
 
-MAX_GAP_S = 1.0
+MAX_GAP_S = 2.0
 """The bound asserted here. The target is 200 ms (met on a quiet machine, see
-docs/core.md); on a shared CI machine CPU noise alone makes gaps of a few
-hundred ms, while the stall this test guards against lasted 4-5 s and left
-a goal's status undelivered."""
+docs/core.md); with the rest of the suite running beside it on two cores, CPU
+noise alone makes gaps of up to about a second (1.07 s seen), while the stall
+this test guards against lasted 4-5 s and left a goal's status undelivered."""
 BURST_S = 4.0
 
 # What floods each service: a key it subscribes to.
