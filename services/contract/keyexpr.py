@@ -14,13 +14,18 @@ it is answered here, for strings, without a session.
 
 from __future__ import annotations
 
-from functools import lru_cache
+from collections.abc import Callable, Sequence
+from typing import TypeVar
 
 STAR = "*"
 DOUBLE_STAR = "**"
 CHUNK_STAR = "$*"
 VERBATIM = "@"
 _FORBIDDEN = frozenset("#?")
+MAX_CHARS = 1024
+"""Longer than any key of the catalogue by far; an expression longer than this
+meets nothing (bounds the matching's time on untrusted keys)."""
+T = TypeVar("T")
 
 
 def valid(expr: str) -> bool:
@@ -42,19 +47,14 @@ def _valid_chunk(chunk: str) -> bool:
 def intersects(a: str, b: str) -> bool:
     """Whether some key belongs to both expressions (a concrete key and an
     expression: whether the key matches). Check `valid` first where the text
-    comes from a person: an invalid expression gets an answer, not an error."""
-    return _chunks_meet(tuple(a.split("/")), tuple(b.split("/")))
+    comes from a person: an invalid expression gets an answer, not an error.
 
-
-@lru_cache(maxsize=4096)
-def _chunks_meet(a: tuple[str, ...], b: tuple[str, ...]) -> bool:
-    if not a or not b:
-        return all(chunk == DOUBLE_STAR for chunk in a or b)
-    if a[0] == DOUBLE_STAR:
-        return _chunks_meet(a[1:], b) or (_wild_may_take(b[0]) and _chunks_meet(a, b[1:]))
-    if b[0] == DOUBLE_STAR:
-        return _chunks_meet(a, b[1:]) or (_wild_may_take(a[0]) and _chunks_meet(a[1:], b))
-    return chunk_intersects(a[0], b[0]) and _chunks_meet(a[1:], b[1:])
+    Keys can come from untrusted places (a recording's channel names), so the
+    work is bounded: an expression longer than `MAX_CHARS` meets nothing, and
+    the matching is a table filled in a loop (no recursion on the input's length)."""
+    if len(a) > MAX_CHARS or len(b) > MAX_CHARS:
+        return False
+    return _meet(a.split("/"), b.split("/"), DOUBLE_STAR, chunk_intersects, _wild_may_take)
 
 
 def _wild_may_take(chunk: str) -> bool:
@@ -68,26 +68,40 @@ def chunk_intersects(a: str, b: str) -> bool:
         return a == b
     if a in (STAR, DOUBLE_STAR) or b in (STAR, DOUBLE_STAR):
         return True
-    return _globs_meet(_glob(a), _glob(b))
+    return _meet(_glob(a), _glob(b), None, lambda x, y: x == y, lambda _x: True)
 
 
-def _glob(chunk: str) -> tuple[str | None, ...]:
+def _glob(chunk: str) -> list[str | None]:
     """A chunk as characters with None for each `$*`."""
     out: list[str | None] = []
     for i, part in enumerate(chunk.split(CHUNK_STAR)):
         if i:
             out.append(None)
         out.extend(part)
-    return tuple(out)
+    return out
 
 
-@lru_cache(maxsize=4096)
-def _globs_meet(a: tuple[str | None, ...], b: tuple[str | None, ...]) -> bool:
-    """Whether two patterns (None: any run of characters) share a string."""
-    if not a or not b:
-        return all(c is None for c in a or b)
-    if a[0] is None:
-        return _globs_meet(a[1:], b) or _globs_meet(a, b[1:])
-    if b[0] is None:
-        return _globs_meet(a, b[1:]) or _globs_meet(a[1:], b)
-    return a[0] == b[0] and _globs_meet(a[1:], b[1:])
+def _meet(a: Sequence[T], b: Sequence[T], wild: T, same: Callable[[T, T], bool],
+          takes: Callable[[T], bool]) -> bool:
+    """Whether two patterns share a concrete sequence. `wild` stands for any run of
+    items (none too) that `takes` accepts; other items meet when `same` says so.
+
+    `reach[j]` for the row of `i` says whether `a[i:]` and `b[j:]` can meet; rows
+    are filled from the end, so time is len(a) * len(b) and memory one row."""
+    n, m = len(a), len(b)
+    below = [False] * (m + 1)  # the row of i + 1
+    for i in range(n, -1, -1):
+        row = [False] * (m + 1)
+        for j in range(m, -1, -1):
+            if i == n:
+                row[j] = all(x == wild for x in b[j:])
+            elif j == m:
+                row[j] = a[i] == wild and below[j]
+            elif a[i] == wild:
+                row[j] = below[j] or (takes(b[j]) and row[j + 1])
+            elif b[j] == wild:
+                row[j] = row[j + 1] or (takes(a[i]) and below[j])
+            else:
+                row[j] = same(a[i], b[j]) and below[j + 1]
+        below = row
+    return below[0]

@@ -95,3 +95,15 @@ def test_validity_agrees_with_zenoh(text: str) -> None:
     except zenoh.ZError:
         accepted = False
     assert keyexpr.valid(text) is accepted
+
+
+def test_long_untrusted_keys_neither_recurse_nor_match() -> None:
+    """A recording's channel name can be anything: thousands of chunks or `$*`s end
+    in an answer, never a RecursionError, and past MAX_CHARS nothing matches."""
+    deep = "/".join(["a"] * 900)  # 1799 characters, 900 chunks
+    assert not keyexpr.intersects("**", deep)
+    near = "/".join(["a"] * 500)  # 999 characters: within the bound, matched
+    assert keyexpr.intersects("**/a", near) and keyexpr.intersects(near, "a/**")
+    globs = "$*a" * 300  # one chunk of 900 characters with 300 wildcards
+    assert keyexpr.intersects(globs, "a" * 300)
+    assert not keyexpr.intersects(globs, "b" * 300)
