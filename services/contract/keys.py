@@ -271,6 +271,22 @@ PEOPLE_EVENTS = Topic(
 """Not latched, so STREAM and not STATE (which is always latched): a late joiner must
 not take an old ARRIVED for a new one. An event lost under congestion is not
 fetched again; `people/state` (latched) is what converges."""
+LEASES = Topic(
+    "leases/state", "who holds the eyes and the speaker, and the last leases that ended",
+    type=m.Leases, qos=STATE, latched=True,
+)
+LEASE_ACQUIRE = Service(
+    "leases/acquire", "take resources (expression, gaze, audio) at a priority",
+    request=m.LeaseRequest, reply=m.LeaseReply,
+)
+LEASE_RELEASE = Service(
+    "leases/release", "end a lease: its holder, or an operator breaking it",
+    request=m.LeaseRelease, reply=m.TriggerReply,
+)
+EYES_COMMAND = Service(
+    "eyes/command", "a lease holder's expression or gaze, published by the controller",
+    request=m.EyesCommand, reply=m.TriggerReply,
+)
 PLAY_SOUND = Service(
     "audio/play_sound", "action goal: play a named sound",
     request=m.PlaySound, reply=m.PlaySoundReply,
@@ -311,12 +327,12 @@ NODE_INFO = Service(
 
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
-    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
+    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS, LEASES,
     PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
-    PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE, AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS,
-    NODE_INFO,
+    LEASE_ACQUIRE, LEASE_RELEASE, EYES_COMMAND, PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE,
+    AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS, NODE_INFO,
 )
 
 

@@ -411,6 +411,101 @@ class PersonEvent(Message):
     engagement: Engagement
 
 
+# --- leases ------------------------------------------------------------------
+
+Resource = Literal["expression", "gaze", "audio"]
+"""What a lease holds: the eyes' expression, their gaze, the speaker."""
+LeasePriority = Literal["builtin", "app", "operator"]
+"""Low to high. `builtin` is the controller's own behaviour: it holds whatever
+no lease holds, and no request may ask for it."""
+LEASE_PRIORITIES: tuple[str, ...] = ("builtin", "app", "operator")
+LeaseId = Annotated[str, msgspec.Meta(max_length=64)]
+NodeName = Annotated[str, msgspec.Meta(min_length=1, max_length=64,
+                                       description="a node name: letters, digits, - and _")]
+Resources = Annotated[list[Resource], msgspec.Meta(min_length=1, max_length=3)]
+MAX_LEASE_S = 86400.0
+"""Longest lease duration the controller grants (a day); longer is refused."""
+
+
+class LeaseRequest(Message):
+    """`leases/acquire`: take `resources` from whoever holds them at a lower priority.
+
+    `holder` and `instance` name the asking node's liveliness token
+    (`nodes/<holder>/<instance>`): the lease ends when that token goes away
+    (the program ended, crashed or was killed). `duration_s` None: until
+    released; otherwise it expires on its own after that many seconds.
+    Ranges are checked by the controller, which refuses with the reason.
+    """
+
+    holder: NodeName
+    instance: Annotated[str, msgspec.Meta(min_length=1, max_length=64,
+                                          description="the holder's Zenoh session id")]
+    resources: Resources
+    priority: LeasePriority = "app"
+    duration_s: float | None = None
+
+
+class LeaseReply(Message):
+    granted: bool
+    lease_id: LeaseId = ""
+    message: Text = ""
+    """Why it was refused, or which leases it took over."""
+    expires_ns: StampNs | None = None
+
+
+class LeaseRelease(Message):
+    """`leases/release`: end a lease (its holder, or an operator breaking it)."""
+
+    lease_id: LeaseId
+    reason: Text = ""
+
+
+class Lease(Message):
+    lease_id: LeaseId
+    holder: NodeName
+    instance: Annotated[str, msgspec.Meta(max_length=64)]
+    priority: LeasePriority
+    resources: Resources
+    granted_ns: StampNs
+    expires_ns: StampNs | None = None
+
+
+class LeaseEnd(Message):
+    """Why a lease ended: `released`, `expired`, `holder_gone`, `preempted` or `broken`."""
+
+    lease_id: LeaseId
+    holder: NodeName
+    reason: Literal["released", "expired", "holder_gone", "preempted", "broken"]
+    stamp_ns: StampNs
+    message: Text = ""
+
+
+class Leases(Message):
+    """Every lease now (latched, on change), and the last ones that ended."""
+
+    stamp_ns: StampNs
+    leases: Annotated[list[Lease], msgspec.Meta(max_length=64)] = msgspec.field(
+        default_factory=list)
+    ended: Annotated[list[LeaseEnd], msgspec.Meta(max_length=16)] = msgspec.field(
+        default_factory=list)
+
+
+class EyesCommand(Message):
+    """`eyes/command`: what a lease holder wants the eyes to do.
+
+    The controller publishes it on `eyes/expression` / `eyes/control` if
+    `lease_id` holds `expression` (for `expression`) and `gaze` (for the
+    gaze fields); it is the one publisher of both keys, so `eyes/expression`
+    keeps exactly one retained value whoever drives it.
+    """
+
+    lease_id: LeaseId
+    expression: ExpressionAction | None = None
+    yaw: Annotated[float, msgspec.Meta(ge=-3.15, le=3.15)] | None = None
+    pitch: Annotated[float, msgspec.Meta(ge=-1.58, le=1.58)] | None = None
+    target_distance_cm: DistanceCm = 0.0
+
+
 # --- system ----------------------------------------------------------------
 
 
@@ -520,6 +615,13 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Person,
     PeopleState,
     PersonEvent,
+    LeaseRequest,
+    LeaseReply,
+    LeaseRelease,
+    Lease,
+    LeaseEnd,
+    Leases,
+    EyesCommand,
     PlaySound,
     PlaySoundReply,
     PlaySoundStatus,
