@@ -1,11 +1,14 @@
-"""The controller as lease arbiter, as a process behind a real router: apps (nodes in
-this process, or a child process killed with SIGKILL) take the eyes, the controller
-puts their commands on `eyes/expression` and gives the eyes back when a lease ends."""
+"""The controller as lease arbiter. First without Zenoh (the `Scene` of
+test_service.py: fake node and clock), then as a process behind a real router:
+apps (nodes in this process, or a child process killed with SIGKILL) take the
+eyes, the controller puts their commands on `eyes/expression` and gives the eyes
+back when a lease ends."""
 
 from __future__ import annotations
 
 import json
 import logging
+import math
 import subprocess
 import sys
 import time
@@ -24,6 +27,7 @@ from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_unti
 
 from ..conftest import TIMING
 from .conftest import FAST_CONFIG
+from .test_service import Scene
 
 X = m.ExpressionAction
 Spawn = Callable[..., Process]
@@ -42,6 +46,125 @@ node.call(keys.EYES_COMMAND, m.EyesCommand(lease_id=reply.lease_id,
 print("star shown", flush=True)
 threading.Event().wait()
 """
+
+
+# --- without Zenoh -------------------------------------------------------------------
+
+
+def take(s: Scene, *resources: m.Resource, holder: str = "app-a",
+         priority: m.LeasePriority = "app", duration_s: float | None = None) -> str:
+    """A lease for `holder` (its liveliness token seen first), granted."""
+    s.controller.on_token(holder, "i1", True)
+    reply = s.controller.acquire(m.LeaseRequest(holder=holder, instance="i1",
+                                                resources=list(resources), priority=priority,
+                                                duration_s=duration_s))
+    assert reply.granted, reply.message
+    return reply.lease_id
+
+
+def command(s: Scene, lease_id: str, **fields: object) -> m.TriggerReply:
+    return s.controller.eyes_command(m.EyesCommand(lease_id=lease_id, **fields))  # type: ignore[arg-type]
+
+
+def leases(s: Scene) -> list[m.Leases]:
+    return list(s.node.publishers["leases/state"].sent)
+
+
+def test_a_held_expression_is_the_holders_and_released_it_is_the_behaviours_at_once(
+) -> None:
+    s = Scene()
+    lease = take(s, "expression")
+    assert leases(s)[-1].leases[0].lease_id == lease
+    assert s.states()[-1].yielded == ["expression"]
+    s.presence(True)  # the behaviour wants EYE_AWAKE now, and keeps that idea
+    assert s.expressions() == [X.EYE_SLEEP]
+    assert s.states()[-1].phase == "noticed"
+    assert command(s, lease, expression=X.ANIMATE_LOVE).success
+    assert s.expressions() == [X.EYE_SLEEP, X.ANIMATE_LOVE]
+    done = s.controller.release(m.LeaseRelease(lease_id=lease, by="app-a"))
+    assert done.success
+    # no clock step: the release itself put the behaviour's expression back
+    assert s.expressions() == [X.EYE_SLEEP, X.ANIMATE_LOVE, X.EYE_AWAKE]
+    assert s.states()[-1].yielded == []
+    assert leases(s)[-1].ended[-1].reason == "released"
+    refused = command(s, lease, expression=X.ANIMATE_STAR)
+    assert not refused.success and "ended (released)" in refused.message
+
+
+def test_a_held_gaze_is_not_followed_and_a_gone_holder_gives_it_back() -> None:
+    s = Scene()
+    lease = take(s, "gaze")
+    s.presence(True)
+    s.face()
+    assert s.controls() == []  # the behaviour's Look is dropped
+    assert command(s, lease, yaw=0.5, pitch=0.2).success
+    assert [(c.yaw, c.pitch) for c in s.controls()] == [(0.5, 0.2)]
+    no_expr = command(s, lease, expression=X.ANIMATE_LOVE)
+    assert not no_expr.success and "does not hold expression" in no_expr.message
+    s.controller.on_token("app-a", "i1", False)  # killed: its token went away
+    back = s.controls()[-1]  # the face's gaze (Scene's point x=1, y=0.3), not the app's
+    assert back.yaw == pytest.approx(math.atan2(0.3, 1.0))
+    assert leases(s)[-1].ended[-1].reason == "holder_gone"
+
+
+def test_the_gaze_returns_to_centre_when_the_behaviour_had_none() -> None:
+    s = Scene()
+    lease = take(s, "gaze")
+    assert command(s, lease, yaw=0.5).success
+    s.controller.release(m.LeaseRelease(lease_id=lease, by="operator-cli"))
+    assert (s.controls()[-1].yaw, s.controls()[-1].pitch) == (0.0, 0.0)
+    assert leases(s)[-1].ended[-1].reason == "broken"
+
+
+def test_while_the_speaker_is_held_no_greeting_starts_and_after_it_does() -> None:
+    s = Scene()
+    lease = take(s, "audio")
+    s.presence(True)
+    s.watch(True)
+    s.run(3.0)  # well past the greeting dwell
+    assert s.sounds == []
+    assert s.states()[-1].waiting == "yielded"
+    s.controller.release(m.LeaseRelease(lease_id=lease, by="app-a"))
+    s.until(lambda: "play:greeting" in s.log, "the greeting once the speaker is free")
+
+
+def test_a_lease_expires_on_the_decision_tick_and_the_eyes_come_back() -> None:
+    s = Scene()
+    wall = [T_WALL]
+    s.controller.wall_ns = lambda: wall[0]
+    lease = take(s, "expression", duration_s=1.0)
+    assert command(s, lease, expression=X.ANIMATE_STAR).success
+    s.run(0.5)
+    assert s.expressions()[-1] == X.ANIMATE_STAR
+    wall[0] += 1_000_000_000
+    s.run(0.1)
+    assert s.expressions()[-1] == X.EYE_SLEEP
+    assert leases(s)[-1].ended[-1].reason == "expired"
+
+
+def test_a_flooding_holder_is_rate_limited_and_counted() -> None:
+    s = Scene(lease_actions_per_s=5.0, lease_actions_burst=3.0)
+    wall = [T_WALL]
+    s.controller.wall_ns = lambda: wall[0]
+    lease = take(s, "expression")
+    results = [command(s, lease, expression=X.EYE_GRIN).success for _ in range(10)]
+    assert results == [True] * 3 + [False] * 7
+    wall[0] += 200_000_000  # one token back at 5/s
+    assert command(s, lease, expression=X.EYE_GRIN).success
+    s.run(1.1)  # the diagnostics are put once a second
+    values = s.node.diagnostics.values
+    assert values["rate_limited"] == 7 and values["eyes_commands"] == 4
+    assert values["eyes_commands_refused"] == 7 and values["leases_granted"] == 1
+    s.controller.apply_settings(msgspec.structs.replace(s.controller.settings,
+                                                        lease_actions_per_s=1000.0))
+    wall[0] += 1_000_000_000
+    assert all(command(s, lease, expression=X.EYE_GRIN).success for _ in range(3))
+
+
+T_WALL = 1_700_000_000_000_000_000
+
+
+# --- through the router ----------------------------------------------------------------
 
 
 @pytest.fixture
