@@ -279,11 +279,34 @@ TERMINAL_GOAL_STATES: frozenset[str] = frozenset({"SUCCEEDED", "CANCELED", "ABOR
 
 TTS_PREFIX = "say:"
 """How a value of `[audio.sounds]` marks a text to speak instead of a file
-(`hello = "say:Hello!"`): the audio service and the SDK read the table alike."""
+(`hello = "say:Hello!"`), and how a `PlaySound` goal asks to speak a text
+that no sound names (`PlaySound{sound: "say:Hello!"}`)."""
+TTS_MAX_CHARS = 240
+"""Longest text a goal may ask to speak (about 15 s of speech)."""
+
+
+def spoken_text(sound: str) -> str | None:
+    """The text a `say:<text>` goal asks to speak (surrounding spaces dropped);
+    None for any other sound. ValueError with the reason when the text is
+    empty, longer than TTS_MAX_CHARS or holds a non-printable character
+    (a control character would reach espeak-ng and the logs)."""
+    if not sound.startswith(TTS_PREFIX):
+        return None
+    text = sound[len(TTS_PREFIX):].strip()
+    if not text:
+        raise ValueError(f"nothing to say after {TTS_PREFIX!r}")
+    if len(text) > TTS_MAX_CHARS:
+        raise ValueError(f"text to say is {len(text)} characters long "
+                         f"(at most {TTS_MAX_CHARS})")
+    bad = next((c for c in text if not c.isprintable()), None)
+    if bad is not None:
+        raise ValueError(f"text to say holds a non-printable character {bad!r}")
+    return text
 
 
 class PlaySound(Message):
-    """Goal of the `audio/play_sound` action: a sound name from [audio.sounds]."""
+    """Goal of the `audio/play_sound` action: a sound name from [audio.sounds],
+    or `say:<text>` to speak any text (1..TTS_MAX_CHARS printable characters)."""
 
     sound: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
 

@@ -4,8 +4,9 @@
 `buddybot` tool (`--connect`, then `[zenoh] connect` of `--config` or
 $BUDDYBOT_CONFIG, then the default; the same for `--robot`), and gives up
 after `timeout` seconds with `NoRouter` instead of waiting forever as a
-service does. The node is a probe: the program is not listed among the
-robot's nodes and publishes nothing on its own.
+service does. The program is a node of the robot: its liveliness token
+`nodes/<name>/<zid>` is what its leases are bound to (they end when it
+ends, however it ends), and `buddybot nodes` lists it.
 """
 
 from __future__ import annotations
@@ -14,15 +15,19 @@ import argparse
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import Any, TypeVar, cast
 
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
 from buddybot.runtime.session import RouterUnreachable
 from buddybot.sdk.errors import NoRouter, TimedOut
+from buddybot.sdk.eyes import Eyes
+from buddybot.sdk.leases import Lease, LeaseTable
 from buddybot.sdk.params import Params
 from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
 from buddybot.sdk.speaker import SoundHandle, Speaker
+
+T = TypeVar("T")
 
 TIMEOUT_S = 5.0
 """Default bound of the connect and of every call."""
@@ -44,8 +49,11 @@ class Bot:
         self.params = Params(node, timeout)
         self._people: People | None = None
         self._speaker: Speaker | None = None
-        self._lock = threading.Lock()
-        """Opens `people` and `speaker` once, on first use from any thread."""
+        self._leases: LeaseTable | None = None
+        self._eyes: Eyes | None = None
+        self._lock = threading.RLock()
+        """Opens `people`, `speaker`, `leases` and `eyes` once, on first use from any
+        thread."""
 
     @classmethod
     def connect(cls, connect: list[str] | None = None, config: str | None = None,
@@ -66,7 +74,7 @@ class Bot:
     def _open(cls, args: argparse.Namespace, name: str, timeout: float) -> Bot:
         ctx = resolve(args, name)
         try:
-            node = ctx.probe(timeout)
+            node = ctx.probe(timeout, visible=True)
         except RouterUnreachable as exc:
             raise NoRouter(str(exc), list(ctx.connect)) from None
         return cls(node, timeout)
@@ -76,10 +84,7 @@ class Bot:
     @property
     def people(self) -> People:
         """Who is there (`bot.people.now()`), from `people/state`."""
-        with self._lock:
-            if self._people is None:
-                self._people = People(self.node, self.timeout)
-            return self._people
+        return self._opened("_people", lambda: People(self.node, self.timeout))
 
     def events(self, *kinds: str, timeout: float | None = None) -> EventStream:
         """Person events of `kinds` (all when none): first the people present now
@@ -107,31 +112,62 @@ class Bot:
         """The person with this id, if present now."""
         return next((p for p in self.people.now() if p.id == person_id), None)
 
+    # -- leases and eyes --
+
+    @property
+    def leases(self) -> LeaseTable:
+        """The leases this program holds (opened on first use)."""
+        return self._opened("_leases", lambda: LeaseTable(self.node, self.timeout))
+
+    def lease(self, *resources: str, priority: str = "app",
+              duration_s: float | None = None) -> Lease:
+        """Take `resources` ("expression", "gaze", "audio"; "eyes" = expression +
+        gaze) from the controller; Refused naming the holder, NoService without
+        a controller, ValueError for a malformed request."""
+        return self.leases.acquire(resources, priority, duration_s)
+
+    @property
+    def eyes(self) -> Eyes:
+        """Expressions and gaze through the controller (opened on first use)."""
+        return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout))
+
     # -- speaker --
 
     @property
     def speaker(self) -> Speaker:
         """Sounds through the `audio/play_sound` action (opened on first use)."""
-        with self._lock:
-            if self._speaker is None:
-                self._speaker = Speaker(self.node, self.params, self.timeout)
-            return self._speaker
+        return self._opened("_speaker", lambda: Speaker(self.node, self.leases, self.timeout))
 
     def play(self, sound: str) -> SoundHandle:
-        """Play a sound of `[audio.sounds]` by name; Refused, NoService."""
+        """Play a sound of `[audio.sounds]` by name, under an "audio" lease;
+        Refused, NoService."""
         return self.speaker.play(sound)
 
     def say(self, text: str) -> SoundHandle:
-        """Speak `text`, configured in `[audio.sounds]` as `say:<text>`; Refused, NoService."""
+        """Speak any `text` (1..240 printable characters) with espeak-ng, under an
+        "audio" lease; ValueError for a malformed text, Refused, NoService."""
         return self.speaker.say(text)
 
     # -- lifetime --
 
+    def _opened(self, attr: str, make: Callable[[], T]) -> T:
+        """The part kept in `attr`, made by `make` on first use (once, from any thread)."""
+        with self._lock:
+            part = getattr(self, attr)
+            if part is None:
+                part = make()
+                setattr(self, attr, part)
+            return cast(T, part)
+
     def close(self) -> None:
+        """Release the leases held (bounded: a gone controller ends them anyway when
+        the token goes), then leave the router."""
         if self._people is not None:
             self._people.close()
         if self._speaker is not None:
             self._speaker.close()
+        if self._leases is not None:
+            self._leases.close(min(self.timeout, 1.0))
         self.node.close()
 
     def __enter__(self) -> Bot:
