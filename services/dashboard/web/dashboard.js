@@ -408,7 +408,7 @@ function showControl() {
   const el = $("control-state");
   if (holding) put(el, `you drive (lease ${l.own})`);
   else if (!l.known) put(el, "no lease state: is the controller running?");
-  else put(el, "the robot's own behaviour or an app drives");
+  else put(el, "off: the robot or an app drives");
   el.className = holding ? "holding" : "dim";
   for (const b of document.querySelectorAll(".needs-control button")) {
     b.disabled = !holding;
@@ -438,8 +438,8 @@ function showLeases() {
     const tr = document.createElement("tr");
     tr.dataset.lease = lease.lease_id; tr.className = lease.own ? "own" : "";
     tr.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's)" : "");
-    const cells = [[lease.holder + (lease.own ? " (you)" : ""), ""], [lease.priority, "prio-" + lease.priority],
-      [lease.resources.join(", "), ""], [ago(lease.since * 1e9), "since"], [until(lease.expires), "expires"]];
+    const cells = [[lease.holder + (lease.own ? " (you)" : ""), "holder"], [lease.priority, "prio-" + lease.priority],
+      [lease.resources.join(", "), "res"], [ago(lease.since * 1e9), "since"], [until(lease.expires), "expires"]];
     for (const [text, cls] of cells) {
       const td = document.createElement("td"); td.textContent = text; td.className = cls; tr.appendChild(td);
     }
