@@ -9,6 +9,8 @@ service): take the lease, drive the eyes with it, give it back, and know
 from `leases/state` whether it still holds. Every call is bounded by a
 timeout and raises `ServiceError` (no controller, a bad reply) or
 `LeaseRefused` (the controller said no, with its reason): never a hang.
+A release names this node (`by`), so the controller tells a holder giving
+its lease back (`released`) from an operator breaking someone's (`broken`).
 """
 
 from __future__ import annotations
@@ -41,10 +43,12 @@ def find(state: m.Leases | None, lease_id: str | None) -> m.Lease | None:
 
 def release(node: Node, lease_id: str, reason: str = "",
             timeout: float = CALL_TIMEOUT_S) -> str:
-    """End any lease by id (an operator breaking one gives BROKEN_BY_OPERATOR);
-    the controller's text on success, LeaseRefused (an unknown id) otherwise."""
+    """End any lease by id, asked by this node: its own lease is `released`,
+    anyone else's `broken` (an operator gives BROKEN_BY_OPERATOR). The
+    controller's text on success, LeaseRefused (an unknown id) otherwise."""
     reply: m.TriggerReply = node.call(
-        keys.LEASE_RELEASE, m.LeaseRelease(lease_id=lease_id, reason=reason), timeout=timeout)
+        keys.LEASE_RELEASE, m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name),
+        timeout=timeout)
     if not reply.success:
         raise LeaseRefused(reply.message or f"lease {lease_id} not released")
     return reply.message or f"lease {lease_id} ended"

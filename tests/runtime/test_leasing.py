@@ -66,7 +66,8 @@ def test_acquire_once_command_with_it_and_release() -> None:
     sent = ctl.requests[-1][1]
     assert sent == m.EyesCommand(lease_id=lease_id, expression=m.ExpressionAction.EYE_GRIN)
     assert h.release("done") == "released"
-    assert ctl.requests[-1][1] == m.LeaseRelease(lease_id=lease_id, reason="done")
+    assert ctl.requests[-1][1] == m.LeaseRelease(lease_id=lease_id, reason="done",
+                                                 by="dashboard")
     assert h.lease_id is None and h.release() is None
     with pytest.raises(leasing.LeaseRefused, match="no lease held"):
         h.command(yaw=0.1, pitch=0.0)

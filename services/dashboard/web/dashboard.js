@@ -406,7 +406,8 @@ function showControl() {
   const holding = !!l.holding;
   $("control").checked = holding;
   const el = $("control-state");
-  if (holding) put(el, `you drive (lease ${l.own})`);
+  el.title = holding ? `this dashboard's operator lease ${l.own}` : "";
+  if (holding) put(el, "on: you drive");
   else if (!l.known) put(el, "no lease state: is the controller running?");
   else put(el, "off: the robot or an app drives");
   el.className = holding ? "holding" : "dim";
@@ -437,8 +438,8 @@ function showLeases() {
   for (const lease of l.leases) {
     const tr = document.createElement("tr");
     tr.dataset.lease = lease.lease_id; tr.className = lease.own ? "own" : "";
-    tr.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's)" : "");
-    const cells = [[lease.holder + (lease.own ? " (you)" : ""), "holder"], [lease.priority, "prio-" + lease.priority],
+    tr.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's: you)" : "");
+    const cells = [[lease.holder, "holder"], [lease.priority, "prio-" + lease.priority],
       [lease.resources.join(", "), "res"], [ago(lease.since * 1e9), "since"], [until(lease.expires), "expires"]];
     for (const [text, cls] of cells) {
       const td = document.createElement("td"); td.textContent = text; td.className = cls; tr.appendChild(td);
