@@ -242,9 +242,9 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
     assert held.priority == "operator" and held.expires_ns is None
     assert sorted(held.resources) == ["audio", "expression", "gaze"]
     page.wait_for_function("document.getElementById('control').checked", timeout=10_000)
-    row = f"#leases tr[data-lease='{held.lease_id}']"
+    row = f"#leases div[data-lease='{held.lease_id}']"
     page.wait_for_selector(row, timeout=10_000)
-    assert page.inner_text(f"{row} td.prio-operator") == "operator"
+    assert page.inner_text(f"{row} .prio-operator") == "operator"
 
     page.click(grin)
     expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
@@ -277,10 +277,10 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
         holder="greeter", instance=app.instance, resources=["expression"], duration_s=60),
         timeout=10)
     assert reply.granted, reply
-    app_row = f"#leases tr[data-lease='{reply.lease_id}']"
+    app_row = f"#leases div[data-lease='{reply.lease_id}']"
     page.wait_for_selector(app_row, timeout=15_000)
-    assert page.inner_text(f"{app_row} td.holder") == "greeter"
-    assert page.inner_text(f"{app_row} td.expires").startswith("in ")
+    assert page.inner_text(f"{app_row} .holder") == "greeter"
+    assert page.inner_text(f"{app_row} .expires").startswith("expires in ")
     page.click(f"{app_row} button.break")
     broken = wait_leases(leases, lambda s: any(
         e.lease_id == reply.lease_id for e in s.ended), "the app's lease broken")
@@ -292,10 +292,37 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
     assert page.errors == []
 
 
+def operator_takes_over_an_app(page: Any, endpoint: str) -> None:
+    """An app holds the eyes; the operator takes control (the app's lease ends
+    `preempted`, shown in the panel) and grins; the screenshot
+    (docs/images/dashboard-operator.png is a copy of one) shows both."""
+    app = Node("greeter", connect=[endpoint])
+    try:
+        reply = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+            holder="greeter", instance=app.instance, resources=["expression", "gaze"],
+            duration_s=600), timeout=10)
+        assert reply.granted, reply
+        page.wait_for_selector(f"#leases div[data-lease='{reply.lease_id}']", timeout=15_000)
+        page.click("label.switch")
+        page.wait_for_selector(f"#leases-ended div[data-ended='{reply.lease_id}']",
+                               timeout=15_000)
+        assert "preempted" in page.inner_text(f"#leases-ended div[data-ended='{reply.lease_id}']")
+        page.click("button[data-expression='EYE_GRIN']")
+        page.wait_for_function(
+            "document.getElementById('expression').textContent === 'EYE_GRIN'", timeout=15_000)
+        page.wait_for_timeout(1500)  # the eye page in its frame grins (a picture only)
+        page.screenshot(path=str(SHOTS / "dashboard-operator.png"), full_page=True)
+        size = page.evaluate("[document.documentElement.scrollWidth, "
+                             "document.documentElement.scrollHeight]")
+        assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+    finally:
+        app.close()
+
+
 def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: Path) -> None:
     """`buddybot up --sim` with the dashboard open at 1280x800: every panel has live
     content; the screenshot is saved for a person to look at (docs/images/dashboard.png
-    is a copy of one)."""
+    is a copy of one); then the operator takes control from an app."""
     eye_port, dash_port, router_port = free_port(), free_port(), free_port()
     config = tmp_path / "robot.toml"
     config.write_text(f"[eye_renderer]\nport = {eye_port}\n\n[dashboard]\nport = {dash_port}\n"
@@ -325,6 +352,7 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
         size = page.evaluate("[document.documentElement.scrollWidth, "
                              "document.documentElement.scrollHeight]")
         assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+        operator_takes_over_an_app(page, f"tcp/127.0.0.1:{router_port}")
         assert page.errors == []
     finally:
         up.stop(30)

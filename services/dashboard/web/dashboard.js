@@ -409,7 +409,7 @@ function showControl() {
   el.title = holding ? `this dashboard's operator lease ${l.own}` : "";
   if (holding) put(el, "on: you drive");
   else if (!l.known) put(el, "no lease state: is the controller running?");
-  else put(el, "off: the robot or an app drives");
+  else put(el, "off: buttons locked");
   el.className = holding ? "holding" : "dim";
   for (const b of document.querySelectorAll(".needs-control button")) {
     b.disabled = !holding;
@@ -419,36 +419,38 @@ function showControl() {
 function until(t) {
   if (t === null || t === undefined) return "until released";
   const s = t - nowS();
-  return s <= 0 ? "now" : s < 90 ? `in ${s.toFixed(0)} s` : `in ${(s / 60).toFixed(1)} min`;
+  return s <= 0 ? "expiring" : s < 90 ? `expires in ${s.toFixed(0)} s` : `expires in ${(s / 60).toFixed(1)} min`;
 }
 function showLeases() {
   const l = D.leases;
   if (!l) return;
-  const body = $("leases").querySelector("tbody");
-  body.textContent = "";
-  if (!l.known) {
-    const tr = document.createElement("tr"), td = document.createElement("td");
-    td.colSpan = 6; td.className = "dim"; td.textContent = "no leases/state from the controller (not running?)";
-    tr.appendChild(td); body.appendChild(tr);
-  } else if (!l.leases.length) {
-    const tr = document.createElement("tr"), td = document.createElement("td");
-    td.colSpan = 6; td.className = "dim"; td.textContent = "none: the robot's own behaviour holds everything";
-    tr.appendChild(td); body.appendChild(tr);
+  const box = $("leases");
+  box.textContent = "";
+  if (!l.known || !l.leases.length) {
+    const div = document.createElement("div");
+    div.className = "none";
+    div.textContent = l.known ? "none: the robot's own behaviour holds everything"
+      : "no leases/state from the controller (not running?)";
+    box.appendChild(div);
   }
   for (const lease of l.leases) {
-    const tr = document.createElement("tr");
-    tr.dataset.lease = lease.lease_id; tr.className = lease.own ? "own" : "";
-    tr.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's: you)" : "");
-    const cells = [[lease.holder, "holder"], [lease.priority, "prio-" + lease.priority],
-      [lease.resources.join(", "), "res"], [ago(lease.since * 1e9), "since"], [until(lease.expires), "expires"]];
-    for (const [text, cls] of cells) {
-      const td = document.createElement("td"); td.textContent = text; td.className = cls; tr.appendChild(td);
-    }
-    const td = document.createElement("td"), b = document.createElement("button");
-    b.textContent = "Break"; b.className = "break"; b.dataset.break = lease.lease_id;
+    const div = document.createElement("div");
+    div.className = "lease" + (lease.own ? " own" : "");
+    div.dataset.lease = lease.lease_id;
+    div.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's: you)" : "");
+    div.innerHTML = `<div class="l1"><b class="holder"></b><span class="prio"></span><button class="break">Break</button></div>`
+      + `<div class="l2"><span class="res"></span> · since <span class="since"></span> · <span class="expires"></span></div>`;
+    div.querySelector(".holder").textContent = lease.holder + (lease.own ? " (you)" : "");
+    const prio = div.querySelector(".prio");
+    prio.textContent = lease.priority; prio.className = "prio prio-" + lease.priority;
+    div.querySelector(".res").textContent = lease.resources.join(", ");
+    div.querySelector(".since").textContent = ago(lease.since * 1e9);
+    div.querySelector(".expires").textContent = until(lease.expires);
+    const b = div.querySelector("button");
+    b.dataset.break = lease.lease_id;
     b.title = `end ${lease.holder}'s lease now (leases/release, "broken by operator")`;
     b.onclick = () => send({ op: "break", lease_id: lease.lease_id });
-    td.appendChild(b); tr.appendChild(td); body.appendChild(tr);
+    box.appendChild(div);
   }
   const ended = $("leases-ended");
   ended.textContent = "";
@@ -467,7 +469,7 @@ function showLeases() {
 // "since" and "expires" move on: their cells only (a rebuilt row would swallow a click).
 setInterval(() => {
   for (const lease of (D.leases && D.leases.leases) || []) {
-    const tr = document.querySelector(`#leases tr[data-lease="${CSS.escape(lease.lease_id)}"]`);
+    const tr = document.querySelector(`#leases div[data-lease="${CSS.escape(lease.lease_id)}"]`);
     if (!tr) continue;
     put(tr.querySelector(".since"), ago(lease.since * 1e9));
     put(tr.querySelector(".expires"), until(lease.expires));
