@@ -20,7 +20,8 @@ from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.dashboard import model
 from buddybot.dashboard.settings import DashboardSettings
-from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.errors import NoReplyError, ServiceError
+from buddybot.runtime.leasing import BROKEN_BY_OPERATOR, LeaseHolder, LeaseRefused, release
 from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
 from buddybot.runtime.node import Node, RateLimitedLog, Subscription
@@ -32,6 +33,9 @@ CALL_TIMEOUT_S = 3.0
 """How long a button's bus call may take before the page is told it failed."""
 PRESENCE_NODE = "radar-presence"
 AUDIO_NODE = "audio"
+OPERATOR_RESOURCES: list[m.Resource] = ["expression", "gaze", "audio"]
+"""What the operator switch takes: the whole robot's face and voice."""
+TAKE_CONTROL = "take control first (the operator switch under Actions)"
 NODES_REFRESH_S = 2.0
 """Live tokens are asked for at least this often (and at once when one changes)."""
 
@@ -78,7 +82,9 @@ class Bus:
         self.mailbox = mailbox
         self.configured_sounds = configured_sounds
         self.limiter = model.RateLimiter(s.max_image_fps)
-        self.expression = node.publisher(keys.EXPRESSION)
+        self.lease = LeaseHolder(node, OPERATOR_RESOURCES, "operator", CALL_TIMEOUT_S)
+        self._leases: m.Leases | None = None
+        self._leases_lock = threading.Lock()
         self._nodes_wanted = threading.Event()
         self._nodes_wanted.set()
         self._last_nodes = 0.0
@@ -112,6 +118,7 @@ class Bus:
         node.subscribe(keys.FACES, latest("faces"), camera=self.s.camera)
         node.subscribe(keys.CONTROLLER_STATE, latest("controller"))
         node.subscribe(keys.EXPRESSION, latest("expression"))
+        node.subscribe(keys.LEASES, self._on_leases)
         node.subscribe(keys.EYES_DIRECTION, on_direction)
         node.subscribe(keys.PUPIL, latest("pupil"))
         node.subscribe(keys.LIDS, latest("lids"))
@@ -176,13 +183,70 @@ class Bus:
             return
         self.mailbox.put("image", model.pack_image(model.image_header(msg), data))
 
+    # -- leases --
+
+    def _on_leases(self, msg: m.Leases, _key: str) -> None:
+        """`leases/state` (Zenoh's thread): our lease is forgotten once it is gone."""
+        with self._leases_lock:
+            self._leases = msg
+            self.lease.forget_unless_in(msg)
+            self._post_leases()
+
+    def _post_leases(self) -> None:
+        self.mailbox.put("leases", (self._leases, self.lease.lease_id))
+
+    def _leases_changed(self) -> None:
+        with self._leases_lock:
+            self._post_leases()
+
+    def close(self) -> None:
+        """Give the operator lease back when the dashboard stops (were it killed,
+        the controller ends it when the node's liveliness token goes)."""
+        try:
+            self.lease.release("dashboard stopped")
+        except ServiceError as exc:
+            log.info("operator lease not released at stop: %s", clip(exc, 200))
+
     # -- buttons (called in a worker thread) --
 
     def run_command(self, cmd: model.Command) -> tuple[bool, str]:
+        """One page request on the bus: (ok, the text the page shows)."""
+        if isinstance(cmd, model.Control):
+            return self._control(cmd.on)
+        if isinstance(cmd, model.BreakLease):
+            return self._break(cmd.lease_id)
+        if self.lease.lease_id is None:
+            return False, TAKE_CONTROL
         if isinstance(cmd, model.SetExpression):
             action = m.ExpressionAction[cmd.action]
-            self.expression.put(m.ScreenExpression(stamp_ns=m.now_ns(), action=action))
-            return True, f"expression {action.name} published"
+            return _lease_call(f"expression {action.name}",
+                               lambda: self.lease.command(expression=action))
+        if isinstance(cmd, model.Look):
+            return _lease_call(f"look {cmd.yaw:+.2f} / {cmd.pitch:+.2f} rad",
+                               lambda: self.lease.command(yaw=cmd.yaw, pitch=cmd.pitch))
+        return self._audio(cmd)
+
+    def _control(self, on: bool) -> tuple[bool, str]:
+        if on:
+            ok, text = _lease_call("take control", lambda: _granted(self.lease.acquire()))
+        else:
+            ok, text = _lease_call("give back control",
+                                   lambda: self.lease.release("released by operator")
+                                   or "control was not held")
+        self._leases_changed()
+        return ok, text
+
+    def _break(self, lease_id: str) -> tuple[bool, str]:
+        if lease_id == self.lease.lease_id:
+            ok, text = _lease_call(f"break {clip(lease_id, 64)}",
+                                   lambda: self.lease.release(BROKEN_BY_OPERATOR) or "")
+        else:
+            ok, text = _lease_call(f"break {clip(lease_id, 64)}", lambda: release(
+                self.node, lease_id, BROKEN_BY_OPERATOR, CALL_TIMEOUT_S))
+        self._leases_changed()
+        return ok, text
+
+    def _audio(self, cmd: model.PlaySound | model.StopSound) -> tuple[bool, str]:
         if isinstance(cmd, model.PlaySound):
             try:
                 reply: m.PlaySoundReply = self.node.call(
@@ -199,3 +263,20 @@ class Bus:
             return False, f"stop: {clip(exc, 200)}"
         return stopped.success, stopped.message or ("stopped" if stopped.success else "refused")
 
+
+def _granted(lease_id: str) -> str:
+    return f"lease {lease_id} on {', '.join(OPERATOR_RESOURCES)}"
+
+
+def _lease_call(what: str, call: Callable[[], str]) -> tuple[bool, str]:
+    """A lease call's outcome as the page shows it: refusals with the controller's
+    reason, a missing controller said plainly (every call is bounded in time)."""
+    try:
+        text = call()
+    except LeaseRefused as exc:
+        return False, f"{what} refused: {clip(exc, 200)}"
+    except NoReplyError:
+        return False, f"{what}: the controller does not answer (is it running?)"
+    except ServiceError as exc:
+        return False, f"{what}: {clip(exc, 200)}"
+    return True, f"{what}: {clip(text, 200)}" if text else what

@@ -13,8 +13,11 @@ a clock value; everything here is deterministic and tested on its own
 * `Latency`: capture-to-gaze latency percentiles over a sliding window;
 * `Outbox`: what one page has not been sent yet (newest per slot, radar
   frames appended), so a slow page never builds a backlog;
-* `parse_command`: a page's request (set an expression, play, stop),
-  validated, or a one-line error for the page;
+* `parse_command`: a page's request (take or give back control, set an
+  expression, look, play, stop, break a lease), validated, or a one-line
+  error for the page;
+* `leases_view`: `leases/state` as the lease panel shows it, the
+  dashboard's own lease marked;
 * `presence_rules`, `sound_names`, `eye_page_url`, `origin_allowed`: small
   conversions with rules worth testing.
 """
@@ -316,6 +319,10 @@ class Outbox:
 
 # --- requests from a page ------------------------------------------------------------
 
+MAX_LOOK_YAW = 1.0
+"""Radians a gaze button may ask for (57 degrees: past the eye page's 40 degree edge)."""
+MAX_LOOK_PITCH = 0.8
+
 class SetExpression(msgspec.Struct, tag="expression", tag_field="op", forbid_unknown_fields=True):
     action: Annotated[str, msgspec.Meta(max_length=64)]
     """An `ExpressionAction` name (`EYE_GRIN`): names, so the page needs no numbers."""
@@ -331,7 +338,26 @@ class StopSound(msgspec.Struct, tag="stop", tag_field="op", forbid_unknown_field
     id: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
 
 
-Command = SetExpression | PlaySound | StopSound
+class Control(msgspec.Struct, tag="control", tag_field="op", forbid_unknown_fields=True):
+    """The operator switch: on takes the dashboard's operator lease, off gives it back."""
+    on: bool
+    id: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
+
+
+class Look(msgspec.Struct, tag="gaze", tag_field="op", forbid_unknown_fields=True):
+    """Where the eyes look (radians, + = the robot's left / up), under the lease."""
+    yaw: Annotated[float, msgspec.Meta(ge=-MAX_LOOK_YAW, le=MAX_LOOK_YAW)]
+    pitch: Annotated[float, msgspec.Meta(ge=-MAX_LOOK_PITCH, le=MAX_LOOK_PITCH)]
+    id: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
+
+
+class BreakLease(msgspec.Struct, tag="break", tag_field="op", forbid_unknown_fields=True):
+    """End anyone's lease (`leases/release`, reason "broken by operator")."""
+    lease_id: Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+    id: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
+
+
+Command = SetExpression | PlaySound | StopSound | Control | Look | BreakLease
 _command_decoder: msgspec.json.Decoder[Command] = msgspec.json.Decoder(Command)
 MAX_COMMAND_BYTES = 4096
 
@@ -349,7 +375,9 @@ def parse_command(text: str | bytes) -> Command:
     except (msgspec.DecodeError, msgspec.ValidationError) as exc:
         raise BadCommand(f"bad request: {clip(exc, 200)} (expected e.g. "
                          '{"op": "expression", "action": "EYE_GRIN"}, '
-                         '{"op": "play", "sound": "greeting"} or {"op": "stop"})') from None
+                         '{"op": "play", "sound": "greeting"}, {"op": "stop"}, '
+                         '{"op": "control", "on": true}, {"op": "gaze", "yaw": 0.3, "pitch": 0}'
+                         ' or {"op": "break", "lease_id": "..."})') from None
     if isinstance(cmd, SetExpression) and cmd.action not in m.ExpressionAction.__members__:
         raise BadCommand(f"unknown expression {clip(cmd.action, 64)!r}: one of "
                          f"{', '.join(m.ExpressionAction.__members__)}")
@@ -416,3 +444,28 @@ def enum_names() -> dict[str, dict[int, str]]:
     kinds: list[type[Any]] = [m.ExpressionAction, m.TargetState, m.PresenceState,
                               m.PresenceTarget, m.EyeId]
     return {k.__name__: {int(v): v.name for v in k} for k in kinds}
+
+
+# --- leases --------------------------------------------------------------------------
+
+
+def leases_view(state: m.Leases | None, own: str | None) -> dict[str, Any]:
+    """The lease panel: every lease now (the dashboard's own marked), the ended
+    ones newest first, and whether the operator holds control (`own`: the
+    dashboard's lease id, kept until a newer `leases/state` no longer lists
+    it). `state` None: the controller has not published `leases/state`."""
+    if state is None:
+        return {"known": False, "holding": own is not None, "own": own, "leases": [],
+                "ended": []}
+    leases = [{
+        "lease_id": lease.lease_id, "holder": lease.holder, "priority": lease.priority,
+        "resources": list(lease.resources), "since": lease.granted_ns / 1e9,
+        "expires": None if lease.expires_ns is None else lease.expires_ns / 1e9,
+        "own": own is not None and lease.lease_id == own,
+    } for lease in state.leases]
+    ended = [{
+        "lease_id": end.lease_id, "holder": end.holder, "reason": end.reason,
+        "message": clip(end.message, 200), "t": end.stamp_ns / 1e9,
+    } for end in reversed(state.ended)]
+    return {"known": True, "holding": own is not None, "own": own,
+            "leases": leases, "ended": ended}

@@ -71,7 +71,8 @@ class Board:
         self.s = s
         self.eye_port = eye_port
         self.pages: set[Page] = set()
-        self.state: dict[str, Any] = {"status": {"bus": False}}
+        self.state: dict[str, Any] = {"status": {"bus": False},
+                                      "leases": model.leases_view(None, None)}
         self.radar = model.RadarHistory(s.history_s)
         self.radar_latest: BoundedDict[str, dict[str, Any]] = BoundedDict(model.MAX_SENSORS)
         self.nodes = model.NodeTable()
@@ -150,6 +151,8 @@ class Board:
                         page.images_skipped += 1
                     else:
                         page.put("image", value)
+            elif slot == "leases":
+                self._send("leases", model.leases_view(*value))
             elif slot == "sounds":
                 if value != self.sounds:
                     self.sounds = value

@@ -4,7 +4,12 @@ One aiohttp server per robot serves the page (`web/`, no build step) and one
 WebSocket (`/ws`) that streams JSON (and the camera image as binary frames)
 to every connected page. The server is the page's only door to the bus: it
 holds one Node, subscribes to what the page shows, and does the buttons'
-bus work (publish an expression, call `audio/play_sound` and `audio/stop`).
+bus work: the operator switch takes an operator lease on the eyes and the
+speaker from the controller (`leases/acquire`), and the expression, gaze
+and sound buttons act under it (`eyes/command`, `audio/play_sound`,
+`audio/stop`); the lease panel breaks anyone's lease (`leases/release`).
+The dashboard never publishes `eyes/expression` itself: the controller is
+its one publisher.
 
 The parts, each in its own module:
 
@@ -131,6 +136,8 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             with contextlib.suppress(Exception):
                 node = await opening
         if node is not None:
+            if app.bus is not None:
+                await asyncio.to_thread(app.bus.close)
             node.close()
 
 

@@ -123,9 +123,10 @@ def plan(wanted: set[str], open_keys: set[str]) -> tuple[set[str], set[str]]:
     return wanted - open_keys, open_keys - wanted
 
 
-# --- the two Foxglove services ------------------------------------------------------
+# --- the Foxglove services ----------------------------------------------------------
 
 EXPRESSION_SERVICE = "eyes/expression"
+RELEASE_SERVICE = "eyes/release"
 PLAY_SOUND_SERVICE = "audio/play_sound"
 
 

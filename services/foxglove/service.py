@@ -12,7 +12,11 @@ A Foxglove WebSocket server (the `foxglove-sdk` package) fed by one node:
 * images are found from the nodes' own reports (`node_info/*`, every few
   seconds), advertised as `foxglove.CompressedImage`, and subscribed to
   only while a Foxglove client watches them, at most `max_image_fps`;
-* two Foxglove services: `eyes/expression` publishes a ScreenExpression,
+* three Foxglove services: `eyes/expression` sets the expression under
+  the bridge's operator lease on `expression` (taken at the first call,
+  held until `eyes/release`, the bridge stops, or an operator breaks it:
+  the controller publishes `eyes/expression`, never the bridge),
+  `eyes/release` gives the expression back to the robot, and
   `audio/play_sound` sends the goal to the audio action and returns its reply.
 
 The server starts before the node, so a busy port fails at once (one line,
@@ -38,7 +42,9 @@ from buddybot.foxglove.options import add_arguments, settings_from
 from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
 from buddybot.runtime.endpoints import is_wildcard, local_host
-from buddybot.runtime.handles import Publisher, Subscription
+from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.handles import Subscription
+from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings
@@ -72,8 +78,7 @@ class Bridge:
         self._images: dict[str, keys.Topic] = {}  # absolute image key -> its topic
         self._image_subs: dict[str, Subscription] = {}
         self._limiters: dict[str, logic.RateLimiter] = {}
-        self._expression: Publisher[Any] | None = None
-        self._expression_lock = threading.Lock()
+        self.lease = LeaseHolder(node, ["expression"], "operator", CALL_TIMEOUT_S)
 
     def apply_settings(self, settings: FoxgloveSettings) -> None:
         """A live change (`buddybot param set foxglove max_image_fps 5`): the image
@@ -89,6 +94,8 @@ class Bridge:
             self.node.subscribe(topic, partial(self.on_message, topic), delivery="inline")
 
     def on_message(self, topic: keys.Topic, msg: Any, relative_key: str) -> None:
+        if topic is keys.LEASES:
+            self.lease.forget_unless_in(msg)  # broken or ended elsewhere: not used again
         key = f"{self.node.prefix}/{relative_key}"
         channel = self.fox.channel(key, topic)
         if channel is None:
@@ -185,22 +192,44 @@ class Bridge:
             schema=service_schema("buddybot.SetExpression",
                                   logic.request_schema(m.ScreenExpression),
                                   channels.message_schema(m.ScreenExpression)))
+        release = foxglove.Service(
+            logic.RELEASE_SERVICE, handler=self.release_expression,
+            schema=service_schema("buddybot.ReleaseExpression",
+                                  logic.request_schema(m.Trigger),
+                                  channels.message_schema(m.TriggerReply)))
         play = foxglove.Service(
             logic.PLAY_SOUND_SERVICE, handler=self.play_sound,
             schema=service_schema("buddybot.PlaySound", logic.request_schema(m.PlaySound),
                                   channels.message_schema(m.PlaySoundReply)))
-        return [expression, play]
+        return [expression, release, play]
 
     def set_expression(self, request: foxglove.ServiceRequest) -> bytes:
-        """Publish the expression (`{"action": "EYE_HAPPY"}`; a name or a number)."""
+        """Set the expression (`{"action": "EYE_HAPPY"}`; a name or a number)
+        through the controller, under the bridge's operator lease on `expression`
+        (taken at the first call); a refusal names who holds the expression."""
         msg = describe.parse_message(m.ScreenExpression, _text(request.payload))
-        with self._expression_lock:
-            if self._expression is None:  # declared on first use: `node info` stays true
-                self._expression = self.node.publisher(keys.EXPRESSION)
-            self._expression.put(msg)
         assert isinstance(msg, m.ScreenExpression)
+        try:
+            self.lease.acquire()
+            self.lease.command(expression=msg.action)
+        except LeaseRefused as exc:
+            raise ServiceError(f"expression {msg.action.name} refused: {exc}") from None
         self.node.log.info("expression %s set from Foxglove", msg.action.name)
         return msgspec.json.encode(msg)
+
+    def release_expression(self, _request: foxglove.ServiceRequest) -> bytes:
+        """Give the expression back to the robot's own behaviour."""
+        text = self.lease.release("released from Foxglove")
+        reply = m.TriggerReply(success=True, message=text or "no lease was held")
+        return msgspec.json.encode(reply)
+
+    def close(self) -> None:
+        """Give the lease back at stop (were the bridge killed, the controller
+        ends it when the node's liveliness token goes)."""
+        try:
+            self.lease.release("foxglove bridge stopped")
+        except ServiceError as exc:
+            self.node.log.info("lease not released at stop: %s", clip(exc))
 
     def play_sound(self, request: foxglove.ServiceRequest) -> bytes:
         """Send a play_sound goal; the reply says whether it was accepted."""
@@ -241,6 +270,7 @@ def run(ctx: ServiceContext) -> int:
             node.spin()
             fox.changed.set()  # wake the manager so it sees the stop
             manager.join(5.0)
+            bridge.close()
         finally:
             node.close()
     finally:

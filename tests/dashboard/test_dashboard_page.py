@@ -209,32 +209,120 @@ def test_a_killed_node_is_shown_down_and_its_restart_counted(
     assert page.errors == []
 
 
-def test_buttons_set_the_expression_and_report_a_missing_audio_service(
-        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+def wait_leases(leases: Collector[m.Leases], predicate: Callable[[m.Leases], bool],
+                what: str) -> m.Leases:
+    """The newest `leases/state` matching `predicate` (waiting for one)."""
+    return leases.wait_for(lambda s: predicate(s) and s is leases.messages[-1], 20, what)
+
+
+def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leases(
+        browser: Any, spawn: Callable[..., Process], probe: Node,
+        node_factory: Callable[..., Node]) -> None:
+    """Router + controller + dashboard: the switch takes an operator lease, the
+    buttons act under it (the controller publishes), switching off gives the
+    eyes back, and the lease panel breaks an app's lease."""
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    controls = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("controller")
+    own = expressions.wait_for(timeout=30, what="the controller's own expression").action
     port = start_dashboard(spawn)
     page = open_page(browser, port)
-    page.click("button[data-expression='EYE_GRIN']")
-    got = expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
-                               "EYE_GRIN on eyes/expression")
-    assert got.stamp_ns > 0
+    page.wait_for_function("window.dash.leases && window.dash.leases.known", timeout=20_000)
+    # Until the operator takes control the buttons are disabled and say why.
+    grin = "button[data-expression='EYE_GRIN']"
+    assert page.is_disabled(grin)
+    assert "take control first" in page.get_attribute(grin, "title")
+    assert page.is_disabled("button[data-gaze='left']")
+
+    page.click("label.switch")
+    state = wait_leases(leases, lambda s: any(x.holder == "dashboard" for x in s.leases),
+                        "the dashboard's lease in leases/state")
+    held = next(x for x in state.leases if x.holder == "dashboard")
+    assert held.priority == "operator" and held.expires_ns is None
+    assert sorted(held.resources) == ["audio", "expression", "gaze"]
+    page.wait_for_function("document.getElementById('control').checked", timeout=10_000)
+    row = f"#leases div[data-lease='{held.lease_id}']"
+    page.wait_for_selector(row, timeout=10_000)
+    assert page.inner_text(f"{row} .prio-operator") == "operator"
+
+    page.click(grin)
+    expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
+                         "EYE_GRIN on eyes/expression (published by the controller)")
     page.wait_for_function("document.getElementById('expression').textContent === 'EYE_GRIN'",
                            timeout=15_000)
+    page.click("button[data-gaze='left']")
+    controls.wait_for(lambda c: abs(c.yaw + 0.5) < 1e-6 and c.pitch == 0.0, 15,
+                      "the robot looking to its right")
     # No audio service runs: the page says so, and the dashboard lives on.
     page.click("button[data-sound='greeting']")
     page.wait_for_function(
         "document.getElementById('reply').textContent.startsWith('play greeting:')",
         timeout=20_000)
     assert "bad" in page.get_attribute("#reply", "class")
-    page.click("button[data-expression='EYE_SAD']")
-    expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_SAD, 15)
+
+    # Switched off: the lease ends "released" and the controller's expression is back.
+    expressions.clear()
+    page.click("label.switch")
+    wait_leases(leases, lambda s: not s.leases and any(
+        e.lease_id == held.lease_id and e.reason == "released" for e in s.ended),
+        "the operator lease released")
+    expressions.wait_for(lambda e: e.action == own, 15, f"the controller's {own.name} again")
+    page.wait_for_function("!document.getElementById('control').checked", timeout=10_000)
+    assert page.is_disabled(grin)
+
+    # An app's lease appears in the panel; Break ends it "broken".
+    app = node_factory("greeter")
+    reply = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+        holder="greeter", instance=app.instance, resources=["expression"], duration_s=60),
+        timeout=10)
+    assert reply.granted, reply
+    app_row = f"#leases div[data-lease='{reply.lease_id}']"
+    page.wait_for_selector(app_row, timeout=15_000)
+    assert page.inner_text(f"{app_row} .holder") == "greeter"
+    assert page.inner_text(f"{app_row} .expires").startswith("expires in ")
+    page.click(f"{app_row} button.break")
+    broken = wait_leases(leases, lambda s: any(
+        e.lease_id == reply.lease_id for e in s.ended), "the app's lease broken")
+    end = next(e for e in broken.ended if e.lease_id == reply.lease_id)
+    assert (end.reason, end.message) == ("broken", "broken by operator")
+    page.wait_for_selector(f"#leases-ended div[data-ended='{reply.lease_id}']", timeout=10_000)
+    assert "broken" in page.inner_text(f"#leases-ended div[data-ended='{reply.lease_id}']")
+    page.wait_for_selector(app_row, state="detached", timeout=10_000)
     assert page.errors == []
+
+
+def operator_takes_over_an_app(page: Any, endpoint: str) -> None:
+    """An app holds the eyes; the operator takes control (the app's lease ends
+    `preempted`, shown in the panel) and grins; the screenshot
+    (docs/images/dashboard-operator.png is a copy of one) shows both."""
+    app = Node("greeter", connect=[endpoint])
+    try:
+        reply = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+            holder="greeter", instance=app.instance, resources=["expression", "gaze"],
+            duration_s=600), timeout=10)
+        assert reply.granted, reply
+        page.wait_for_selector(f"#leases div[data-lease='{reply.lease_id}']", timeout=15_000)
+        page.click("label.switch")
+        page.wait_for_selector(f"#leases-ended div[data-ended='{reply.lease_id}']",
+                               timeout=15_000)
+        assert "preempted" in page.inner_text(f"#leases-ended div[data-ended='{reply.lease_id}']")
+        page.click("button[data-expression='EYE_GRIN']")
+        page.wait_for_function(
+            "document.getElementById('expression').textContent === 'EYE_GRIN'", timeout=15_000)
+        page.wait_for_timeout(1500)  # the eye page in its frame grins (a picture only)
+        page.screenshot(path=str(SHOTS / "dashboard-operator.png"), full_page=True)
+        size = page.evaluate("[document.documentElement.scrollWidth, "
+                             "document.documentElement.scrollHeight]")
+        assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+    finally:
+        app.close()
 
 
 def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: Path) -> None:
     """`buddybot up --sim` with the dashboard open at 1280x800: every panel has live
     content; the screenshot is saved for a person to look at (docs/images/dashboard.png
-    is a copy of one)."""
+    is a copy of one); then the operator takes control from an app."""
     eye_port, dash_port, router_port = free_port(), free_port(), free_port()
     config = tmp_path / "robot.toml"
     config.write_text(f"[eye_renderer]\nport = {eye_port}\n\n[dashboard]\nport = {dash_port}\n"
@@ -264,6 +352,7 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
         size = page.evaluate("[document.documentElement.scrollWidth, "
                              "document.documentElement.scrollHeight]")
         assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+        operator_takes_over_an_app(page, f"tcp/127.0.0.1:{router_port}")
         assert page.errors == []
     finally:
         up.stop(30)

@@ -120,6 +120,9 @@ def test_outbox_keeps_newest_per_slot_and_appends_frames_bounded() -> None:
     ('{"op": "expression", "action": "EYE_GRIN", "id": 3}', model.SetExpression),
     ('{"op": "play", "sound": "greeting"}', model.PlaySound),
     ('{"op": "stop"}', model.StopSound),
+    ('{"op": "control", "on": true}', model.Control),
+    ('{"op": "gaze", "yaw": 0.5, "pitch": -0.35, "id": 9}', model.Look),
+    ('{"op": "break", "lease_id": "L7"}', model.BreakLease),
 ])
 def test_commands_parse(text: str, kind: type) -> None:
     assert isinstance(model.parse_command(text), kind)
@@ -129,6 +132,10 @@ def test_commands_parse(text: str, kind: type) -> None:
     "not json", "{}", '{"op": "explode"}', '{"op": "expression", "action": "EYE_WINK"}',
     '{"op": "expression", "action": 3}', '{"op": "play", "sound": ""}',
     '{"op": "stop", "extra": 1}', "[" * 5000,
+    '{"op": "control"}', '{"op": "control", "on": "yes"}',
+    '{"op": "gaze", "yaw": 7, "pitch": 0}', '{"op": "gaze", "yaw": NaN, "pitch": 0}',
+    '{"op": "gaze", "yaw": 0}', '{"op": "break", "lease_id": ""}',
+    '{"op": "break", "lease_id": "' + "x" * 65 + '"}',
 ])
 def test_bad_commands_get_one_line_reasons(text: str) -> None:
     with pytest.raises(model.BadCommand) as err:
@@ -189,3 +196,34 @@ def test_enum_names_are_json_ready() -> None:
     names = msgspec.json.decode(msgspec.json.encode(model.enum_names()))
     assert names["ExpressionAction"]["3"] == "EYE_GRIN"
     assert names["PresenceState"]["1"] == "IN_RANGE"
+
+
+def lease(lease_id: str, holder: str, priority: m.LeasePriority = "app",
+          expires_ns: int | None = None) -> m.Lease:
+    return m.Lease(lease_id=lease_id, holder=holder, instance="z1", priority=priority,
+                   resources=["expression", "gaze"], granted_ns=2_000_000_000,
+                   expires_ns=expires_ns)
+
+
+def test_the_lease_panel_marks_our_lease_and_lists_the_ended_newest_first() -> None:
+    state = m.Leases(stamp_ns=5, leases=[lease("L1", "greeter", expires_ns=9_000_000_000),
+                                         lease("L2", "dashboard", "operator")],
+                     ended=[m.LeaseEnd(lease_id="L0", holder="old", reason="expired",
+                                       stamp_ns=1_000_000_000),
+                            m.LeaseEnd(lease_id="L9", holder="app", reason="preempted",
+                                       stamp_ns=3_000_000_000, message="by dashboard")])
+    view = model.leases_view(state, "L2")
+    assert view["known"] and view["holding"] and view["own"] == "L2"
+    assert [(r["lease_id"], r["own"]) for r in view["leases"]] == [("L1", False), ("L2", True)]
+    assert view["leases"][0]["expires"] == 9.0 and view["leases"][1]["expires"] is None
+    assert view["leases"][0]["since"] == 2.0
+    assert [e["reason"] for e in view["ended"]] == ["preempted", "expired"]
+    assert view["ended"][0]["message"] == "by dashboard"
+    msgspec.json.encode(view)  # what the page gets is plain JSON
+    idle = model.leases_view(state, None)
+    assert not idle["holding"] and not any(r["own"] for r in idle["leases"])
+
+
+def test_no_lease_state_says_so() -> None:
+    view = model.leases_view(None, None)
+    assert view == {"known": False, "holding": False, "own": None, "leases": [], "ended": []}

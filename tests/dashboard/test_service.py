@@ -113,20 +113,71 @@ def test_bad_requests_get_error_replies_and_foreign_origins_are_refused(
                     replies.append(await _next(ws, "reply"))
                 await ws.send_bytes(b"\x00\x01")
                 replies.append(await _next(ws, "reply"))
-                # The socket still works after all that.
+                # The socket still works after all that (the button needs control).
                 await ws.send_str('{"op": "expression", "action": "EYE_SAD", "id": 7}')
                 replies.append(await _next(ws, "reply"))
         return replies
 
     replies = asyncio.run(talk())
-    assert [r["ok"] for r in replies] == [False, False, False, False, True]
+    assert [r["ok"] for r in replies] == [False, False, False, False, False]
     assert "bad request" in replies[0]["text"]
     assert "EYE_WINK" in replies[1]["text"]
     assert "sound" in replies[2]["text"]
     assert "binary" in replies[3]["text"]
-    assert replies[4]["id"] == 7
+    assert replies[4]["id"] == 7 and replies[4]["text"].startswith("take control first")
     assert proc.alive()
     assert health(port)["bad_requests"] == 4
+
+
+def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
+        spawn: Callable[..., Process]) -> None:
+    """No controller: taking control fails within the call timeout, naming it;
+    a stale lease id is refused by the controller, and the page learns it all."""
+    proc, port = start_dashboard(spawn)
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    url = f"http://{LOOPBACK}:{port}/ws"
+
+    async def ask(ws: aiohttp.ClientWebSocketResponse, request: dict[str, Any]
+                  ) -> tuple[dict[str, Any], float]:
+        start = time.monotonic()
+        await ws.send_str(json.dumps(request))
+        reply = await _next(ws, "reply", timeout=20)
+        assert reply["id"] == request["id"]
+        return reply, time.monotonic() - start
+
+    async def without() -> None:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                url, origin=f"http://{LOOPBACK}:{port}") as ws:
+            panel = await _next(ws, "leases")
+            assert panel == {"known": False, "holding": False, "own": None, "leases": [],
+                             "ended": []}
+            reply, took = await ask(ws, {"op": "control", "on": True, "id": 1})
+            assert not reply["ok"] and "controller does not answer" in reply["text"]
+            assert took < 10
+            reply, _ = await ask(ws, {"op": "break", "lease_id": "L-old", "id": 2})
+            assert not reply["ok"] and "controller does not answer" in reply["text"]
+            reply, _ = await ask(ws, {"op": "gaze", "yaw": 0.5, "pitch": 0, "id": 3})
+            assert not reply["ok"] and reply["text"].startswith("take control first")
+
+    asyncio.run(without())
+    spawn("controller")
+
+    async def stale() -> None:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                url, origin=f"http://{LOOPBACK}:{port}") as ws:
+            end = time.monotonic() + 30  # until the controller's services are declared
+            while True:
+                reply, _ = await ask(ws, {"op": "break", "lease_id": "L-old", "id": 4})
+                if "does not answer" not in reply["text"] or time.monotonic() > end:
+                    break
+            assert not reply["ok"] and "L-old" in reply["text"], reply
+            reply, _ = await ask(ws, {"op": "control", "on": True, "id": 5})
+            assert reply["ok"], reply
+            reply, _ = await ask(ws, {"op": "expression", "action": "EYE_GRIN", "id": 6})
+            assert reply["ok"], reply
+
+    asyncio.run(stale())
+    assert proc.alive()
 
 
 async def _next(ws: aiohttp.ClientWebSocketResponse, slot: str,

@@ -115,7 +115,6 @@ def test_keys_annotations_images_and_services_reach_a_foxglove_client(
     presence_pub = probe.publisher(keys.PRESENCE)
     faces_pub = probe.publisher(keys.FACES, camera="front")
     presence_pub.put(presence(1.5))  # latched: the bridge sees it whenever it subscribes
-    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
     diagnostics = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="foxglove")
     garbage = probe.raw_publisher(f"{PREFIX}/radar/presence", "application/json")
     probe.serve(keys.PLAY_SOUND, lambda goal: m.PlaySoundReply(
@@ -159,11 +158,9 @@ def test_keys_annotations_images_and_services_reach_a_foxglove_client(
             assert box == [{"x": 10.0, "y": 20.0}, {"x": 50.0, "y": 20.0},
                            {"x": 50.0, "y": 70.0}, {"x": 10.0, "y": 70.0}]
 
-            # The bridge's services: set an expression, query the play_sound action.
-            reply = await client.call("eyes/expression", b'{"action": "EYE_GRIN"}', 1)
-            assert msgspec.json.decode(reply, type=m.ScreenExpression).action == \
-                m.ExpressionAction.EYE_GRIN
-            assert expressions.wait_for(timeout=10).action == m.ExpressionAction.EYE_GRIN
+            # The bridge's services: a bad expression is refused by name (the lease
+            # path: test_a_client_expression_goes_through_an_operator_lease), the
+            # play_sound action is queried.
             with pytest.raises(CallFailed, match="action"):
                 await client.call("eyes/expression", b'{"action": "EYE_NOPE"}', 2)
             reply = await client.call("audio/play_sound", b'{"sound": "hello"}', 3)
@@ -173,6 +170,55 @@ def test_keys_annotations_images_and_services_reach_a_foxglove_client(
             await client.close()
 
     asyncio.run(scenario())
+
+
+@pytest.mark.integration
+def test_a_client_expression_goes_through_an_operator_lease(
+        bridge: int, probe: Node, spawn: Callable[..., Process],
+        node_factory: Callable[..., Node]) -> None:
+    """The bridge never publishes eyes/expression: it takes an operator lease on
+    `expression` and asks the controller (eyes/command); eyes/release gives the
+    expression back; another operator's lease refuses it with the holder named."""
+    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("controller")
+    own = expressions.wait_for(timeout=30, what="the controller's own expression").action
+    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
+                            for i in probe.node_infos(1.0)),
+                30, 0.2, "the controller's lease services")
+
+    async def scenario() -> None:
+        client = await FoxgloveClient.connect(bridge)
+        try:
+            reply = await client.call("eyes/expression", b'{"action": "EYE_GRIN"}', 1)
+            assert msgspec.json.decode(reply, type=m.ScreenExpression).action == \
+                m.ExpressionAction.EYE_GRIN
+            expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 10,
+                                 "EYE_GRIN from the controller")
+            held = leases.wait_for(lambda s: any(x.holder == "foxglove" for x in s.leases),
+                                   10, "the bridge's lease").leases
+            assert [(x.priority, x.resources) for x in held] == [("operator", ["expression"])]
+            await client.call("eyes/expression", b'{"action": "EYE_SAD"}', 2)  # same lease
+            expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_SAD, 10)
+            assert [x.holder for x in leases.messages[-1].leases] == ["foxglove"]
+            expressions.clear()
+            released = await client.call("eyes/release", b"{}", 3)
+            assert msgspec.json.decode(released, type=m.TriggerReply).success
+            expressions.wait_for(lambda e: e.action == own, 10, "the controller's own again")
+
+            wizard = node_factory("wizard")
+            taken = wizard.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+                holder="wizard", instance=wizard.instance, resources=["expression"],
+                priority="operator"), timeout=10)
+            assert taken.granted, taken
+            with pytest.raises(CallFailed, match="held by wizard"):
+                await client.call("eyes/expression", b'{"action": "EYE_GRIN"}', 4)
+        finally:
+            await client.close()
+
+    asyncio.run(scenario())
+    # The refused call showed nothing (the list was cleared before the release).
+    assert m.ExpressionAction.EYE_GRIN not in [e.action for e in expressions.messages]
 
 
 async def until_received_channel(client: FoxgloveClient, topic: str,

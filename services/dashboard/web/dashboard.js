@@ -77,10 +77,11 @@ const handlers = {
     for (const e of v.expressions) {
       const b = document.createElement("button");
       b.textContent = e.replace(/^(EYE_|ANIMATE_)/, "").toLowerCase();
-      b.title = "set the expression " + e; b.dataset.expression = e;
+      b.dataset.title = "set the expression " + e; b.dataset.expression = e;
       b.onclick = () => send({ op: "expression", action: e });
       box.appendChild(b);
     }
+    showControl();
   },
   status(v) { badge($("conn"), v.bus ? "on the bus" : "connecting to the robot…", v.bus ? "ok" : "warn"); },
   history(v) {
@@ -135,15 +136,17 @@ const handlers = {
     const box = $("sound-buttons"); box.textContent = "";
     for (const s of names) {
       const b = document.createElement("button");
-      b.textContent = "▶ " + s; b.title = "play " + s; b.dataset.sound = s;
+      b.textContent = "▶ " + s; b.dataset.title = "play " + s; b.dataset.sound = s;
       b.onclick = () => send({ op: "play", sound: s });
       box.appendChild(b);
     }
     const stop = document.createElement("button");
-    stop.textContent = "■ stop"; stop.className = "stop"; stop.title = "stop the sound playing";
+    stop.textContent = "■ stop"; stop.className = "stop"; stop.dataset.title = "stop the sound playing";
     stop.onclick = () => send({ op: "stop" });
     box.appendChild(stop);
+    showControl();
   },
+  leases(v) { D.leases = v; showControl(); showLeases(); },
   reply(r) { showReply(r); },
 };
 
@@ -383,4 +386,99 @@ function showNodes() {
   }
 }
 
+// --- operator control and leases --------------------------------------------------------
+// The buttons act under the dashboard's operator lease only: until the operator
+// takes control they are disabled and their tooltip says why, so a press never
+// takes the robot from its own behaviour or an app by surprise.
+const GAZE = { left: [-0.5, 0], right: [0.5, 0], up: [0, 0.35], down: [0, -0.35], centre: [0, 0] };
+const NEEDS_CONTROL = "take control first (the switch above): the robot's own behaviour or an app drives now";
+for (const b of document.querySelectorAll("#gaze-buttons button")) {
+  b.dataset.title = b.title;
+  const [yaw, pitch] = GAZE[b.dataset.gaze];
+  b.onclick = () => send({ op: "gaze", yaw, pitch });
+}
+$("control").onchange = (ev) => {
+  send({ op: "control", on: ev.target.checked });
+  showControl();  // back to what the server says until it answers
+};
+function showControl() {
+  const l = D.leases || { known: false, holding: false };
+  const holding = !!l.holding;
+  $("control").checked = holding;
+  const el = $("control-state");
+  el.title = holding ? `this dashboard's operator lease ${l.own}` : "";
+  if (holding) put(el, "on: you drive");
+  else if (!l.known) put(el, "no lease state: is the controller running?");
+  else put(el, "off: buttons locked");
+  el.className = holding ? "holding" : "dim";
+  for (const b of document.querySelectorAll(".needs-control button")) {
+    b.disabled = !holding;
+    b.title = holding ? (b.dataset.title || "") : NEEDS_CONTROL;
+  }
+}
+function until(t) {
+  if (t === null || t === undefined) return "until released";
+  const s = t - nowS();
+  return s <= 0 ? "expiring" : s < 90 ? `expires in ${s.toFixed(0)} s` : `expires in ${(s / 60).toFixed(1)} min`;
+}
+function showLeases() {
+  const l = D.leases;
+  if (!l) return;
+  const box = $("leases");
+  box.textContent = "";
+  if (!l.known || !l.leases.length) {
+    const div = document.createElement("div");
+    div.className = "none";
+    div.textContent = l.known ? "none: the robot's own behaviour holds everything"
+      : "no leases/state from the controller (not running?)";
+    box.appendChild(div);
+  }
+  for (const lease of l.leases) {
+    const div = document.createElement("div");
+    div.className = "lease" + (lease.own ? " own" : "");
+    div.dataset.lease = lease.lease_id;
+    div.title = `lease ${lease.lease_id}` + (lease.own ? " (this dashboard's: you)" : "");
+    div.innerHTML = `<div class="l1"><b class="holder"></b><span class="prio"></span><button class="break">Break</button></div>`
+      + `<div class="l2"><span class="res"></span> · since <span class="since"></span> · <span class="expires"></span></div>`;
+    div.querySelector(".holder").textContent = lease.holder + (lease.own ? " (you)" : "");
+    const prio = div.querySelector(".prio");
+    prio.textContent = lease.priority; prio.className = "prio prio-" + lease.priority;
+    div.querySelector(".res").textContent = lease.resources.join(", ");
+    div.querySelector(".since").textContent = ago(lease.since * 1e9);
+    div.querySelector(".expires").textContent = until(lease.expires);
+    const b = div.querySelector("button");
+    b.dataset.break = lease.lease_id;
+    b.title = `end ${lease.holder}'s lease now (leases/release, "broken by operator")`;
+    b.onclick = () => send({ op: "break", lease_id: lease.lease_id });
+    box.appendChild(div);
+  }
+  const ended = $("leases-ended");
+  ended.textContent = "";
+  for (const e of l.ended.slice(0, 4)) {
+    const div = document.createElement("div");
+    div.dataset.ended = e.lease_id;
+    div.innerHTML = `ended <span class="reason"></span> · <b></b> <span class="when"></span> <span class="msg"></span>`;
+    div.querySelector(".reason").textContent = e.reason;
+    div.querySelector("b").textContent = e.holder;
+    div.querySelector(".when").textContent = ago(e.t * 1e9);
+    div.querySelector(".msg").textContent = e.message ? "— " + e.message : "";
+    div.title = `lease ${e.lease_id}: ${e.reason}${e.message ? " (" + e.message + ")" : ""}`;
+    ended.appendChild(div);
+  }
+}
+// "since" and "expires" move on: their cells only (a rebuilt row would swallow a click).
+setInterval(() => {
+  for (const lease of (D.leases && D.leases.leases) || []) {
+    const tr = document.querySelector(`#leases div[data-lease="${CSS.escape(lease.lease_id)}"]`);
+    if (!tr) continue;
+    put(tr.querySelector(".since"), ago(lease.since * 1e9));
+    put(tr.querySelector(".expires"), until(lease.expires));
+  }
+  for (const e of (D.leases && D.leases.ended) || []) {
+    const div = document.querySelector(`#leases-ended div[data-ended="${CSS.escape(e.lease_id)}"]`);
+    if (div) put(div.querySelector(".when"), ago(e.t * 1e9));
+  }
+}, 1000);
+
+showControl();
 connect();
