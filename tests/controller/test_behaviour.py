@@ -282,6 +282,31 @@ def test_farewell_dropped_if_device_stays_busy() -> None:
     assert r.b.counters["farewells_dropped"] == 1
 
 
+def test_a_held_speaker_delays_the_greeting_and_says_why() -> None:
+    r = Rig(greet_dwell_s=0.0)
+    r._rec(r.b.audio_held(r.t, True))
+    r.presence(True)
+    r.faces(2.0)
+    assert r.sounds() == []
+    assert r.b.state(r.t).waiting == "yielded"
+    assert r.expressions()[-1] == X.EYE_AWAKE  # only the sound waits
+    r._rec(r.b.audio_held(r.t, False))
+    assert r.sounds() == ["greeting"]
+
+
+def test_a_farewell_waits_for_a_held_speaker_then_plays_or_is_dropped() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, farewell_max_delay_s=2.0)
+    r.presence(True)
+    gid = r.accept(plays(r.face())[0])
+    r.status(gid, "SUCCEEDED")
+    r._rec(r.b.audio_held(r.t, True))
+    r.presence(False)
+    r.at(1.0)
+    assert r.sounds() == ["greeting"]
+    r._rec(r.b.audio_held(r.t, False))
+    assert r.sounds() == ["greeting", "farewell"]
+
+
 def test_back_within_cooldown_is_same_visit() -> None:
     r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=10.0)
     r.presence(True)
