@@ -205,7 +205,7 @@ class Camera:
 
 def _cpu_s(proc: Process) -> float:
     times = psutil.Process(proc.pid).cpu_times()
-    return times.user + times.system
+    return float(times.user + times.system)
 
 
 def bench_cpu(router: Router, seconds: float, fps: float, folder: Path) -> None:
