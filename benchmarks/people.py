@@ -32,12 +32,13 @@ import threading
 import time
 from pathlib import Path
 
-import msgspec
 import psutil
-from common import percentile
+from common import host, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.radar import ld2410
+from buddybot.radar.convert import report_to_frame
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, Event
 from buddybot.tools.testing import Collector, Process, Router, retry_until, run_service
@@ -48,14 +49,10 @@ HOLD_S = 0.2  # radar-presence's and people's absence holds: short visits
 
 
 def _frames() -> tuple[m.LD2410TargetDataFrame, m.LD2410TargetDataFrame]:
-    """A moving target at 1.2 m, and the same sensor seeing nobody."""
-    near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,
-                                   movement_distance=120, movement_energy=50,
-                                   stationary_distance=0, stationary_energy=0,
-                                   detection_distance=120)
-    empty = msgspec.structs.replace(near, target_state=m.TargetState.NO_TARGET,
-                                    movement_distance=0, movement_energy=0,
-                                    detection_distance=0)
+    """A moving target at 1.2 m, and the same sensor seeing nobody, as the bridge
+    converts the sensor's reports."""
+    near = report_to_frame(ld2410.Report(1, 120, 50, 0, 0, 120), radar_id=0).frame
+    empty = report_to_frame(ld2410.Report(0, 0, 0, 0, 0, 0), radar_id=0).frame
     return near, empty
 
 
@@ -251,9 +248,7 @@ def main() -> int:
     parser.add_argument("--skip", choices=("arrival", "cpu"), action="append", default=[],
                         help="leave a part out (repeatable)")
     args = parser.parse_args()
-    print(f"host: {psutil.cpu_count()} cores, load average "
-          f"{' '.join(f'{x:.1f}' for x in psutil.getloadavg())}, Python "
-          f"{sys.version.split()[0]}")
+    print(host())
     folder = Path(tempfile.mkdtemp(prefix="buddybot-people-bench-"))
     router = Router()
     try:

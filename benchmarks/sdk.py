@@ -28,8 +28,7 @@ import sys
 import threading
 import time
 
-import psutil
-from common import percentile
+from common import host, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -157,9 +156,7 @@ def main() -> int:
     parser.add_argument("--skip", choices=("rss", "express"), action="append", default=[],
                         help="leave a part out (repeatable)")
     args = parser.parse_args()
-    print(f"host: {psutil.cpu_count()} cores, load average "
-          f"{' '.join(f'{x:.1f}' for x in psutil.getloadavg())}, Python "
-          f"{sys.version.split()[0]}")
+    print(host())
     router = Router()
     try:
         if "rss" not in args.skip:
