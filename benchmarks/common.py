@@ -6,6 +6,7 @@ Scripts run as `python benchmarks/<name>.py`, so this folder is on
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 from typing import Any
@@ -54,4 +55,14 @@ def host() -> str:
     load = " ".join(f"{x:.1f}" for x in psutil.getloadavg())
     return (f"host: {psutil.cpu_count()} cores, load average {load}, "
             f"Python {sys.version.split()[0]}")
+
+
+def options(doc: str | None, parts: tuple[str, ...]) -> argparse.ArgumentParser:
+    """The script's options: its docstring as the help, and `--skip PART` for
+    each part it measures, to run the others alone."""
+    made = argparse.ArgumentParser(description=doc,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    made.add_argument("--skip", choices=parts, action="append", default=[],
+                      help="leave a part out (repeatable)")
+    return made
 

@@ -23,7 +23,6 @@
 
 from __future__ import annotations
 
-import argparse
 import random
 import statistics
 import sys
@@ -33,7 +32,7 @@ import time
 from pathlib import Path
 
 import psutil
-from common import host, percentile
+from common import host, options, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -240,13 +239,10 @@ def bench_cpu(router: Router, seconds: float, fps: float, folder: Path) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = options(__doc__, ("arrival", "cpu"))
     parser.add_argument("--visits", type=int, default=40, help="visits timed (>= 30)")
     parser.add_argument("--cpu-seconds", type=float, default=20.0, help="CPU window")
     parser.add_argument("--fps", type=float, default=30.0, help="faces per second")
-    parser.add_argument("--skip", choices=("arrival", "cpu"), action="append", default=[],
-                        help="leave a part out (repeatable)")
     args = parser.parse_args()
     print(host())
     folder = Path(tempfile.mkdtemp(prefix="buddybot-people-bench-"))

@@ -21,14 +21,13 @@
 
 from __future__ import annotations
 
-import argparse
 import statistics
 import subprocess
 import sys
 import threading
 import time
 
-from common import host, percentile
+from common import host, options, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -147,14 +146,11 @@ def bench_express(router: Router, count: int, rate: float) -> None:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(description=__doc__,
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = options(__doc__, ("rss", "express"))
     parser.add_argument("--settle-s", type=float, default=3.0,
                         help="idle time before the app's RSS is read")
     parser.add_argument("--count", type=int, default=100, help="expressions timed")
     parser.add_argument("--rate", type=float, default=10.0, help="expressions per second")
-    parser.add_argument("--skip", choices=("rss", "express"), action="append", default=[],
-                        help="leave a part out (repeatable)")
     args = parser.parse_args()
     print(host())
     router = Router()
