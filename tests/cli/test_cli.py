@@ -102,7 +102,7 @@ def test_the_console_script_answers_the_shell_hook(tmp_path: Path) -> None:
 
 
 VERBS = ["up", "router", "run", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
-         "radar"]
+         "lease", "radar"]
 
 
 @pytest.mark.integration

@@ -9,7 +9,6 @@ from __future__ import annotations
 import json
 import logging
 import math
-import subprocess
 import sys
 import time
 from collections.abc import Callable
@@ -23,7 +22,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import CallError
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.tools.testing import Collector, Process, retry_until
 
 from ..conftest import TIMING
 from .conftest import FAST_CONFIG
@@ -323,34 +322,3 @@ def _client(endpoint: str) -> zenoh.Config:
     conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
     conf.insert_json5("scouting/multicast/enabled", "false")
     return conf
-
-
-def lease_cli(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(buddybot_argv("lease", *args, "--connect", endpoint),
-                          capture_output=True, text=True, timeout=60)
-
-
-@pytest.mark.integration
-def test_lease_list_and_break_from_the_command_line(
-        controller: Process, node_factory: Callable[..., Node], endpoint: str,
-        probe: Node) -> None:
-    app = node_factory("app-cli")
-    lease = acquire(app, "expression", "audio", duration_s=600)
-    assert lease.granted
-    listed = lease_cli(endpoint, "list")
-    assert listed.returncode == 0, listed.stderr
-    assert lease.lease_id in listed.stdout and "app-cli" in listed.stdout
-    data = json.loads(lease_cli(endpoint, "list", "--json").stdout)
-    assert [x["lease_id"] for x in data["leases"]] == [lease.lease_id]
-
-    broken = lease_cli(endpoint, "break", lease.lease_id, "--reason", "demo over")
-    assert broken.returncode == 0, broken.stdout + broken.stderr
-    assert "broken" in broken.stdout
-    again = lease_cli(endpoint, "break", lease.lease_id)
-    assert again.returncode == 1 and "ended (broken)" in (again.stdout + again.stderr)
-    usage = lease_cli(endpoint, "break")
-    assert usage.returncode == 2
-    after = json.loads(lease_cli(endpoint, "list", "--json").stdout)
-    assert after["leases"] == []
-    assert after["ended"][-1]["reason"] == "broken"
-    assert after["ended"][-1]["message"] == "demo over"
