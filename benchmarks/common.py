@@ -6,8 +6,12 @@ Scripts run as `python benchmarks/<name>.py`, so this folder is on
 
 from __future__ import annotations
 
+import argparse
 import statistics
+import sys
 from typing import Any
+
+import psutil
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -43,3 +47,22 @@ def percentile(values: list[float], q: float) -> float:
 def summary(name: str, values_ms: list[float]) -> str:
     return (f"{name}: n={len(values_ms)} median={statistics.median(values_ms):.3f} ms "
             f"p99={percentile(values_ms, 0.99):.3f} ms max={max(values_ms):.3f} ms")
+
+
+def host() -> str:
+    """The machine the figures come from, and how busy it was (a shared machine's
+    load moves latencies and CPU shares)."""
+    load = " ".join(f"{x:.1f}" for x in psutil.getloadavg())
+    return (f"host: {psutil.cpu_count()} cores, load average {load}, "
+            f"Python {sys.version.split()[0]}")
+
+
+def options(doc: str | None, parts: tuple[str, ...]) -> argparse.ArgumentParser:
+    """The script's options: its docstring as the help, and `--skip PART` for
+    each part it measures, to run the others alone."""
+    made = argparse.ArgumentParser(description=doc,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    made.add_argument("--skip", choices=parts, action="append", default=[],
+                      help="leave a part out (repeatable)")
+    return made
+
