@@ -41,7 +41,8 @@ ALLOWED: dict[str, frozenset[str]] = {
     "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
     **{area: BASE | {area} for area in AREAS},
     "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
-    "cli": BASE | {"tools", "supervisor", "cli", *AREAS},
+    "apps": BASE | {"sdk", "apps"},  # apps and their runner stand on the sdk
+    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", *AREAS},
     "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
 }
 """Layer -> the layers its modules may import (a layer is a folder of `services/`)."""
