@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 from buddybot.apps import loading, runner, template
@@ -87,7 +88,7 @@ def _add_list(parser: argparse.ArgumentParser) -> None:
         '"running": [name] or null when no router answered}')
 
 
-def running_apps(found: dict[str, object]) -> list[str]:
+def running_apps(found: Iterable[str]) -> list[str]:
     """The live node names that are not services of the robot: its apps."""
     services = {e.name for e in registry.SERVICES}
     return sorted(name for name in found if name not in services)

@@ -60,9 +60,9 @@ class AppsSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
     `run` lists app specs (`examples/apps/greeter.py`, `mypkg.app:Greeter`, an
     installed app's name; docs/apps.md). Each is checked here, as text: a
-    malformed spec, or two apps that would get the same node name, stop the
-    robot at start-up with the key named. A relative FILE is relative to the
-    config file's folder, like every path in it.
+    malformed spec, or two apps (or an app and a service) that would get the
+    same node name, stop the robot at start-up with the key named. A
+    relative FILE is relative to the config file's folder, like every path.
     """
 
     run: list[str] = msgspec.field(default_factory=list)
@@ -77,6 +77,9 @@ class AppsSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
             if name in seen:
                 raise ValueError(f"run: {seen[name]!r} and {text!r} would both run as node "
                                  f"{name!r}")
+            if registry.service(name) is not None:
+                raise ValueError(f"run: {text!r} would run as node {name!r}, the name of a "
+                                 "service")
             seen[name] = text
 
     def specs(self) -> list[AppSpec]:
