@@ -159,7 +159,12 @@ def _import_module(name: str, installed_too: bool = False) -> ModuleType:
 
 def _import_failed(where: str, exc: BaseException) -> AppError:
     """The app's own code failed while importing: its traceback, in the one line's place."""
-    lines = traceback.format_exception(exc)
+    tb = exc.__traceback__
+    while tb is not None and (tb.tb_frame.f_code.co_filename == __file__
+                              or tb.tb_frame.f_code.co_filename.startswith("<frozen")
+                              or "importlib" in tb.tb_frame.f_code.co_filename):
+        tb = tb.tb_next  # the loader's own frames say nothing about the app
+    lines = traceback.format_exception(type(exc), exc, tb)
     return AppError(f"{where}: failed to import:\n{''.join(lines).rstrip()}")
 
 
