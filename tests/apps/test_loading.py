@@ -95,15 +95,16 @@ def test_an_installed_app_is_found_by_its_entry_point(on_path: Path) -> None:
     assert installed_apps()["hello"] == "acme_apps:Hello"
     loaded = load_app("hello")
     assert loaded.cls.__name__ == "Hello" and loaded.name == "hello"
-    with pytest.raises(AppError, match="installed app 'broken'.*failed to import"):
+    with pytest.raises(AppError, match=r"installed app 'broken'.*failed to import"):
         load_app("broken")
-    with pytest.raises(AppError, match="installed app 'many'.*3 app classes"):
+    with pytest.raises(AppError, match=r"installed app 'many'.*3 app classes"):
         load_app("many")
 
 
 @pytest.mark.parametrize(("code", "why"), [
     ("x = 1\n", "no app class"),
-    ("class A:\n    def run(self, bot): ...\n", r"run\(self, bot\) must take \(self, bot, stop_event\)"),
+    ("class A:\n    def run(self, bot): ...\n",
+     r"run\(self, bot\) must take \(self, bot, stop_event\)"),
     ("class A:\n    def run(self): ...\n", "must take"),
     ("class A:\n    def __init__(self, x): ...\n    def run(self, bot, stop_event): ...\n",
      r"made without arguments, not A\(x\)"),

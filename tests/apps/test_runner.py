@@ -5,6 +5,7 @@ the stop is left behind after the grace time."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import threading
 import time
@@ -63,10 +64,8 @@ class AsyncRaises:
 class AsyncSwallows:
     async def run(self, bot: Any, stop_event: threading.Event) -> None:
         while True:
-            try:
+            with contextlib.suppress(asyncio.CancelledError):
                 await asyncio.sleep(3600)
-            except asyncio.CancelledError:
-                pass
 
 
 def test_a_run_that_returns_is_a_success() -> None:
