@@ -1,6 +1,7 @@
 """The play_sound action's goal state machine (pure: no Zenoh, no clock of its own).
 
-A goal is ACCEPTED when its reply says so, PLAYING once the player
+A goal names a configured sound, or `say:<text>` to speak any text
+(`messages.spoken_text` is the rule). It is ACCEPTED when its reply says so, PLAYING once the player
 confirmed it started (progress = elapsed / the duration the player
 announced), and ends SUCCEEDED (the device became free after the sound's
 length), CANCELED (cancel request, preempted by a newer goal, or stopped
@@ -109,9 +110,14 @@ class GoalBook:
             return Decision(m.PlaySoundReply(goal_id=goal_id, accepted=False, message=why))
 
         if sound not in self.sounds:
-            known = ", ".join(sorted(self.sounds)) or "none"
-            return refuse(f"unknown sound {limits.clip(sound)!r} (configured: "
-                          f"{limits.clip(known)})")
+            try:
+                spoken = m.spoken_text(sound)
+            except ValueError as exc:
+                return refuse(str(exc))
+            if spoken is None:
+                known = ", ".join(sorted(self.sounds)) or "none"
+                return refuse(f"unknown sound {limits.clip(sound)!r} (configured: "
+                              f"{limits.clip(known)}; or {m.TTS_PREFIX}TEXT to speak TEXT)")
         if not player_present:
             return refuse("the audio player is not running")
         statuses = []

@@ -40,6 +40,8 @@ from buddybot.audio import access, tts
 from buddybot.audio import sounds as snd
 from buddybot.audio.pcm import Chunk, Cursor, Track, apply_volume
 from buddybot.audio.settings import AudioPlayerSettings
+from buddybot.contract import messages as m
+from buddybot.runtime import limits
 
 log = logging.getLogger("buddybot.audio.player")
 
@@ -299,6 +301,12 @@ class Player:
         """(display name, file) for a configured sound name or an allowed file (else
         `access.REFUSAL`, whatever the reason); may render speech."""
         if name_or_path not in self.sounds:
+            try:
+                spoken = m.spoken_text(name_or_path)
+            except ValueError as exc:
+                raise AudioError(str(exc)) from None
+            if spoken is not None:
+                return self._speak(name_or_path, spoken)
             path = access.allowed_file(name_or_path, self.sound_dirs)
             if path is None:
                 raise AudioError(access.REFUSAL)
@@ -308,11 +316,16 @@ class Player:
         except ValueError as exc:
             raise AudioError(f"sound {name_or_path!r}: {exc}") from None
         if isinstance(sound, snd.SpokenSound):
-            try:
-                return name_or_path, tts.render(sound.text)
-            except tts.TtsError as exc:
-                raise AudioError(f"sound {name_or_path!r}: {exc}") from None
+            return self._speak(name_or_path, sound.text)
         return name_or_path, sound.path
+
+    @staticmethod
+    def _speak(name: str, text: str) -> tuple[str, Path]:
+        """(name, the WAV file speaking `text`), rendered by espeak-ng on first use."""
+        try:
+            return name, tts.render(text)
+        except tts.TtsError as exc:
+            raise AudioError(f"sound {limits.clip(name)!r}: {exc}") from None
 
     def load(self, name_or_path: str) -> Track:
         """The decoded track (cached by path, size and modification time)."""

@@ -279,11 +279,34 @@ TERMINAL_GOAL_STATES: frozenset[str] = frozenset({"SUCCEEDED", "CANCELED", "ABOR
 
 TTS_PREFIX = "say:"
 """How a value of `[audio.sounds]` marks a text to speak instead of a file
-(`hello = "say:Hello!"`): the audio service and the SDK read the table alike."""
+(`hello = "say:Hello!"`), and how a `PlaySound` goal asks to speak a text
+that no sound names (`PlaySound{sound: "say:Hello!"}`)."""
+TTS_MAX_CHARS = 240
+"""Longest text a goal may ask to speak (about 15 s of speech)."""
+
+
+def spoken_text(sound: str) -> str | None:
+    """The text a `say:<text>` goal asks to speak (surrounding spaces dropped);
+    None for any other sound. ValueError with the reason when the text is
+    empty, longer than TTS_MAX_CHARS or holds a non-printable character
+    (a control character would reach espeak-ng and the logs)."""
+    if not sound.startswith(TTS_PREFIX):
+        return None
+    text = sound[len(TTS_PREFIX):].strip()
+    if not text:
+        raise ValueError(f"nothing to say after {TTS_PREFIX!r}")
+    if len(text) > TTS_MAX_CHARS:
+        raise ValueError(f"text to say is {len(text)} characters long "
+                         f"(at most {TTS_MAX_CHARS})")
+    bad = next((c for c in text if not c.isprintable()), None)
+    if bad is not None:
+        raise ValueError(f"text to say holds a non-printable character {bad!r}")
+    return text
 
 
 class PlaySound(Message):
-    """Goal of the `audio/play_sound` action: a sound name from [audio.sounds]."""
+    """Goal of the `audio/play_sound` action: a sound name from [audio.sounds],
+    or `say:<text>` to speak any text (1..TTS_MAX_CHARS printable characters)."""
 
     sound: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
 
@@ -329,9 +352,11 @@ class Bool(Message):
 
 # --- controller --------------------------------------------------------------
 
+Resource = Literal["expression", "gaze", "audio"]
+"""What a lease holds: the eyes' expression, their gaze, the speaker."""
 EngagementPhase = Literal["idle", "noticed", "engaged", "leaving", "drowsy"]
 Waiting = Literal["nothing", "face", "dwell", "cooldown", "sound_busy", "device_busy",
-                  "recovery", "greeted"]
+                  "recovery", "greeted", "yielded"]
 
 
 class ControllerState(Message):
@@ -342,8 +367,9 @@ class ControllerState(Message):
     `cooldown` (greeted less than `regreet_cooldown_s` ago), `sound_busy`
     (our own sound still playing), `device_busy` (`audio/device_free`
     false), `recovery` (listening to latched inputs after a start),
-    `greeted` (this visit was greeted: nothing more until the farewell) or
-    `nothing`. `waiting_s` is the time left when known (dwell, cooldown).
+    `greeted` (this visit was greeted: nothing more until the farewell),
+    `yielded` (a lease holds the speaker) or `nothing`. `waiting_s` is the
+    time left when known (dwell, cooldown).
     """
 
     stamp_ns: StampNs
@@ -360,6 +386,9 @@ class ControllerState(Message):
     waiting_s: Annotated[float, msgspec.Meta(ge=0.0, le=86400.0, description="s")] = 0.0
     last_greeting_ns: StampNs | None = None
     last_farewell_ns: StampNs | None = None
+    yielded: Annotated[list[Resource], msgspec.Meta(max_length=3)] = msgspec.field(
+        default_factory=list)
+    """The resources a lease holds now: the behaviour's own choice for them waits."""
 
 
 # --- people ------------------------------------------------------------------
@@ -413,8 +442,6 @@ class PersonEvent(Message):
 
 # --- leases ------------------------------------------------------------------
 
-Resource = Literal["expression", "gaze", "audio"]
-"""What a lease holds: the eyes' expression, their gaze, the speaker."""
 LeasePriority = Literal["builtin", "app", "operator"]
 """Low to high. `builtin` is the controller's own behaviour: it holds whatever
 no lease holds, and no request may ask for it."""
@@ -423,6 +450,7 @@ LeaseId = Annotated[str, msgspec.Meta(max_length=64)]
 NodeName = Annotated[str, msgspec.Meta(min_length=1, max_length=64,
                                        description="a node name: letters, digits, - and _")]
 Resources = Annotated[list[Resource], msgspec.Meta(min_length=1, max_length=3)]
+LeaseEndReason = Literal["released", "expired", "holder_gone", "preempted", "broken"]
 MAX_LEASE_S = 86400.0
 """Longest lease duration the controller grants (a day); longer is refused."""
 
@@ -458,6 +486,9 @@ class LeaseRelease(Message):
 
     lease_id: LeaseId
     reason: Text = ""
+    by: NodeName | None = None
+    """Who asks: the lease's holder releases it (`released`); anyone else breaks
+    it (`broken`)."""
 
 
 class Lease(Message):
@@ -475,7 +506,7 @@ class LeaseEnd(Message):
 
     lease_id: LeaseId
     holder: NodeName
-    reason: Literal["released", "expired", "holder_gone", "preempted", "broken"]
+    reason: LeaseEndReason
     stamp_ns: StampNs
     message: Text = ""
 

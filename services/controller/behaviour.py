@@ -194,6 +194,7 @@ class Behaviour:
         self._in_range: bool | None = None
         self._out_since: float | None = None
         self._device_free: bool | None = None
+        self._yielded = False  # a lease holds the speaker: no sound of ours starts
         self._last_face: float | None = None
         self._face_since: float | None = None
         # derived state
@@ -264,7 +265,8 @@ class Behaviour:
         if self.recovering:
             return "recovery", 0.0
         busy: Waiting | None = ("sound_busy" if self._goal is not None else
-                                "device_busy" if self._device_free is False else None)
+                                "device_busy" if self._device_free is False else
+                                "yielded" if self._yielded else None)
         if self._farewell_since is not None:
             return busy or "nothing", 0.0
         if not self._present:
@@ -288,8 +290,9 @@ class Behaviour:
         return "nothing", 0.0
 
     def sound_busy(self) -> bool:
-        """True while a sound of ours is unfinished or the player says it is busy."""
-        return self._goal is not None or self._device_free is False
+        """True while a sound of ours is unfinished, the player says it is busy, or
+        a lease holds the speaker."""
+        return self._goal is not None or self._device_free is False or self._yielded
 
     # -- events --
 
@@ -312,6 +315,12 @@ class Behaviour:
 
     def device_free(self, now: float, free: bool) -> list[Command]:
         self._device_free = free
+        return self._step(now)
+
+    def audio_held(self, now: float, held: bool) -> list[Command]:
+        """A lease holds the speaker (True) or gave it back: while held no greeting
+        or farewell of ours starts (a farewell still waits its `farewell_max_delay_s`)."""
+        self._yielded = held
         return self._step(now)
 
     def sound_status(
@@ -470,7 +479,7 @@ class Behaviour:
                 self.counters["cancels"] += 1
                 out.append(CancelSound(goal.goal_id))
             return
-        if self._device_free is False:
+        if self._device_free is False or self._yielded:
             return
         self._farewell_since = None
         self.counters["farewells"] += 1

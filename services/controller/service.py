@@ -17,6 +17,16 @@ Threads, and why:
   other key of the session) and posts their replies back to the inbox,
   so gaze keeps flowing while a call waits.
 
+Leases (`leases.LeaseTable` decides, docs/design.md 4.8): `leases/acquire`,
+`leases/release` and `eyes/command` are answered on the node's service
+workers under the same lock, and the liveliness of `nodes/*/*` (Zenoh's
+thread, under the lock, quick) tells which holders are alive and ends the
+leases of one that goes away. While a lease holds a resource the
+behaviour's own commands for it are dropped (it keeps its own idea); the
+moment the resource is free again its current expression / gaze is put
+at once. `leases/state` (latched) is put at start and on every change;
+expiry is checked on every decision step.
+
 `controller/state` (latched) is published once at start and then whenever
 a field other than the stamp and the `waiting_s` countdown changed: checked
 after every decision step, and after a face once its eye control is out
@@ -55,6 +65,7 @@ from buddybot.controller.events import (
     PresenceChanged,
     SoundStatus,
 )
+from buddybot.controller.leases import LeaseTable
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
 from buddybot.runtime.errors import ConfigError
@@ -96,12 +107,20 @@ class Controller:
     """Wires one Node to one Behaviour; `start()` declares everything, `close()` stops."""
 
     def __init__(self, node: Node, settings: ControllerSettings,
-                 clock: Callable[[], float] = time.monotonic) -> None:
+                 clock: Callable[[], float] = time.monotonic,
+                 wall_ns: Callable[[], int] = m.now_ns) -> None:
         self.transform = camera_transform(settings)
         self.node = node
         self.settings = settings
         self.clock = clock
+        self.wall_ns = wall_ns
+        """Wall-clock ns, the clock of lease grants and expiries."""
         self.behaviour = Behaviour(settings, clock())
+        self.leases = LeaseTable()
+        self._alive: set[tuple[str, str]] = set()
+        """(node, instance) of every liveliness token seen alive."""
+        self._last_look = Look(None)
+        """The behaviour's latest gaze, put again when a gaze lease ends."""
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
         self._cond = threading.Condition()
         self._lock = threading.Lock()
@@ -112,7 +131,8 @@ class Controller:
         self._expression_pub = node.publisher(keys.EXPRESSION)
         self._control_pub = node.publisher(keys.EYE_CONTROL)
         self._state_pub = node.publisher(keys.CONTROLLER_STATE)
-        self._state: State | None = None  # the last one published
+        self._leases_pub = node.publisher(keys.LEASES)
+        self._state: tuple[State, tuple[m.Resource, ...]] | None = None  # the last one put
         self._threads: list[threading.Thread] = []
         self._last_diag = 0.0
 
@@ -133,8 +153,13 @@ class Controller:
         node.subscribe(keys.DEVICE_FREE, self._on_device_free)
         node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
         node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
+        node.watch_nodes(self.on_token)
         with self._lock:
             self._publish_state(self.clock())  # the first one, even before any input
+            self._leases_pub.put(self.leases.snapshot(self.wall_ns()))
+        node.serve(keys.LEASE_ACQUIRE, self.acquire)
+        node.serve(keys.LEASE_RELEASE, self.release)
+        node.serve(keys.EYES_COMMAND, self.eyes_command)
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
             thread = threading.Thread(target=target, name=f"controller:{name}", daemon=True)
             thread.start()
@@ -173,6 +198,93 @@ class Controller:
             self._handle_face(msg, now)
             self._publish_state(now)
 
+    def on_token(self, node: str, instance: str, alive: bool) -> None:
+        """A liveliness token came or went (Zenoh's thread): a holder that went
+        away loses its leases at once."""
+        with self._lock:
+            if alive:
+                self._alive.add((node, instance))
+                return
+            self._alive.discard((node, instance))
+            before = self.leases.held()
+            if self.leases.holder_gone(node, instance, self.wall_ns()):
+                self._leases_changed(before)
+
+    # -- lease services (the node's service workers) --
+
+    def acquire(self, req: m.LeaseRequest) -> m.LeaseReply:
+        with self._lock:
+            alive = (req.holder, req.instance) in self._alive
+        if not alive:
+            # The token may be on its way still (a program that just started):
+            # ask the router once, outside the lock.
+            alive = self._token_exists(req.holder, req.instance)
+        with self._lock:
+            if alive:
+                self._alive.add((req.holder, req.instance))
+            before = self.leases.held()
+            decision = self.leases.acquire(req, self.wall_ns(), alive)
+            if decision.reply.granted:
+                log.info("lease %s granted to %s (%s, %s)", decision.reply.lease_id,
+                         req.holder, req.priority, ", ".join(req.resources))
+                self._leases_changed(before)
+            else:
+                log.info("lease refused to %s: %s", req.holder, decision.reply.message)
+        return decision.reply
+
+    def release(self, req: m.LeaseRelease) -> m.TriggerReply:
+        with self._lock:
+            before = self.leases.held()
+            reply, ended = self.leases.release(req.lease_id, req.by, req.reason, self.wall_ns())
+            if ended:
+                log.info("lease %s", reply.message)
+                self._leases_changed(before)
+        return reply
+
+    def eyes_command(self, cmd: m.EyesCommand) -> m.TriggerReply:
+        with self._lock:
+            s = self.settings
+            eyes = self.leases.eyes_command(cmd, self.wall_ns(), s.lease_actions_per_s,
+                                            s.lease_actions_burst)
+            if eyes.expression is not None:
+                self._expression_pub.put(eyes.expression)
+            if eyes.control is not None:
+                self._control_pub.put(eyes.control)
+        if not eyes.reply.success:
+            self._warn.warning(f"eyes:{cmd.lease_id}", "eyes command refused: %s",
+                               eyes.reply.message)
+        return eyes.reply
+
+    def _token_exists(self, node: str, instance: str) -> bool:
+        if not (keys.valid_robot_id(node) and keys.valid_robot_id(instance)):
+            return False
+        try:
+            found = self.node.live_instances(self.node.key(keys.NODES, node=node), timeout=1.0)
+        except Exception as exc:  # a closing session: no token then
+            log.debug("liveliness query failed: %r", exc)
+            return False
+        return instance in found
+
+    def _leases_changed(self, before: list[m.Resource]) -> None:
+        """After the table changed (under the lock): put `leases/state`, give the
+        behaviour back what no lease holds any more (its expression and gaze at
+        once), and tell it whether the speaker is held."""
+        now = self.clock()
+        after = self.leases.held()
+        self._leases_pub.put(self.leases.snapshot(self.wall_ns()))
+        freed = set(before) - set(after)
+        if "expression" in freed:
+            expression = self.behaviour.snapshot(now).expression
+            if expression is not None:
+                log.info("expression resumed -> %s", expression.name)
+                self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
+                                                            action=expression))
+        if "gaze" in freed:
+            self._control_pub.put(self._eye_control(Look(self._last_look.gaze)))
+        if ("audio" in before) != ("audio" in after):
+            self._execute(self.behaviour.audio_held(now, "audio" in after))
+        self._publish_state(now)
+
     # -- decision thread --
 
     def _decide(self) -> None:
@@ -199,6 +311,9 @@ class Controller:
         this, and pure tests drive it with a fake clock and node."""
         with self._lock:
             self._handle(events)
+            before = self.leases.held()
+            if self.leases.expire(self.wall_ns()):
+                self._leases_changed(before)
             now = self.clock()
             if now >= next_tick:
                 next_tick = now + self.settings.tick_s
@@ -242,11 +357,18 @@ class Controller:
         """Carry out the behaviour's commands. Exhaustive: a `Command` member without a
         case fails type checking at `assert_never`, and at run time it raises instead
         of being taken for a sound."""
+        held = self.leases.held()
         for cmd in commands:
             match cmd:
                 case Look():
-                    self._control_pub.put(self._eye_control(cmd))
+                    self._last_look = cmd
+                    if "gaze" not in held:
+                        self._control_pub.put(self._eye_control(cmd))
                 case SetExpression(action=action):
+                    if "expression" in held:
+                        log.info("expression %s held back: a lease holds the eyes",
+                                 action.name)
+                        continue
                     log.info("expression -> %s", action.name)
                     self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
                                                                 action=action))
@@ -266,11 +388,11 @@ class Controller:
 
     def _publish_state(self, now: float) -> None:
         """Put `controller/state` if it changed (beyond `waiting_s`); under the lock."""
-        state = self.behaviour.state(now)
-        if state == self._state:
+        current = (self.behaviour.state(now), tuple(self.leases.held()))
+        if current == self._state:
             return
-        self._state = state
-        self._state_pub.put(state_message(state, now, m.now_ns()))
+        self._state = current
+        self._state_pub.put(state_message(current[0], now, m.now_ns(), list(current[1])))
 
     def _publish_diagnostics(self, now: float) -> None:
         if now - self._last_diag < 1.0:
@@ -285,6 +407,8 @@ class Controller:
         values["recovering"] = snap.recovering
         values["farewell_pending"] = snap.farewell_pending
         values.update(snap.counters)
+        values.update(self.leases.counters)
+        values["leases"] = len(self.leases)
 
     # -- sound thread --
 
@@ -326,9 +450,10 @@ class Controller:
                 assert_never(cmd)
 
 
-def state_message(state: State, now: float, now_ns: int) -> m.ControllerState:
+def state_message(state: State, now: float, now_ns: int,
+                  yielded: list[m.Resource] | None = None) -> m.ControllerState:
     """The behaviour's state as the message: its times (on the clock of `now`)
-    become wall-clock ns, taking `now` to be `now_ns`."""
+    become wall-clock ns, taking `now` to be `now_ns`; `yielded`: what leases hold."""
     def wall(at: float | None) -> int | None:
         return None if at is None else max(0, now_ns - round((now - at) * 1e9))
 
@@ -339,7 +464,7 @@ def state_message(state: State, now: float, now_ns: int) -> m.ControllerState:
         farewell_pending=state.farewell_pending, waiting=state.waiting,
         waiting_s=state.waiting_s,
         last_greeting_ns=wall(state.last_greeting_at),
-        last_farewell_ns=wall(state.last_farewell_at),
+        last_farewell_ns=wall(state.last_farewell_at), yielded=list(yielded or []),
     )
 
 

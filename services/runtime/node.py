@@ -279,27 +279,40 @@ class Node:
         Close the returned handle to stop watching."""
         alive: set[str] = set()
         lock = threading.Lock()
+
+        def on_token(_node: str, instance: str, up: bool) -> None:
+            with lock:
+                if up:
+                    alive.add(instance)
+                else:
+                    alive.discard(instance)
+                current = frozenset(alive)
+            on_change(current)
+
+        return self.watch_nodes(on_token, name=name)
+
+    def watch_nodes(
+        self, on_token: Callable[[str, str, bool], None], *, name: str = "*"
+    ) -> Subscription:
+        """Call `on_token(node, instance, alive)` for every liveliness token of the
+        nodes matching `name` (every node by default) that exists now, and for
+        every one that appears or goes away later (a process that ends, crashes
+        or is killed loses its token). Runs in Zenoh's thread: be quick."""
         put = zenoh.SampleKind.PUT
 
-        def on_token(sample: zenoh.Sample) -> None:
+        def on_sample(sample: zenoh.Sample) -> None:
             found = keys.NODES.match(self.relative(str(sample.key_expr)))
             if found is None:
                 return
-            with lock:
-                if sample.kind == put:
-                    alive.add(found["instance"])
-                else:
-                    alive.discard(found["instance"])
-                current = frozenset(alive)
             try:
-                on_change(current)
+                on_token(found["node"], found["instance"], sample.kind == put)
             except Exception as exc:
                 self._warn.warning(f"watch:{name}", "node watcher for %s failed: %r", name, exc)
 
         key = self.key(keys.NODES, node=name)
         gate = Gate()
         entity = self._session.liveliness().declare_subscriber(
-            key, gate.guard(on_token), history=True)
+            key, gate.guard(on_sample), history=True)
         return self._track(Subscription(key, entity, self._forget, gate=gate))
 
     def live_instances(self, key: str, timeout: float = 2.0) -> set[str]:

@@ -114,19 +114,22 @@ class ServiceContext:
 
         return await asyncio.to_thread(opener)
 
-    def probe(self, timeout: float | None = None) -> Node:
+    def probe(self, timeout: float | None = None, *, visible: bool = False) -> Node:
         """A probe node on the robot's router, or RouterUnreachable (exit 1) when
         none answers within `timeout` (default CONNECT_TIMEOUT_S); Ctrl-C aborts.
 
         Tools and programs use it: unlike a service they must never hang on a
         missing router, and a probe declares nothing that makes it a node of
-        the robot (see `Node(probe=True)`)."""
+        the robot (see `Node(probe=True)`). `visible=True`: the same bounded
+        connect, but a node of the robot (token `nodes/<name>/<zid>`,
+        diagnostics, node info): a program holding leases needs the token,
+        whose end ends its leases."""
         limit = timeout if timeout and timeout > 0 else CONNECT_TIMEOUT_S
         config = zenoh_config(connect=self.connect, base_file=self.config.zenoh.config_file,
                               connect_timeout_s=limit)
         try:
             return Node(self.name, robot=self.robot, connect=self.connect, config=config,
-                        stop_event=self.stop, probe=True)
+                        stop_event=self.stop, probe=not visible)
         except RouterUnreachable as exc:
             raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
 

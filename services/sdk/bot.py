@@ -4,8 +4,9 @@
 `buddybot` tool (`--connect`, then `[zenoh] connect` of `--config` or
 $BUDDYBOT_CONFIG, then the default; the same for `--robot`), and gives up
 after `timeout` seconds with `NoRouter` instead of waiting forever as a
-service does. The node is a probe: the program is not listed among the
-robot's nodes and publishes nothing on its own.
+service does. The program is a node of the robot: its liveliness token
+`nodes/<name>/<zid>` is what its leases are bound to (they end when it
+ends, however it ends), and `buddybot nodes` lists it.
 """
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
 from buddybot.runtime.session import RouterUnreachable
 from buddybot.sdk.errors import NoRouter, TimedOut
+from buddybot.sdk.eyes import Eyes
+from buddybot.sdk.leases import Lease, LeaseTable
 from buddybot.sdk.params import Params
 from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
 from buddybot.sdk.speaker import SoundHandle, Speaker
@@ -44,8 +47,11 @@ class Bot:
         self.params = Params(node, timeout)
         self._people: People | None = None
         self._speaker: Speaker | None = None
+        self._leases: LeaseTable | None = None
+        self._eyes: Eyes | None = None
         self._lock = threading.Lock()
-        """Opens `people` and `speaker` once, on first use from any thread."""
+        """Opens `people`, `speaker`, `leases` and `eyes` once, on first use from any
+        thread."""
 
     @classmethod
     def connect(cls, connect: list[str] | None = None, config: str | None = None,
@@ -66,7 +72,7 @@ class Bot:
     def _open(cls, args: argparse.Namespace, name: str, timeout: float) -> Bot:
         ctx = resolve(args, name)
         try:
-            node = ctx.probe(timeout)
+            node = ctx.probe(timeout, visible=True)
         except RouterUnreachable as exc:
             raise NoRouter(str(exc), list(ctx.connect)) from None
         return cls(node, timeout)
@@ -107,31 +113,64 @@ class Bot:
         """The person with this id, if present now."""
         return next((p for p in self.people.now() if p.id == person_id), None)
 
+    # -- leases and eyes --
+
+    @property
+    def leases(self) -> LeaseTable:
+        """The leases this program holds (opened on first use)."""
+        with self._lock:
+            if self._leases is None:
+                self._leases = LeaseTable(self.node, self.timeout)
+            return self._leases
+
+    def lease(self, *resources: str, priority: str = "app",
+              duration_s: float | None = None) -> Lease:
+        """Take `resources` ("expression", "gaze", "audio"; "eyes" = expression +
+        gaze) from the controller; Refused naming the holder, NoService without
+        a controller, ValueError for a malformed request."""
+        return self.leases.acquire(resources, priority, duration_s)
+
+    @property
+    def eyes(self) -> Eyes:
+        """Expressions and gaze through the controller (opened on first use)."""
+        leases = self.leases
+        with self._lock:
+            if self._eyes is None:
+                self._eyes = Eyes(self.node, leases, self.timeout)
+            return self._eyes
+
     # -- speaker --
 
     @property
     def speaker(self) -> Speaker:
         """Sounds through the `audio/play_sound` action (opened on first use)."""
+        leases = self.leases
         with self._lock:
             if self._speaker is None:
-                self._speaker = Speaker(self.node, self.params, self.timeout)
+                self._speaker = Speaker(self.node, leases, self.timeout)
             return self._speaker
 
     def play(self, sound: str) -> SoundHandle:
-        """Play a sound of `[audio.sounds]` by name; Refused, NoService."""
+        """Play a sound of `[audio.sounds]` by name, under an "audio" lease;
+        Refused, NoService."""
         return self.speaker.play(sound)
 
     def say(self, text: str) -> SoundHandle:
-        """Speak `text`, configured in `[audio.sounds]` as `say:<text>`; Refused, NoService."""
+        """Speak any `text` (1..240 printable characters) with espeak-ng, under an
+        "audio" lease; ValueError for a malformed text, Refused, NoService."""
         return self.speaker.say(text)
 
     # -- lifetime --
 
     def close(self) -> None:
+        """Release the leases held (bounded: a gone controller ends them anyway when
+        the token goes), then leave the router."""
         if self._people is not None:
             self._people.close()
         if self._speaker is not None:
             self._speaker.close()
+        if self._leases is not None:
+            self._leases.close(min(self.timeout, 1.0))
         self.node.close()
 
     def __enter__(self) -> Bot:

@@ -1,40 +1,36 @@
 """The speaker: sounds played through the `audio/play_sound` action.
 
-A goal names a sound of `[audio.sounds]` (docs/design.md 4.6); its reply
-comes at once (accepted, or refused with the reason), its progress on the
-latched `audio/play_sound/status`. `SoundHandle` follows one goal to its
-final state. `say(text)` speaks a text the audio service has configured as
-a `say:` sound: the action plays configured names only, so an arbitrary
-text cannot be spoken through it.
+A goal names a sound of `[audio.sounds]`, or `say:<text>` to speak any text
+(docs/design.md 4.6); its reply comes at once (accepted, or refused with the
+reason), its progress on the latched `audio/play_sound/status`.
+`SoundHandle` follows one goal to its final state.
+
+A program that holds no "audio" lease gets one for the sound's length
+(released when the sound ends), so the controller's greeting does not talk
+over it, and an operator holding the speaker refuses it. Without a
+controller there is nobody to share the speaker with: the sound plays.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 import threading
 from collections.abc import Generator
 from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.contract.messages import TTS_PREFIX
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
 from buddybot.sdk.calls import call
-from buddybot.sdk.errors import Refused, TimedOut
-from buddybot.sdk.params import Params
+from buddybot.sdk.errors import NoService, Refused, TimedOut
+from buddybot.sdk.leases import Lease, LeaseTable
+
+log = logging.getLogger("buddybot.sdk")
 
 WAIT_S = 120.0
 """How long `wait()` and `await handle` wait for a sound's end by default."""
-
-
-def spoken_sound(sounds: dict[str, str], text: str) -> str | None:
-    """The configured sound name that speaks `text` (surrounding spaces ignored)."""
-    wanted = text.strip()
-    for name, value in sorted(sounds.items()):
-        if value.startswith(TTS_PREFIX) and value[len(TTS_PREFIX):].strip() == wanted:
-            return name
-    return None
 
 
 class SoundHandle:
@@ -43,10 +39,13 @@ class SoundHandle:
     `state` goes ACCEPTED -> PLAYING -> SUCCEEDED, CANCELED or ABORTED
     (`message` says why for the last two)."""
 
-    def __init__(self, speaker: Speaker, goal_id: str, sound: str) -> None:
+    def __init__(self, speaker: Speaker, goal_id: str, sound: str,
+                 lease: Lease | None = None) -> None:
         self._speaker = speaker
         self.goal_id = goal_id
         self.sound = sound
+        self.lease = lease
+        """The "audio" lease taken for this sound alone, released at its end."""
         self.state: str = "ACCEPTED"
         self.message = ""
         self._ended = threading.Event()
@@ -61,6 +60,8 @@ class SoundHandle:
         self.state, self.message = status.state, status.message
         if status.state in m.TERMINAL_GOAL_STATES:
             self._ended.set()
+            if self.lease is not None:
+                release_quietly(self.lease)
 
     def wait(self, timeout: float = WAIT_S) -> str:
         """The final state, once reached; TimedOut after `timeout` s."""
@@ -86,9 +87,9 @@ class SoundHandle:
 class Speaker:
     """Goals to `audio/play_sound`, and their statuses routed to the handles."""
 
-    def __init__(self, node: Node, params: Params, timeout: float) -> None:
+    def __init__(self, node: Node, leases: LeaseTable, timeout: float) -> None:
         self.node = node
-        self.params = params
+        self.leases = leases
         self.timeout = timeout
         self._lock = threading.Lock()
         self._handles: BoundedDict[str, SoundHandle] = BoundedDict(256)
@@ -106,14 +107,25 @@ class Speaker:
             handle.update(status)
 
     def play(self, sound: str, timeout: float | None = None) -> SoundHandle:
-        """Start a sound of `[audio.sounds]`; Refused with the action's reason."""
+        """Start a sound of `[audio.sounds]` (or `say:<text>`); Refused with the
+        action's reason, or the controller's when the speaker is held."""
+        if not isinstance(sound, str) or not 1 <= len(sound) <= 256:
+            raise ValueError(f"a sound is a name of 1 to 256 characters, not {sound!r}")
         limit = self.timeout if timeout is None else timeout
-        reply: m.PlaySoundReply = call(
-            self.node, keys.PLAY_SOUND, m.PlaySound(sound=sound), limit,
-            hint="is the audio service running? `buddybot run audio`")
+        lease = self._audio_lease(limit)
+        try:
+            reply: m.PlaySoundReply = call(
+                self.node, keys.PLAY_SOUND, m.PlaySound(sound=sound), limit,
+                hint="is the audio service running? `buddybot run audio`")
+        except BaseException:
+            if lease is not None:
+                release_quietly(lease)
+            raise
         if not reply.accepted:
+            if lease is not None:
+                release_quietly(lease)
             raise Refused(reply.message)
-        handle = SoundHandle(self, reply.goal_id, sound)
+        handle = SoundHandle(self, reply.goal_id, sound, lease)
         with self._lock:
             self._handles[reply.goal_id] = handle
             early = self._early.pop(reply.goal_id, None)
@@ -122,14 +134,24 @@ class Speaker:
         return handle
 
     def say(self, text: str, timeout: float | None = None) -> SoundHandle:
-        """Speak `text`: the sound the audio service has configured as `say:<text>`."""
-        sounds = self.params.get("audio", "sounds", timeout)
-        name = spoken_sound(dict(sounds or {}), text)
-        if name is None:
-            raise Refused(f"the audio service speaks configured sounds only, and no "
-                          f"[audio.sounds] entry is {TTS_PREFIX}{text.strip()} "
-                          f"(add one, e.g. hello = \"{TTS_PREFIX}{text.strip()}\")")
-        return self.play(name, timeout)
+        """Speak any `text` (1..TTS_MAX_CHARS printable characters, surrounding
+        spaces dropped); ValueError saying what is wrong with it."""
+        if not isinstance(text, str):
+            raise ValueError(f"say() speaks a str, not {text!r}")
+        sound = m.TTS_PREFIX + text
+        m.spoken_text(sound)
+        return self.play(sound, timeout)
+
+    def _audio_lease(self, timeout: float) -> Lease | None:
+        """An "audio" lease for one sound, or None: the program holds one already,
+        or no controller answers (nobody to share the speaker with)."""
+        if self.leases.holding("audio") is not None:
+            return None
+        try:
+            return self.leases.acquire(["audio"], "app", None, timeout)
+        except NoService as exc:
+            log.debug("playing without an audio lease: %s", exc)
+            return None
 
     def cancel(self, goal_id: str, timeout: float) -> None:
         call(self.node, keys.PLAY_SOUND_CANCEL, m.CancelGoal(goal_id=goal_id), timeout,
@@ -137,3 +159,12 @@ class Speaker:
 
     def close(self) -> None:
         self._status.close()
+
+
+def release_quietly(lease: Lease) -> None:
+    """Release a lease taken for one action; a failure only leaves it to end with
+    the program's token (logged)."""
+    try:
+        lease.release()
+    except Exception as exc:
+        log.warning("could not release lease %s: %s", lease.lease_id, exc)

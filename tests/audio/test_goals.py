@@ -42,6 +42,19 @@ def test_unknown_sound_and_missing_player_are_refused() -> None:
     assert b.active is None
 
 
+def test_a_say_goal_speaks_any_text_and_a_bad_text_is_refused_with_why() -> None:
+    b = book()
+    d = b.request("g1", "say:Hello, how are you?", player_present=True)
+    assert d.accepted and states(d.statuses) == [("g1", "ACCEPTED")]
+    assert b.should_play("g1")
+    for bad, why in (("say: ", "nothing to say"), ("say:" + "x" * 300, "at most 240"),
+                     ("say:a\tb", "non-printable")):
+        refused = b.request("g9", bad, player_present=True)
+        assert not refused.accepted and why in refused.reply.message, refused.reply.message
+    assert b.active is not None and b.active.goal_id == "g1"
+    assert "say:TEXT" in b.request("g8", "fanfare", player_present=True).reply.message
+
+
 def test_preempt_cancels_the_running_goal_first() -> None:
     b = book("preempt")
     b.request("g1", "greeting", player_present=True)

@@ -205,6 +205,18 @@ def test_text_to_speech_sound(player_factory) -> None:
     assert np.abs(rec.samples()).max() > 1000  # audible speech, not silence
 
 
+@pytest.mark.skipif(shutil.which("espeak-ng") is None,
+                    reason="espeak-ng not installed (scripts/test-packages.sh installs it)")
+def test_any_text_after_say_is_spoken_and_a_bad_text_refused(player_factory) -> None:
+    player, rec = player_factory({})
+    track = player.play("say:Any text at all")
+    assert track.name == "say:Any text at all" and 0.3 < track.duration_s < 5.0
+    retry_until(lambda: not player.busy, what="speech end")
+    assert np.abs(rec.samples()).max() > 1000
+    with pytest.raises(AudioError, match="non-printable"):
+        player.play("say:two\nlines")
+
+
 def test_missing_hardware_backend_is_reported_not_fatal() -> None:
     """`alsa` on a box without a sound card: no device, every play refused with why.
     (On a machine with a card the device opens and plays: checked too.)"""

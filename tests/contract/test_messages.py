@@ -140,3 +140,17 @@ def test_images_are_msgpack_and_control_is_json() -> None:
         expected = keys.MSGPACK if topic.type is m.Image else keys.JSON
         assert topic.codec is expected, topic.pattern
         assert topic.encoding.endswith("buddybot/" + topic.type.__name__)
+
+
+def test_a_say_goal_names_its_text_and_bad_texts_say_why() -> None:
+    assert m.spoken_text("greeting") is None
+    assert m.spoken_text("say:  Hello there ") == "Hello there"
+    assert m.spoken_text("say:" + "a" * m.TTS_MAX_CHARS) == "a" * m.TTS_MAX_CHARS
+    with pytest.raises(ValueError, match="nothing to say"):
+        m.spoken_text("say:   ")
+    with pytest.raises(ValueError, match="241 characters long"):
+        m.spoken_text("say:" + "a" * 241)
+    with pytest.raises(ValueError, match=r"non-printable character '\\n'"):
+        m.spoken_text("say:two\nlines")
+    with pytest.raises(ValueError, match="non-printable"):
+        m.spoken_text("say:bell\x07")

@@ -1,6 +1,7 @@
-"""`buddybot.sdk.speaker`: the spoken-sound lookup and the handle (pure), and, marked
-`integration`, real `audio` and `audio-player` services on the null device: a sound
-plays to SUCCEEDED, a cancel ends it CANCELED, an unknown name is refused."""
+"""`buddybot.sdk.speaker`: the handle (pure), and, marked `integration`, real `audio`
+and `audio-player` services on the null device: a sound plays to SUCCEEDED, a cancel
+ends it CANCELED, an unknown name is refused, any text is spoken, a malformed text
+raises before anything is sent."""
 
 from __future__ import annotations
 
@@ -14,19 +15,11 @@ import pytest
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
-from buddybot.sdk.speaker import Speaker, spoken_sound
+from buddybot.sdk.speaker import Speaker
 from buddybot.tools.testing import retry_until
 from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
 
 # --- pure ----------------------------------------------------------------------------------
-
-
-def test_the_spoken_sound_is_the_entry_that_says_the_text() -> None:
-    sounds = {"beep": "beep.wav", "hello": "say: Hello there ", "bye": "say:Bye"}
-    assert spoken_sound(sounds, "Hello there") == "hello"
-    assert spoken_sound(sounds, " Bye") == "bye"
-    assert spoken_sound(sounds, "beep.wav") is None
-    assert spoken_sound(sounds, "Hello") is None
 
 
 def _handle() -> SoundHandle:
@@ -90,7 +83,7 @@ def test_a_canceled_sound_ends_canceled(ready_audio: Callable[..., Audio],
 
 
 @pytest.mark.integration
-def test_unknown_sounds_and_texts_are_refused_with_the_reason(
+def test_unknown_sounds_are_refused_and_bad_texts_raise_with_the_reason(
         ready_audio: Callable[..., Audio], bot_factory: Callable[..., Bot],
         tmp_path: Path) -> None:
     config, _ = beep_config(tmp_path, 0.3)
@@ -98,12 +91,16 @@ def test_unknown_sounds_and_texts_are_refused_with_the_reason(
     bot = bot_factory()
     with pytest.raises(Refused, match="unknown sound 'fanfare'"):
         bot.play("fanfare")
-    with pytest.raises(Refused, match=r"no \[audio.sounds\] entry is say:Good night"):
-        bot.say("Good night")
+    for bad, why in (("", "nothing to say"), ("x" * 241, "at most 240"),
+                     ("bell\x07", "non-printable"), (42, "speaks a str")):
+        with pytest.raises(ValueError, match=why):
+            bot.say(bad)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="1 to 256 characters"):
+        bot.play("")
 
 
 @pytest.mark.integration
-def test_a_configured_text_is_spoken(ready_audio: Callable[..., Audio],
+def test_a_configured_and_any_other_text_are_spoken(ready_audio: Callable[..., Audio],
                                      bot_factory: Callable[..., Bot], tmp_path: Path) -> None:
     if shutil.which("espeak-ng") is None:
         pytest.skip("espeak-ng is not installed (scripts/test-packages.sh installs it)")
@@ -111,7 +108,9 @@ def test_a_configured_text_is_spoken(ready_audio: Callable[..., Audio],
     ready_audio(config)
     bot = bot_factory()
     handle = bot.say("Hi")
-    assert handle.sound == "hi" and handle.wait(60) == "SUCCEEDED", handle.message
+    assert handle.sound == "say:Hi" and handle.wait(60) == "SUCCEEDED", handle.message
+    any_text = bot.say("Any text at all, not configured anywhere")
+    assert any_text.wait(60) == "SUCCEEDED", any_text.message
 
 
 @pytest.mark.integration
