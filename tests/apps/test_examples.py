@@ -80,20 +80,29 @@ def test_wizard_commands() -> None:
 # --- against `up --sim` -------------------------------------------------------------------
 
 
+RADAR_ONLY = ("radar-bridge", "radar-presence", "people", "controller", "eyes", "audio",
+              "audio-player")
+
+
 @contextmanager
-def up_sim(tmp_path: Path, apps: list[str]) -> Iterator[tuple[Process, Node, str]]:
-    """`buddybot up --sim` on private ports with `apps` in `[apps]`; a probe on its router."""
+def up_sim(tmp_path: Path, apps: list[Path], only: tuple[str, ...] = (),
+           extra_config: str = "") -> Iterator[tuple[Process, Node, str]]:
+    """`buddybot up --sim` on private ports with `apps` in `[apps]` (and `--only` these
+    services when given); a probe on its router."""
     config = tmp_path / "robot.toml"
-    config.write_text('[audio_player]\nbackend = "null"\n'
-                      f"[apps]\nrun = {[str(a) for a in apps]!r}\n".replace("'", '"'))
+    listed = ", ".join(f'"{a}"' for a in apps)
+    config.write_text(f'[audio_player]\nbackend = "null"\n[apps]\nrun = [{listed}]\n'
+                      + extra_config)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
+    selected = [arg for name in only for arg in ("--only", name)]
     up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", endpoint,
                                "--config", str(config), "--eye-port", str(free_port()),
-                               "--dashboard-port", str(free_port()), "--status-period", "1"),
-                 "up", tmp_path / "logs")
+                               "--dashboard-port", str(free_port()), "--status-period", "1",
+                               *selected), "up", tmp_path / "logs")
     probe: Node | None = None
     try:
-        expected = len([e for e in available_services() if not e.on_request]) + len(apps)
+        services = len(only) or len([e for e in available_services() if not e.on_request])
+        expected = services + len(apps)
         up.wait_for_output(f"nodes {expected}/{expected}", 120)
         probe = Node("probe", robot="buddy", connect=[endpoint], probe=True)
         yield up, probe, endpoint
@@ -123,7 +132,9 @@ def test_love_after_the_dwell_then_the_robots_own_eyes_when_the_visitor_left(
     assert "DWELL_S = 10.0\n" in source
     quick = tmp_path / "love_after_10s.py"
     quick.write_text(source.replace("DWELL_S = 10.0\n", "DWELL_S = 3.0\n"))
-    with up_sim(tmp_path, [quick]) as (up, probe, _endpoint):
+    # The simulated camera's face never leaves: the radar alone makes the visit here.
+    with up_sim(tmp_path, [quick], RADAR_ONLY, "[people]\nabsence_hold_s = 1\n") as (
+            up, probe, _endpoint):
         expression = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
         leases = Collector[m.Leases](probe, keys.LEASES)
         status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)
