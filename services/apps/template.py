@@ -26,6 +26,7 @@ class {cls}(App):
     name = "{name}"
 
     def run(self, bot: Bot, stop_event: threading.Event) -> None:
+        self.bot = bot  # for the callbacks below
         present = [person.id for person in bot.people.now()]
         print(f"{{self.name}}: watching robot {{bot.robot}}; present now: {{present}}", flush=True)
         bot.on("ARRIVED", self.arrived)
