@@ -12,7 +12,8 @@ tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, 
 
 An area imports only the runtime, the contract and itself, so an area can
 be lifted into its own repository (so can `sdk`, the library for
-programs, which imports the same two layers); the runtime imports no tool, no
+programs, which imports the same two layers, and `apps`, which adds the
+sdk and which the sdk never imports); the runtime imports no tool, no
 supervisor and no area, so a service process loads only what it runs. The
 rule is a table (`ALLOWED`), checked statically (every `import` in the
 source, also the ones inside functions) and at run time (what loading the
