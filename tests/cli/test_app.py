@@ -119,12 +119,26 @@ def test_an_app_that_ignores_the_stop_is_ended_after_the_grace_time(
 
 
 @pytest.mark.integration
-def test_list_shows_installed_configured_and_running_apps(endpoint: str, tmp_path: Path) -> None:
+def test_list_shows_installed_configured_and_running_apps(endpoint: str, log_dir: Path,
+                                                          tmp_path: Path) -> None:
     config = tmp_path / "robot.toml"
     config.write_text('[apps]\nrun = ["examples/apps/greeter.py"]\n')
     result = bb("app", "list", "--json", "--connect", endpoint, "--config", str(config))
     assert result.returncode == 0, result.stderr
     listed = json.loads(result.stdout)
     assert listed["config"] == ["examples/apps/greeter.py"] and listed["running"] == []
+    waiter = app_file(tmp_path, "waiter.py", """
+        class Waiter:
+            def run(self, bot, stop_event):
+                print("waiter: up", flush=True)
+                stop_event.wait()
+        """)
+    app = run_app(endpoint, log_dir, str(waiter))
+    try:
+        app.wait_for_output("waiter: up", 30)
+        running = bb("app", "list", "--json", "--connect", endpoint)
+        assert json.loads(running.stdout)["running"] == ["waiter"], running.stdout
+    finally:
+        app.stop()
     offline = bb("app", "list", "--connect", "tcp/127.0.0.1:1", "--timeout", "1")
     assert offline.returncode == 0 and "? (no router answered)" in offline.stdout
