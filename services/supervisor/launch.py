@@ -302,11 +302,7 @@ def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
     """Command line of one service under `up`: sim flags when no hardware is set."""
     args = ctx.args
     argv = [sys.executable, "-m", "buddybot", "run", name]
-    for endpoint in [connect] if isinstance(connect, str) else connect:
-        argv += ["--connect", endpoint]
-    argv += ["--robot", ctx.robot, "--log-level", args.log_level]
-    if args.config:
-        argv += ["--config", args.config]
+    argv += _child_options(ctx, [connect] if isinstance(connect, str) else connect)
     sim = args.sim
     if name == "radar-bridge" and (sim or not ctx.config.radar_bridge.sensors):
         argv.append("--sim")
@@ -320,6 +316,12 @@ def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
 def app_argv(app: AppLaunch, ctx: ServiceContext, connect: list[str]) -> list[str]:
     """Command line of one app under `up`: its runner, named as `up` knows it."""
     argv = [sys.executable, "-m", "buddybot", "app", "run", app.spec, "--name", app.name]
+    return argv + _child_options(ctx, connect)
+
+
+def _child_options(ctx: ServiceContext, connect: list[str]) -> list[str]:
+    """The common options every child of `up` gets: where, which robot, how verbose."""
+    argv = []
     for endpoint in connect:
         argv += ["--connect", endpoint]
     argv += ["--robot", ctx.robot, "--log-level", ctx.args.log_level]
