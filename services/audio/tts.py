@@ -1,8 +1,10 @@
 """Text-to-speech with espeak-ng, rendered once to a cached WAV file.
 
-Optional: only used when a sound is configured as `say:<text>`. The file
-name is a hash of the text, so a restart reuses the rendering and the
-first play of a spoken sound costs no synthesis time.
+Optional: only used for `say:<text>` (a configured sound, or a goal
+speaking any text). The file name is a hash of the text, so a restart
+reuses the rendering and the first play of a spoken sound costs no
+synthesis time. Goals may speak any text, so the cache keeps the
+CACHE_FILES most recently rendered files and deletes older ones.
 """
 
 from __future__ import annotations
@@ -12,6 +14,9 @@ import shutil
 import subprocess
 import tempfile
 from pathlib import Path
+
+CACHE_FILES = 256
+"""Rendered texts kept (a 240-character text is about 0.7 MB)."""
 
 
 class TtsError(Exception):
@@ -33,6 +38,7 @@ def render(text: str, *, voice: str = "en-us", folder: Path | None = None,
     digest = hashlib.sha256(f"{voice}\0{text}".encode()).hexdigest()[:20]
     out = folder / f"{digest}.wav"
     if out.exists() and out.stat().st_size > 44:
+        out.touch()
         return out
     partial = out.with_suffix(".part.wav")
     try:
@@ -46,4 +52,26 @@ def render(text: str, *, voice: str = "en-us", folder: Path | None = None,
         err = done.stderr.decode(errors="replace").strip()
         raise TtsError(f"espeak-ng failed (exit {done.returncode}): {err}")
     partial.replace(out)
+    prune(folder, CACHE_FILES)
     return out
+
+
+def prune(folder: Path, keep: int) -> int:
+    """Delete all but the `keep` most recently used WAV files; how many went."""
+    files = []
+    for path in folder.glob("*.wav"):
+        if path.name.endswith(".part.wav"):
+            continue  # being rendered now
+        try:
+            files.append((path.stat().st_mtime_ns, path))
+        except OSError:
+            continue  # deleted meanwhile by another process
+    files.sort(reverse=True)
+    gone = 0
+    for _, path in files[keep:]:
+        try:
+            path.unlink()
+            gone += 1
+        except OSError:
+            pass
+    return gone

@@ -15,7 +15,7 @@ import argparse
 import threading
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import Any, TypeVar, cast
 
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
@@ -26,6 +26,8 @@ from buddybot.sdk.leases import Lease, LeaseTable
 from buddybot.sdk.params import Params
 from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
 from buddybot.sdk.speaker import SoundHandle, Speaker
+
+T = TypeVar("T")
 
 TIMEOUT_S = 5.0
 """Default bound of the connect and of every call."""
@@ -49,7 +51,7 @@ class Bot:
         self._speaker: Speaker | None = None
         self._leases: LeaseTable | None = None
         self._eyes: Eyes | None = None
-        self._lock = threading.Lock()
+        self._lock = threading.RLock()
         """Opens `people`, `speaker`, `leases` and `eyes` once, on first use from any
         thread."""
 
@@ -82,10 +84,7 @@ class Bot:
     @property
     def people(self) -> People:
         """Who is there (`bot.people.now()`), from `people/state`."""
-        with self._lock:
-            if self._people is None:
-                self._people = People(self.node, self.timeout)
-            return self._people
+        return self._opened("_people", lambda: People(self.node, self.timeout))
 
     def events(self, *kinds: str, timeout: float | None = None) -> EventStream:
         """Person events of `kinds` (all when none): first the people present now
@@ -118,10 +117,7 @@ class Bot:
     @property
     def leases(self) -> LeaseTable:
         """The leases this program holds (opened on first use)."""
-        with self._lock:
-            if self._leases is None:
-                self._leases = LeaseTable(self.node, self.timeout)
-            return self._leases
+        return self._opened("_leases", lambda: LeaseTable(self.node, self.timeout))
 
     def lease(self, *resources: str, priority: str = "app",
               duration_s: float | None = None) -> Lease:
@@ -133,22 +129,14 @@ class Bot:
     @property
     def eyes(self) -> Eyes:
         """Expressions and gaze through the controller (opened on first use)."""
-        leases = self.leases
-        with self._lock:
-            if self._eyes is None:
-                self._eyes = Eyes(self.node, leases, self.timeout)
-            return self._eyes
+        return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout))
 
     # -- speaker --
 
     @property
     def speaker(self) -> Speaker:
         """Sounds through the `audio/play_sound` action (opened on first use)."""
-        leases = self.leases
-        with self._lock:
-            if self._speaker is None:
-                self._speaker = Speaker(self.node, leases, self.timeout)
-            return self._speaker
+        return self._opened("_speaker", lambda: Speaker(self.node, self.leases, self.timeout))
 
     def play(self, sound: str) -> SoundHandle:
         """Play a sound of `[audio.sounds]` by name, under an "audio" lease;
@@ -161,6 +149,15 @@ class Bot:
         return self.speaker.say(text)
 
     # -- lifetime --
+
+    def _opened(self, attr: str, make: Callable[[], T]) -> T:
+        """The part kept in `attr`, made by `make` on first use (once, from any thread)."""
+        with self._lock:
+            part = getattr(self, attr)
+            if part is None:
+                part = make()
+                setattr(self, attr, part)
+            return cast(T, part)
 
     def close(self) -> None:
         """Release the leases held (bounded: a gone controller ends them anyway when

@@ -208,7 +208,8 @@ class LeaseTable:
         limit = self.timeout if timeout is None else timeout
         try:
             reply: m.TriggerReply = call(self.node, keys.LEASE_RELEASE,
-                                         m.LeaseRelease(lease_id=lease.lease_id), limit,
+                                         m.LeaseRelease(lease_id=lease.lease_id,
+                                                        by=self.node.name), limit,
                                          hint=CONTROLLER_HINT)
             message = reply.message
         finally:

@@ -67,6 +67,12 @@ class Rig:
     def device_free(self, free: bool) -> list[Command]:
         return self._rec(self.b.device_free(self.t, free))
 
+    def speaker_blocked(self, by: str, blocked: bool) -> list[Command]:
+        """`device busy` (audio/device_free false) or a `lease on the speaker`."""
+        if by == "device busy":
+            return self.device_free(not blocked)
+        return self._rec(self.b.audio_held(self.t, blocked))
+
     def accept(self, cmd: PlaySound) -> str:
         self.goal += 1
         gid = f"g{self.goal}"
@@ -268,18 +274,33 @@ def test_busy_device_delays_greeting() -> None:
     assert r.sounds() == ["greeting"]
 
 
-def test_farewell_dropped_if_device_stays_busy() -> None:
+@pytest.mark.parametrize("blocker", ["device busy", "lease on the speaker"])
+@pytest.mark.parametrize(("blocked_s", "played"), [(1.0, True), (3.0, False)])
+def test_a_farewell_waits_for_the_speaker_then_plays_or_is_dropped(
+        blocker: str, blocked_s: float, played: bool) -> None:
     r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, farewell_max_delay_s=2.0)
     r.presence(True)
     gid = r.accept(plays(r.face())[0])
     r.status(gid, "SUCCEEDED")
-    r.device_free(False)  # someone else plays something
+    r.speaker_blocked(blocker, True)  # someone else plays something, or holds the speaker
     r.presence(False)
-    r.at(3.0)
-    r.device_free(True)
+    r.at(blocked_s)
+    r.speaker_blocked(blocker, False)
     r.at(1.0)
+    assert r.sounds() == (["greeting", "farewell"] if played else ["greeting"])
+    assert r.b.counters["farewells_dropped"] == (0 if played else 1)
+
+
+def test_a_held_speaker_delays_the_greeting_and_says_why() -> None:
+    r = Rig(greet_dwell_s=0.0)
+    r.speaker_blocked("lease on the speaker", True)
+    r.presence(True)
+    r.faces(2.0)
+    assert r.sounds() == []
+    assert r.b.state(r.t).waiting == "yielded"
+    assert r.expressions()[-1] == X.EYE_AWAKE  # only the sound waits
+    r.speaker_blocked("lease on the speaker", False)
     assert r.sounds() == ["greeting"]
-    assert r.b.counters["farewells_dropped"] == 1
 
 
 def test_back_within_cooldown_is_same_visit() -> None:

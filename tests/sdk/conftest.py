@@ -12,7 +12,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot
-from buddybot.tools.testing import Collector, Process
+from buddybot.tools.testing import Collector, Process, retry_until
 
 
 @pytest.fixture
@@ -38,3 +38,27 @@ def start_people(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> 
     proc = spawn("people", "--config", str(config))
     state.wait_for(lambda s: s.people == [], 30, "the first, empty, people/state")
     return proc
+
+
+CONTROLLER_CONFIG = "[controller]\nrecover_s = 0.3\n"
+
+
+@pytest.fixture
+def controller(spawn: Callable[..., Process], probe: Node, tmp_path: Path
+               ) -> Callable[[], Process]:
+    """Start a `controller` (no inputs: its own expression is EYE_SLEEP), returning
+    once it serves `leases/acquire` and `eyes/command` and has published its
+    expression."""
+    def start() -> Process:
+        expr = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+        config = tmp_path / "controller.toml"
+        config.write_text(CONTROLLER_CONFIG)
+        proc = spawn("controller", "--config", str(config))
+        retry_until(lambda: any(i.node == "controller" and "leases/acquire" in i.services
+                                and "eyes/command" in i.services
+                                for i in probe.node_infos(1.0)),
+                    30, 0.2, "the controller serving leases")
+        expr.wait_for(lambda e: e.action == m.ExpressionAction.EYE_SLEEP, 30,
+                      "the controller's own EYE_SLEEP")
+        return proc
+    return start

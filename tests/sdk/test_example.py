@@ -1,6 +1,6 @@
 """The example of docs/sdk.md, run as it is shown (marked `integration`): a program
 connected with the standard flags, a real people service and real audio services, a
-visitor arriving -> the configured `say:` sound is played to its end."""
+visitor arriving -> "Hello there" (configured nowhere) is spoken to its end."""
 
 from __future__ import annotations
 
@@ -36,8 +36,7 @@ def test_the_page_has_an_example_using_the_standard_flags() -> None:
 def test_the_example_greets_a_visitor(spawn: Callable[..., Process], probe: Node,
                                       endpoint: str, log_dir: Path, tmp_path: Path) -> None:
     config = tmp_path / "robot.toml"
-    config.write_text('[audio.sounds]\nhello = "say:Hello there"\n'
-                      "[audio_player]\nbackend = \"null\"\n")
+    config.write_text("[audio_player]\nbackend = \"null\"\n")
     state = Collector[m.PeopleState](probe, keys.PEOPLE_STATE)
     free = Collector[m.Bool](probe, keys.DEVICE_FREE)
     status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)

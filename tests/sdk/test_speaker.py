@@ -1,7 +1,8 @@
 """`buddybot.sdk.speaker`: the handle (pure), and, marked `integration`, real `audio`
 and `audio-player` services on the null device: a sound plays to SUCCEEDED, a cancel
 ends it CANCELED, an unknown name is refused, any text is spoken, a malformed text
-raises before anything is sent."""
+raises before anything is sent; with a controller, a sound holds an "audio" lease for
+its length and an operator's lease refuses it."""
 
 from __future__ import annotations
 
@@ -12,11 +13,12 @@ from pathlib import Path
 
 import pytest
 
+from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
 from buddybot.sdk.speaker import Speaker
-from buddybot.tools.testing import retry_until
+from buddybot.tools.testing import Collector, Process, retry_until
 from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
 
 # --- pure ----------------------------------------------------------------------------------
@@ -118,3 +120,26 @@ def test_without_an_audio_service_play_says_so(bot_factory: Callable[..., Bot]) 
     bot = bot_factory(timeout=0.5)
     with pytest.raises(NoService, match=r"nobody answered on audio/play_sound within 0\.5 s"):
         bot.play("greeting")
+
+
+@pytest.mark.integration
+def test_a_sound_holds_the_speaker_for_its_length_and_an_operator_refuses_it(
+        ready_audio: Callable[..., Audio], controller: Callable[[], Process],
+        bot_factory: Callable[..., Bot], probe: Node, tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 0.4)
+    ready_audio(config)
+    controller()
+    state = Collector[m.Leases](probe, keys.LEASES)
+    bot = bot_factory(name="player_app")
+    with (bot_factory(name="wizard").lease("audio", priority="operator"),
+          pytest.raises(Refused, match="audio is held by wizard at priority operator")):
+        bot.play("beep")
+    handle = bot.play("beep")
+    assert handle.lease is not None and handle.lease.resources == ("audio",)
+    assert handle.wait(30) == "SUCCEEDED", handle.message
+    state.wait_for(lambda s: any(e.lease_id == handle.lease.lease_id  # type: ignore[union-attr]
+                                 and e.reason == "released" for e in s.ended),
+                   10, "the sound's lease released at its end")
+    with bot.lease("audio") as mine:  # a lease of the program's own: no second one
+        held = bot.play("beep")
+        assert held.lease is None and held.wait(30) == "SUCCEEDED" and mine.active

@@ -1,0 +1,324 @@
+"""The controller as lease arbiter. First without Zenoh (the `Scene` of
+test_service.py: fake node and clock), then as a process behind a real router:
+apps (nodes in this process, or a child process killed with SIGKILL) take the
+eyes, the controller puts their commands on `eyes/expression` and gives the eyes
+back when a lease ends."""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import msgspec
+import pytest
+import zenoh
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.errors import CallError
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, retry_until
+
+from ..conftest import TIMING
+from .conftest import FAST_CONFIG
+from .test_service import Scene
+
+X = m.ExpressionAction
+Spawn = Callable[..., Process]
+log = logging.getLogger("test.leases")
+
+HOLDER = """
+import sys, threading
+from buddybot.contract import keys, messages as m
+from buddybot.runtime.node import Node
+node = Node("app-crashy", robot="buddy", connect=[sys.argv[1]])
+reply = node.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+    holder=node.name, instance=node.instance, resources=["expression", "gaze"]), timeout=10)
+print("lease", reply.granted, reply.lease_id, reply.message, flush=True)
+node.call(keys.EYES_COMMAND, m.EyesCommand(lease_id=reply.lease_id,
+          expression=m.ExpressionAction.ANIMATE_STAR), timeout=10)
+print("star shown", flush=True)
+threading.Event().wait()
+"""
+
+
+# --- without Zenoh -------------------------------------------------------------------
+
+
+def take(s: Scene, *resources: m.Resource, holder: str = "app-a",
+         priority: m.LeasePriority = "app", duration_s: float | None = None) -> str:
+    """A lease for `holder` (its liveliness token seen first), granted."""
+    s.controller.on_token(holder, "i1", True)
+    reply = s.controller.acquire(m.LeaseRequest(holder=holder, instance="i1",
+                                                resources=list(resources), priority=priority,
+                                                duration_s=duration_s))
+    assert reply.granted, reply.message
+    return reply.lease_id
+
+
+def command(s: Scene, lease_id: str, **fields: object) -> m.TriggerReply:
+    return s.controller.eyes_command(m.EyesCommand(lease_id=lease_id, **fields))  # type: ignore[arg-type]
+
+
+def leases(s: Scene) -> list[m.Leases]:
+    return list(s.node.publishers["leases/state"].sent)
+
+
+def test_a_held_expression_is_the_holders_and_released_it_is_the_behaviours_at_once(
+) -> None:
+    s = Scene()
+    lease = take(s, "expression")
+    assert leases(s)[-1].leases[0].lease_id == lease
+    assert s.states()[-1].yielded == ["expression"]
+    s.presence(True)  # the behaviour wants EYE_AWAKE now, and keeps that idea
+    assert s.expressions() == [X.EYE_SLEEP]
+    assert s.states()[-1].phase == "noticed"
+    assert command(s, lease, expression=X.ANIMATE_LOVE).success
+    assert s.expressions() == [X.EYE_SLEEP, X.ANIMATE_LOVE]
+    done = s.controller.release(m.LeaseRelease(lease_id=lease, by="app-a"))
+    assert done.success
+    # no clock step: the release itself put the behaviour's expression back
+    assert s.expressions() == [X.EYE_SLEEP, X.ANIMATE_LOVE, X.EYE_AWAKE]
+    assert s.states()[-1].yielded == []
+    assert leases(s)[-1].ended[-1].reason == "released"
+    refused = command(s, lease, expression=X.ANIMATE_STAR)
+    assert not refused.success and "ended (released)" in refused.message
+
+
+def test_a_held_gaze_is_not_followed_and_a_gone_holder_gives_it_back() -> None:
+    s = Scene()
+    lease = take(s, "gaze")
+    s.presence(True)
+    s.face()
+    assert s.controls() == []  # the behaviour's Look is dropped
+    assert command(s, lease, yaw=0.5, pitch=0.2).success
+    assert [(c.yaw, c.pitch) for c in s.controls()] == [(0.5, 0.2)]
+    no_expr = command(s, lease, expression=X.ANIMATE_LOVE)
+    assert not no_expr.success and "does not hold expression" in no_expr.message
+    s.controller.on_token("app-a", "i1", False)  # killed: its token went away
+    back = s.controls()[-1]  # the face's gaze (Scene's point x=1, y=0.3), not the app's
+    assert back.yaw == pytest.approx(math.atan2(0.3, 1.0))
+    assert leases(s)[-1].ended[-1].reason == "holder_gone"
+
+
+def test_the_gaze_returns_to_centre_when_the_behaviour_had_none() -> None:
+    s = Scene()
+    lease = take(s, "gaze")
+    assert command(s, lease, yaw=0.5).success
+    s.controller.release(m.LeaseRelease(lease_id=lease, by="operator-cli"))
+    assert (s.controls()[-1].yaw, s.controls()[-1].pitch) == (0.0, 0.0)
+    assert leases(s)[-1].ended[-1].reason == "broken"
+
+
+def test_while_the_speaker_is_held_no_greeting_starts_and_after_it_does() -> None:
+    s = Scene()
+    lease = take(s, "audio")
+    s.presence(True)
+    s.watch(True)
+    s.run(3.0)  # well past the greeting dwell
+    assert s.sounds == []
+    assert s.states()[-1].waiting == "yielded"
+    s.controller.release(m.LeaseRelease(lease_id=lease, by="app-a"))
+    s.until(lambda: "play:greeting" in s.log, "the greeting once the speaker is free")
+
+
+def test_a_lease_expires_on_the_decision_tick_and_the_eyes_come_back() -> None:
+    s = Scene()
+    wall = [T_WALL]
+    s.controller.wall_ns = lambda: wall[0]
+    lease = take(s, "expression", duration_s=1.0)
+    assert command(s, lease, expression=X.ANIMATE_STAR).success
+    s.run(0.5)
+    assert s.expressions()[-1] == X.ANIMATE_STAR
+    wall[0] += 1_000_000_000
+    s.run(0.1)
+    assert s.expressions()[-1] == X.EYE_SLEEP
+    assert leases(s)[-1].ended[-1].reason == "expired"
+
+
+def test_a_flooding_holder_is_rate_limited_and_counted() -> None:
+    s = Scene(lease_actions_per_s=5.0, lease_actions_burst=3.0)
+    wall = [T_WALL]
+    s.controller.wall_ns = lambda: wall[0]
+    lease = take(s, "expression")
+    results = [command(s, lease, expression=X.EYE_GRIN).success for _ in range(10)]
+    assert results == [True] * 3 + [False] * 7
+    wall[0] += 200_000_000  # one token back at 5/s
+    assert command(s, lease, expression=X.EYE_GRIN).success
+    s.run(1.1)  # the diagnostics are put once a second
+    values = s.node.diagnostics.values
+    assert values["rate_limited"] == 7 and values["eyes_commands"] == 4
+    assert values["eyes_commands_refused"] == 7 and values["leases_granted"] == 1
+    s.controller.apply_settings(msgspec.structs.replace(s.controller.settings,
+                                                        lease_actions_per_s=1000.0))
+    wall[0] += 1_000_000_000
+    assert all(command(s, lease, expression=X.EYE_GRIN).success for _ in range(3))
+
+
+T_WALL = 1_700_000_000_000_000_000
+
+
+# --- through the router ----------------------------------------------------------------
+
+
+@pytest.fixture
+def controller(spawn: Spawn, tmp_path: Path, probe: Node) -> Process:
+    """The controller of FAST_CONFIG, up (its lease services declared) and past its
+    recovery (EYE_SLEEP shown)."""
+    config = tmp_path / "robot.toml"
+    config.write_text(FAST_CONFIG)
+    expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
+    proc = spawn("controller", "--config", str(config))
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=20, what="initial EYE_SLEEP")
+
+    def serving() -> bool:
+        return any(keys.EYES_COMMAND.pattern in info.services
+                   for info in probe.node_infos(timeout=1.0) if info.node == "controller")
+
+    retry_until(serving, 20, what="the controller serving eyes/command")
+    return proc
+
+
+def acquire(node: Node, *resources: m.Resource, priority: m.LeasePriority = "app",
+            duration_s: float | None = None) -> m.LeaseReply:
+    reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+        holder=node.name, instance=node.instance, resources=list(resources),
+        priority=priority, duration_s=duration_s), timeout=10)
+    return reply
+
+
+def express(node: Node, lease_id: str, action: X) -> m.TriggerReply:
+    reply: m.TriggerReply = node.call(keys.EYES_COMMAND, m.EyesCommand(
+        lease_id=lease_id, expression=action), timeout=10)
+    return reply
+
+
+@pytest.mark.integration
+def test_a_holder_drives_the_eyes_and_a_late_screen_gets_one_value(
+        controller: Process, node_factory: Callable[..., Node], probe: Node) -> None:
+    app = node_factory("app-love")
+    expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
+    control: Collector[m.EyeControl] = Collector(probe, keys.EYE_CONTROL)
+    states: Collector[m.Leases] = Collector(probe, keys.LEASES)
+    lease = acquire(app, "expression", "gaze")
+    assert lease.granted, lease.message
+    states.wait_for(lambda s: [x.lease_id for x in s.leases] == [lease.lease_id],
+                    what="the lease in leases/state")
+    assert express(app, lease.lease_id, X.ANIMATE_LOVE).success
+    expr.wait_for(lambda e: e.action == X.ANIMATE_LOVE, what="ANIMATE_LOVE on the bus")
+    gaze = app.call(keys.EYES_COMMAND, m.EyesCommand(lease_id=lease.lease_id, yaw=0.3,
+                                                     pitch=-0.1), timeout=10)
+    assert gaze.success
+    control.wait_for(lambda c: c.yaw == pytest.approx(0.3) and c.pitch == pytest.approx(-0.1),
+                     what="the holder's gaze")
+
+    # A screen starting now (a new subscriber: it asks the history of the latched
+    # key) gets exactly one value, the holder's LOVE from the controller's publisher.
+    late_sub = node_factory("late-screen")
+    seen: Collector[m.ScreenExpression] = Collector(late_sub, keys.EXPRESSION)
+    first = seen.wait_for(what="the latched expression")
+    time.sleep(0.5)  # a second retained value would arrive in this time (not a sync)
+    assert [e.action for e in seen.messages] == [X.ANIMATE_LOVE], seen.messages
+    assert first.action == X.ANIMATE_LOVE
+
+    # Released: the controller's own expression (EYE_SLEEP, nobody here) at once.
+    done = app.call(keys.LEASE_RELEASE, m.LeaseRelease(lease_id=lease.lease_id,
+                                                        by=app.name), timeout=10)
+    assert done.success, done.message
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP and e.stamp_ns > first.stamp_ns,
+                  what="EYE_SLEEP back")
+    ended = states.wait_for(lambda s: not s.leases and s.ended, what="the lease ended")
+    assert ended.ended[-1].reason == "released"
+    refused = express(app, lease.lease_id, X.ANIMATE_STAR)
+    assert not refused.success and "released" in refused.message
+
+
+@pytest.mark.integration
+@TIMING
+def test_a_killed_holder_gives_the_eyes_back_within_1_s(
+        controller: Process, endpoint: str, log_dir: Path, probe: Node) -> None:
+    expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
+    states: Collector[m.Leases] = Collector(probe, keys.LEASES)
+    holder = Process([sys.executable, "-c", HOLDER, endpoint], "app-crashy", log_dir)
+    try:
+        holder.wait_for_output("star shown", timeout=20)
+        expr.wait_for(lambda e: e.action == X.ANIMATE_STAR, what="the app's STAR")
+        expr.clear()
+        killed = time.monotonic()
+        holder.kill()
+        back = expr.wait_for(lambda e: e.action == X.EYE_SLEEP, timeout=10,
+                             what="the controller's EYE_SLEEP back")
+        took = time.monotonic() - killed
+    finally:
+        holder.stop()
+    print(f"kill -9 of the holder -> own expression back: {took * 1000:.0f} ms")
+    log.warning("kill -9 of the holder -> own expression back: %.0f ms", took * 1000)
+    assert back.action == X.EYE_SLEEP
+    end = states.wait_for(lambda s: any(e.reason == "holder_gone" for e in s.ended),
+                          what="holder_gone")
+    assert end.ended[-1].holder == "app-crashy"
+    assert took <= 1.0, f"{took:.2f} s"
+
+
+@pytest.mark.integration
+def test_an_operator_preempts_an_app_and_equals_queue(
+        controller: Process, node_factory: Callable[..., Node], probe: Node) -> None:
+    app, other, operator = (node_factory(n) for n in ("app-a", "app-b", "wizard"))
+    expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
+    first = acquire(app, "expression")
+    assert first.granted
+    second = acquire(other, "expression", "audio")
+    assert not second.granted
+    assert "app-a" in second.message and first.lease_id in second.message
+    taken = acquire(operator, "expression", priority="operator")
+    assert taken.granted and first.lease_id in taken.message
+    stale = express(app, first.lease_id, X.ANIMATE_LOVE)
+    assert not stale.success and "preempted" in stale.message
+    assert express(operator, taken.lease_id, X.ANIMATE_STAR).success
+    expr.wait_for(lambda e: e.action == X.ANIMATE_STAR, what="the operator's STAR")
+    assert X.ANIMATE_LOVE not in [e.action for e in expr.messages]
+
+
+@pytest.mark.integration
+def test_bad_requests_are_refused_with_reasons_and_survived(
+        controller: Process, node_factory: Callable[..., Node], endpoint: str) -> None:
+    app = node_factory("app-bad")
+    for duration, reason in ((0.0, "duration_s"), (-5.0, "duration_s"),
+                             (1e12, "86400")):
+        reply = acquire(app, "gaze", duration_s=duration)
+        assert not reply.granted and reason in reply.message, reply
+    builtin = acquire(app, "gaze", priority="builtin")
+    assert not builtin.granted and "builtin" in builtin.message
+    ghost = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+        holder="ghost", instance="abc", resources=["gaze"]), timeout=10)
+    assert not ghost.granted and "no liveliness token nodes/ghost/abc" in ghost.message
+
+    session = zenoh.open(_client(endpoint))
+    try:
+        for key, payload in ((keys.LEASE_ACQUIRE, b'{"holder": 1}'),
+                             (keys.LEASE_RELEASE, b"\xff garbage"),
+                             (keys.EYES_COMMAND, b'{"lease_id": "x", "yaw": 99}')):
+            replies = list(session.get(app.key(key), payload=payload, timeout=5.0))
+            assert replies and replies[0].err is not None, key.pattern
+            error = msgspec.json.decode(replies[0].err.payload.to_bytes(), type=m.ErrorReply)
+            assert error.error.startswith("bad "), error
+    finally:
+        session.close()
+    with pytest.raises(CallError):
+        app.call_key(app.key(keys.EYES_COMMAND), keys.EYES_COMMAND,
+                     m.Trigger(), timeout=5.0)  # type: ignore[arg-type]
+    assert controller.alive()
+    assert acquire(app, "gaze", duration_s=5.0).granted  # still serving
+
+
+def _client(endpoint: str) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"client"')
+    conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return conf
