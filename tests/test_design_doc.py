@@ -131,9 +131,10 @@ def _struct_fields(struct: type[msgspec.Struct]) -> list[msgspec.structs.FieldIn
 
 
 def _tables() -> list[tuple[str, type[msgspec.Struct]]]:
-    """Every config table: [robot], [zenoh], each service's, and nested tables."""
+    """Every config table: [robot], [zenoh], [apps], each service's, and nested tables."""
     found: list[tuple[str, type[msgspec.Struct]]] = [
-        ("robot", config.RobotSettings), ("zenoh", config.ZenohSettings)]
+        ("robot", config.RobotSettings), ("zenoh", config.ZenohSettings),
+        ("apps", config.AppsSettings)]
     for entry in registry.SERVICES:
         assert entry.table is not None
         found.append((entry.table, entry.settings_type()))

@@ -19,6 +19,9 @@ that start with `buddybot `. Then:
   (marked integration: they start processes). Long-running commands (`up`,
   `run`, `router`, the probes) and the ones needing hardware (`radar`) are
   parse-checked only;
+* the tutorial of docs/apps.md is run as a reader would, in order, against
+  `up --sim` (`test_the_apps_tutorial_runs`, integration): `app new hello`,
+  `app run hello.py` as generated and as edited on the page, `[apps]`;
 * other commands: `scripts/...` and `benchmarks/...` run directly must
   exist and be executable; files given to `.venv/bin/python` and paths
   given to pytest must exist; `make TARGET` must be a Makefile target;
@@ -43,6 +46,7 @@ import pytest
 from buddybot import cli
 from buddybot.runtime import registry
 from buddybot.runtime.service import add_common_arguments
+from buddybot.tools import testing
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
@@ -278,3 +282,80 @@ def test_quick_command_runs(argv: str) -> None:
     assert result.returncode == 0, f"buddybot {argv}: exit {result.returncode}\n{result.stderr}"
     if not argv.startswith("schemas"):  # a successful check is silent
         assert result.stdout.strip(), f"buddybot {argv} printed nothing"
+
+
+# --- docs/apps.md: the tutorial, run as a reader would --------------------------------
+
+APPS_DOC = ROOT / "docs" / "apps.md"
+
+
+def _blocks(path: Path, lang: str) -> list[str]:
+    """The text of each fenced block of `lang` in `path`."""
+    out, current = [], None
+    for line in path.read_text(encoding="utf-8").splitlines():
+        fence = FENCE.match(line)
+        if fence and current is None and fence.group(1) == lang:
+            current = []
+        elif fence and current is not None:
+            out.append("\n".join(current) + "\n")
+            current = None
+        elif current is not None:
+            current.append(line)
+    return out
+
+
+def _tutorial_command(start: str) -> list[str]:
+    found = [c.text for c in commands_in(APPS_DOC) if not c.inline and c.text.startswith(start)]
+    assert found, f"docs/apps.md shows no `{start}...` command"
+    argv = buddybot_argv(words(found[0]))
+    assert argv is not None
+    return argv
+
+
+@pytest.mark.integration
+def test_the_apps_tutorial_runs(tmp_path: Path) -> None:
+    """`up --sim`, `app new hello`, `app run hello.py` (as generated, then as edited in
+    the page: it greets the simulated visitor), then `[apps]` read by `app list`."""
+    up_words = _tutorial_command("buddybot up --sim")
+    audio = tmp_path / "audio.toml"
+    audio.write_text('[audio_player]\nbackend = "null"\n')
+    endpoint = f"tcp/127.0.0.1:{testing.free_port()}"
+    ports = [str(testing.free_port()) for _ in range(2)]
+    up = testing.Process(testing.buddybot_argv(
+        *up_words, "--no-browser", "--listen", endpoint, "--config", str(audio),
+        "--eye-port", ports[0], "--dashboard-port", ports[1], "--status-period", "1"),
+        "up", tmp_path / "logs")
+    env = {k: v for k, v in os.environ.items() if k != "BUDDYBOT_CONFIG"}
+
+    def run_app(name: str) -> testing.Process:
+        """The page's `buddybot app run hello.py`, run in the reader's folder."""
+        argv = [str(tmp_path / a) if a == "hello.py" else a
+                for a in _tutorial_command("buddybot app run hello.py")]
+        return testing.Process(testing.buddybot_argv(*argv, "--connect", endpoint), name,
+                               tmp_path / "logs")
+
+    try:
+        up.wait_for_output(" | face ", 120)
+        new = subprocess.run(testing.buddybot_argv(*_tutorial_command("buddybot app new hello")),
+                             cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+        assert new.returncode == 0 and (tmp_path / "hello.py").is_file(), new.stderr
+        generated = run_app("hello-generated")
+        generated.wait_for_output("hello: watching robot buddy; present now:", 60)
+        assert generated.stop() == 0
+
+        edited = _blocks(APPS_DOC, "python")
+        assert len(edited) == 1
+        (tmp_path / "hello.py").write_text(edited[0])
+        greeting = run_app("hello-edited")
+        greeting.wait_for_output("hello: greeted person ", 90)
+        assert greeting.stop() == 0
+
+        table = next(b for b in _blocks(APPS_DOC, "toml") if "[apps]" in b)
+        (tmp_path / "robot.toml").write_text(table)
+        listed = subprocess.run(
+            testing.buddybot_argv(*_tutorial_command("buddybot app list"), "--connect", endpoint),
+            cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+        assert listed.returncode == 0, listed.stderr
+        assert "[apps] run (robot.toml):\n  hello.py" in listed.stdout, listed.stdout
+    finally:
+        up.stop(30)

@@ -12,7 +12,8 @@ tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, 
 
 An area imports only the runtime, the contract and itself, so an area can
 be lifted into its own repository (so can `sdk`, the library for
-programs, which imports the same two layers); the runtime imports no tool, no
+programs, which imports the same two layers, and `apps`, which adds the
+sdk and which the sdk never imports); the runtime imports no tool, no
 supervisor and no area, so a service process loads only what it runs. The
 rule is a table (`ALLOWED`), checked statically (every `import` in the
 source, also the ones inside functions) and at run time (what loading the
@@ -41,7 +42,8 @@ ALLOWED: dict[str, frozenset[str]] = {
     "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
     **{area: BASE | {area} for area in AREAS},
     "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
-    "cli": BASE | {"tools", "supervisor", "cli", *AREAS},
+    "apps": BASE | {"sdk", "apps"},  # apps and their runner stand on the sdk
+    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", *AREAS},
     "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
 }
 """Layer -> the layers its modules may import (a layer is a folder of `services/`)."""

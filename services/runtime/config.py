@@ -21,6 +21,7 @@ import msgspec
 
 from buddybot.contract.keys import DEFAULT_ROBOT, valid_robot_id
 from buddybot.runtime import registry
+from buddybot.runtime.appspec import AppSpec, parse_app_spec
 from buddybot.runtime.errors import ConfigError
 
 CONFIG_ENV = "BUDDYBOT_CONFIG"
@@ -54,6 +55,37 @@ class ZenohSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     router_config_file: str | None = None
 
 
+class AppsSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[apps]`: the apps `buddybot up` starts and supervises like its services.
+
+    `run` lists app specs (`examples/apps/greeter.py`, `mypkg.app:Greeter`, an
+    installed app's name; docs/apps.md). Each is checked here, as text: a
+    malformed spec, or two apps (or an app and a service) that would get the
+    same node name, stop the robot at start-up with the key named. A
+    relative FILE is relative to the config file's folder, like every path.
+    """
+
+    run: list[str] = msgspec.field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        seen: dict[str, str] = {}
+        for text in self.run:
+            try:
+                name = parse_app_spec(text).default_name
+            except ValueError as exc:  # msgspec names the table
+                raise ValueError(f"run: {exc}") from None
+            if name in seen:
+                raise ValueError(f"run: {seen[name]!r} and {text!r} would both run as node "
+                                 f"{name!r}")
+            if registry.service(name) is not None:
+                raise ValueError(f"run: {text!r} would run as node {name!r}, the name of a "
+                                 "service")
+            seen[name] = text
+
+    def specs(self) -> list[AppSpec]:
+        return [parse_app_spec(text) for text in self.run]
+
+
 S = TypeVar("S")
 
 
@@ -62,6 +94,7 @@ class ConfigBase(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 
     robot: RobotSettings = msgspec.field(default_factory=RobotSettings)
     zenoh: ZenohSettings = msgspec.field(default_factory=ZenohSettings)
+    apps: AppsSettings = msgspec.field(default_factory=AppsSettings)
     # Where the file came from (not a TOML key); relative paths in it resolve here.
     source: str | None = None
 

@@ -38,7 +38,7 @@ from typing import IO
 
 from buddybot.runtime import endpoints, registry
 from buddybot.runtime.backoff import Backoff
-from buddybot.runtime.config import DEFAULT_ENDPOINT
+from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase, resolve_path
 from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
@@ -193,6 +193,27 @@ def _await_ready(listener: socket.socket, proc: subprocess.Popen[bytes],
                 return
 
 
+@dataclass(frozen=True)
+class AppLaunch:
+    """One app of `[apps]`: its node name (also its log prefix) and the spec its
+    runner is given (a relative FILE made absolute from the config's folder)."""
+
+    name: str
+    spec: str
+
+
+def plan_apps(config: ConfigBase) -> list[AppLaunch]:
+    """`[apps] run` as launches; the table was checked when the config was read."""
+    out = []
+    for spec in config.apps.specs():
+        text = str(spec)
+        if spec.kind == "file":
+            path = resolve_path(config, spec.target).absolute()
+            text = str(path) + (f":{spec.cls}" if spec.cls else "")
+        out.append(AppLaunch(spec.default_name, text))
+    return out
+
+
 @dataclass
 class UpPlan:
     """What `up` will do, decided (and validated) before anything starts."""
@@ -208,6 +229,8 @@ class UpPlan:
     """The Zenoh file of our router: `[zenoh] router_config_file`, else `zenoh_file`."""
     service_args: dict[str, list[str]] = field(default_factory=dict)
     """Extra options per service (`--eye-port` -> eye-renderer's `--port`)."""
+    apps: list[AppLaunch] = field(default_factory=list)
+    """The apps of `[apps] run`, started after the services."""
 
     @property
     def joins(self) -> bool:
@@ -271,7 +294,7 @@ def plan_up(ctx: ServiceContext) -> UpPlan:
         extra.setdefault("dashboard", []).extend(["--port", str(args.dashboard_port)])
     zenoh = ctx.config.zenoh
     return UpPlan(entries, listen, connect, zenoh.config_file, zenoh.router_config_file
-                  or zenoh.config_file, extra)
+                  or zenoh.config_file, extra, plan_apps(ctx.config))
 
 
 def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
@@ -279,11 +302,7 @@ def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
     """Command line of one service under `up`: sim flags when no hardware is set."""
     args = ctx.args
     argv = [sys.executable, "-m", "buddybot", "run", name]
-    for endpoint in [connect] if isinstance(connect, str) else connect:
-        argv += ["--connect", endpoint]
-    argv += ["--robot", ctx.robot, "--log-level", args.log_level]
-    if args.config:
-        argv += ["--config", args.config]
+    argv += _child_options(ctx, [connect] if isinstance(connect, str) else connect)
     sim = args.sim
     if name == "radar-bridge" and (sim or not ctx.config.radar_bridge.sensors):
         argv.append("--sim")
@@ -292,6 +311,23 @@ def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
     if name == "eye-renderer" and args.no_browser:
         argv.append("--no-browser")
     return argv + list(extra or [])
+
+
+def app_argv(app: AppLaunch, ctx: ServiceContext, connect: list[str]) -> list[str]:
+    """Command line of one app under `up`: its runner, named as `up` knows it."""
+    argv = [sys.executable, "-m", "buddybot", "app", "run", app.spec, "--name", app.name]
+    return argv + _child_options(ctx, connect)
+
+
+def _child_options(ctx: ServiceContext, connect: list[str]) -> list[str]:
+    """The common options every child of `up` gets: where, which robot, how verbose."""
+    argv = []
+    for endpoint in connect:
+        argv += ["--connect", endpoint]
+    argv += ["--robot", ctx.robot, "--log-level", ctx.args.log_level]
+    if ctx.args.config:
+        argv += ["--config", ctx.args.config]
+    return argv
 
 
 def router_argv(ctx: ServiceContext, plan: UpPlan) -> list[str]:
@@ -405,6 +441,8 @@ def up(ctx: ServiceContext) -> int:
         else f"starting router on {', '.join(plan.listen)}"
     log.info("%s and %d services: %s", where, len(plan.entries),
              ", ".join(e.name for e in plan.entries))
+    if plan.apps:
+        log.info("and %d apps: %s", len(plan.apps), ", ".join(a.name for a in plan.apps))
     try:
         if router is not None:
             failed = _start_router(router, plan, out, lock, ctx.stop)
@@ -415,9 +453,14 @@ def up(ctx: ServiceContext) -> int:
                                                    plan.service_args.get(entry.name)))
             child.start(out, lock)
             children.append(child)
+        for app in plan.apps:
+            child = Child(app.name, app_argv(app, ctx, plan.connect))
+            child.start(out, lock)
+            children.append(child)
         for line in _urls(ctx, plan):
             log.info("%s", line)
-        monitor = _monitor(ctx, plan, [e.name for e in plan.entries])
+        monitor = _monitor(ctx, plan, [e.name for e in plan.entries]
+                           + [a.name for a in plan.apps])
         try:
             status = _supervise(router, children, ctx.stop, out, lock, monitor,
                                 args.status_period, plan)

@@ -120,3 +120,27 @@ def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
     assert result.returncode == 2, result.stderr
     assert str(tmp_path / "zenoh.json5") in result.stderr
     assert "Traceback" not in result.stderr
+
+
+# --- [apps] ----------------------------------------------------------------------------
+
+
+def test_apps_table_lists_app_specs() -> None:
+    config = parse_config('[apps]\nrun = ["examples/apps/greeter.py", "mypkg.app:Hi", "wave"]\n')
+    assert [s.kind for s in config.apps.specs()] == ["file", "module", "name"]
+    assert parse_config("").apps.run == []
+
+
+@pytest.mark.parametrize(("table", "why"), [
+    ('run = "greeter.py"', "key 'apps.run': Expected array"),
+    ('run = ["apps/greeter"]', "key 'apps': run: 'apps/greeter': an app file must end in .py"),
+    ('run = [""]', "run: an empty app"),
+    ('run = ["a/hi.py", "b/hi.py"]', "'a/hi.py' and 'b/hi.py' would both run as node 'hi'"),
+    ('run = ["controller"]', "'controller' would run as node 'controller', the name of a service"),
+    ("start = []", "key 'apps': unknown key start"),
+])
+def test_bad_apps_tables_are_refused_naming_the_key(table: str, why: str) -> None:
+    with pytest.raises(ConfigError) as error:
+        parse_config(f"[apps]\n{table}\n", "robot.toml")
+    assert str(error.value).startswith("robot.toml: ")
+    assert why in str(error.value)

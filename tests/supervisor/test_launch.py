@@ -20,11 +20,18 @@ import psutil
 import pytest
 
 from buddybot.runtime import registry
-from buddybot.runtime.config import default_config
+from buddybot.runtime.config import default_config, parse_config
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.runtime.service import ServiceContext
-from buddybot.supervisor.launch import plan_up, select_services, service_argv
+from buddybot.supervisor.launch import (
+    AppLaunch,
+    app_argv,
+    plan_apps,
+    plan_up,
+    select_services,
+    service_argv,
+)
 from buddybot.supervisor.status import RobotStatus, format_status
 from buddybot.tools.testing import (
     Process,
@@ -137,6 +144,47 @@ def _children(up: Process) -> list[psutil.Process]:
     with contextlib.suppress(psutil.Error):
         found = psutil.Process(up.pid).children(recursive=True)
     return found
+
+
+def test_apps_of_the_config_are_planned_with_their_node_names(tmp_path: Path) -> None:
+    config = parse_config('[apps]\nrun = ["apps/hi.py:Hi", "mypkg.wave", "greeter"]\n',
+                          str(tmp_path / "robot.toml"))
+    assert plan_apps(config) == [AppLaunch("hi", f"{tmp_path / 'apps' / 'hi.py'}:Hi"),
+                                 AppLaunch("wave", "mypkg.wave"),
+                                 AppLaunch("greeter", "greeter")]
+    assert plan_apps(default_config()) == []
+    ctx = _ctx(config=str(tmp_path / "robot.toml"))
+    argv = app_argv(AppLaunch("wave", "mypkg.wave"), ctx, ["tcp/127.0.0.1:9000"])
+    assert argv[1:] == ["-m", "buddybot", "app", "run", "mypkg.wave", "--name", "wave",
+                        "--connect", "tcp/127.0.0.1:9000", "--robot", "buddy",
+                        "--log-level", "INFO", "--config", str(tmp_path / "robot.toml")]
+
+
+@pytest.mark.integration
+def test_apps_are_supervised_crashed_restarted_unloadable_left_down(tmp_path: Path) -> None:
+    """An app that raises (exit 1) is restarted with backoff; one that cannot be loaded
+    (exit 2) is reported once and not restarted; the status line counts both."""
+    (tmp_path / "boom.py").write_text(
+        "class Boom:\n    def run(self, bot, stop_event):\n"
+        "        raise RuntimeError('boom')\n")
+    (tmp_path / "two.py").write_text(
+        "class A:\n    def run(self, bot, stop_event): ...\n"
+        "class B:\n    def run(self, bot, stop_event): ...\n")
+    config = tmp_path / "robot.toml"
+    config.write_text('[apps]\nrun = ["boom.py", "two.py"]\n')
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--config", str(config),
+                               "--listen", f"tcp/127.0.0.1:{free_port()}",
+                               "--status-period", "1", "--only", "people"), "up", tmp_path)
+    with reaped(up):
+        up.wait_for_output("restarting boom (restart 1)", 60)
+        up.wait_for_output("two exited with status 2", 60)
+        up.wait_for_output("restarting boom (restart 2)", 60)
+        out = up.output()
+        assert "RuntimeError: boom" in out and "2 app classes (A, B)" in out
+        assert "restarting two" not in out and out.count("two exited with status") == 1
+        last = [x for x in out.splitlines() if x.startswith("[status")][-1]
+        assert "(not restarted: two exit 2)" in last and "nodes 1/3" in last, last
+        assert up.alive()
 
 
 @pytest.mark.integration
