@@ -87,7 +87,8 @@ def test_a_lease_is_granted_listed_under_the_program_and_released_on_leaving(
     controller()
     state = Collector[m.Leases](probe, keys.LEASES)
     bot = bot_factory(name="tester")
-    assert bot.node.instance in probe.node_instances().get("tester", set())
+    retry_until(lambda: bot.node.instance in probe.node_instances().get("tester", set()),
+                10, 0.1, "the bot's liveliness token")
     with bot.lease("eyes", "audio", duration_s=60) as lease:
         assert lease.active and lease.resources == ("expression", "gaze", "audio")
         listed = state.wait_for(lambda s: any(x.lease_id == lease.lease_id for x in s.leases),
