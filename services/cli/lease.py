@@ -22,7 +22,7 @@ from buddybot.cli import subverbs
 from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.runtime import options
+from buddybot.runtime import leasing, options
 from buddybot.runtime.errors import NoReplyError, ServiceError
 from buddybot.runtime.service import ServiceContext
 
@@ -105,18 +105,16 @@ def _add_break(parser: argparse.ArgumentParser) -> None:
 
 def _break(ctx: ServiceContext) -> int:
     lease_id = ctx.args.lease_id
-    req = m.LeaseRelease(lease_id=lease_id, reason=ctx.args.reason, by=OPERATOR)
     with ctx.probe() as node:
         try:
-            reply: m.TriggerReply = node.call(keys.LEASE_RELEASE, req,
-                                              timeout=ctx.args.timeout)
+            text = leasing.release(node, lease_id, ctx.args.reason, ctx.args.timeout,
+                                   by=OPERATOR)
         except NoReplyError:
             raise ServiceError(
                 f"nobody answered {keys.LEASE_RELEASE.pattern} within {ctx.args.timeout:g} s "
                 "(is the controller running?)") from None
-    if not reply.success:
-        raise ServiceError(reply.message)
-    print(msgspec.json.encode(reply).decode() if ctx.args.json else reply.message)
+    reply = m.TriggerReply(success=True, message=text)
+    print(msgspec.json.encode(reply).decode() if ctx.args.json else text)
     return 0
 
 

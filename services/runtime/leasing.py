@@ -3,19 +3,26 @@
 The controller arbitrates (`leases/acquire`, `leases/release`, `eyes/command`,
 docs/design.md section 4.8); a lease holder is a node with a liveliness
 token, so the controller can end the lease when the holder's process goes
-away. `LeaseHolder` is that holder's side for the processes that drive the
-eyes for a person (the dashboard's operator switch, Foxglove's expression
-service): take the lease, drive the eyes with it, give it back, and know
-from `leases/state` whether it still holds. Every call is bounded by a
-timeout and raises `ServiceError` (no controller, a bad reply) or
-`LeaseRefused` (the controller said no, with its reason): never a hang.
+away. This module is the holder's wire side, once for every holder (the
+dashboard, Foxglove, the SDK, `buddybot lease`): the request checked before
+it leaves (`request`), asking (`acquire`), driving the eyes (`eyes_command`),
+giving back (`release`), and reading from `leases/state` whether a lease
+has ended and why (`ending`). `LeaseHolder` is the one-lease holder of the
+processes that drive the eyes for a person (the dashboard's operator switch,
+Foxglove's expression service).
+
+Every call is bounded by a timeout and raises `ServiceError` (a
+`NoReplyError` when no controller answers, a `CallError` for a bad reply)
+or `LeaseRefused` (the controller said no, with its reason): never a hang.
 A release names this node (`by`), so the controller tells a holder giving
 its lease back (`released`) from an operator breaking someone's (`broken`).
 """
 
 from __future__ import annotations
 
+import math
 import threading
+from collections.abc import Iterable
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -28,10 +35,106 @@ local and answers in milliseconds)."""
 BROKEN_BY_OPERATOR = "broken by operator"
 """The release reason an operator gives for someone else's lease (the controller
 records it as `broken`)."""
+RESOURCES: tuple[m.Resource, ...] = ("expression", "gaze", "audio")
+SHORTHANDS: dict[str, tuple[m.Resource, ...]] = {"eyes": ("expression", "gaze")}
+"""Names a request may use for several resources at once."""
+PRIORITIES: tuple[m.LeasePriority, ...] = ("app", "operator")
+"""What a holder may ask for (`builtin` is the controller's own)."""
+GONE = "no longer in leases/state"
+"""The end message of a lease that left `leases/state` without an `ended` entry."""
+NOT_LISTED = "not in a leases/state newer than its request"
+"""The end message of a lease a state newer than its request does not list."""
 
 
 class LeaseRefused(ServiceError):
     """The controller answered no: the text is its reason (who holds what)."""
+
+
+# --- the request, checked before it leaves (pure) ------------------------------------------
+
+
+def resources(names: Iterable[str]) -> tuple[m.Resource, ...]:
+    """The resources `names` stand for ("eyes" = expression + gaze), in the
+    contract's order, once each; ValueError naming the valid ones."""
+    wanted: set[str] = set()
+    for name in names:
+        if not isinstance(name, str) or name not in (*RESOURCES, *SHORTHANDS):
+            raise ValueError(f"unknown resource {name!r} (resources: "
+                             f"{', '.join((*RESOURCES, *SHORTHANDS))})")
+        wanted.update(SHORTHANDS.get(name, (name,)))
+    if not wanted:
+        raise ValueError(f"a lease needs at least one resource "
+                         f"({', '.join((*RESOURCES, *SHORTHANDS))})")
+    return tuple(r for r in RESOURCES if r in wanted)
+
+
+def check_duration(duration_s: float | None) -> float | None:
+    """`duration_s` when it is None or a number in (0, MAX_LEASE_S]; ValueError
+    otherwise (NaN would go out as JSON null, meaning "forever")."""
+    if duration_s is None:
+        return None
+    if isinstance(duration_s, bool) or not isinstance(duration_s, int | float):
+        raise ValueError(f"duration_s must be a number of seconds, not {duration_s!r}")
+    if not (math.isfinite(duration_s) and 0 < duration_s <= m.MAX_LEASE_S):
+        raise ValueError(f"duration_s must be > 0 and <= {m.MAX_LEASE_S:g} s "
+                         f"(None: until released), not {duration_s!r}")
+    return float(duration_s)
+
+
+def check_priority(priority: str) -> m.LeasePriority:
+    """`priority` when a holder may ask for it; ValueError naming the valid ones."""
+    if priority not in PRIORITIES:
+        raise ValueError(f"priority must be one of {', '.join(PRIORITIES)}, "
+                         f"not {priority!r}")
+    return priority
+
+
+def request(node: Node, names: Iterable[str], priority: str = "app",
+            duration_s: float | None = None) -> m.LeaseRequest:
+    """The checked request of this node (its name and liveliness instance) for
+    `names` (see `resources`); ValueError before anything is sent."""
+    return m.LeaseRequest(holder=node.name, instance=node.instance,
+                          resources=list(resources(names)),
+                          priority=check_priority(priority),
+                          duration_s=check_duration(duration_s))
+
+
+# --- the calls -----------------------------------------------------------------------------
+
+
+def acquire(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S) -> str:
+    """Ask for `req`; the granted lease's id, LeaseRefused with the controller's
+    reason otherwise."""
+    reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
+    if not reply.granted or not reply.lease_id:
+        raise LeaseRefused(reply.message or f"{'+'.join(req.resources)} refused")
+    return reply.lease_id
+
+
+def release(node: Node, lease_id: str, reason: str = "",
+            timeout: float = CALL_TIMEOUT_S, *, by: str | None = None) -> str:
+    """End any lease by id, asked by this node (or `by`): its holder's own lease
+    is `released`, anyone else's `broken` (an operator gives BROKEN_BY_OPERATOR).
+    The controller's text on success, LeaseRefused (an unknown id) otherwise."""
+    reply: m.TriggerReply = node.call(
+        keys.LEASE_RELEASE,
+        m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name if by is None else by),
+        timeout=timeout)
+    if not reply.success:
+        raise LeaseRefused(reply.message or f"lease {lease_id} not released")
+    return reply.message or f"lease {lease_id} ended"
+
+
+def eyes_command(node: Node, command: m.EyesCommand, timeout: float = CALL_TIMEOUT_S) -> str:
+    """Send `command` on `eyes/command`; the controller's text, or LeaseRefused
+    (the lease does not hold what it drives, has ended, or runs over the rate)."""
+    reply: m.TriggerReply = node.call(keys.EYES_COMMAND, command, timeout=timeout)
+    if not reply.success:
+        raise LeaseRefused(reply.message or f"eyes/command refused on lease {command.lease_id}")
+    return reply.message
+
+
+# --- reading leases/state (pure) -----------------------------------------------------------
 
 
 def find(state: m.Leases | None, lease_id: str | None) -> m.Lease | None:
@@ -41,17 +144,24 @@ def find(state: m.Leases | None, lease_id: str | None) -> m.Lease | None:
     return next((lease for lease in state.leases if lease.lease_id == lease_id), None)
 
 
-def release(node: Node, lease_id: str, reason: str = "",
-            timeout: float = CALL_TIMEOUT_S) -> str:
-    """End any lease by id, asked by this node: its own lease is `released`,
-    anyone else's `broken` (an operator gives BROKEN_BY_OPERATOR). The
-    controller's text on success, LeaseRefused (an unknown id) otherwise."""
-    reply: m.TriggerReply = node.call(
-        keys.LEASE_RELEASE, m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name),
-        timeout=timeout)
-    if not reply.success:
-        raise LeaseRefused(reply.message or f"lease {lease_id} not released")
-    return reply.message or f"lease {lease_id} ended"
+def ending(state: m.Leases, lease_id: str, *, seen: bool = False,
+           asked_ns: int | None = None) -> tuple[str, str] | None:
+    """(reason, message) when `state` shows that lease `lease_id` has ended; None
+    while it is listed or may not be listed yet.
+
+    Ended: listed in `ended` (the controller's reason and text); or not listed
+    though an earlier state listed it (`seen`); or not listed in a state
+    stamped after the request was sent (`asked_ns`, same clock as the stamp)."""
+    if find(state, lease_id) is not None:
+        return None
+    end = next((e for e in state.ended if e.lease_id == lease_id), None)
+    if end is not None:
+        return end.reason, end.message
+    if seen:
+        return "ended", GONE
+    if asked_ns is not None and state.stamp_ns >= asked_ns:
+        return "ended", NOT_LISTED
+    return None
 
 
 class LeaseHolder:
@@ -81,16 +191,11 @@ class LeaseHolder:
         with self._lock:
             if self.lease_id is not None:
                 return self.lease_id
-            request = m.LeaseRequest(holder=self.node.name, instance=self.node.instance,
-                                     resources=list(self.resources), priority=self.priority,
-                                     duration_s=duration_s)
+            req = request(self.node, self.resources, self.priority, duration_s)
             asked_ns = m.now_ns()
-            reply: m.LeaseReply = self.node.call(keys.LEASE_ACQUIRE, request,
-                                                 timeout=self.timeout)
-            if not reply.granted or not reply.lease_id:
-                raise LeaseRefused(reply.message or "refused")
-            self.lease_id, self._asked_ns = reply.lease_id, asked_ns
-            return reply.lease_id
+            lease_id = acquire(self.node, req, self.timeout)
+            self.lease_id, self._asked_ns = lease_id, asked_ns
+            return lease_id
 
     def release(self, reason: str = "") -> str | None:
         """Give the lease back; the controller's text, None when none was held.
@@ -103,11 +208,12 @@ class LeaseHolder:
         return release(self.node, lease_id, reason, self.timeout)
 
     def forget_unless_in(self, state: m.Leases) -> bool:
-        """Drop the id when a `leases/state` newer than the request no longer
-        lists it (ended elsewhere: broken, expired); True when it was dropped."""
+        """Drop the id when `leases/state` says the lease ended (see `ending`: gone
+        from a state newer than the request, or listed as ended: broken,
+        expired); True when it was dropped."""
         with self._lock:
-            if self.lease_id is None or state.stamp_ns < self._asked_ns \
-                    or find(state, self.lease_id) is not None:
+            if self.lease_id is None or ending(state, self.lease_id,
+                                               asked_ns=self._asked_ns) is None:
                 return False
             self.lease_id = None
             return True
@@ -119,9 +225,5 @@ class LeaseHolder:
         lease_id = self.lease_id
         if lease_id is None:
             raise LeaseRefused("no lease held")
-        reply: m.TriggerReply = self.node.call(
-            keys.EYES_COMMAND, m.EyesCommand(lease_id=lease_id, expression=expression,
-                                             yaw=yaw, pitch=pitch), timeout=self.timeout)
-        if not reply.success:
-            raise LeaseRefused(reply.message or "refused")
-        return reply.message
+        return eyes_command(self.node, m.EyesCommand(lease_id=lease_id, expression=expression,
+                                                     yaw=yaw, pitch=pitch), self.timeout)

@@ -22,10 +22,11 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import leasing
+from buddybot.runtime.leasing import check_duration
 from buddybot.runtime.node import Node
-from buddybot.sdk.calls import call
 from buddybot.sdk.errors import Refused, TimedOut
-from buddybot.sdk.leases import CONTROLLER_HINT, Lease, LeaseTable, check_duration
+from buddybot.sdk.leases import Lease, LeaseTable, controller_errors
 from buddybot.sdk.people import Person
 
 ALIASES: dict[str, m.ExpressionAction] = {
@@ -196,9 +197,7 @@ class Eyes:
                  ) -> EyesHandle:
         with self._lock:
             lease, implicit = self._lease_for(resource, for_s)
-        request = m.EyesCommand(lease_id=lease.lease_id, **fields)
-        reply: m.TriggerReply = call(self.node, keys.EYES_COMMAND, request, self.timeout,
-                                     hint=CONTROLLER_HINT)
-        if not reply.success:
-            raise Refused(reply.message or f"eyes/command refused {what}")
+        with controller_errors(keys.EYES_COMMAND, self.timeout):
+            leasing.eyes_command(self.node, m.EyesCommand(lease_id=lease.lease_id, **fields),
+                                 self.timeout)
         return EyesHandle(what, lease, implicit, for_s)

@@ -8,68 +8,42 @@ does, however it ends. It can also end from elsewhere: preempted by a higher
 priority, broken by an operator, expired: the program learns it from
 `leases/state` (`Lease.ended`, `Lease.on_end`).
 
-`resources()` and `check_duration()` are the pure checks made before asking;
-`LeaseTable` follows the published state to the leases this program holds.
+The wire side (the request's checks, the calls, reading the state) is the
+runtime's, shared with every lease holder (`buddybot.runtime.leasing`); here
+its errors become the SDK's (`controller_errors`) and `LeaseTable` follows
+the published state to the leases this program holds.
 """
 
 from __future__ import annotations
 
 import asyncio
 import logging
-import math
 import threading
-from collections.abc import Callable, Generator, Iterable
+from collections.abc import Callable, Generator, Iterable, Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import leasing
 from buddybot.runtime.node import Node
-from buddybot.sdk.calls import call
+from buddybot.sdk.calls import sdk_errors
 from buddybot.sdk.errors import Refused, TimedOut
 
 log = logging.getLogger("buddybot.sdk")
 
-RESOURCES: tuple[str, ...] = ("expression", "gaze", "audio")
-SHORTHANDS: dict[str, tuple[str, ...]] = {"eyes": ("expression", "gaze")}
-"""Names a program may use for several resources at once."""
-PRIORITIES: tuple[str, ...] = ("app", "operator")
-"""What a program may ask for (`builtin` is the controller's own)."""
 CONTROLLER_HINT = "is the controller running? it grants the leases: `buddybot run controller`"
 
 
-def resources(names: Iterable[str]) -> tuple[str, ...]:
-    """The resources `names` stand for ("eyes" = expression + gaze), in the
-    contract's order, once each; ValueError naming the valid ones."""
-    wanted: set[str] = set()
-    for name in names:
-        if not isinstance(name, str) or name not in (*RESOURCES, *SHORTHANDS):
-            raise ValueError(f"unknown resource {name!r} (resources: "
-                             f"{', '.join((*RESOURCES, *SHORTHANDS))})")
-        wanted.update(SHORTHANDS.get(name, (name,)))
-    if not wanted:
-        raise ValueError(f"a lease needs at least one resource "
-                         f"({', '.join((*RESOURCES, *SHORTHANDS))})")
-    return tuple(r for r in RESOURCES if r in wanted)
-
-
-def check_duration(duration_s: float | None) -> float | None:
-    """`duration_s` when it is None or a number in (0, MAX_LEASE_S]; ValueError
-    otherwise (NaN would go out as JSON null, meaning "forever")."""
-    if duration_s is None:
-        return None
-    if isinstance(duration_s, bool) or not isinstance(duration_s, int | float):
-        raise ValueError(f"duration_s must be a number of seconds, not {duration_s!r}")
-    if not (math.isfinite(duration_s) and 0 < duration_s <= m.MAX_LEASE_S):
-        raise ValueError(f"duration_s must be > 0 and <= {m.MAX_LEASE_S:g} s "
-                         f"(None: until released), not {duration_s!r}")
-    return float(duration_s)
-
-
-def check_priority(priority: str) -> str:
-    if priority not in PRIORITIES:
-        raise ValueError(f"priority must be one of {', '.join(PRIORITIES)}, "
-                         f"not {priority!r}")
-    return priority
+@contextmanager
+def controller_errors(service: keys.Service, timeout: float) -> Iterator[None]:
+    """A lease call to the controller in the block, its errors as the SDK's:
+    Refused with the controller's reason, NoService naming the controller."""
+    with sdk_errors(service, timeout, hint=CONTROLLER_HINT):
+        try:
+            yield
+        except leasing.LeaseRefused as exc:
+            raise Refused(str(exc)) from None
 
 
 class Lease:
@@ -186,17 +160,11 @@ class LeaseTable:
                 duration_s: float | None = None, timeout: float | None = None) -> Lease:
         """A granted lease; Refused with the controller's reason, NoService when
         no controller answers, ValueError for a malformed request."""
-        wanted = resources(names)
-        request = m.LeaseRequest(holder=self.node.name, instance=self.node.instance,
-                                 resources=list(wanted),  # type: ignore[arg-type]
-                                 priority=check_priority(priority),  # type: ignore[arg-type]
-                                 duration_s=check_duration(duration_s))
+        req = leasing.request(self.node, names, priority, duration_s)
         limit = self.timeout if timeout is None else timeout
-        reply: m.LeaseReply = call(self.node, keys.LEASE_ACQUIRE, request, limit,
-                                   hint=CONTROLLER_HINT)
-        if not reply.granted:
-            raise Refused(reply.message or f"{'+'.join(wanted)} refused")
-        lease = Lease(self, reply.lease_id, wanted, priority, request.duration_s)
+        with controller_errors(keys.LEASE_ACQUIRE, limit):
+            lease_id = leasing.acquire(self.node, req, limit)
+        lease = Lease(self, lease_id, tuple(req.resources), priority, req.duration_s)
         with self._lock:
             self._held[lease.lease_id] = lease
         lease.on_end(self._forget)
@@ -207,15 +175,12 @@ class LeaseTable:
         (a lease the controller no longer knows has ended already)."""
         limit = self.timeout if timeout is None else timeout
         try:
-            reply: m.TriggerReply = call(self.node, keys.LEASE_RELEASE,
-                                         m.LeaseRelease(lease_id=lease.lease_id,
-                                                        by=self.node.name), limit,
-                                         hint=CONTROLLER_HINT)
-            message = reply.message
+            with sdk_errors(keys.LEASE_RELEASE, limit, hint=CONTROLLER_HINT):
+                leasing.release(self.node, lease.lease_id, timeout=limit)
+        except leasing.LeaseRefused as exc:
+            log.debug("release of lease %s: %s", lease.lease_id, exc)
         finally:
             lease.end("released")
-        if not reply.success:
-            log.debug("release of lease %s: %s", lease.lease_id, message)
 
     def _forget(self, lease: Lease) -> None:
         with self._lock:
@@ -229,18 +194,14 @@ class LeaseTable:
     def changes(self, msg: m.Leases) -> list[tuple[Lease, str, str]]:
         """(lease, reason, message) for each held lease that `msg` says has ended:
         listed in `ended`, or no longer listed after having been."""
-        ended = {e.lease_id: e for e in msg.ended}
-        listed = {lease.lease_id for lease in msg.leases}
         out: list[tuple[Lease, str, str]] = []
         with self._lock:
             for lease_id, lease in self._held.items():
-                end = ended.get(lease_id)
-                if end is not None and lease_id not in listed:
-                    out.append((lease, end.reason, end.message))
-                elif lease_id in listed:
+                end = leasing.ending(msg, lease_id, seen=lease_id in self._seen)
+                if end is not None:
+                    out.append((lease, *end))
+                elif leasing.find(msg, lease_id) is not None:
                     self._seen.add(lease_id)
-                elif lease_id in self._seen:
-                    out.append((lease, "ended", "no longer in leases/state"))
         return out
 
     def close(self, timeout: float = 1.0) -> None:

@@ -1,4 +1,5 @@
-"""The holder's side of a lease, against a scripted controller (no router)."""
+"""The holder's side of a lease: the request's checks and reading `leases/state`
+(pure), the calls and `LeaseHolder` against a scripted controller (no router)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,68 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime import leasing
 from buddybot.runtime.errors import NoReplyError, ServiceError
+from buddybot.runtime.node import Node
+
+# --- the request and the state (pure) ------------------------------------------------------
+
+
+def test_eyes_is_expression_and_gaze_and_resources_come_once_in_order() -> None:
+    assert leasing.resources(["eyes"]) == ("expression", "gaze")
+    assert leasing.resources(["audio", "eyes", "gaze"]) == ("expression", "gaze", "audio")
+    for bad, why in (([], "at least one resource"), (["ears"], "unknown resource 'ears'"),
+                     ([3], "unknown resource 3")):
+        with pytest.raises(ValueError, match=why):
+            leasing.resources(bad)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad", [0, -1.0, float("nan"), float("inf"), m.MAX_LEASE_S + 1,
+                                 True, "10"])
+def test_an_absurd_duration_raises_before_asking(bad: object) -> None:
+    with pytest.raises(ValueError, match="duration_s must be"):
+        leasing.check_duration(bad)  # type: ignore[arg-type]
+
+
+def test_durations_and_priorities_that_may_be_asked_for() -> None:
+    assert leasing.check_duration(None) is None and leasing.check_duration(2) == 2.0
+    assert leasing.check_duration(m.MAX_LEASE_S) == m.MAX_LEASE_S
+    assert leasing.check_priority("operator") == "operator"
+    with pytest.raises(ValueError, match="priority must be one of app, operator, not 'builtin'"):
+        leasing.check_priority("builtin")
+
+
+def test_a_request_is_this_node_s_and_checked_before_anything_is_sent() -> None:
+    ctl = Controller()
+    req = leasing.request(ctl, ["audio", "eyes"], "app", 5)  # type: ignore[arg-type]
+    assert req == m.LeaseRequest(holder="dashboard", instance="abc123",
+                                 resources=["expression", "gaze", "audio"], priority="app",
+                                 duration_s=5.0)
+    for names, priority, duration, why in ((["eyes"], "builtin", None, "priority"),
+                                           (["ears"], "app", None, "unknown resource"),
+                                           (["gaze"], "app", float("nan"), "duration_s")):
+        with pytest.raises(ValueError, match=why):
+            leasing.request(ctl, names, priority, duration)  # type: ignore[arg-type]
+    assert ctl.requests == []
+
+
+def _listed(*ids: str) -> list[m.Lease]:
+    return [m.Lease(lease_id=i, holder="app", instance="z", priority="app",
+                    resources=["gaze"], granted_ns=1) for i in ids]
+
+
+def test_the_state_says_a_lease_ended_when_listed_ended_gone_once_seen_or_unlisted_after(
+        ) -> None:
+    end = m.LeaseEnd(lease_id="C", holder="app", reason="broken", stamp_ns=2,
+                     message="broken by wizard")
+    state = m.Leases(stamp_ns=100, leases=_listed("A"), ended=[end])
+    assert leasing.ending(state, "A", seen=True, asked_ns=50) is None  # listed: holds
+    assert leasing.ending(state, "C") == ("broken", "broken by wizard")
+    assert leasing.ending(state, "B") is None  # maybe not listed yet
+    assert leasing.ending(state, "B", seen=True) == ("ended", leasing.GONE)
+    assert leasing.ending(state, "B", asked_ns=100) == ("ended", leasing.NOT_LISTED)
+    assert leasing.ending(state, "B", asked_ns=101) is None  # older than the request
+
+
+# --- the calls, against a scripted controller ----------------------------------------------
 
 
 class Controller:
@@ -71,6 +134,18 @@ def test_acquire_once_command_with_it_and_release() -> None:
     assert h.lease_id is None and h.release() is None
     with pytest.raises(leasing.LeaseRefused, match="no lease held"):
         h.command(yaw=0.1, pitch=0.0)
+
+
+def test_an_operator_breaks_a_lease_as_someone_else_and_a_refused_command_says_why(
+        ) -> None:
+    ctl = Controller()
+    node: Node = ctl  # type: ignore[assignment]
+    lease_id = holder(ctl).acquire()
+    assert leasing.release(node, lease_id, "demo over", by="operator-cli") == "released"
+    assert ctl.requests[-1][1] == m.LeaseRelease(lease_id=lease_id, reason="demo over",
+                                                 by="operator-cli")
+    with pytest.raises(leasing.LeaseRefused, match=f"{lease_id}: no such lease"):
+        leasing.eyes_command(node, m.EyesCommand(lease_id=lease_id, yaw=0.1), 1.0)
 
 
 def test_refusals_and_a_missing_controller_are_errors_with_reasons() -> None:

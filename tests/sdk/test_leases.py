@@ -1,7 +1,8 @@
-"""`buddybot.sdk.leases`: request checks, a lease's end and its callbacks, reading
-`leases/state` (pure), and, marked `integration`, a real controller: a lease is
-granted, listed under the program's node name and released by the context manager;
-a bad request raises; without a controller NoService; the Bot is a visible node."""
+"""`buddybot.sdk.leases`: the runtime's errors as the SDK's, a lease's end and its
+callbacks, following `leases/state` (pure), and, marked `integration`, a real
+controller: a lease is granted, listed under the program's node name and released by
+the context manager; a bad request raises; without a controller NoService; the Bot
+is a visible node."""
 
 from __future__ import annotations
 
@@ -12,36 +13,28 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime.errors import CallError, NoReplyError
+from buddybot.runtime.leasing import LeaseRefused
 from buddybot.runtime.node import Node
-from buddybot.sdk import Bot, Lease, NoService, Refused, TimedOut
-from buddybot.sdk.leases import LeaseTable, check_duration, check_priority, resources
+from buddybot.sdk import Bot, Lease, NoService, Refused, SdkError, TimedOut
+from buddybot.sdk.leases import LeaseTable, controller_errors
 from buddybot.tools.testing import Collector, Process, retry_until
 
 # --- pure ----------------------------------------------------------------------------------
 
 
-def test_eyes_is_expression_and_gaze_and_resources_come_once_in_order() -> None:
-    assert resources(["eyes"]) == ("expression", "gaze")
-    assert resources(["audio", "eyes", "gaze"]) == ("expression", "gaze", "audio")
-    for bad, why in (([], "at least one resource"), (["ears"], "unknown resource 'ears'"),
-                     ([3], "unknown resource 3")):
-        with pytest.raises(ValueError, match=why):
-            resources(bad)  # type: ignore[arg-type]
-
-
-@pytest.mark.parametrize("bad", [0, -1.0, float("nan"), float("inf"), m.MAX_LEASE_S + 1,
-                                 True, "10"])
-def test_an_absurd_duration_raises_before_asking(bad: object) -> None:
-    with pytest.raises(ValueError, match="duration_s must be"):
-        check_duration(bad)  # type: ignore[arg-type]
-
-
-def test_durations_and_priorities_that_may_be_asked_for() -> None:
-    assert check_duration(None) is None and check_duration(2) == 2.0
-    assert check_duration(m.MAX_LEASE_S) == m.MAX_LEASE_S
-    assert check_priority("operator") == "operator"
-    with pytest.raises(ValueError, match="priority must be one of app, operator, not 'builtin'"):
-        check_priority("builtin")
+def test_the_runtime_s_lease_errors_become_the_sdk_s_naming_the_controller() -> None:
+    with pytest.raises(Refused, match="audio is held by greeter") as refused, \
+            controller_errors(keys.LEASE_ACQUIRE, 1.0):
+        raise LeaseRefused("audio is held by greeter")
+    assert refused.value.reason == "audio is held by greeter"
+    with pytest.raises(NoService, match=r"nobody answered on eyes/command within 0\.5 s "
+                                        r"\(is the controller running\?"), \
+            controller_errors(keys.EYES_COMMAND, 0.5):
+        raise NoReplyError("eyes/command", "no reply")
+    with pytest.raises(SdkError, match="leases/release: bad reply"), \
+            controller_errors(keys.LEASE_RELEASE, 0.5):
+        raise CallError("leases/release", "bad reply")
 
 
 def test_a_lease_ends_once_and_calls_back_each_callback_once() -> None:
@@ -94,7 +87,8 @@ def test_a_lease_is_granted_listed_under_the_program_and_released_on_leaving(
     controller()
     state = Collector[m.Leases](probe, keys.LEASES)
     bot = bot_factory(name="tester")
-    assert bot.node.instance in probe.node_instances().get("tester", set())
+    retry_until(lambda: bot.node.instance in probe.node_instances().get("tester", set()),
+                10, 0.1, "the bot's liveliness token")
     with bot.lease("eyes", "audio", duration_s=60) as lease:
         assert lease.active and lease.resources == ("expression", "gaze", "audio")
         listed = state.wait_for(lambda s: any(x.lease_id == lease.lease_id for x in s.leases),
