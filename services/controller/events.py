@@ -38,11 +38,11 @@ def people_changed(msg: m.PeopleState) -> PeopleChanged:
     """The controller's presence from the people service's state.
 
     `in_range` = a person present whom the radar sees now (`seen_by` RADAR or
-    BOTH): the level the controller read from `radar/presence` before, one hop
-    later, so its own holds (`absence_hold_s`, the greeting dwell, drowsy) keep
-    their meaning. A person held by the people service after the radar lost them
-    (`seen_by` NONE, or CAMERA only) is not in range: the controller's shorter
-    absence hold decides the departure, as it always did. With several such
+    BOTH): the level of `radar/presence`, one hop later, so the controller's
+    holds (`absence_hold_s`, the greeting dwell, drowsy) keep their meaning. A
+    person held by the people service after the radar lost them (`seen_by` NONE,
+    or CAMERA only) is not in range: the controller's shorter absence hold
+    decides the departure (docs/design.md 4.3). With several such
     persons the nearest is the one (the lowest id on a tie), so the choice does
     not depend on the list's order.
     """

@@ -447,6 +447,60 @@ def test_approach_greet_follow_leave_farewell_through_the_router(
     assert proc.alive()
 
 
+PEOPLE_CONFIG = """
+[people]
+absence_hold_s = 1.0
+"""
+
+
+@pytest.mark.integration
+def test_the_chain_radar_presence_people_controller(spawn, tmp_path, stimulus, make_audio,
+                                                    watch, probe) -> None:
+    """The real chain: `radar/presence` -> people -> `people/state` -> controller. A
+    visit is greeted and bid farewell as when the controller read the radar itself,
+    and `controller/state` names the person the people service gave an id."""
+    config = tmp_path / "robot.toml"
+    config.write_text(FAST_CONFIG + PEOPLE_CONFIG)
+    expr, _ = watch
+    states: Collector[m.ControllerState] = Collector(probe, keys.CONTROLLER_STATE)
+    events: Collector[m.PersonEvent] = Collector(probe, keys.PEOPLE_EVENTS)
+    people_state: Collector[m.PeopleState] = Collector(probe, keys.PEOPLE_STATE)
+    radar = probe.publisher(keys.PRESENCE)
+    audio = make_audio(durations={"greeting": 0.5, "farewell": 0.5})
+    spawn("people", "--config", str(config))
+    people_state.wait_for(timeout=20, what="the people service's first state")
+    proc = start_controller(spawn, config, expr)
+
+    def presence(in_range: bool) -> None:
+        state = m.PresenceState.IN_RANGE if in_range else m.PresenceState.OUT_OF_RANGE
+        radar.put(m.PresenceDetection(stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
+                                      presence_state=state, distance_m=1.2))
+
+    presence(True)
+    first = events.wait_for(lambda e: e.kind == "ARRIVED", 20, "ARRIVED").person_id
+    wait_expressions(expr, [X.EYE_AWAKE])
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log, what="greeting")
+    greeted = states.wait_for(lambda st: st.greeted, 20, "state: greeted")
+    assert greeted.person_id == first
+
+    presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert seq == [X.EYE_SLEEP, X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+    assert audio.sounds() == ["greeting", "farewell"]
+
+    # Once the people service let them go, the next arrival is a new person.
+    events.wait_for(lambda e: e.kind == "LEFT" and e.person_id == first, 20, "LEFT")
+    presence(True)
+    second = events.wait_for(lambda e: e.kind == "ARRIVED" and e.person_id != first, 20,
+                             "the second ARRIVED").person_id
+    states.wait_for(lambda st: st.in_range and st.person_id == second, 20,
+                    "state: the second person")
+    assert proc.alive()
+
+
 MALFORMED: list[bytes] = [
     b"", b"\xff\xfe garbage", b"{", b"[]", b"null", b'{"stamp_ns": -1}',
     b'{"stamp_ns": 1, "presence_state": 7, "target_state": 0, "distance_m": 1.0}',
