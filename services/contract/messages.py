@@ -378,6 +378,8 @@ class ControllerState(Message):
     in_range: bool = False
     face_visible: bool = False
     visit: Annotated[int, msgspec.Meta(ge=0, description="visits since start")] = 0
+    person_id: PersonId | None = None
+    """The people service's id of the person this visit is about (`people/state`)."""
     greeted: bool = False
     sound: Literal["greeting", "farewell", "unknown"] | None = None
     """The sound of ours playing now, if any."""

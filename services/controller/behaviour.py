@@ -3,7 +3,8 @@
 Nothing here knows Zenoh or threads. Every method takes the current time
 `now` (seconds on any monotonic clock; tests pass a fake one) and returns
 the commands to carry out: `SetExpression`, `Look`, `PlaySound`,
-`CancelSound`. The service feeds it presence, faces, audio status,
+`CancelSound`. The service feeds it presence (from the people service:
+someone the radar sees, and their person id), faces, audio status,
 device-free flags and service replies, and calls `tick()` periodically so
 timers fire.
 
@@ -168,6 +169,9 @@ class State:
     face_visible: bool
     visit: int
     """Visits since start (a return within `regreet_cooldown_s` is the same visit)."""
+    person_id: int | None
+    """The people service's id of the person this visit is about: the one the radar
+    showed last (see `Behaviour.presence`); None while IDLE."""
     greeted: bool
     sound: SoundKind | None
     """Our sound playing now (or waiting for the player's reply), if any."""
@@ -192,6 +196,7 @@ class Behaviour:
         self._recover_until: float | None = now + settings.recover_s
         # inputs
         self._in_range: bool | None = None
+        self._person_id: int | None = None
         self._out_since: float | None = None
         self._device_free: bool | None = None
         self._yielded = False  # a lease holds the speaker: no sound of ours starts
@@ -249,6 +254,7 @@ class Behaviour:
         return State(
             phase=self.phase(now), expression=self._expression, in_range=bool(self._in_range),
             face_visible=self._face_visible(now), visit=self._visits,
+            person_id=None if self.phase(now) is Phase.IDLE else self._person_id,
             greeted=self._visit.greeted, sound=None if self._goal is None else self._goal.kind,
             farewell_pending=self._farewell_since is not None, waiting=waiting,
             waiting_s=left, last_greeting_at=self._greeting_started,
@@ -296,13 +302,18 @@ class Behaviour:
 
     # -- events --
 
-    def presence(self, now: float, in_range: bool) -> list[Command]:
-        """Radar presence (latched, on change): IN_RANGE or OUT_OF_RANGE."""
+    def presence(self, now: float, in_range: bool, person_id: int | None = None) -> list[Command]:
+        """Someone the radar sees is present (`in_range`), or nobody (latched, on
+        change). `person_id`: the people service's id of that person; it names the
+        visit's person until another one is in range (kept while they leave and
+        the farewell plays, so a tool sees whom the goodbye is for)."""
         if self.recovering and self._in_range_at_start is None:
             self._in_range_at_start = in_range  # the first one is the replayed latched value
         if in_range != self._in_range:
             self._out_since = None if in_range else now
         self._in_range = in_range
+        if in_range and person_id is not None:
+            self._person_id = person_id
         return self._step(now)
 
     def face(self, now: float, gaze: Gaze, stamp_ns: int | None = None) -> list[Command]:

@@ -19,12 +19,38 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from buddybot.contract import messages as m
+
+RADAR_SEES: frozenset[m.SeenBy] = frozenset({"RADAR", "BOTH"})
+"""The `seen_by` values of a person the radar shows now."""
+
 
 @dataclass(frozen=True, slots=True)
-class PresenceChanged:
-    """Radar presence (latched): someone IN_RANGE or not."""
+class PeopleChanged:
+    """What the controller takes from `people/state` (latched): is someone the
+    radar sees present (`in_range`), and the people service's id of that person."""
 
     in_range: bool
+    person_id: int | None = None
+
+
+def people_changed(msg: m.PeopleState) -> PeopleChanged:
+    """The controller's presence from the people service's state.
+
+    `in_range` = a person present whom the radar sees now (`seen_by` RADAR or
+    BOTH): the level of `radar/presence`, one hop later, so the controller's
+    holds (`absence_hold_s`, the greeting dwell, drowsy) keep their meaning. A
+    person held by the people service after the radar lost them (`seen_by` NONE,
+    or CAMERA only) is not in range: the controller's shorter absence hold
+    decides the departure (docs/design.md 4.3). With several such
+    persons the nearest is the one (the lowest id on a tie), so the choice does
+    not depend on the list's order.
+    """
+    seen = [p for p in msg.people if p.seen_by in RADAR_SEES]
+    if not seen:
+        return PeopleChanged(False)
+    nearest = min(seen, key=lambda p: (p.distance_m, p.id))
+    return PeopleChanged(True, nearest.id)
 
 
 @dataclass(frozen=True, slots=True)
@@ -61,4 +87,4 @@ class CancelReply:
     success: bool
 
 
-Event = PresenceChanged | DeviceFree | SoundStatus | GoalReply | CancelReply
+Event = PeopleChanged | DeviceFree | SoundStatus | GoalReply | CancelReply

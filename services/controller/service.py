@@ -62,8 +62,9 @@ from buddybot.controller.events import (
     DeviceFree,
     Event,
     GoalReply,
-    PresenceChanged,
+    PeopleChanged,
     SoundStatus,
+    people_changed,
 )
 from buddybot.controller.leases import LeaseTable
 from buddybot.controller.settings import ControllerSettings
@@ -122,6 +123,8 @@ class Controller:
         self._last_look = Look(None)
         """The behaviour's latest gaze, put again when a gaze lease ends."""
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
+        self._last_people: PeopleChanged | None = None
+        """The last presence posted (under `_cond`): the next is posted only if it differs."""
         self._cond = threading.Condition()
         self._lock = threading.Lock()
         """Guards `behaviour` and the publishers' order: the decision thread and the
@@ -149,7 +152,7 @@ class Controller:
 
     def start(self) -> None:
         node = self.node
-        node.subscribe(keys.PRESENCE, self._on_presence)
+        node.subscribe(keys.PEOPLE_STATE, self._on_people)
         node.subscribe(keys.DEVICE_FREE, self._on_device_free)
         node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
         node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
@@ -181,8 +184,16 @@ class Controller:
             self._inbox.append(event)
             self._cond.notify()
 
-    def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
-        self._post(PresenceChanged(msg.presence_state == m.PresenceState.IN_RANGE))
+    def _on_people(self, msg: m.PeopleState, _key: str) -> None:
+        # `people/state` changes with every face frame of a visitor (distance,
+        # direction); only a change of who is in range is news for the behaviour.
+        change = people_changed(msg)
+        with self._cond:
+            if change == self._last_people:
+                return
+            self._last_people = change
+            self._inbox.append(change)
+            self._cond.notify()
 
     def _on_device_free(self, msg: m.Bool, _key: str) -> None:
         self._post(DeviceFree(msg.data))
@@ -329,8 +340,8 @@ class Controller:
             # Exhaustive: an Event member without a case fails type checking at
             # assert_never, and at run time it raises instead of being dropped.
             match event:
-                case PresenceChanged(in_range=in_range):
-                    commands = b.presence(now, in_range)
+                case PeopleChanged(in_range=in_range, person_id=person_id):
+                    commands = b.presence(now, in_range, person_id)
                 case DeviceFree(free=free):
                     commands = b.device_free(now, free)
                 case SoundStatus(goal_id=goal_id, state=state, age_s=age_s):
@@ -460,6 +471,7 @@ def state_message(state: State, now: float, now_ns: int,
     return m.ControllerState(
         stamp_ns=now_ns, phase=state.phase.value, expression=state.expression,
         in_range=state.in_range, face_visible=state.face_visible, visit=state.visit,
+        person_id=state.person_id,
         greeted=state.greeted, sound=None if state.sound is None else state.sound.value,
         farewell_pending=state.farewell_pending, waiting=state.waiting,
         waiting_s=state.waiting_s,

@@ -25,6 +25,7 @@ from typing import Any, Generic, TypeVar
 import numpy as np
 
 from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 
 T = TypeVar("T")
@@ -126,6 +127,18 @@ class Process:
             return output if text in output else ""
 
         return retry_until(printed, timeout, what=f"{self.name} printing {text!r}")
+
+
+def visitor(in_range: bool, person_id: int = 1, distance_m: float = 1.2,
+            stamp_ns: int | None = None) -> m.PeopleState:
+    """`people/state` with one visitor, as the people service shows them: seen by
+    the radar (`in_range`) or missed by it and not yet gone (seen_by NONE). What a
+    test about the controller alone publishes instead of running `people`."""
+    stamp = m.now_ns() if stamp_ns is None else stamp_ns
+    person = m.Person(id=person_id, distance_m=distance_m, zone="PERSONAL",
+                      seen_by="RADAR" if in_range else "NONE", zone_since_ns=stamp,
+                      arrived_ns=stamp, engagement="NONE", engagement_since_ns=stamp)
+    return m.PeopleState(stamp_ns=stamp, people=[person])
 
 
 def write_tone(path: Path, seconds: float, hz: float = 440.0, rate: int = 48000,

@@ -1,6 +1,8 @@
 """Scenario fixtures: a fake audio action server and a face/presence stimulus, both
 real Zenoh nodes in the test process talking to the controller process through
-the real router."""
+the real router. The stimulus stands in for the people service (its latched
+`people/state`), so these tests are about the controller alone; the chain
+radar/presence -> people -> controller has its own test in test_service.py."""
 
 from __future__ import annotations
 
@@ -16,6 +18,7 @@ import zenoh
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node, new_goal_id
+from buddybot.tools.testing import visitor
 
 FAST_CONFIG = """
 [controller]
@@ -119,10 +122,11 @@ class FakeAudio:
 
 
 class Stimulus:
-    """The radar and the camera of a scenario: presence (latched) and a face stream."""
+    """The people service and the camera of a scenario: one visitor the radar sees or
+    not (`people/state`, latched) and a face stream."""
 
     def __init__(self, node: Node, camera: str = "front") -> None:
-        self.presence_pub = node.publisher(keys.PRESENCE)
+        self.people_pub = node.publisher(keys.PEOPLE_STATE)
         self.face_pub = node.publisher(keys.FACE, camera=camera)
         self.point = m.Point(x=1.0, y=0.3, z=0.0)
         self._watching = threading.Event()
@@ -131,11 +135,8 @@ class Stimulus:
         self._thread = threading.Thread(target=self._stream, daemon=True)
         self._thread.start()
 
-    def presence(self, in_range: bool, distance_m: float = 1.2) -> None:
-        state = m.PresenceState.IN_RANGE if in_range else m.PresenceState.OUT_OF_RANGE
-        self.presence_pub.put(m.PresenceDetection(
-            stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
-            presence_state=state, distance_m=distance_m))
+    def presence(self, in_range: bool, distance_m: float = 1.2, person_id: int = 1) -> None:
+        self.people_pub.put(visitor(in_range, person_id, distance_m))
 
     def face(self, stamp_ns: int | None = None) -> int:
         stamp = stamp_ns if stamp_ns is not None else m.now_ns()

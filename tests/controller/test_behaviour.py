@@ -50,8 +50,8 @@ class Rig:
             out += self._rec(self.b.tick(self.t))
         return out
 
-    def presence(self, in_range: bool) -> list[Command]:
-        return self._rec(self.b.presence(self.t, in_range))
+    def presence(self, in_range: bool, person_id: int | None = None) -> list[Command]:
+        return self._rec(self.b.presence(self.t, in_range, person_id))
 
     def face(self) -> list[Command]:
         return self._rec(self.b.face(self.t, GAZE, 42))
@@ -507,6 +507,38 @@ def greet(r: Rig) -> str:
     r.presence(True)
     r.faces(r.s.greet_dwell_s + 0.2)
     return r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+
+
+def test_the_person_of_the_visit_is_named_until_the_visit_is_over() -> None:
+    """The person id is the one the radar showed last: through the greeting, while
+    they leave and while the farewell plays; nobody's once the robot sleeps."""
+    r = Rig(greet_dwell_s=0.5, absence_hold_s=0.5, sleepy_s=1.0)
+    assert state(r).person_id is None
+    r.presence(True, person_id=3)
+    assert (state(r).phase, state(r).person_id) == (Phase.NOTICED, 3)
+    gid = greet(r)
+    assert (state(r).greeted, state(r).person_id) == (True, 3)
+    r.status(gid, "SUCCEEDED")
+    r.presence(False)  # the radar lost them: the people service names nobody in range
+    assert (state(r).phase, state(r).person_id) == (Phase.LEAVING, 3)
+    r.at(0.6)
+    farewell = r.last(PlaySound)
+    assert isinstance(farewell, PlaySound) and farewell.sound == "farewell"
+    assert (state(r).phase, state(r).person_id) == (Phase.DROWSY, 3)
+    r.status(r.accept(farewell), "SUCCEEDED")
+    r.at(1.1)
+    assert (state(r).phase, state(r).person_id) == (Phase.IDLE, None)
+    r.presence(True, person_id=4)  # the next visitor
+    assert state(r).person_id == 4
+
+
+def test_another_person_in_range_becomes_the_visits_person() -> None:
+    r = Rig()
+    r.presence(True, person_id=1)
+    r.presence(True, person_id=2)  # nearer now: the same visit, about them
+    st = state(r)
+    assert (st.visit, st.person_id, st.phase) == (1, 2, Phase.NOTICED)
+    assert r.expressions() == [X.EYE_AWAKE]
 
 
 # --- why the controller waits ----------------------------------------------------------

@@ -1,6 +1,7 @@
 """The controller's typed inbox: each callback posts its event, and the decision
-step hands every event to the right `Behaviour` method. A fake node stands in
-for Zenoh, so this runs without a router."""
+step hands every event to the right `Behaviour` method; the people service's
+state becomes the controller's presence (`people_changed`, pure). A fake node
+stands in for Zenoh, so this runs without a router."""
 
 from __future__ import annotations
 
@@ -15,11 +16,13 @@ from buddybot.controller.events import (
     CancelReply,
     DeviceFree,
     GoalReply,
-    PresenceChanged,
+    PeopleChanged,
     SoundStatus,
+    people_changed,
 )
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
+from buddybot.tools.testing import visitor
 
 from .fakes import Clock, FakeNode
 
@@ -55,18 +58,16 @@ def commanded(controller: Controller) -> list[Any]:
 
 def test_callbacks_post_typed_events(rig: tuple[Controller, FakeNode, Clock]) -> None:
     controller, _node, _clock = rig
-    controller._on_presence(m.PresenceDetection(
-        stamp_ns=1, target_state=m.PresenceTarget.STANDING,
-        presence_state=m.PresenceState.IN_RANGE, distance_m=1.0), "k")
+    controller._on_people(visitor(True, person_id=4), "k")
     controller._on_device_free(m.Bool(stamp_ns=1, data=False), "k")
     controller._on_status(m.PlaySoundStatus(goal_id="g", state="PLAYING", stamp_ns=0), "k")
-    assert drain(controller) == [PresenceChanged(True), DeviceFree(False),
+    assert drain(controller) == [PeopleChanged(True, 4), DeviceFree(False),
                                  SoundStatus("g", "PLAYING", None)]
 
 
 def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Clock]) -> None:
     controller, node, clock = rig
-    controller._post(PresenceChanged(True))
+    controller._post(PeopleChanged(True, 1))
     drain(controller)
     assert expressions(node) == [A.EYE_AWAKE]
     # A face, decided in the callback itself, makes the greeting (and gaze at once);
@@ -83,7 +84,7 @@ def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Cloc
     assert controller.behaviour.sound_busy()
     # The visitor leaves while it plays: the greeting is cancelled for the farewell.
     clock.t += 1.0
-    controller._post(PresenceChanged(False))
+    controller._post(PeopleChanged(False))
     drain(controller)
     [cancel] = commanded(controller)
     assert cancel == CancelSound("g1")
@@ -111,3 +112,51 @@ def test_an_unknown_command_is_an_error_not_played_as_a_sound(
         controller._execute(["greeting"])  # type: ignore[list-item]
     assert commanded(controller) == []
     assert not any(pub.sent for pub in node.publishers.values())
+
+
+# --- people/state -> the controller's presence ------------------------------------------
+
+
+def person(pid: int, seen_by: m.SeenBy, distance_m: float = 1.0) -> m.Person:
+    return m.Person(id=pid, distance_m=distance_m, zone="PERSONAL", seen_by=seen_by,
+                    zone_since_ns=1, arrived_ns=1, engagement="NONE", engagement_since_ns=1)
+
+
+def people(*persons: m.Person) -> m.PeopleState:
+    return m.PeopleState(stamp_ns=5, people=list(persons))
+
+
+@pytest.mark.parametrize(("seen_by", "in_range"), [
+    ("RADAR", True), ("BOTH", True), ("CAMERA", False), ("NONE", False)])
+def test_in_range_is_a_person_the_radar_sees(seen_by: m.SeenBy, in_range: bool) -> None:
+    expected = PeopleChanged(True, 7) if in_range else PeopleChanged(False)
+    assert people_changed(people(person(7, seen_by))) == expected
+
+
+def test_nobody_present_is_out_of_range() -> None:
+    assert people_changed(people()) == PeopleChanged(False, None)
+
+
+def test_the_nearest_person_the_radar_sees_is_the_one_whatever_the_order() -> None:
+    near, far = person(3, "RADAR", 0.8), person(2, "BOTH", 2.5)
+    camera_only = person(9, "CAMERA", 0.3)  # nearer, but the radar does not see them
+    for order in ((near, far, camera_only), (camera_only, far, near)):
+        assert people_changed(people(*order)) == PeopleChanged(True, 3)
+    tie = (person(5, "RADAR", 1.0), person(4, "RADAR", 1.0))
+    assert people_changed(people(*tie)) == people_changed(people(*reversed(tie))) == \
+        PeopleChanged(True, 4)
+
+
+def test_only_a_change_of_who_is_in_range_reaches_the_inbox(
+    rig: tuple[Controller, FakeNode, Clock],
+) -> None:
+    """people/state changes with every face frame (distance, direction): the same
+    presence again posts nothing; another person, or the radar losing them, does."""
+    controller, _node, _clock = rig
+    for distance in (1.0, 1.1, 1.2):
+        controller._on_people(visitor(True, person_id=1, distance_m=distance), "k")
+    controller._on_people(visitor(True, person_id=2), "k")
+    controller._on_people(visitor(False, person_id=2), "k")
+    controller._on_people(people(), "k")  # then gone: still out of range
+    assert drain(controller) == [PeopleChanged(True, 1), PeopleChanged(True, 2),
+                                 PeopleChanged(False)]

@@ -31,7 +31,7 @@ from buddybot.controller.settings import ControllerSettings
 from buddybot.runtime.config import parse_config
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until, visitor
 
 from .conftest import FAST_CONFIG
 from .fakes import Clock, FakeNode
@@ -88,11 +88,9 @@ class Scene:
 
     # -- the stimulus --
 
-    def presence(self, in_range: bool) -> None:
-        state = m.PresenceState.IN_RANGE if in_range else m.PresenceState.OUT_OF_RANGE
-        self.controller._on_presence(m.PresenceDetection(
-            stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
-            presence_state=state, distance_m=1.2), "radar/presence")
+    def presence(self, in_range: bool, person_id: int = 1) -> None:
+        """The people service's state: the visitor seen by the radar, or missed."""
+        self.controller._on_people(visitor(in_range, person_id), "people/state")
         self._settle()
 
     def face(self) -> int:
@@ -323,6 +321,7 @@ def test_the_state_is_published_at_start_and_then_on_change_only() -> None:
     noticed = s.states()[-1]
     assert (noticed.phase, noticed.in_range, noticed.visit, noticed.waiting) == (
         "noticed", True, 1, "face")
+    assert noticed.person_id == 1  # the people service's id of the visitor
     s.face()  # published from the face callback, right after the eye control
     engaged = s.states()[-1]
     assert (engaged.phase, engaged.waiting, engaged.face_visible) == ("engaged", "dwell", True)
@@ -448,9 +447,65 @@ def test_approach_greet_follow_leave_farewell_through_the_router(
     assert proc.alive()
 
 
+PEOPLE_CONFIG = """
+[people]
+absence_hold_s = 1.0
+"""
+
+
+@pytest.mark.integration
+def test_the_chain_radar_presence_people_controller(spawn, tmp_path, stimulus, make_audio,
+                                                    watch, probe) -> None:
+    """The real chain: `radar/presence` -> people -> `people/state` -> controller. A
+    visit is greeted and bid farewell as when the controller read the radar itself,
+    and `controller/state` names the person the people service gave an id."""
+    config = tmp_path / "robot.toml"
+    config.write_text(FAST_CONFIG + PEOPLE_CONFIG)
+    expr, _ = watch
+    states: Collector[m.ControllerState] = Collector(probe, keys.CONTROLLER_STATE)
+    events: Collector[m.PersonEvent] = Collector(probe, keys.PEOPLE_EVENTS)
+    people_state: Collector[m.PeopleState] = Collector(probe, keys.PEOPLE_STATE)
+    radar = probe.publisher(keys.PRESENCE)
+    audio = make_audio(durations={"greeting": 0.5, "farewell": 0.5})
+    spawn("people", "--config", str(config))
+    people_state.wait_for(timeout=20, what="the people service's first state")
+    proc = start_controller(spawn, config, expr)
+
+    def presence(in_range: bool) -> None:
+        state = m.PresenceState.IN_RANGE if in_range else m.PresenceState.OUT_OF_RANGE
+        radar.put(m.PresenceDetection(stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
+                                      presence_state=state, distance_m=1.2))
+
+    presence(True)
+    first = events.wait_for(lambda e: e.kind == "ARRIVED", 20, "ARRIVED").person_id
+    wait_expressions(expr, [X.EYE_AWAKE])
+    stimulus.watch(True)
+    audio.wait_log(lambda log: "end:greeting" in log, what="greeting")
+    greeted = states.wait_for(lambda st: st.greeted, 20, "state: greeted")
+    assert greeted.person_id == first
+
+    presence(False)
+    stimulus.watch(False)
+    audio.wait_log(lambda log: "play:farewell" in log, what="farewell")
+    seq = wait_expressions(expr, [X.EYE_SLEEPY, X.EYE_SLEEP])
+    assert seq == [X.EYE_SLEEP, X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
+    assert audio.sounds() == ["greeting", "farewell"]
+
+    # Once the people service let them go, the next arrival is a new person.
+    events.wait_for(lambda e: e.kind == "LEFT" and e.person_id == first, 20, "LEFT")
+    presence(True)
+    second = events.wait_for(lambda e: e.kind == "ARRIVED" and e.person_id != first, 20,
+                             "the second ARRIVED").person_id
+    states.wait_for(lambda st: st.in_range and st.person_id == second, 20,
+                    "state: the second person")
+    assert proc.alive()
+
+
 MALFORMED: list[bytes] = [
     b"", b"\xff\xfe garbage", b"{", b"[]", b"null", b'{"stamp_ns": -1}',
     b'{"stamp_ns": 1, "presence_state": 7, "target_state": 0, "distance_m": 1.0}',
+    b'{"stamp_ns": 1, "people": [{"id": 0, "seen_by": "RADAR"}]}',
+    b'{"stamp_ns": 1, "people": "everyone"}',
     b'{"stamp_ns": 1, "frame_id": "f", "point": {"x": 1e999, "y": 0, "z": 0}, '
     b'"confidence": 0.5}',
     b'{"stamp_ns": 1, "frame_id": "f", "point": {"x": "a", "y": 0, "z": 0}, '
@@ -466,7 +521,7 @@ def test_malformed_payloads_on_every_input_are_survived(spawn, fast_config, stim
     expr, control = watch
     audio = make_audio(durations={"greeting": 0.3})
     proc = start_controller(spawn, fast_config, expr)
-    inputs = [keys.PRESENCE.key(), keys.FACE.key(camera="front"), keys.DEVICE_FREE.key(),
+    inputs = [keys.PEOPLE_STATE.key(), keys.FACE.key(camera="front"), keys.DEVICE_FREE.key(),
               keys.PLAY_SOUND_STATUS.key(), keys.EXPRESSION.key()]
     with zenoh.open(_probe_config(endpoint)) as session:
         for rel in inputs:

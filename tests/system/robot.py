@@ -27,6 +27,7 @@ BASE_SERVICES: dict[str, tuple[str, ...]] = {
     "audio": (),
     "eyes": (),
     "controller": (),
+    "people": (),  # the controller's presence: radar/presence -> people/state
     "face-detector": (),
     "radar-presence": (),
 }

@@ -14,18 +14,13 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes.driver import DEFAULT_LIDS
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, Router, retry_until, run_service
+from buddybot.tools.testing import Collector, Process, Router, retry_until, run_service, visitor
 
 from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes
 
 pytestmark = pytest.mark.integration  # a router and the robot's processes in every test
 
 A = m.ExpressionAction
-
-
-def in_range(stamp: int = 1) -> m.PresenceDetection:
-    return m.PresenceDetection(stamp_ns=stamp, target_state=m.PresenceTarget.STANDING,
-                               presence_state=m.PresenceState.IN_RANGE, distance_m=1.0)
 
 
 def test_router_restart_every_service_reconnects(tmp_path: Path) -> None:
@@ -70,11 +65,12 @@ def test_router_restart_every_service_reconnects(tmp_path: Path) -> None:
 
 @pytest.fixture
 def awake_robot(probe: Node, spawn: Spawn) -> Iterator[dict[str, Process]]:
-    """Controller, eyes and audio, with a latched 'someone is here' from the probe."""
+    """Controller, eyes and audio, with a latched 'someone is here' from the probe
+    (standing in for the people service: these tests are about the others)."""
     procs = {name: spawn(name, *BASE_SERVICES[name])
              for name in ("audio-player", "audio", "eyes", "controller")}
-    presence = probe.publisher(keys.PRESENCE)
-    presence.put(in_range())
+    people = probe.publisher(keys.PEOPLE_STATE)
+    people.put(visitor(True))
     wait_nodes(probe, list(procs))
     yield procs
 
@@ -189,7 +185,7 @@ def test_two_robots_on_one_router_do_not_cross_talk(probe: Node, spawn: Spawn,
     alpha_lids = Collector[m.EyeLidControl](alpha, keys.LIDS)
     beta_lids = Collector[m.EyeLidControl](beta, keys.LIDS)
     beta_expr = Collector[m.ScreenExpression](beta, keys.EXPRESSION)
-    alpha.publisher(keys.PRESENCE).put(in_range())
+    alpha.publisher(keys.PEOPLE_STATE).put(visitor(True))
     alpha_lids.wait_for(lambda x: x.top_lid_position == 0, 30, "alpha's eyes open")
     # Positive control for beta: its own traffic arrives (its latched sleep state) ...
     beta_expr.wait_for(lambda e: e.action == A.EYE_SLEEP, 30, "beta's own state")

@@ -4,7 +4,7 @@ Live run: the robot (every service, the camera playing a face sequence, the
 simulated LD2410 playing one visitor) on router A, recorded with
 `buddybot bag record --images`. Replay: the recording's sensor keys only
 (radar frames and camera images) played on router B into fresh
-radar-presence, face-detector, controller, eyes, audio and audio-player
+radar-presence, people, face-detector, controller, eyes, audio and audio-player
 processes, with no radar bridge and no camera. The decisions must be the
 same: the same sequence of expressions, and exactly one greeting and one
 farewell, as in the live run.

@@ -1,0 +1,127 @@
+"""Benchmark: radar presence -> the controller's EYE_AWAKE, through a real router.
+
+Starts `buddybot router`, `buddybot run people` and `buddybot run
+controller` on loopback (the controller reads the person from
+`people/state`, so an arrival crosses radar/presence -> people -> controller
+-> eyes/expression), then a probe node publishes IN_RANGE on
+`radar/presence` and times it until `eyes/expression` EYE_AWAKE comes
+back; OUT_OF_RANGE and EYE_SLEEP in between reset the robot. The
+controller's holds are 0 (`absence_hold_s`, `sleepy_s`) so the cycle is
+quick; entering needs no hold, so the figure is the pipeline's own
+latency: the people service's step, the controller's decision thread and
+four router crossings. A loopback baseline (probe -> router -> probe) is
+printed next to it.
+
+    .venv/bin/python benchmarks/presence.py [--count N]
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+from pathlib import Path
+from tempfile import mkdtemp
+
+from common import summary
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Router, retry_until, run_service
+
+CONFIG = """
+[controller]
+absence_hold_s = 0.0
+sleepy_s = 0.0
+recover_s = 0.2
+"""
+
+X = m.ExpressionAction
+
+
+def presence(in_range: bool) -> m.PresenceDetection:
+    state = m.PresenceState.IN_RANGE if in_range else m.PresenceState.OUT_OF_RANGE
+    return m.PresenceDetection(stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
+                               presence_state=state, distance_m=1.2)
+
+
+def run_visits(node: Node, count: int) -> list[float]:
+    """`count` arrivals: each one's time from the put to EYE_AWAKE arriving here."""
+    shown: list[X] = []
+    arrived = threading.Condition()
+
+    def on_expression(msg: m.ScreenExpression, _key: str) -> None:
+        with arrived:
+            shown.append(msg.action)
+            arrived.notify_all()
+
+    def wait(action: X, timeout: float = 10.0) -> None:
+        with arrived:
+            if not arrived.wait_for(lambda: shown and shown[-1] == action, timeout):
+                raise TimeoutError(f"no {action.name} within {timeout} s: {shown[-5:]}")
+
+    node.subscribe(keys.EXPRESSION, on_expression)
+    pub = node.publisher(keys.PRESENCE)
+    wait(X.EYE_SLEEP, 30.0)
+    latencies: list[float] = []
+    for i in range(count + 5):  # the first five warm up
+        start = time.perf_counter_ns()
+        pub.put(presence(True))
+        wait(X.EYE_AWAKE)
+        if i >= 5:
+            latencies.append((time.perf_counter_ns() - start) / 1e6)
+        pub.put(presence(False))
+        wait(X.EYE_SLEEP)
+    return latencies
+
+
+def run_loopback(sender: Node, receiver: Node, count: int) -> list[float]:
+    """Baseline: one node's put heard by another through the router."""
+    got = threading.Event()
+    receiver.subscribe(keys.EYE_CONTROL, lambda _msg, _key: got.set(), history=False)
+    pub = sender.publisher(keys.EYE_CONTROL)
+
+    def msg() -> m.EyeControl:
+        return m.EyeControl(stamp_ns=m.now_ns(), yaw=0.0, pitch=0.0, target_distance_cm=100.0)
+
+    retry_until(lambda: pub.put(msg()) or got.wait(0.2), 30, 0.0, what="loopback")
+    latencies: list[float] = []
+    for _ in range(count):
+        got.clear()
+        start = time.perf_counter_ns()
+        pub.put(msg())
+        if not got.wait(5.0):
+            raise TimeoutError("loopback sample lost")
+        latencies.append((time.perf_counter_ns() - start) / 1e6)
+    return latencies
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--count", type=int, default=50)
+    args = parser.parse_args()
+    folder = Path(mkdtemp(prefix="buddybot-bench-presence-"))
+    config = folder / "robot.toml"
+    config.write_text(CONFIG)
+    router = Router(log_dir=folder)
+    procs = [run_service(name, router.endpoint, "--config", str(config), log_dir=folder)
+             for name in ("people", "controller")]
+    try:
+        with Node("bench", connect=[router.endpoint]) as node:
+            Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
+            lat = run_visits(node, args.count)
+        with (Node("bench-a", connect=[router.endpoint]) as a,
+              Node("bench-b", connect=[router.endpoint]) as b):
+            base = run_loopback(a, b, args.count)
+        print(summary("radar/presence -> people -> controller -> EYE_AWAKE", lat))
+        print(summary("loopback probe -> router -> probe", base))
+    finally:
+        for proc in procs:
+            proc.stop()
+        router.stop()
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
