@@ -4,11 +4,11 @@ A goal names a configured sound, `say:<text>` to speak any text
 (`messages.spoken_text` is the rule) or `file:<path>` to play a file
 (`messages.sound_file`; whether the file may be played is the player's
 sandbox, so a file outside it ends ABORTED with the player's refusal).
-It is ACCEPTED when its reply says so, PLAYING once the player confirmed it started (progress = elapsed / the duration the player
-announced), and ends SUCCEEDED (the device became free after the sound's
-length), CANCELED (cancel request, preempted by a newer goal, or stopped
-from outside before its end) or ABORTED (the player refused or did not
-answer). One goal is active at a time; `policy` decides what a new goal
+It is ACCEPTED when its reply says so, PLAYING once the player confirmed
+it started (progress = elapsed / the duration the player announced), and
+ends SUCCEEDED (the device became free after the sound's length),
+CANCELED (cancel request, preempted by a newer goal, or stopped from
+outside before its end) or ABORTED (the player refused or did not answer). One goal is active at a time; `policy` decides what a new goal
 does meanwhile: "preempt" ends the active one as CANCELED, "refuse"
 answers accepted=false.
 

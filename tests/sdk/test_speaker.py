@@ -9,15 +9,16 @@ from __future__ import annotations
 import asyncio
 import shutil
 from collections.abc import Callable
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import pytest
 
+from buddybot.audio.access import REFUSAL
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
-from buddybot.sdk.speaker import Speaker
+from buddybot.sdk.speaker import Speaker, goal_sound
 from buddybot.tools.testing import Collector, Process, retry_until
 from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
 
@@ -37,6 +38,44 @@ def test_a_handle_follows_its_goal_to_the_first_final_state() -> None:
     handle.update(m.PlaySoundStatus(goal_id="g1", state="CANCELED", message="preempted"))
     handle.update(m.PlaySoundStatus(goal_id="g1", state="SUCCEEDED"))
     assert handle.wait(0.01) == "CANCELED" and handle.message == "preempted"
+
+
+@pytest.mark.parametrize("given, goal", [
+    ("greeting", "greeting"),
+    ("chime.wav", "file:chime.wav"),
+    ("Chime.OGG", "file:Chime.OGG"),
+    ("birds/robin", "file:birds/robin"),
+    ("/usr/share/sounds/a.flac", "file:/usr/share/sounds/a.flac"),
+    (Path("chime"), "file:chime"),
+    (PurePosixPath("../x.mp3"), "file:../x.mp3"),
+    ("say:Hello there", "say:Hello there"),
+    ("file:chime", "file:chime"),
+    ("wav", "wav"),
+])
+def test_a_path_or_a_str_with_a_slash_or_an_audio_suffix_is_a_file(given: object,
+                                                                   goal: str) -> None:
+    assert goal_sound(given) == goal  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad, why", [
+    ("", "1 to 256 characters"), ("x" * 257, "1 to 256"), (Path("a" * 260), "1 to 256"),
+    (42, "a sound name or a file path"), (b"chime.wav", "a sound name or a file path"),
+    ("file:", "no file named"), ("a\x00.wav", "non-printable"), ("say: ", "nothing to say"),
+])
+def test_a_malformed_sound_raises_before_anything_is_sent(bad: object, why: str) -> None:
+    with pytest.raises(ValueError, match=why):
+        goal_sound(bad)  # type: ignore[arg-type]
+
+
+def test_a_file_goal_refused_by_the_player_raises_refused_with_its_reason() -> None:
+    handle = _handle()
+    handle.update(m.PlaySoundStatus(goal_id="g1", state="ABORTED", message=REFUSAL))
+    with pytest.raises(Refused) as err:
+        Speaker._judged(handle, 0.01)
+    assert err.value.reason == REFUSAL
+    started = _handle()
+    started.update(m.PlaySoundStatus(goal_id="g1", state="PLAYING"))
+    Speaker._judged(started, 0.01)  # playing: no error
 
 
 # --- real audio services -------------------------------------------------------------------
