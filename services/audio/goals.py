@@ -8,9 +8,10 @@ It is ACCEPTED when its reply says so, PLAYING once the player confirmed
 it started (progress = elapsed / the duration the player announced), and
 ends SUCCEEDED (the device became free after the sound's length),
 CANCELED (cancel request, preempted by a newer goal, or stopped from
-outside before its end) or ABORTED (the player refused or did not answer). One goal is active at a time; `policy` decides what a new goal
-does meanwhile: "preempt" ends the active one as CANCELED, "refuse"
-answers accepted=false.
+outside before its end) or ABORTED (the player refused or did not answer).
+One goal is active at a time; `policy` decides what a new goal does
+meanwhile: "preempt" ends the active one as CANCELED, "refuse" answers
+accepted=false.
 
 Every method returns the status messages to publish, in order, so the
 service adapter only publishes them.

@@ -20,7 +20,13 @@ from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
 from buddybot.sdk.speaker import Speaker, goal_sound
 from buddybot.tools.testing import Collector, Process, retry_until
-from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
+from tests.audio.conftest import (  # noqa: F401 (fixture)
+    Audio,
+    audio,
+    beep_config,
+    tone,
+    write_wav,
+)
 
 # --- pure ----------------------------------------------------------------------------------
 
@@ -138,6 +144,36 @@ def test_unknown_sounds_are_refused_and_bad_texts_raise_with_the_reason(
             bot.say(bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="1 to 256 characters"):
         bot.play("")
+
+
+@pytest.mark.integration
+def test_a_file_of_the_sound_dirs_plays_and_one_outside_is_refused_with_the_players_reason(
+        ready_audio: Callable[..., Audio], bot_factory: Callable[..., Bot],
+        tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 0.3)  # the sound dirs: beep.wav's folder (tmp_path)
+    write_wav(tmp_path / "chime.wav", tone(0.3))
+    outside = write_wav(tmp_path.parent / f"{tmp_path.name}-outside.wav", tone(0.3))
+    (tmp_path / "escape.wav").symlink_to(outside)
+    a = ready_audio(config)
+    bot = bot_factory()
+    try:
+        for sound in ("chime.wav", tmp_path / "chime.wav"):
+            handle = bot.play(sound)
+            assert handle.sound == "file:" + str(sound) and handle.state in (
+                "PLAYING", "SUCCEEDED")
+            assert handle.wait(30) == "SUCCEEDED", handle.message
+        for bad in ("../../etc/passwd", "/etc/passwd", outside, "escape.wav",
+                    f"../{tmp_path.name}-outside.wav", Path("."), "/no/such.wav"):
+            with pytest.raises(Refused) as err:
+                bot.play(bad)
+            assert err.value.reason == REFUSAL, bad
+        (tmp_path / "sub").mkdir()
+        with pytest.raises(Refused, match="not a regular file"):
+            bot.play(Path("sub"))  # a folder inside the sound dirs: the player says so
+        assert bot.play("beep").wait(30) == "SUCCEEDED"  # names are still names
+        assert a.alive()
+    finally:
+        outside.unlink()
 
 
 @pytest.mark.integration
