@@ -1,16 +1,27 @@
 """`buddybot.sdk.actions`: a Bot's action limit (pure: a fake clock, a probe-less
-Diagnostics): the burst, then the rate, refused at once with the reason, counted."""
+Diagnostics): the burst, then the rate, refused at once with the reason, counted;
+marked `integration`, an app run by `buddybot app run` looping on expressions is
+limited and counted in its diagnostics, and once killed (SIGKILL) its lease ends
+holder_gone and the controller's own expression is back."""
 
 from __future__ import annotations
 
 import contextlib
 import math
+import time
+from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.runtime.diagnostics import Diagnostics
+from buddybot.runtime.node import Node
 from buddybot.sdk import Refused
 from buddybot.sdk.actions import ActionLimit, check_rate
+from buddybot.tools.testing import Collector, Process, retry_until
+from tests.cli.test_app import app_file, run_app
 
 
 class Clock:
@@ -61,3 +72,54 @@ def test_an_absurd_limit_is_refused_naming_it(rate: object, burst: object, why: 
     with pytest.raises(ValueError, match=why):
         check_rate(rate, burst)  # type: ignore[arg-type]
     assert check_rate(20, 40) == (20.0, 40.0)
+
+
+# --- a real app, controller and router ----------------------------------------------------
+
+
+@pytest.mark.integration
+def test_an_app_looping_on_actions_is_limited_counted_and_the_robot_resumes_when_killed(
+        controller: Callable[[], Process], probe: Node, endpoint: str, log_dir: Path,
+        tmp_path: Path) -> None:
+    controller()
+    expr = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="looper")
+    path = app_file(tmp_path, "looper.py", """
+        import time
+        from buddybot.sdk import Refused
+        class Looper:
+            def run(self, bot, stop_event):
+                told = False
+                while not stop_event.is_set():
+                    try:
+                        bot.eyes.express("love")
+                    except Refused as exc:
+                        if not told:
+                            print(f"looper: {exc}", flush=True)
+                            told = True
+                    time.sleep(0.002)
+        """)
+    started = time.monotonic()
+    app = run_app(endpoint, log_dir, str(path))
+    try:
+        app.wait_for_output("looper: rate limited: express refused, more than 20 actions/s "
+                            "(burst 40) from this program", 30)
+        expr.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30, "LOVE")
+        counted = diag.wait_for(lambda d: int(d.values.get("rate_limited", 0)) > 0, 30,
+                                "the app's diagnostics counting refusals")
+        elapsed = time.monotonic() - started
+        assert 40 <= int(counted.values["actions"]) <= 40 + 20 * elapsed + 2, (
+            counted.values, elapsed)
+        holder = leases.wait_for(lambda s: any(lease.holder == "looper" for lease in s.leases),
+                                 30, "the app's lease")
+        lease_id = next(lease.lease_id for lease in holder.leases if lease.holder == "looper")
+        resumed_from = len(expr.messages)
+        app.kill()  # SIGKILL: no release, only the liveliness token's end
+        leases.wait_for(lambda s: any(e.lease_id == lease_id and e.reason == "holder_gone"
+                                      for e in s.ended), 30, "the lease ended holder_gone")
+        retry_until(lambda: any(e.action == m.ExpressionAction.EYE_SLEEP
+                                for e in expr.messages[resumed_from:]),
+                    30, 0.05, "the controller's own EYE_SLEEP back on eyes/expression")
+    finally:
+        app.stop()
