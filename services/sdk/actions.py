@@ -7,8 +7,9 @@ the action raises `Refused("rate limited: ...")` at once and nothing is
 sent, so an app looping on actions neither blocks nor floods the bus (the
 controller limits eyes commands per lease as well: this is the first
 fence, not the only one). `actions` and `rate_limited` are counted in the
-bot node's diagnostics (`diagnostics/<name>`), which `buddybot doctor`
-and the dashboard show.
+bot node's diagnostics (`diagnostics/<name>`, `buddybot echo`), whose
+status turns WARN while the program runs over the limit, which the
+dashboard's node table shows.
 """
 
 from __future__ import annotations
@@ -27,6 +28,10 @@ ACTIONS_PER_S = 20.0
 ACTIONS_BURST = 40.0
 """Default actions one Bot may ask at once."""
 MAX_ACTIONS_PER_S = 10000.0
+CALM_S = 10.0
+"""The WARN status of a limited program clears at its first action this long
+after its last refusal."""
+LIMITED = "actions over the limit refused:"
 
 
 def check_rate(actions_per_s: float, burst: float) -> tuple[float, float]:
@@ -56,15 +61,26 @@ class ActionLimit:
         self._clock = clock
         self._lock = threading.Lock()
         self._bucket = TokenBucket(rate, depth, clock())
+        self._limited_at: float | None = None
         for name in ("actions", "rate_limited"):
             diagnostics.values.setdefault(name, 0)
 
     def take(self, what: str) -> None:
         """Count one action `what`; Refused("rate limited: ...") when over the limit."""
         with self._lock:
-            allowed = self._bucket.take(self._clock())
-        self.diagnostics.increment("actions" if allowed else "rate_limited")
+            now = self._clock()
+            allowed = self._bucket.take(now)
+            if not allowed:
+                self._limited_at = now
+            calm = self._limited_at is not None and now - self._limited_at >= CALM_S
+        diag = self.diagnostics
+        diag.increment("actions" if allowed else "rate_limited")
+        bucket = self._bucket
         if not allowed:
-            bucket = self._bucket
+            # one status per episode (set() publishes only a change), not one per refusal
+            diag.set("WARN", f"{LIMITED} {bucket.rate_per_s:g} actions/s (burst "
+                     f"{bucket.burst:g}): see rate_limited")
             raise Refused(f"rate limited: {what} refused, more than {bucket.rate_per_s:g} "
                           f"actions/s (burst {bucket.burst:g}) from this program")
+        if calm and diag.message.startswith(LIMITED):
+            diag.set("OK", "running")

@@ -51,6 +51,13 @@ def test_actions_over_the_limit_are_refused_at_once_and_counted() -> None:
     with pytest.raises(Refused, match="rate limited"):
         limit.take("look_at")
     assert diag.values == {"actions": 3, "rate_limited": 2}
+    assert diag.level == "WARN" and "over the limit" in diag.message
+    clock.now += 5.0
+    limit.take("express")
+    assert diag.level == "WARN"  # still the same episode
+    clock.now += 5.0
+    limit.take("express")
+    assert (diag.level, diag.message) == ("OK", "running")
 
 
 def test_a_loop_gets_the_rate_and_no_more() -> None:
@@ -108,6 +115,7 @@ def test_an_app_looping_on_actions_is_limited_counted_and_the_robot_resumes_when
         expr.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30, "LOVE")
         counted = diag.wait_for(lambda d: int(d.values.get("rate_limited", 0)) > 0, 30,
                                 "the app's diagnostics counting refusals")
+        assert counted.level == "WARN" and "over the limit" in counted.message
         elapsed = time.monotonic() - started
         assert 40 <= int(counted.values["actions"]) <= 40 + 20 * elapsed + 2, (
             counted.values, elapsed)
