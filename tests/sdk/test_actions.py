@@ -113,9 +113,10 @@ def test_an_app_looping_on_actions_is_limited_counted_and_the_robot_resumes_when
         app.wait_for_output("looper: rate limited: express refused, more than 20 actions/s "
                             "(burst 40) from this program", 30)
         expr.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30, "LOVE")
-        counted = diag.wait_for(lambda d: int(d.values.get("rate_limited", 0)) > 0, 30,
-                                "the app's diagnostics counting refusals")
-        assert counted.level == "WARN" and "over the limit" in counted.message
+        counted = diag.wait_for(lambda d: int(d.values.get("rate_limited", 0)) > 0
+                                and d.level == "WARN", 30,
+                                "the app's diagnostics counting refusals, WARN")
+        assert "over the limit" in counted.message
         elapsed = time.monotonic() - started
         assert 40 <= int(counted.values["actions"]) <= 40 + 20 * elapsed + 2, (
             counted.values, elapsed)
