@@ -1,14 +1,17 @@
 """The play_sound action's goal state machine (pure: no Zenoh, no clock of its own).
 
-A goal names a configured sound, or `say:<text>` to speak any text
-(`messages.spoken_text` is the rule). It is ACCEPTED when its reply says so, PLAYING once the player
-confirmed it started (progress = elapsed / the duration the player
-announced), and ends SUCCEEDED (the device became free after the sound's
-length), CANCELED (cancel request, preempted by a newer goal, or stopped
-from outside before its end) or ABORTED (the player refused or did not
-answer). One goal is active at a time; `policy` decides what a new goal
-does meanwhile: "preempt" ends the active one as CANCELED, "refuse"
-answers accepted=false.
+A goal names a configured sound, `say:<text>` to speak any text
+(`messages.spoken_text` is the rule) or `file:<path>` to play a file
+(`messages.sound_file`; whether the file may be played is the player's
+sandbox, so a file outside it ends ABORTED with the player's refusal).
+It is ACCEPTED when its reply says so, PLAYING once the player confirmed
+it started (progress = elapsed / the duration the player announced), and
+ends SUCCEEDED (the device became free after the sound's length),
+CANCELED (cancel request, preempted by a newer goal, or stopped from
+outside before its end) or ABORTED (the player refused or did not answer).
+One goal is active at a time; `policy` decides what a new goal does
+meanwhile: "preempt" ends the active one as CANCELED, "refuse" answers
+accepted=false.
 
 Every method returns the status messages to publish, in order, so the
 service adapter only publishes them.
@@ -111,13 +114,14 @@ class GoalBook:
 
         if sound not in self.sounds:
             try:
-                spoken = m.spoken_text(sound)
+                named = m.spoken_text(sound) or m.sound_file(sound)
             except ValueError as exc:
                 return refuse(str(exc))
-            if spoken is None:
+            if named is None:
                 known = ", ".join(sorted(self.sounds)) or "none"
                 return refuse(f"unknown sound {limits.clip(sound)!r} (configured: "
-                              f"{limits.clip(known)}; or {m.TTS_PREFIX}TEXT to speak TEXT)")
+                              f"{limits.clip(known)}; or {m.TTS_PREFIX}TEXT to speak TEXT, "
+                              f"{m.FILE_PREFIX}PATH to play a file of the sound folders)")
         if not player_present:
             return refuse("the audio player is not running")
         statuses = []

@@ -298,16 +298,18 @@ class Player:
         return self._busy
 
     def resolve(self, name_or_path: str) -> tuple[str, Path]:
-        """(display name, file) for a configured sound name or an allowed file (else
-        `access.REFUSAL`, whatever the reason); may render speech."""
+        """(display name, file) for a configured sound name or an allowed file, as
+        it is or `file:<path>` (else `access.REFUSAL`, whatever the reason); may
+        render speech."""
         if name_or_path not in self.sounds:
             try:
                 spoken = m.spoken_text(name_or_path)
+                file = m.sound_file(name_or_path) or name_or_path
             except ValueError as exc:
                 raise AudioError(str(exc)) from None
             if spoken is not None:
                 return self._speak(name_or_path, spoken)
-            path = access.allowed_file(name_or_path, self.sound_dirs)
+            path = access.allowed_file(file, self.sound_dirs)
             if path is None:
                 raise AudioError(access.REFUSAL)
             return name_or_path, path

@@ -12,10 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from buddybot.contract.messages import TTS_PREFIX
+from buddybot.contract.messages import AUDIO_SUFFIXES, TTS_PREFIX
 
 PACKAGE_DIR = Path(__file__).resolve().parent
-SUPPORTED_SUFFIXES = (".wav", ".flac", ".mp3", ".ogg", ".oga")
 
 
 @dataclass(frozen=True)
@@ -65,6 +64,6 @@ def parse_sound(value: str, config_dir: Path | None) -> Sound:
 def format_hint(path: Path) -> str:
     """A short reason to add to a decode error, from the file name."""
     suffix = path.suffix.lower()
-    if suffix and suffix not in SUPPORTED_SUFFIXES:
+    if suffix and suffix not in AUDIO_SUFFIXES:
         return f"unsupported format '{suffix}' (supported: WAV, FLAC, MP3, Ogg Vorbis)"
     return "not a valid WAV, FLAC, MP3 or Ogg Vorbis file (corrupt or truncated?)"

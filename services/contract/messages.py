@@ -304,9 +304,34 @@ def spoken_text(sound: str) -> str | None:
     return text
 
 
+FILE_PREFIX = "file:"
+"""How a `PlaySound` goal (and a `PlayAudioFile` request) names a file of the
+player's sound folders rather than a sound (`PlaySound{sound: "file:chime.wav"}`):
+the player's sandbox alone decides whether it may be played."""
+AUDIO_SUFFIXES = (".wav", ".flac", ".mp3", ".ogg", ".oga")
+"""File suffixes the player decodes (WAV, FLAC, MP3, Ogg Vorbis)."""
+
+
+def sound_file(sound: str) -> str | None:
+    """The path a `file:<path>` goal asks to play (as given: relative to the
+    player's sound folders, or absolute); None for any other sound. ValueError
+    with the reason when the path is empty or holds a non-printable character
+    (a NUL byte or a newline would reach the file system and the logs)."""
+    if not sound.startswith(FILE_PREFIX):
+        return None
+    path = sound[len(FILE_PREFIX):]
+    if not path.strip():
+        raise ValueError(f"no file named after {FILE_PREFIX!r}")
+    bad = next((c for c in path if not c.isprintable()), None)
+    if bad is not None:
+        raise ValueError(f"file name holds a non-printable character {bad!r}")
+    return path
+
+
 class PlaySound(Message):
     """Goal of the `audio/play_sound` action: a sound name from [audio.sounds],
-    or `say:<text>` to speak any text (1..TTS_MAX_CHARS printable characters)."""
+    `say:<text>` to speak any text (1..TTS_MAX_CHARS printable characters), or
+    `file:<path>` to play a file inside the player's sound folders."""
 
     sound: Annotated[str, msgspec.Meta(min_length=1, max_length=256)]
 
@@ -330,8 +355,10 @@ class CancelGoal(Message):
 
 
 class PlayAudioFile(Message):
-    """Request to the player: a configured sound name, or a file inside its sound
-    folders (`[audio_player] sound_dirs`); anything else is refused alike."""
+    """Request to the player: a configured sound name, `say:<text>`, or a file
+    inside its sound folders (`[audio_player] sound_dirs`), given as it is or
+    as `file:<path>` (then never taken for a name); anything else is refused
+    alike."""
 
     path: Annotated[str, msgspec.Meta(min_length=1, max_length=4096)]
 

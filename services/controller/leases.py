@@ -27,17 +27,12 @@ import secrets
 from dataclasses import dataclass
 
 from buddybot.contract import messages as m
+from buddybot.runtime.rates import TokenBucket
 
 MAX_LEASES = 64
 MAX_PER_HOLDER = 8
 ENDED_KEPT = 16
 PRIORITY_RANK = {name: rank for rank, name in enumerate(m.LEASE_PRIORITIES)}
-
-
-@dataclass
-class _Bucket:
-    tokens: float
-    at_ns: int
 
 
 @dataclass(frozen=True)
@@ -65,7 +60,7 @@ class LeaseTable:
         self._tag = run_tag if run_tag is not None else secrets.token_hex(3)
         self._next = 1
         self._leases: dict[str, m.Lease] = {}
-        self._buckets: dict[str, _Bucket] = {}
+        self._buckets: dict[str, TokenBucket] = {}
         self._ended: collections.deque[m.LeaseEnd] = collections.deque(maxlen=ENDED_KEPT)
         self.counters: dict[str, int] = {
             "leases_granted": 0, "leases_refused": 0, "eyes_commands": 0,
@@ -161,14 +156,12 @@ class LeaseTable:
     def allow(self, lease_id: str, now_ns: int, rate_per_s: float, burst: float) -> bool:
         """Take one action token of the lease's bucket (`rate_per_s` refill, `burst`
         deep); False (and counted) when it is empty."""
+        now_s = now_ns / 1e9
         bucket = self._buckets.get(lease_id)
         if bucket is None:
-            bucket = self._buckets[lease_id] = _Bucket(burst, now_ns)
-        elapsed = max(0, now_ns - bucket.at_ns) / 1e9
-        bucket.tokens = min(burst, bucket.tokens + elapsed * rate_per_s)
-        bucket.at_ns = now_ns
-        if bucket.tokens >= 1.0:
-            bucket.tokens -= 1.0
+            bucket = self._buckets[lease_id] = TokenBucket(rate_per_s, burst, now_s)
+        bucket.rate_per_s, bucket.burst = rate_per_s, burst
+        if bucket.take(now_s):
             return True
         self.counters["rate_limited"] += 1
         return False

@@ -6,7 +6,8 @@ Two estimates, because the places that show a rate want different things:
 is the same for a count already made, as `topics` and `bag info` have), while
 `span_hz` measures from the first to the last arrival (steady and exact for a
 stream that is running: the camera's `fps`, `buddybot hz`). `RateCounter`
-keeps the sliding window for the latter.
+keeps the sliding window for the latter. `TokenBucket` limits a rate rather
+than measuring one (a lease's eyes commands, a program's actions).
 """
 
 from __future__ import annotations
@@ -52,3 +53,34 @@ class RateCounter:
         while stamps and now - stamps[0] > self.window_s:
             stamps.popleft()
         return span_hz(stamps)
+
+
+WHOLE_EPS = 1e-6
+"""A token refilled to within this counts as whole: a wall clock in seconds since
+1970 (a float) cannot hold the exact gap of one token's refill."""
+
+
+class TokenBucket:
+    """At most `rate_per_s` actions per second on average, `burst` at once.
+
+    Full at the start; each `take(now)` spends one token if there is one
+    (refilled at `rate_per_s` up to `burst` since the last take) and says
+    whether it could, so the caller refuses at once instead of waiting.
+    `rate_per_s` and `burst` may be changed between takes (live parameters).
+    """
+
+    def __init__(self, rate_per_s: float, burst: float, now: float) -> None:
+        self.rate_per_s = rate_per_s
+        self.burst = burst
+        self.tokens = burst
+        self._at = now
+
+    def take(self, now: float) -> bool:
+        """Spend one token at `now` (seconds, any monotonic clock); False when empty."""
+        elapsed = max(0.0, now - self._at)
+        self.tokens = min(self.burst, self.tokens + elapsed * self.rate_per_s)
+        self._at = max(self._at, now)
+        if self.tokens >= 1.0 - WHOLE_EPS:
+            self.tokens = max(0.0, self.tokens - 1.0)
+            return True
+        return False

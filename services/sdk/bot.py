@@ -20,12 +20,13 @@ from typing import Any, TypeVar, cast
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
 from buddybot.runtime.session import RouterUnreachable
+from buddybot.sdk.actions import ACTIONS_BURST, ACTIONS_PER_S, ActionLimit, check_rate
 from buddybot.sdk.errors import NoRouter, TimedOut
 from buddybot.sdk.eyes import Eyes
 from buddybot.sdk.leases import Lease, LeaseTable
 from buddybot.sdk.params import Params
 from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
-from buddybot.sdk.speaker import SoundHandle, Speaker
+from buddybot.sdk.speaker import Sound, SoundHandle, Speaker
 
 T = TypeVar("T")
 
@@ -42,10 +43,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 class Bot:
     """One robot, seen from a program. Use it as a context manager, or `close()`."""
 
-    def __init__(self, node: Node, timeout: float = TIMEOUT_S) -> None:
+    def __init__(self, node: Node, timeout: float = TIMEOUT_S,
+                 actions_per_s: float = ACTIONS_PER_S,
+                 actions_burst: float = ACTIONS_BURST) -> None:
         self.node = node
         self.robot = node.robot
         self.timeout = timeout
+        self.limit = ActionLimit(node.diagnostics, actions_per_s, actions_burst)
+        """Every action of this Bot (express, look_at, play, say, lease) takes one
+        token; over the limit it raises Refused("rate limited: ...") at once."""
         self.params = Params(node, timeout)
         self._people: People | None = None
         self._speaker: Speaker | None = None
@@ -58,26 +64,32 @@ class Bot:
     @classmethod
     def connect(cls, connect: list[str] | None = None, config: str | None = None,
                 robot: str | None = None, name: str = "app",
-                timeout: float = TIMEOUT_S) -> Bot:
-        """Join the robot's router; NoRouter (naming the endpoints) after `timeout` s."""
+                timeout: float = TIMEOUT_S, actions_per_s: float = ACTIONS_PER_S,
+                actions_burst: float = ACTIONS_BURST) -> Bot:
+        """Join the robot's router; NoRouter (naming the endpoints) after `timeout` s.
+        `actions_per_s`/`actions_burst`: this program's action limit (ValueError
+        out of range, checked before connecting)."""
         args = argparse.Namespace(connect=connect, config=config, robot=robot)
-        return cls._open(args, name, timeout)
+        return cls._open(args, name, timeout, check_rate(actions_per_s, actions_burst))
 
     @classmethod
     def from_args(cls, args: argparse.Namespace, name: str = "app",
-                  timeout: float = TIMEOUT_S) -> Bot:
+                  timeout: float = TIMEOUT_S, actions_per_s: float = ACTIONS_PER_S,
+                  actions_burst: float = ACTIONS_BURST) -> Bot:
         """`connect` with the flags of `add_arguments`; sets up logging at `--log-level`."""
+        rate = check_rate(actions_per_s, actions_burst)
         setup_logging(getattr(args, "log_level", None) or "INFO")
-        return cls._open(args, name, timeout)
+        return cls._open(args, name, timeout, rate)
 
     @classmethod
-    def _open(cls, args: argparse.Namespace, name: str, timeout: float) -> Bot:
+    def _open(cls, args: argparse.Namespace, name: str, timeout: float,
+              rate: tuple[float, float]) -> Bot:
         ctx = resolve(args, name)
         try:
             node = ctx.probe(timeout, visible=True)
         except RouterUnreachable as exc:
             raise NoRouter(str(exc), list(ctx.connect)) from None
-        return cls(node, timeout)
+        return cls(node, timeout, *rate)
 
     # -- people --
 
@@ -117,7 +129,7 @@ class Bot:
     @property
     def leases(self) -> LeaseTable:
         """The leases this program holds (opened on first use)."""
-        return self._opened("_leases", lambda: LeaseTable(self.node, self.timeout))
+        return self._opened("_leases", lambda: LeaseTable(self.node, self.timeout, self.limit))
 
     def lease(self, *resources: str, priority: str = "app",
               duration_s: float | None = None) -> Lease:
@@ -129,18 +141,22 @@ class Bot:
     @property
     def eyes(self) -> Eyes:
         """Expressions and gaze through the controller (opened on first use)."""
-        return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout))
+        return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout,
+                                                  self.limit))
 
     # -- speaker --
 
     @property
     def speaker(self) -> Speaker:
         """Sounds through the `audio/play_sound` action (opened on first use)."""
-        return self._opened("_speaker", lambda: Speaker(self.node, self.leases, self.timeout))
+        return self._opened("_speaker", lambda: Speaker(self.node, self.leases,
+                                                        self.timeout, self.limit))
 
-    def play(self, sound: str) -> SoundHandle:
-        """Play a sound of `[audio.sounds]` by name, under an "audio" lease;
-        Refused, NoService."""
+    def play(self, sound: Sound) -> SoundHandle:
+        """Play a sound of `[audio.sounds]` by name, or a file of the player's sound
+        folders (a `Path`, or a str with "/" or an audio suffix: see
+        `speaker.goal_sound`), under an "audio" lease; Refused (a file outside
+        the sound folders: the player's reason), NoService."""
         return self.speaker.play(sound)
 
     def say(self, text: str) -> SoundHandle:

@@ -25,6 +25,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime import leasing
 from buddybot.runtime.leasing import check_duration
 from buddybot.runtime.node import Node
+from buddybot.sdk.actions import ActionLimit
 from buddybot.sdk.errors import Refused, TimedOut
 from buddybot.sdk.leases import Lease, LeaseTable, controller_errors
 from buddybot.sdk.people import Person
@@ -137,10 +138,13 @@ class EyesHandle:
 class Eyes:
     """Expressions and gaze sent to the controller on `eyes/command`."""
 
-    def __init__(self, node: Node, leases: LeaseTable, timeout: float) -> None:
+    def __init__(self, node: Node, leases: LeaseTable, timeout: float,
+                 limit: ActionLimit | None = None) -> None:
         self.node = node
         self.leases = leases
         self.timeout = timeout
+        self.limit = limit
+        """The program's action limit: one token per expression or gaze."""
         self._lock = threading.Lock()
         """One action at a time picks or takes its lease."""
         self._implicit: dict[str, Lease] = {}
@@ -150,8 +154,9 @@ class Eyes:
                 ) -> EyesHandle:
         """Show `expression` (see `expression_of`); for `for_s` s under an implicit lease."""
         action = expression_of(expression)
-        return self._command("expression", action.name, check_duration(for_s),
-                             expression=action)
+        duration = check_duration(for_s)
+        self._take("express")
+        return self._command("expression", action.name, duration, expression=action)
 
     def look_at(self, yaw: float | Person, pitch: float | None = None,
                 distance_m: float | None = None) -> EyesHandle:
@@ -167,8 +172,13 @@ class Eyes:
         if pitch is None:
             raise ValueError("look_at(yaw, pitch) needs a pitch (or pass a Person)")
         gaze = gaze_of(yaw, pitch, distance_m)
+        self._take("look_at")
         return self._command("gaze", f"gaze {gaze[0]:+.2f}/{gaze[1]:+.2f} rad", None,
                              yaw=gaze[0], pitch=gaze[1], target_distance_cm=gaze[2])
+
+    def _take(self, what: str) -> None:
+        if self.limit is not None:
+            self.limit.take(what)
 
     def release(self, timeout: float | None = None) -> None:
         """End the leases the eyes took themselves: the controller resumes."""
@@ -189,7 +199,7 @@ class Eyes:
             return own, True
         if own is not None:
             own.release()
-        lease = self.leases.acquire([resource], "app", for_s)
+        lease = self.leases.acquire([resource], "app", for_s, counted=False)
         self._implicit[resource] = lease
         return lease, True
 

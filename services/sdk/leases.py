@@ -27,6 +27,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime import leasing
 from buddybot.runtime.node import Node
+from buddybot.sdk.actions import ActionLimit
 from buddybot.sdk.calls import sdk_errors
 from buddybot.sdk.errors import Refused, TimedOut
 
@@ -141,9 +142,11 @@ class Lease:
 class LeaseTable:
     """The leases this program holds, asked of and followed on the controller."""
 
-    def __init__(self, node: Node, timeout: float) -> None:
+    def __init__(self, node: Node, timeout: float, limit: ActionLimit | None = None) -> None:
         self.node = node
         self.timeout = timeout
+        self.limit = limit
+        """The program's action limit, taken by each `acquire` it asks itself."""
         self._lock = threading.Lock()
         self._held: dict[str, Lease] = {}
         self._seen: set[str] = set()
@@ -157,10 +160,15 @@ class LeaseTable:
                         None)
 
     def acquire(self, names: Iterable[str], priority: str = "app",
-                duration_s: float | None = None, timeout: float | None = None) -> Lease:
-        """A granted lease; Refused with the controller's reason, NoService when
-        no controller answers, ValueError for a malformed request."""
+                duration_s: float | None = None, timeout: float | None = None, *,
+                counted: bool = True) -> Lease:
+        """A granted lease; Refused with the controller's reason (or "rate
+        limited" over the program's action limit), NoService when no controller
+        answers, ValueError for a malformed request. `counted=False`: a lease an
+        action takes for itself (the action was counted already)."""
         req = leasing.request(self.node, names, priority, duration_s)
+        if counted and self.limit is not None:
+            self.limit.take("lease")
         limit = self.timeout if timeout is None else timeout
         with controller_errors(keys.LEASE_ACQUIRE, limit):
             lease_id = leasing.acquire(self.node, req, limit)

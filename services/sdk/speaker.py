@@ -1,9 +1,17 @@
 """The speaker: sounds played through the `audio/play_sound` action.
 
-A goal names a sound of `[audio.sounds]`, or `say:<text>` to speak any text
-(docs/design.md 4.6); its reply comes at once (accepted, or refused with the
-reason), its progress on the latched `audio/play_sound/status`.
-`SoundHandle` follows one goal to its final state.
+A goal names a sound of `[audio.sounds]`, `say:<text>` to speak any text,
+or `file:<path>` to play a file of the player's sound folders (docs/design.md
+4.6); its reply comes at once (accepted, or refused with the reason), its
+progress on the latched `audio/play_sound/status`. `SoundHandle` follows one
+goal to its final state. `goal_sound` (pure) is how `play()` tells a name
+from a file.
+
+Only the player knows its sound folders, so a file goal is accepted by the
+action and judged by the player's sandbox when it is handed over: `play()`
+waits for that answer (the goal PLAYING or ended) and raises `Refused` with
+the player's reason when the goal ended ABORTED, as it does for a name the
+action refuses.
 
 A program that holds no "audio" lease gets one for the sound's length
 (released when the sound ends), so the controller's greeting does not talk
@@ -14,15 +22,19 @@ controller there is nobody to share the speaker with: the sound plays.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
+import os
 import threading
 from collections.abc import Generator
+from pathlib import PurePath
 from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
+from buddybot.sdk.actions import ActionLimit
 from buddybot.sdk.calls import call
 from buddybot.sdk.errors import NoService, Refused, TimedOut
 from buddybot.sdk.leases import Lease, LeaseTable
@@ -31,6 +43,40 @@ log = logging.getLogger("buddybot.sdk")
 
 WAIT_S = 120.0
 """How long `wait()` and `await handle` wait for a sound's end by default."""
+
+Sound = str | os.PathLike[str]
+"""What `play()` takes: a sound name, `say:<text>`, `file:<path>`, or a path."""
+
+
+def goal_sound(sound: Sound) -> str:
+    """The `PlaySound.sound` for what a program passed to `play()`.
+
+    A path object (`Path("chime.wav")`), or a str holding a "/" or ending in
+    an audio suffix (.wav .flac .mp3 .ogg .oga, any case), names a file:
+    `file:<path>`, relative to the player's sound folders or absolute. A str
+    already starting with `say:` or `file:` is kept; any other str is a name
+    of `[audio.sounds]`. ValueError for anything else, or for a goal that is
+    not 1..256 characters or a malformed `file:`/`say:` goal.
+    """
+    if isinstance(sound, os.PathLike | PurePath):
+        path = os.fspath(sound)
+        if not isinstance(path, str):
+            raise ValueError(f"a sound file is named by a str path, not {sound!r}")
+        goal = m.FILE_PREFIX + path
+    elif isinstance(sound, str):
+        if sound.startswith((m.TTS_PREFIX, m.FILE_PREFIX)):
+            goal = sound
+        elif "/" in sound or sound.lower().endswith(m.AUDIO_SUFFIXES):
+            goal = m.FILE_PREFIX + sound
+        else:
+            goal = sound
+    else:
+        raise ValueError(f"play() takes a sound name or a file path, not {sound!r}")
+    if not 1 <= len(goal) <= 256:
+        raise ValueError(f"a sound is a name or file of 1 to 256 characters, not {goal!r}")
+    m.spoken_text(goal)
+    m.sound_file(goal)
+    return goal
 
 
 class SoundHandle:
@@ -49,6 +95,8 @@ class SoundHandle:
         self.state: str = "ACCEPTED"
         self.message = ""
         self._ended = threading.Event()
+        self._started = threading.Event()
+        """Set once the goal left ACCEPTED: the player started it, or it ended."""
 
     @property
     def done(self) -> bool:
@@ -58,6 +106,8 @@ class SoundHandle:
         if self._ended.is_set():
             return
         self.state, self.message = status.state, status.message
+        if status.state != "ACCEPTED":
+            self._started.set()
         if status.state in m.TERMINAL_GOAL_STATES:
             self._ended.set()
             if self.lease is not None:
@@ -67,6 +117,14 @@ class SoundHandle:
         """The final state, once reached; TimedOut after `timeout` s."""
         if not self._ended.wait(timeout):
             raise TimedOut(f"sound {self.sound!r} (goal {self.goal_id}) still {self.state} "
+                           f"after {timeout:g} s")
+        return self.state
+
+    def started(self, timeout: float) -> str:
+        """The state once the goal left ACCEPTED (PLAYING or a final state);
+        TimedOut after `timeout` s."""
+        if not self._started.wait(timeout):
+            raise TimedOut(f"sound {self.sound!r} (goal {self.goal_id}) not started "
                            f"after {timeout:g} s")
         return self.state
 
@@ -87,10 +145,13 @@ class SoundHandle:
 class Speaker:
     """Goals to `audio/play_sound`, and their statuses routed to the handles."""
 
-    def __init__(self, node: Node, leases: LeaseTable, timeout: float) -> None:
+    def __init__(self, node: Node, leases: LeaseTable, timeout: float,
+                 limit: ActionLimit | None = None) -> None:
         self.node = node
         self.leases = leases
         self.timeout = timeout
+        self.limit = limit
+        """The program's action limit: one token per sound."""
         self._lock = threading.Lock()
         self._handles: BoundedDict[str, SoundHandle] = BoundedDict(256)
         self._early: BoundedDict[str, m.PlaySoundStatus] = BoundedDict(64)
@@ -106,12 +167,36 @@ class Speaker:
         if handle is not None:
             handle.update(status)
 
-    def play(self, sound: str, timeout: float | None = None) -> SoundHandle:
-        """Start a sound of `[audio.sounds]` (or `say:<text>`); Refused with the
-        action's reason, or the controller's when the speaker is held."""
-        if not isinstance(sound, str) or not 1 <= len(sound) <= 256:
-            raise ValueError(f"a sound is a name of 1 to 256 characters, not {sound!r}")
+    def play(self, sound: Sound, timeout: float | None = None) -> SoundHandle:
+        """Start a sound of `[audio.sounds]`, `say:<text>` or a file (`goal_sound`
+        tells which); Refused with the action's reason, the player's for a file
+        it may not play, or the controller's when the speaker is held."""
+        goal = goal_sound(sound)
+        self._take("play")
         limit = self.timeout if timeout is None else timeout
+        handle = self._start(goal, limit)
+        if m.sound_file(goal) is not None:
+            self._judged(handle, limit)
+        return handle
+
+    @staticmethod
+    def _judged(handle: SoundHandle, limit: float) -> None:
+        """Wait for the player's verdict on a file goal: Refused with its reason
+        when the goal ended ABORTED (the sandbox's refusal, a bad file)."""
+        try:
+            state = handle.started(limit)
+        except TimedOut:
+            with contextlib.suppress(Exception):
+                handle.cancel(limit)
+            raise
+        if state == "ABORTED":
+            raise Refused(handle.message)
+
+    def _take(self, what: str) -> None:
+        if self.limit is not None:
+            self.limit.take(what)
+
+    def _start(self, sound: str, limit: float) -> SoundHandle:
         lease = self._audio_lease(limit)
         try:
             reply: m.PlaySoundReply = call(
@@ -140,7 +225,8 @@ class Speaker:
             raise ValueError(f"say() speaks a str, not {text!r}")
         sound = m.TTS_PREFIX + text
         m.spoken_text(sound)
-        return self.play(sound, timeout)
+        self._take("say")
+        return self._start(sound, self.timeout if timeout is None else timeout)
 
     def _audio_lease(self, timeout: float) -> Lease | None:
         """An "audio" lease for one sound, or None: the program holds one already,
@@ -148,7 +234,7 @@ class Speaker:
         if self.leases.holding("audio") is not None:
             return None
         try:
-            return self.leases.acquire(["audio"], "app", None, timeout)
+            return self.leases.acquire(["audio"], "app", None, timeout, counted=False)
         except NoService as exc:
             log.debug("playing without an audio lease: %s", exc)
             return None

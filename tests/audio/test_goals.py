@@ -55,6 +55,17 @@ def test_a_say_goal_speaks_any_text_and_a_bad_text_is_refused_with_why() -> None
     assert "say:TEXT" in b.request("g8", "fanfare", player_present=True).reply.message
 
 
+def test_a_file_goal_is_left_to_the_players_sandbox_and_a_bad_path_refused_with_why() -> None:
+    b = book()
+    for path in ("file:chime.wav", "file:../../etc/passwd"):  # the player decides
+        d = b.request(f"g-{path}", path, player_present=True)
+        assert d.accepted and b.should_play(f"g-{path}"), d.reply.message
+    for bad, why in (("file:", "no file named"), ("file:a\x00b", "non-printable")):
+        refused = b.request("g9", bad, player_present=True)
+        assert not refused.accepted and why in refused.reply.message, refused.reply.message
+    assert "file:PATH" in b.request("g8", "fanfare", player_present=True).reply.message
+
+
 def test_preempt_cancels_the_running_goal_first() -> None:
     b = book("preempt")
     b.request("g1", "greeting", player_present=True)

@@ -259,6 +259,27 @@ def test_files_outside_the_sound_dirs_get_one_refusal(player_factory, tmp_path) 
         outside.unlink()
 
 
+def test_a_file_request_is_a_file_of_the_sound_dirs_never_a_name(player_factory, tmp_path):
+    write_wav(tmp_path / "chime.wav", tone(0.1))
+    player, _ = player_factory(sounds={"greeting": "chime.wav"})
+    assert player.resolve("file:chime.wav") == ("file:chime.wav", tmp_path / "chime.wav")
+    assert player.resolve(f"file:{tmp_path / 'chime.wav'}")[1] == tmp_path / "chime.wav"
+    (tmp_path.parent / f"{tmp_path.name}-dir").mkdir()
+    (tmp_path / "out.wav").symlink_to("/etc/passwd")
+    for request in ("file:../../etc/passwd", "file:/etc/passwd", "file:out.wav",
+                    f"file:../{tmp_path.name}-dir", "file:/no/such.wav"):
+        with pytest.raises(AudioError) as err:
+            player.play(request)
+        assert str(err.value) == access.REFUSAL, request
+    # inside the sound dirs the player says what is wrong with the file; a name after
+    # file: is a file name, never the configured sound nor a text to speak
+    (tmp_path / "sub").mkdir()
+    for request, why in (("file:sub", "not a regular file"), ("file:missing.wav", "no such"),
+                         ("file:greeting", "no such"), ("file:say:hello", "no such")):
+        with pytest.raises(AudioError, match=f"sound 'file:{request[5:]}': .*{why}"):
+            player.play(request)
+
+
 def test_long_and_large_files_are_refused_from_header_and_size(tmp_path: Path) -> None:
     long = write_sparse_wav(tmp_path / "long.wav", 30 * 60)
     with pytest.raises(AudioError, match=r"1800 s long, more than max_duration_s \(60 s\)"):

@@ -154,3 +154,15 @@ def test_a_say_goal_names_its_text_and_bad_texts_say_why() -> None:
         m.spoken_text("say:two\nlines")
     with pytest.raises(ValueError, match="non-printable"):
         m.spoken_text("say:bell\x07")
+
+
+def test_a_file_goal_names_its_path_and_bad_paths_say_why() -> None:
+    assert m.sound_file("greeting") is None and m.sound_file("say:hi") is None
+    assert m.sound_file("file:chime.wav") == "chime.wav"
+    assert m.sound_file("file:../../etc/passwd") == "../../etc/passwd"  # the sandbox judges
+    assert m.sound_file("file:/abs/My Sound.ogg") == "/abs/My Sound.ogg"
+    for bad, why in (("file:", "no file named"), ("file:   ", "no file named"),
+                     ("file:a\x00b.wav", r"non-printable character '\\x00'"),
+                     ("file:two\nlines.wav", "non-printable")):
+        with pytest.raises(ValueError, match=why):
+            m.sound_file(bad)

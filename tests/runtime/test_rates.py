@@ -7,7 +7,7 @@ from collections import deque
 
 import pytest
 
-from buddybot.runtime.rates import RateCounter, count_hz, rate_hz, span_hz
+from buddybot.runtime.rates import RateCounter, TokenBucket, count_hz, rate_hz, span_hz
 
 
 def test_rate_counts_only_the_window() -> None:
@@ -52,3 +52,26 @@ def test_counter_forgets_arrivals_older_than_the_window() -> None:
         rate = c.add(1.0 + i * 0.3)
     assert rate == pytest.approx(1 / 0.3)
     assert all(4.0 - t <= 2.0 for t in c.stamps)
+
+
+def test_a_token_bucket_allows_the_burst_then_the_rate_and_never_waits() -> None:
+    bucket = TokenBucket(rate_per_s=10.0, burst=3.0, now=100.0)
+    assert [bucket.take(100.0) for _ in range(4)] == [True, True, True, False]
+    assert not bucket.take(100.05)  # half a token back
+    assert bucket.take(100.1) and not bucket.take(100.1)
+    assert [bucket.take(200.0) for _ in range(4)] == [True, True, True, False]  # capped
+    assert not bucket.take(150.0)  # a clock going back refills nothing
+
+
+def test_a_token_bucket_on_a_wall_clock_in_seconds_refills_exactly_one_token() -> None:
+    now = 1.7e9 + 0.123456789
+    bucket = TokenBucket(rate_per_s=20.0, burst=1.0, now=now)
+    assert bucket.take(now) and not bucket.take(now)
+    assert bucket.take(now + 1 / 20)  # float rounding must not lose the token
+
+
+def test_a_token_bucket_follows_a_changed_rate() -> None:
+    bucket = TokenBucket(rate_per_s=1.0, burst=1.0, now=0.0)
+    assert bucket.take(0.0) and not bucket.take(0.5)
+    bucket.rate_per_s = 100.0
+    assert bucket.take(0.51)

@@ -9,17 +9,24 @@ from __future__ import annotations
 import asyncio
 import shutil
 from collections.abc import Callable
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import pytest
 
+from buddybot.audio.access import REFUSAL
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, NoService, Refused, SoundHandle, TimedOut
-from buddybot.sdk.speaker import Speaker
+from buddybot.sdk.speaker import Speaker, goal_sound
 from buddybot.tools.testing import Collector, Process, retry_until
-from tests.audio.conftest import Audio, audio, beep_config  # noqa: F401 (fixture)
+from tests.audio.conftest import (  # noqa: F401 (fixture)
+    Audio,
+    audio,
+    beep_config,
+    tone,
+    write_wav,
+)
 
 # --- pure ----------------------------------------------------------------------------------
 
@@ -37,6 +44,44 @@ def test_a_handle_follows_its_goal_to_the_first_final_state() -> None:
     handle.update(m.PlaySoundStatus(goal_id="g1", state="CANCELED", message="preempted"))
     handle.update(m.PlaySoundStatus(goal_id="g1", state="SUCCEEDED"))
     assert handle.wait(0.01) == "CANCELED" and handle.message == "preempted"
+
+
+@pytest.mark.parametrize("given, goal", [
+    ("greeting", "greeting"),
+    ("chime.wav", "file:chime.wav"),
+    ("Chime.OGG", "file:Chime.OGG"),
+    ("birds/robin", "file:birds/robin"),
+    ("/usr/share/sounds/a.flac", "file:/usr/share/sounds/a.flac"),
+    (Path("chime"), "file:chime"),
+    (PurePosixPath("../x.mp3"), "file:../x.mp3"),
+    ("say:Hello there", "say:Hello there"),
+    ("file:chime", "file:chime"),
+    ("wav", "wav"),
+])
+def test_a_path_or_a_str_with_a_slash_or_an_audio_suffix_is_a_file(given: object,
+                                                                   goal: str) -> None:
+    assert goal_sound(given) == goal  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad, why", [
+    ("", "1 to 256 characters"), ("x" * 257, "1 to 256"), (Path("a" * 260), "1 to 256"),
+    (42, "a sound name or a file path"), (b"chime.wav", "a sound name or a file path"),
+    ("file:", "no file named"), ("a\x00.wav", "non-printable"), ("say: ", "nothing to say"),
+])
+def test_a_malformed_sound_raises_before_anything_is_sent(bad: object, why: str) -> None:
+    with pytest.raises(ValueError, match=why):
+        goal_sound(bad)  # type: ignore[arg-type]
+
+
+def test_a_file_goal_refused_by_the_player_raises_refused_with_its_reason() -> None:
+    handle = _handle()
+    handle.update(m.PlaySoundStatus(goal_id="g1", state="ABORTED", message=REFUSAL))
+    with pytest.raises(Refused) as err:
+        Speaker._judged(handle, 0.01)
+    assert err.value.reason == REFUSAL
+    started = _handle()
+    started.update(m.PlaySoundStatus(goal_id="g1", state="PLAYING"))
+    Speaker._judged(started, 0.01)  # playing: no error
 
 
 # --- real audio services -------------------------------------------------------------------
@@ -99,6 +144,36 @@ def test_unknown_sounds_are_refused_and_bad_texts_raise_with_the_reason(
             bot.say(bad)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="1 to 256 characters"):
         bot.play("")
+
+
+@pytest.mark.integration
+def test_a_file_of_the_sound_dirs_plays_and_one_outside_is_refused_with_the_players_reason(
+        ready_audio: Callable[..., Audio], bot_factory: Callable[..., Bot],
+        tmp_path: Path) -> None:
+    config, _ = beep_config(tmp_path, 0.3)  # the sound dirs: beep.wav's folder (tmp_path)
+    write_wav(tmp_path / "chime.wav", tone(0.3))
+    outside = write_wav(tmp_path.parent / f"{tmp_path.name}-outside.wav", tone(0.3))
+    (tmp_path / "escape.wav").symlink_to(outside)
+    a = ready_audio(config)
+    bot = bot_factory()
+    try:
+        for sound in ("chime.wav", tmp_path / "chime.wav"):
+            handle = bot.play(sound)
+            assert handle.sound == "file:" + str(sound) and handle.state in (
+                "PLAYING", "SUCCEEDED")
+            assert handle.wait(30) == "SUCCEEDED", handle.message
+        for bad in ("../../etc/passwd", "/etc/passwd", outside, "escape.wav",
+                    f"../{tmp_path.name}-outside.wav", Path("."), "/no/such.wav"):
+            with pytest.raises(Refused) as err:
+                bot.play(bad)
+            assert err.value.reason == REFUSAL, bad
+        (tmp_path / "sub").mkdir()
+        with pytest.raises(Refused, match="not a regular file"):
+            bot.play(Path("sub"))  # a folder inside the sound dirs: the player says so
+        assert bot.play("beep").wait(30) == "SUCCEEDED"  # names are still names
+        assert a.alive()
+    finally:
+        outside.unlink()
 
 
 @pytest.mark.integration
