@@ -221,6 +221,11 @@ RADAR_FRAMES = Topic(
     "radar/{device}/frames", "every LD2410 report frame of one radar bridge",
     type=m.LD2410TargetDataFrameArray, qos=STREAM,
 )
+RADAR_TARGETS = Topic(
+    "radar/{device}/targets",
+    "every angle-radar (LD2450) report: targets with position and bearing",
+    type=m.RadarTargets, qos=STREAM,
+)
 PRESENCE = Topic(
     "radar/presence", "someone in range or not, on change",
     type=m.PresenceDetection, qos=STATE, latched=True,
@@ -326,9 +331,9 @@ NODE_INFO = Service(
 )
 
 TOPICS: tuple[Topic, ...] = (
-    RADAR_FRAMES, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION, EYE_CONTROL,
-    EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS, LEASES,
-    PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+    RADAR_FRAMES, RADAR_TARGETS, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION,
+    EYE_CONTROL, EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
+    LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
     LEASE_ACQUIRE, LEASE_RELEASE, EYES_COMMAND, PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE,

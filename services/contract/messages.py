@@ -94,6 +94,48 @@ class LD2410TargetDataFrameArray(Message):
     sensors: list[LD2410TargetDataFrame]
 
 
+SensorMetres = Annotated[float, msgspec.Meta(
+    ge=-32.768, le=32.768, description="m, the sensor's own axes (16-bit mm)")]
+MAX_RADAR_TARGETS = 8
+"""Most targets one angle-radar report carries (the LD2450 tracks 3)."""
+
+
+class RadarTarget(Message):
+    """One target of an angle radar (LD2450) report.
+
+    `x_m`/`y_m` are the sensor's own axes as its datasheet defines them (y
+    away from the sensor's face, x across it), decoded from sign-magnitude;
+    `position` is the same point in the camera's frame (ROS axes: x forward,
+    y left, z up, like `FacePosition.point`), placed by the sensor's
+    mounting pose, and `bearing_rad`/`distance_m` are its direction and
+    horizontal range seen from the camera.
+    """
+
+    slot: Annotated[int, msgspec.Meta(ge=0, lt=MAX_RADAR_TARGETS,
+                                      description="the sensor's slot (it may swap)")]
+    x_m: SensorMetres
+    y_m: SensorMetres
+    speed_mps: Annotated[float, msgspec.Meta(ge=-327.68, le=327.68,
+                                             description="m/s, + = moving away")]
+    resolution_m: Annotated[float, msgspec.Meta(ge=0.0, le=65.535, description="m")]
+    position: Point
+    bearing_rad: Annotated[float, msgspec.Meta(ge=-3.15, le=3.15,
+                                               description="rad, + = the robot's left")]
+    distance_m: Metres
+
+
+class RadarTargets(Message):
+    """Every report of one angle radar: its targets now (empty: nobody)."""
+
+    stamp_ns: StampNs
+    """When the report was read."""
+    device_id: Annotated[int, msgspec.Meta(ge=0)]
+    radar_id: Annotated[int, msgspec.Meta(ge=0, description="the sensor's index in the bridge")]
+    model: Literal["LD2450"] = "LD2450"
+    targets: Annotated[list[RadarTarget], msgspec.Meta(max_length=MAX_RADAR_TARGETS)] = (
+        msgspec.field(default_factory=list))
+
+
 class PresenceTarget(enum.IntEnum):
     MOVING = 0
     STANDING = 1
@@ -658,6 +700,8 @@ class NodeInfo(Message):
 ALL_MESSAGES: tuple[type[Message], ...] = (
     LD2410TargetDataFrame,
     LD2410TargetDataFrameArray,
+    RadarTarget,
+    RadarTargets,
     PresenceDetection,
     Image,
     Point,

@@ -60,6 +60,12 @@ def sample_messages() -> list[m.Message]:
         m.LeaseEnd(lease_id="L3", holder="wizard", reason="expired", stamp_ns=now),
         m.EyesCommand(lease_id="L1", expression=m.ExpressionAction.ANIMATE_LOVE, yaw=0.1,
                       pitch=0.0, target_distance_cm=80.0),
+        m.RadarTargets(stamp_ns=now, device_id=0, radar_id=1, targets=[m.RadarTarget(
+            slot=0, x_m=-0.4, y_m=1.5, speed_mps=-0.3, resolution_m=0.32,
+            position=m.Point(x=1.5, y=0.4, z=0.0), bearing_rad=0.26, distance_m=1.55)]),
+        m.RadarTarget(slot=2, x_m=4.0, y_m=8.0, speed_mps=0.0, resolution_m=0.0,
+                      position=m.Point(x=8.0, y=-4.0, z=0.0), bearing_rad=-0.46,
+                      distance_m=8.94),
         m.ScreenExpression(stamp_ns=now, action=m.ExpressionAction.ANIMATE_STAR),
         m.EyeControl(stamp_ns=now, yaw=0.3, pitch=-0.1, target_distance_cm=120.0),
         m.EyesDirection(stamp_ns=now, yaw=17.0, pitch=-5.0),
