@@ -110,8 +110,10 @@ def test_an_app_looping_on_actions_is_limited_counted_and_the_robot_resumes_when
     started = time.monotonic()
     app = run_app(endpoint, log_dir, str(path))
     try:
-        app.wait_for_output("looper: rate limited: express refused, more than 20 actions/s "
-                            "(burst 40) from this program", 30)
+        # The program's own limit and the controller's per-lease one are alike (20/s,
+        # burst 40); under load the controller may see a burst squeezed by the
+        # network and refuse first: either is the app being limited.
+        app.wait_for_output("looper: rate limited: ", 30)
         expr.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30, "LOVE")
         counted = diag.wait_for(lambda d: int(d.values.get("rate_limited", 0)) > 0
                                 and d.level == "WARN", 30,
