@@ -338,10 +338,10 @@ class Scene:
 
 
 def test_presence_from_ld2450_targets_and_ld2410_frames_with_an_ignore_zone(
-        tmp_path: Path, spawn: Spawn, probe: Node) -> None:
+        tmp_path: Path, spawn: Spawn, probe: Node, endpoint: str) -> None:
     """Both models on one bridge: a TV in the doorway zone never makes presence, a
     person elsewhere does (LD2450 alone, then the LD2410 alone); malformed target
-    reports are counted and change nothing."""
+    reports are counted and change nothing; zones removed live, the TV counts."""
     config = tmp_path / "robot.toml"
     config.write_text('[radar_presence]\nabsence_hold_s = 0.5\nzones = [{name = "doorway", '
                       'mode = "ignore", x = [2.0, 3.0], y = [-1.0, 0.0]}]\n')
@@ -393,5 +393,11 @@ def test_presence_from_ld2450_targets_and_ld2410_frames_with_an_ignore_zone(
         d = pdiag.wait_for(lambda d: d.values.get("sensors") == 2 and d.level == "OK", 20,
                            "both sensors fresh")
         assert int(d.values.get("targets_outside_detect_zones") or 0) == 0
+
+        result = param(endpoint, "set", "radar-presence", "zones", "[]")
+        assert result.returncode == 0, result.stderr
+        tv_counts = presence.wait_for(lambda v: v.presence_state == IN
+                                      and v.distance_m > 2.5, 20, "IN_RANGE: the TV counts")
+        assert tv_counts.target_state == m.PresenceTarget.MOVING  # 0.3 m/s
     assert all(v.presence_state in (IN, OUT) for v in presence.messages)
     assert service.alive()

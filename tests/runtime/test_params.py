@@ -52,7 +52,8 @@ def test_required_live_fields_are_marked() -> None:
     from buddybot.eyes.settings import EyesSettings
 
     live = {
-        RadarPresenceSettings: ["range_m", "exit_margin_m", "absence_hold_s", "target_hold_s"],
+        RadarPresenceSettings: ["range_m", "exit_margin_m", "absence_hold_s", "target_hold_s",
+                                "moving_speed_mps", "zones"],
         ControllerSettings: ["greet_dwell_s", "regreet_cooldown_s", "absence_hold_s"],
         EyesSettings: ["pupil_curve", "lids", "unknown_distance_percent"],
         AudioPlayerSettings: ["volume"],
