@@ -131,6 +131,7 @@ class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=
         "STANDING (a still person reads 0 to a few cm/s, a slow walk ~0.5 m/s)")] = 0.1
     zones: Annotated[list[RadarZone], msgspec.Meta(
         extra={"live": True}, max_length=MAX_ZONES,
+        examples=[[{"name": "doorway", "mode": "ignore", "x": [2.0, 3.0], "y": [-1.0, 0.0]}]],
         description="rectangles in the camera's frame deciding which angle-radar "
         "targets count: detect (if any, a target must be inside one) or ignore "
         "(never counts); LD2410 readings have no position and ignore them")] = (
