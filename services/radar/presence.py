@@ -1,4 +1,4 @@
-"""The presence rule: radar frames -> IN_RANGE / OUT_OF_RANGE, with what real radars need.
+"""The presence rule: radar reports -> IN_RANGE / OUT_OF_RANGE, with what real radars need.
 
 Pure logic, driven by explicit timestamps (seconds, monotonic), so every
 timing rule is tested without waiting.
@@ -33,6 +33,13 @@ else MOVING; publish on change. What a real LD2410 adds, and the answer:
   pushes out a sensor that was already there (and the person it sees),
   not even one still becoming established. A sensor whose first frame
   comes in the middle of such a flood is only tracked once it ends.
+* Angle radars (LD2450) report targets with a position instead of one
+  distance: `read_targets` keeps those the zones count (zones.py) and
+  makes of them the same per-sensor reading, the nearest counted target's
+  distance, so hysteresis, holds, staleness and the sensor table apply to
+  both models alike, and a mix of them is one table: IN_RANGE when any
+  fresh sensor has someone within range. The kind of an LD2450 target
+  comes from its speed: MOVING when |speed| > `moving_speed_mps`.
 * Stamps: a verdict carries the stamp of the frame that caused it, or of
   the latest frame for a verdict that time caused. Never the largest
   stamp ever seen: one frame stamped far in the future would otherwise be
@@ -41,10 +48,12 @@ else MOVING; publish on change. What a real LD2410 adds, and the answer:
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
-from buddybot.contract.messages import PresenceState, PresenceTarget, TargetState
+from buddybot.contract.messages import PresenceState, PresenceTarget, RadarTarget, TargetState
 from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.radar.zones import ZoneVerdict, judge
 from buddybot.runtime.limits import BoundedDict
 
 TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
@@ -79,6 +88,68 @@ class Reading:
                 cm = self.still_distance_cm
         return cm / 100.0
 
+    @property
+    def kind(self) -> PresenceTarget:
+        """STANDING only when the sensor says STATIONARY alone (the seed's rule)."""
+        return (PresenceTarget.STANDING if self.target_state == TargetState.STATIONARY
+                else PresenceTarget.MOVING)
+
+
+@dataclass(frozen=True)
+class TargetsReading:
+    """What the rule needs from one angle-radar report, after the zones: the
+    nearest counted target (None: nobody counted), and how many were not counted."""
+
+    nearest: RadarTarget | None
+    moving: bool = False
+    ignored: int = 0
+    """Targets inside an ignore zone."""
+    outside: int = 0
+    """Targets outside every detect zone."""
+
+    @property
+    def present(self) -> bool:
+        return self.nearest is not None
+
+    @property
+    def distance_m(self) -> float:
+        return 0.0 if self.nearest is None else self.nearest.distance_m
+
+    @property
+    def kind(self) -> PresenceTarget:
+        return PresenceTarget.MOVING if self.moving else PresenceTarget.STANDING
+
+
+SensorReading = Reading | TargetsReading
+"""One sensor's latest report, whichever the model: the table holds both."""
+
+
+def read_targets(targets: Sequence[RadarTarget], rules: RadarPresenceSettings) -> TargetsReading:
+    """An LD2450 report as a reading: the targets the zones count, the nearest of
+    them (by its horizontal distance from the camera) decides distance and kind.
+
+    The nearest, as for LD2410 sensors: the verdict describes the person
+    closest to the robot. Its kind comes from its speed, MOVING when
+    |speed| > `moving_speed_mps` (0.1 m/s): a person standing reads about 0
+    (a few cm/s while fidgeting), a slow walk ~0.5 m/s, so 0.1 splits them
+    with room on both sides; `target_hold_s` then smooths a fidget that
+    crosses it. The speed is radial (Doppler, toward or away from the
+    sensor): someone walking straight across its view reads slow and may be
+    STANDING until their path bends.
+    """
+    nearest: RadarTarget | None = None
+    ignored = outside = 0
+    for target in targets:
+        verdict = judge(rules.zones, target.position.x, target.position.y)
+        if verdict is ZoneVerdict.IGNORED:
+            ignored += 1
+        elif verdict is ZoneVerdict.OUTSIDE:
+            outside += 1
+        elif nearest is None or target.distance_m < nearest.distance_m:
+            nearest = target
+    moving = nearest is not None and abs(nearest.speed_mps) > rules.moving_speed_mps
+    return TargetsReading(nearest, moving, ignored, outside)
+
 
 @dataclass(frozen=True)
 class Verdict:
@@ -92,7 +163,7 @@ class Verdict:
 
 @dataclass
 class _Sensor:
-    reading: Reading
+    reading: SensorReading
     seen_s: float
     stamp_ns: int
     first_s: float
@@ -146,8 +217,10 @@ class PresenceTracker:
 
     # -- inputs --
 
-    def update(self, sensor: str, reading: Reading, now_s: float, stamp_ns: int) -> Verdict | None:
-        """A frame from `sensor` (any stable name, e.g. "0/1" = device/radar)."""
+    def update(self, sensor: str, reading: SensorReading, now_s: float,
+               stamp_ns: int) -> Verdict | None:
+        """A report from `sensor` (any stable name, e.g. "0/1" = device/radar),
+        of either model: a sensor that changes model keeps its entry."""
         entry = self._sensors.get(sensor)
         if entry is None:
             self._make_room()
@@ -191,8 +264,8 @@ class PresenceTracker:
 
     # -- the rule --
 
-    def _nearest(self, now_s: float) -> tuple[Reading, int] | None:
-        best: tuple[Reading, int] | None = None
+    def _nearest(self, now_s: float) -> tuple[SensorReading, int] | None:
+        best: tuple[SensorReading, int] | None = None
         for s in self._sensors.values():
             if now_s - s.seen_s > self.rules.stale_after_s or not s.reading.present:
                 continue
@@ -217,8 +290,7 @@ class PresenceTracker:
             assert nearest is not None
             reading, stamp = nearest
             self._absent_since = None
-            kind = (PresenceTarget.STANDING if reading.target_state == TargetState.STATIONARY
-                    else PresenceTarget.MOVING)
+            kind = reading.kind
             if self.presence != PresenceState.IN_RANGE:
                 self.presence = PresenceState.IN_RANGE
                 self.target = kind

@@ -1,8 +1,9 @@
-"""`buddybot run radar-presence`: radar frames of every bridge -> `radar/presence` (latched).
+"""`buddybot run radar-presence`: radar reports of every bridge -> `radar/presence` (latched).
 
 The seed's radar_hld as a thin adapter around `presence.PresenceTracker`:
-frames arrive from all devices (wildcard subscription), each sensor is
-known as "<device>/<radar_id>", a timer drives the hold and staleness
+LD2410 frames (`radar/*/frames`) and LD2450 targets (`radar/*/targets`)
+arrive from all devices (wildcard subscriptions), each sensor is known as
+"<device>/<radar_id>" whatever its model, a timer drives the hold and staleness
 rules, and a change is published at once, stamped with the frame that
 caused it. Stale sensors are reported in `diagnostics/radar-presence`.
 
@@ -26,7 +27,7 @@ import time
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar.intake import Intake
-from buddybot.radar.presence import PresenceTracker, Reading, Verdict
+from buddybot.radar.presence import PresenceTracker, Reading, Verdict, read_targets
 from buddybot.radar.settings import RadarPresenceSettings
 from buddybot.runtime.limits import clip, plausible_stamp
 from buddybot.runtime.node import Node
@@ -40,7 +41,8 @@ NAMES_SHOWN = 4  # sensor names listed in diagnostics; the rest are counted
 NAME_MAX = 60  # characters of a sensor name (the device part comes from the key)
 QUEUE_SIZE = 256  # frames from not (yet) established sensors waiting for the rule
 RULE_NAMES = ("range_m", "exit_margin_m", "absence_hold_s", "target_hold_s", "stale_after_s",
-              "max_sensors")
+              "max_sensors", "moving_speed_mps")
+Report = m.LD2410TargetDataFrameArray | m.RadarTargets
 
 
 def settings_from(ctx: ServiceContext) -> RadarPresenceSettings:
@@ -61,7 +63,11 @@ class PresenceService:
         self._published = 0
         self.implausible_stamps = 0
         self.ignored_frames = 0
-        self.intake: Intake[m.LD2410TargetDataFrameArray] = Intake(
+        self.zone_ignored = 0
+        """Angle-radar targets inside an ignore zone (each report counts again)."""
+        self.zone_outside = 0
+        """Angle-radar targets outside every detect zone."""
+        self.intake: Intake[Report] = Intake(
             self._take, general_size=QUEUE_SIZE, per_key=rules.max_sensors,
             max_trusted=rules.max_sensors, on_error=self._handler_failed,
             name="presence-intake")
@@ -73,12 +79,16 @@ class PresenceService:
         with self._lock:
             self.tracker.rules = rules
 
-    def submit(self, msg: m.LD2410TargetDataFrameArray, key: str) -> None:
-        """In Zenoh's thread: only sorted into the intake."""
+    def submit(self, msg: Report, key: str) -> None:
+        """In Zenoh's thread: only sorted into the intake (frames and targets
+        come on different keys, so each has its own lane once trusted)."""
         self.intake.submit(key, msg)
 
-    def _take(self, key: str, msg: m.LD2410TargetDataFrameArray) -> None:
-        self.on_frames(msg, key)
+    def _take(self, key: str, msg: Report) -> None:
+        if isinstance(msg, m.RadarTargets):
+            self.on_targets(msg, key)
+        else:
+            self.on_frames(msg, key)
 
     def _handler_failed(self, exc: BaseException) -> None:
         self.node.diagnostics.increment("callback_errors")
@@ -108,6 +118,25 @@ class PresenceService:
         if trusted:
             self.intake.trust(key)
 
+    def on_targets(self, msg: m.RadarTargets, key: str) -> None:
+        """One LD2450 report: the targets the zones count make one sensor's reading."""
+        now = time.monotonic()
+        stamp, replaced = plausible_stamp(msg.stamp_ns, m.now_ns())
+        device = (keys.RADAR_TARGETS.match(key) or {}).get("device", str(msg.device_id))
+        name = clip(f"{device}/{msg.radar_id}", NAME_MAX)
+        with self._lock:
+            if replaced:
+                self.implausible_stamps += 1
+            reading = read_targets(msg.targets, self.tracker.rules)
+            self.zone_ignored += reading.ignored
+            self.zone_outside += reading.outside
+            verdict = self.tracker.update(name, reading, now, stamp)
+            if verdict is not None:
+                self._publish(verdict)
+            trusted = self.tracker.established(name)
+        if trusted:
+            self.intake.trust(key)
+
     def tick(self) -> None:
         now = time.monotonic()
         with self._lock:
@@ -120,6 +149,8 @@ class PresenceService:
             values["evicted_sensors"] = self.tracker.evicted
             values["implausible_stamps"] = self.implausible_stamps
             values["ignored_frames"] = self.ignored_frames
+            values["targets_in_ignore_zones"] = self.zone_ignored
+            values["targets_outside_detect_zones"] = self.zone_outside
             values["dropped_frames"] = self.intake.dropped
             values["dropped_established_frames"] = self.intake.dropped_trusted
         if stale == self._stale and known == self._known:
@@ -191,9 +222,11 @@ def run(ctx: ServiceContext) -> int:
         service = PresenceService(node, settings)
         LiveSettings(settings, service.apply_settings).serve(node)
         service.intake.start()
-        # Every device (wildcard). Zenoh's thread only sorts the frames into the
-        # intake; the rule runs on its worker, established sensors first.
+        # Every device (wildcard), both models. Zenoh's thread only sorts the
+        # reports into the intake; the rule runs on its worker, established
+        # sensors first.
         node.subscribe(keys.RADAR_FRAMES, service.submit, delivery="inline")
+        node.subscribe(keys.RADAR_TARGETS, service.submit, delivery="inline")
         node.every(TICK_S, service.tick, name="presence-tick")
         try:
             node.spin()

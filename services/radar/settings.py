@@ -8,9 +8,44 @@ description (unit, why): the config file, the command-line options
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
+
+ZONE_LIMIT_M = 20.0
+"""Farthest zone edge from the camera, metres: the LD2450 sees to 8 m and a
+mounting offset adds little; a zone beyond 20 m is a typo (mm for m)."""
+ZONE_MIN_SIDE_M = 0.1
+"""Narrowest zone side, metres: a person is ~0.4 m across and a target's
+position jitters by about 0.1 m, so a narrower zone holds someone only by chance."""
+MAX_ZONES = 16
+"""Zones at most: a room needs a few (the sensor's own filter has 3)."""
+
+ZoneEdge = Annotated[float, msgspec.Meta(ge=-ZONE_LIMIT_M, le=ZONE_LIMIT_M)]
+ZoneSpan = Annotated[list[ZoneEdge], msgspec.Meta(min_length=2, max_length=2)]
+
+
+class RadarZone(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """A rectangle of floor in the camera's frame (metres, x forward, y left, as
+    `RadarTarget.position`): `detect` (only targets inside one count) or
+    `ignore` (targets inside never count: a doorway, a TV). Edges are inside.
+    Checked when the config or a `param set` is read; the rule is in zones.py."""
+
+    name: Annotated[str, msgspec.Meta(min_length=1, max_length=64)]
+    mode: Literal["detect", "ignore"]
+    x: ZoneSpan
+    """[near, far]: metres forward of the camera."""
+    y: ZoneSpan
+    """[right, left]: metres to the camera's left (right is negative)."""
+
+    def __post_init__(self) -> None:
+        for axis, (low, high) in (("x", self.x), ("y", self.y)):
+            span = f"zone {self.name!r}: {axis} = [{low}, {high}]"
+            if low > high:
+                raise ValueError(f"{span} is inverted: write [{high}, {low}] (smaller first)")
+            if high - low < ZONE_MIN_SIDE_M:
+                raise ValueError(f"{span} is {'empty' if low == high else 'too narrow'}: "
+                                 f"a side needs at least {ZONE_MIN_SIDE_M} m")
 
 
 class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -89,3 +124,22 @@ class RadarPresenceSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=
         description="sensors remembered at most, least recently heard forgotten "
         "first: a robot has a few; the bound keeps a flood of invented sensor ids "
         "from growing the table")] = 16
+    moving_speed_mps: Annotated[float, msgspec.Meta(
+        extra={"live": True},
+        ge=0.0, le=10.0,
+        description="m/s: an angle-radar target faster than this is MOVING, else "
+        "STANDING (a still person reads 0 to a few cm/s, a slow walk ~0.5 m/s)")] = 0.1
+    zones: Annotated[list[RadarZone], msgspec.Meta(
+        extra={"live": True}, max_length=MAX_ZONES,
+        examples=[[{"name": "doorway", "mode": "ignore", "x": [2.0, 3.0], "y": [-1.0, 0.0]}]],
+        description="rectangles in the camera's frame deciding which angle-radar "
+        "targets count: detect (if any, a target must be inside one) or ignore "
+        "(never counts); LD2410 readings have no position and ignore them")] = (
+        msgspec.field(default_factory=list))
+
+    def __post_init__(self) -> None:
+        names = [zone.name for zone in self.zones]
+        twice = sorted({n for n in names if names.count(n) > 1})
+        if twice:
+            raise ValueError(f"zones: each zone needs its own name; repeated: "
+                             f"{', '.join(repr(n) for n in twice)}")

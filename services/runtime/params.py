@@ -142,7 +142,11 @@ def validate(current: S, values: dict[str, Any]) -> tuple[S, list[str]]:
             typed = msgspec.convert(value, _annotation(struct, name))
         except msgspec.ValidationError as exc:
             bounds = describe_range(names[name].type)
-            allowed = f"allowed {bounds}" if bounds else str(exc).replace("`$`", "value")
+            text = str(exc)
+            if " - at `$" in text or ", got `" in text:  # a wrong type, or a bad item
+                allowed = text.replace("`$", f"`{name}")
+            else:
+                allowed = f"allowed {bounds}" if bounds else text.replace("`$`", "value")
             raise ParamRefused(f"{table}.{name} = {clip(repr(value), 80)} refused: "
                                f"{allowed}") from None
         typed_values[name] = msgspec.to_builtins(typed)

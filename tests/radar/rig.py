@@ -1,8 +1,10 @@
-"""The radar test rig: scripted scenes for simulated LD2410s, and waits on what the
-bridge publishes (frames per sensor, diagnostics values)."""
+"""The radar test rig: scripted scenes for simulated LD2410s, waits on what the
+bridge publishes (frames per sensor, diagnostics values), and angle-radar targets
+as the bridge would publish them."""
 
 from __future__ import annotations
 
+import math
 import random
 
 import serial
@@ -54,3 +56,11 @@ def diag_value(msg: m.DiagnosticStatus, name: str) -> object:
 def open_port(path: str) -> serial.Serial:
     """The serial port of a simulated sensor, as the bridge opens a real one."""
     return serial.serial_for_url(path, baudrate=256000, timeout=0.05)
+
+
+def radar_target(x: float, y: float, speed: float = 0.0, slot: int = 0) -> m.RadarTarget:
+    """An LD2450 target at (x forward, y left) metres in the camera's frame, the
+    sensor mounted at the camera facing forward (its y axis = forward)."""
+    return m.RadarTarget(slot=slot, x_m=-y, y_m=x, speed_mps=speed, resolution_m=0.36,
+                         position=m.Point(x=x, y=y, z=0.0), bearing_rad=math.atan2(y, x),
+                         distance_m=math.hypot(x, y))

@@ -1,4 +1,5 @@
-"""The presence rule (pure): seed rule, hysteresis, holds, stale sensors."""
+"""The presence rule (pure): seed rule, hysteresis, holds, stale sensors; angle-radar
+(LD2450) reports through the zones, and both models at once."""
 
 from __future__ import annotations
 
@@ -7,10 +8,18 @@ import random
 import msgspec
 import pytest
 
-from buddybot.contract.messages import PresenceState, PresenceTarget
-from buddybot.radar.presence import PresenceTracker, Reading, Verdict
+from buddybot.contract.messages import PresenceState, PresenceTarget, RadarTarget
+from buddybot.radar.presence import (
+    PresenceTracker,
+    Reading,
+    SensorReading,
+    TargetsReading,
+    Verdict,
+    read_targets,
+)
 from buddybot.radar.scenarios import SCENARIOS
-from buddybot.radar.settings import RadarPresenceSettings
+from buddybot.radar.settings import RadarPresenceSettings, RadarZone
+from tests.radar.rig import radar_target
 
 IN, OUT = PresenceState.IN_RANGE, PresenceState.OUT_OF_RANGE
 MOVING, STANDING = PresenceTarget.MOVING, PresenceTarget.STANDING
@@ -31,7 +40,7 @@ class Clock:
         self.t = 0.0
         self.verdicts: list[Verdict] = []
 
-    def feed(self, reading: Reading, seconds: float = 0.1, sensor: str = "0/0") -> None:
+    def feed(self, reading: SensorReading, seconds: float = 0.1, sensor: str = "0/0") -> None:
         steps = max(1, round(seconds / 0.1))
         for _ in range(steps):
             v = self.tracker.update(sensor, reading, self.t, round(self.t * 1e9))
@@ -332,3 +341,171 @@ def test_noisy_sensor_does_not_flap() -> None:
     c = _run_scenario("noisy", 60.0)
     assert [v.presence for v in c.verdicts].count(OUT) == 0
     assert c.verdicts[0].presence == IN
+
+
+# --- angle radars (LD2450) ------------------------------------------------------------
+
+DOOR = msgspec.convert({"name": "doorway", "mode": "ignore", "x": [2.0, 3.0], "y": [-1.0, 0.0]},
+                       RadarZone)
+ROOM = msgspec.convert({"name": "room", "mode": "detect", "x": [0.3, 2.5], "y": [-1.5, 1.5]},
+                       RadarZone)
+
+
+def seen(*targets: RadarTarget, rules: RadarPresenceSettings | None = None) -> TargetsReading:
+    return read_targets(targets, rules or RadarPresenceSettings())
+
+
+def test_a_report_reads_as_its_nearest_counted_target() -> None:
+    far, near = radar_target(3.0, 1.0, 0.0, slot=0), radar_target(1.2, -0.5, 0.0, slot=1)
+    reading = seen(far, near)
+    assert reading.present and reading.nearest == near
+    assert reading.distance_m == pytest.approx(1.3)
+    assert (reading.ignored, reading.outside) == (0, 0)
+    nobody = seen()
+    assert not nobody.present and nobody.distance_m == 0.0
+
+
+def test_zones_decide_which_targets_count_and_count_the_others() -> None:
+    rules = RadarPresenceSettings(zones=[ROOM, DOOR])
+    in_door = radar_target(2.2, -0.5)  # inside the room too: ignore wins
+    beyond = radar_target(4.0, 0.0)  # outside the only detect zone
+    person = radar_target(2.0, 1.0)
+    reading = seen(in_door, beyond, person, rules=rules)
+    assert reading.nearest == person
+    assert (reading.ignored, reading.outside) == (1, 1)
+    only_door = seen(in_door, rules=rules)
+    assert not only_door.present and only_door.ignored == 1
+
+
+@pytest.mark.parametrize(("speed", "kind"), [
+    (0.0, STANDING), (0.1, STANDING), (-0.1, STANDING), (0.11, MOVING), (-0.5, MOVING),
+    (1.4, MOVING)])
+def test_the_kind_comes_from_the_nearest_counted_target_s_speed(
+        speed: float, kind: PresenceTarget) -> None:
+    """|speed| strictly above moving_speed_mps (0.1 m/s) is MOVING, either way."""
+    assert seen(radar_target(1.0, 0.0, speed)).kind == kind
+
+
+def test_only_the_nearest_target_s_speed_decides() -> None:
+    walker_far, stander_near = radar_target(1.8, 0.0, 1.2), radar_target(1.0, 0.0, 0.0)
+    assert seen(walker_far, stander_near).kind == STANDING
+    in_door = radar_target(2.2, -0.5, 1.2)  # ignored: its speed does not count either
+    assert seen(in_door, radar_target(1.5, 0.5, 0.0),
+                rules=RadarPresenceSettings(zones=[DOOR])).kind == STANDING
+
+
+def test_moving_speed_is_a_rule() -> None:
+    walk = radar_target(1.0, 0.0, 0.3)
+    assert seen(walk).kind == MOVING
+    assert seen(walk, rules=RadarPresenceSettings(moving_speed_mps=0.5)).kind == STANDING
+
+
+def test_ld2450_enters_on_the_first_report_in_range_and_leaves_after_the_hold() -> None:
+    c = Clock(RadarPresenceSettings(range_m=2.0, exit_margin_m=0.3, absence_hold_s=1.0))
+    c.feed(seen(radar_target(3.0, 0.0, -1.0)), 1.0)
+    assert c.verdicts == []
+    c.feed(seen(radar_target(1.2, 1.6, -1.0)))  # exactly 2.0 m: in range
+    assert c.states == [(IN, MOVING)]
+    assert c.verdicts[0].distance_m == 2.0
+    for x in [2.1, 2.25, 1.9, 2.29] * 5:  # within the exit margin: stays
+        c.feed(seen(radar_target(x, 0.0, -1.0)))
+    assert c.states == [(IN, MOVING)]
+    c.feed(seen(), 0.9)  # nobody for less than the hold
+    assert c.states == [(IN, MOVING)]
+    c.feed(seen(), 0.2)
+    assert [s for s, _ in c.states] == [IN, OUT]
+    assert c.verdicts[-1].distance_m == 0.0
+
+
+def test_ld2450_standing_needs_to_last_like_an_ld2410_kind() -> None:
+    c = Clock(RadarPresenceSettings(target_hold_s=1.0))
+    c.feed(seen(radar_target(1.0, 0.0, 0.8)))
+    for _ in range(10):  # stops for a moment, walks on
+        c.feed(seen(radar_target(1.0, 0.0, 0.0)), 0.5)
+        c.feed(seen(radar_target(1.0, 0.0, 0.8)), 0.2)
+    assert c.states == [(IN, MOVING)]
+    c.feed(seen(radar_target(1.0, 0.0, 0.0)), 1.2)
+    assert c.states == [(IN, MOVING), (IN, STANDING)]
+
+
+def test_a_target_in_an_ignore_zone_makes_no_presence() -> None:
+    """The TV in the doorway zone, 2.2 m... with range 3 m: never IN_RANGE;
+    a person elsewhere at the same distance is."""
+    rules = RadarPresenceSettings(range_m=3.0, absence_hold_s=0.5, zones=[DOOR])
+    c = Clock(rules)
+    tv = radar_target(2.2, -0.5, 0.4)
+    c.feed(read_targets([tv], rules), 2.0)
+    assert c.states == [(OUT, MOVING)]
+    c.feed(read_targets([tv, radar_target(2.2, 0.5)], rules))
+    assert c.states == [(OUT, MOVING), (IN, STANDING)]
+
+
+def test_zones_changed_live_apply_to_the_next_report() -> None:
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.3))
+    target = radar_target(1.5, -0.2)
+    c.feed(read_targets([target], c.tracker.rules))
+    assert c.states == [(IN, STANDING)]
+    c.tracker.rules = RadarPresenceSettings(absence_hold_s=0.3, zones=[
+        msgspec.convert({"name": "here", "mode": "ignore", "x": [1.0, 2.0], "y": [-1.0, 1.0]},
+                        RadarZone)])
+    c.feed(read_targets([target], c.tracker.rules), 0.5)
+    assert c.states == [(IN, STANDING), (OUT, STANDING)]
+
+
+def test_an_ld2450_report_with_nobody_is_fresh_and_a_silent_one_is_stale() -> None:
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.5, stale_after_s=1.0))
+    c.feed(seen(radar_target(1.0, 0.0)), sensor="0/1")
+    c.idle(3.0)  # silent: its person is neither kept nor forgotten by the hold
+    assert c.tracker.stale_sensors(c.t) == ["0/1"]
+    assert c.states == [(IN, STANDING)]
+    c.feed(seen(), 0.6, sensor="0/1")  # back, seeing nobody
+    assert c.states == [(IN, STANDING), (OUT, STANDING)]
+    assert c.tracker.stale_sensors(c.t) == []
+
+
+# --- both models at once ----------------------------------------------------------------
+
+
+def test_mixed_sensors_in_range_when_any_says_so() -> None:
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.5))
+    for _ in range(10):  # LD2410 sees nobody, the LD2450 nobody in range
+        c.feed(NOBODY, sensor="0/0")
+        c.feed(seen(radar_target(3.0, 0.0)), sensor="0/1")
+    assert c.states == [(OUT, MOVING)]
+    c.feed(seen(radar_target(1.5, 0.0, 0.0)), sensor="0/1")  # the LD2450 alone
+    assert c.states[-1] == (IN, STANDING)
+    for _ in range(5):  # the LD2450 loses them, the LD2410 has them: still IN
+        c.feed(seen(), sensor="0/1")
+        c.feed(at(140, 1), sensor="0/0")
+    assert [s for s, _ in c.states] == [OUT, IN]
+    for _ in range(10):  # both see nobody for the hold
+        c.feed(seen(), sensor="0/1")
+        c.feed(NOBODY, sensor="0/0")
+    assert [s for s, _ in c.states] == [OUT, IN, OUT]
+
+
+def test_mixed_sensors_the_nearest_decides_distance_and_kind() -> None:
+    tracker = PresenceTracker(RadarPresenceSettings())
+    tracker.update("0/0", at(180, 2), 0.0, 1)  # LD2410: someone still at 1.8 m
+    v = tracker.update("0/1", seen(radar_target(0.9, 0.3, 0.6)), 0.0, 2)
+    assert v is None  # already IN_RANGE (STANDING), the kind change must last
+    assert tracker.presence == IN and tracker.target == STANDING
+    v = tracker.update("0/1", seen(radar_target(0.9, 0.3, 0.6)), 1.1, 3)
+    assert v == Verdict(IN, MOVING, round(0.9487, 3), 3)
+
+
+def test_an_ld2410_ignores_the_zones() -> None:
+    """It has no position: its distance counts wherever the person stands."""
+    everywhere = msgspec.convert({"name": "all", "mode": "ignore", "x": [-20, 20],
+                                  "y": [-20, 20]}, RadarZone)
+    c = Clock(RadarPresenceSettings(zones=[everywhere]))
+    c.feed(at(120), sensor="0/0")
+    assert c.states == [(IN, MOVING)]
+
+
+def test_a_sensor_switching_model_keeps_its_entry() -> None:
+    c = Clock(RadarPresenceSettings(absence_hold_s=0.5))
+    c.feed(at(120), sensor="0/0")
+    c.feed(seen(), 0.6, sensor="0/0")  # the same sensor now sends LD2450 reports
+    assert c.tracker.known_sensors() == ["0/0"]
+    assert [s for s, _ in c.states] == [IN, OUT]

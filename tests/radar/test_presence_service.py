@@ -1,7 +1,8 @@
 """The presence service (`buddybot run radar-presence`) as a real process through a
 real router, fed by the real radar-bridge reading simulated LD2410s on real ptys, or
 by frames published straight to it: silence, restarts, malformed and flooding
-frames, implausible stamps, and a parameter changed while it runs."""
+frames, implausible stamps, a parameter changed while it runs, and LD2450 target
+reports beside LD2410 frames, through the zones."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import random
 import subprocess
 import threading
 from collections.abc import Callable
+from pathlib import Path
 
 import msgspec
 import pytest
@@ -19,7 +21,7 @@ from buddybot.radar.scenarios import NOBODY, Target
 from buddybot.radar.sim import PtySensor
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
-from tests.radar.rig import standing
+from tests.radar.rig import radar_target, standing
 
 pytestmark = pytest.mark.integration
 
@@ -302,3 +304,100 @@ def test_range_m_set_live_moves_the_decision(sensors: Callable[..., PtySensor], 
     changed = diag.wait_for(lambda d: d.values.get("params_changed") == 2, 15,
                             "params_changed in diagnostics")
     assert changed.values["last_param_change"] == "range_m=0.5"
+
+
+class Scene:
+    """A bridge with an LD2410 (radar 0, on radar/0/frames) and an LD2450 (radar 1,
+    on radar/0/targets), each reporting what `frame` and `targets` say, at 10 Hz."""
+
+    def __init__(self, probe: Node) -> None:
+        near, empty = _near_and_empty()
+        self.near, self.empty = near, empty
+        self.frame = empty
+        self.targets: list[m.RadarTarget] = []
+        self._frames = probe.publisher(keys.RADAR_FRAMES, device="0")
+        self._targets = probe.publisher(keys.RADAR_TARGETS, device="0")
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name="scene", daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.1):
+            stamp = m.now_ns()
+            self._frames.put(m.LD2410TargetDataFrameArray(stamp_ns=stamp, device_id=0,
+                                                          sensors=[self.frame]))
+            self._targets.put(m.RadarTargets(stamp_ns=stamp, device_id=0, radar_id=1,
+                                             targets=list(self.targets)))
+
+    def __enter__(self) -> Scene:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+
+def test_presence_from_ld2450_targets_and_ld2410_frames_with_an_ignore_zone(
+        tmp_path: Path, spawn: Spawn, probe: Node, endpoint: str) -> None:
+    """Both models on one bridge: a TV in the doorway zone never makes presence, a
+    person elsewhere does (LD2450 alone, then the LD2410 alone); malformed target
+    reports are counted and change nothing; zones removed live, the TV counts."""
+    config = tmp_path / "robot.toml"
+    config.write_text('[radar_presence]\nabsence_hold_s = 0.5\nzones = [{name = "doorway", '
+                      'mode = "ignore", x = [2.0, 3.0], y = [-1.0, 0.0]}]\n')
+    presence = Collector[m.PresenceDetection](probe, keys.PRESENCE)
+    pdiag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="radar-presence")
+    service = spawn("radar-presence", "--config", str(config), "--range-m", "3.0")
+    wanted = {keys.RADAR_FRAMES.wildcard(), keys.RADAR_TARGETS.wildcard()}
+    retry_until(lambda: any(i.node == "radar-presence" and wanted <= set(i.subscriptions)
+                            for i in probe.node_infos(1.0)), 30, 0.2, "both subscriptions")
+
+    raw = probe.raw_publisher(probe.key(keys.RADAR_TARGETS, device="0"),
+                              keys.RADAR_TARGETS.encoding)
+    good = msgspec.to_builtins(m.RadarTargets(stamp_ns=m.now_ns(), device_id=0, radar_id=1,
+                                              targets=[radar_target(1.0, 0.0)]))
+    bad_slot = {**good, "targets": [{**good["targets"][0], "slot": 9}]}
+    too_many = {**good, "targets": good["targets"] * 9}
+    malformed = [b"\x00\xff not json", b'{"stamp_ns":1,"device_id":0}',
+                 msgspec.json.encode(bad_slot), msgspec.json.encode(too_many)]
+    for payload in malformed:
+        raw.put(payload)
+    pdiag.wait_for(lambda d: int(d.values.get("malformed") or 0) >= len(malformed), 20,
+                   "malformed target reports counted")
+    raw.close()
+
+    tv = radar_target(2.5, -0.5, 0.3)  # 2.55 m away: within range, inside the doorway zone
+    with Scene(probe) as scene:
+        scene.targets = [tv]
+        first = presence.wait_for(timeout=30, what="first verdict")
+        assert first.presence_state == OUT, first  # the TV alone is nobody
+        pdiag.wait_for(lambda d: int(d.values.get("targets_in_ignore_zones") or 0) >= 5, 20,
+                       "targets in the doorway counted")
+
+        scene.targets = [tv, radar_target(1.0, 0.3, 0.0, slot=1)]  # someone standing
+        entered = presence.wait_for(lambda v: v.presence_state == IN, 20, "IN_RANGE (LD2450)")
+        assert entered.target_state == m.PresenceTarget.STANDING
+        assert entered.distance_m == pytest.approx(1.044, abs=0.001)
+
+        scene.targets = [tv]
+        presence.wait_for(lambda v: v.presence_state == OUT and v.stamp_ns > entered.stamp_ns,
+                          20, "OUT_OF_RANGE: only the TV left")
+
+        presence.clear()
+        scene.frame = scene.near  # the LD2410 sees someone the LD2450 does not
+        from_ld2410 = presence.wait_for(lambda v: v.presence_state == IN, 20,
+                                        "IN_RANGE (LD2410)")
+        assert from_ld2410.distance_m == pytest.approx(1.2)
+        scene.frame = scene.empty
+        presence.wait_for(lambda v: v.presence_state == OUT, 20, "OUT_OF_RANGE again")
+        d = pdiag.wait_for(lambda d: d.values.get("sensors") == 2 and d.level == "OK", 20,
+                           "both sensors fresh")
+        assert int(d.values.get("targets_outside_detect_zones") or 0) == 0
+
+        result = param(endpoint, "set", "radar-presence", "zones", "[]")
+        assert result.returncode == 0, result.stderr
+        tv_counts = presence.wait_for(lambda v: v.presence_state == IN
+                                      and v.distance_m > 2.5, 20, "IN_RANGE: the TV counts")
+        assert tv_counts.target_state == m.PresenceTarget.MOVING  # 0.3 m/s
+    assert all(v.presence_state in (IN, OUT) for v in presence.messages)
+    assert service.alive()

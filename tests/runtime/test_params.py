@@ -52,7 +52,8 @@ def test_required_live_fields_are_marked() -> None:
     from buddybot.eyes.settings import EyesSettings
 
     live = {
-        RadarPresenceSettings: ["range_m", "exit_margin_m", "absence_hold_s", "target_hold_s"],
+        RadarPresenceSettings: ["range_m", "exit_margin_m", "absence_hold_s", "target_hold_s",
+                                "moving_speed_mps", "zones"],
         ControllerSettings: ["greet_dwell_s", "regreet_cooldown_s", "absence_hold_s"],
         EyesSettings: ["pupil_curve", "lids", "unknown_distance_percent"],
         AudioPlayerSettings: ["volume"],
@@ -102,8 +103,18 @@ def test_out_of_range_is_refused_naming_field_and_range() -> None:
 
 
 def test_wrong_type_is_refused() -> None:
-    with pytest.raises(ParamRefused, match="gain"):
+    with pytest.raises(ParamRefused, match=r"gain = 'loud' refused: Expected `float`, got `str`"):
         validate(Tuning(), {"gain": "loud"})
+
+
+def test_a_bad_item_of_a_list_is_refused_saying_which_and_why() -> None:
+    """Not the list's own bound ("at most 16 items"), which the value keeps."""
+    from buddybot.radar.settings import RadarPresenceSettings
+
+    zone = {"name": "tv", "mode": "ignore", "x": [1.0, 2.0], "y": [0.0, 1.0]}
+    with pytest.raises(ParamRefused, match=r"refused: Expected `float` <= 20.0 - at "
+                                           r"`zones\[1\].y\[1\]`"):
+        validate(RadarPresenceSettings(), {"zones": [zone, {**zone, "y": [0.0, 100.0]}]})
 
 
 def test_restart_field_is_refused_unless_unchanged() -> None:
