@@ -319,6 +319,11 @@ class PeopleModel:
             case _:
                 assert_never(event)
 
+    @property
+    def tracks_refused(self) -> int:
+        """Targets that found no track because `max_tracks` existed."""
+        return self._tracker.refused
+
     def _limits(self) -> TrackerLimits:
         s = self.s
         return TrackerLimits(s.track_gate_m, s.track_coast_s, s.max_tracks)
