@@ -22,15 +22,13 @@ import argparse
 import math
 import threading
 import time
-from pathlib import Path
-from tempfile import mkdtemp
 
-from common import host, summary
+from common import host, services_up, summary
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Router, run_service
+from buddybot.tools.testing import Collector
 
 CONFIG = """
 [people]
@@ -106,32 +104,23 @@ def main() -> int:
     parser.add_argument("--count", type=int, default=30)
     parser.add_argument("--tolerance-deg", type=float, default=3.0)
     args = parser.parse_args()
-    folder = Path(mkdtemp(prefix="buddybot-bench-radar-gaze-"))
-    config = folder / "robot.toml"
-    config.write_text(CONFIG)
-    router = Router(log_dir=folder)
-    procs = [run_service(name, router.endpoint, "--config", str(config), log_dir=folder)
-             for name in ("people", "controller", "eyes")]
-    try:
-        with Node("bench", connect=[router.endpoint]) as node:
-            Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
-            Collector(node, keys.CONTROLLER_STATE).wait_for(timeout=30, what="controller up")
-            eyes = Eyes(node)
-            pub = node.publisher(keys.RADAR_TARGETS, device="1")
-            trial(pub, eyes, BEARING_DEG, args.tolerance_deg)  # warm up (and wait for eyes)
+    names = ("people", "controller", "eyes")
+    with (services_up(names, CONFIG, "buddybot-bench-radar-gaze-") as endpoint,
+          Node("bench", connect=[endpoint]) as node):
+        Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
+        Collector(node, keys.CONTROLLER_STATE).wait_for(timeout=30, what="controller up")
+        eyes = Eyes(node)
+        pub = node.publisher(keys.RADAR_TARGETS, device="1")
+        trial(pub, eyes, BEARING_DEG, args.tolerance_deg)  # warm up (and wait for the eyes)
+        leave(pub, eyes)
+        latencies = []
+        for i in range(args.count):
+            bearing = BEARING_DEG if i % 2 else -BEARING_DEG
+            latencies.append(trial(pub, eyes, bearing, args.tolerance_deg))
             leave(pub, eyes)
-            latencies = []
-            for i in range(args.count):
-                bearing = BEARING_DEG if i % 2 else -BEARING_DEG
-                latencies.append(trial(pub, eyes, bearing, args.tolerance_deg))
-                leave(pub, eyes)
-        print(host())
-        print(summary(f"radar target -> eyes/direction within {args.tolerance_deg} deg "
-                      f"(first contact, no face; target <= 150 ms median)", latencies))
-    finally:
-        for proc in procs:
-            proc.stop()
-        router.stop()
+    print(host())
+    print(summary(f"radar target -> eyes/direction within {args.tolerance_deg} deg "
+                  f"(first contact, no face; target <= 150 ms median)", latencies))
     return 0
 
 

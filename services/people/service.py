@@ -3,10 +3,10 @@
 Reads `radar/presence` (latched), `radar/*/targets` (every angle-radar
 report) and `camera/<camera>/face`, turns each message into the model's
 input with the message's own stamp, and runs a `Tick` every `tick_s` so
-holds and timeouts fire without input. Every event the model returns goes out on `people/events` at once, in order; the
-persons present go out on `people/state` (latched) whenever they differ
-from the last ones published (once at start, empty, so a reader learns
-that nobody is there).
+holds and timeouts fire without input. Every event the model returns goes
+out on `people/events` at once, in order; the persons present go out on
+`people/state` (latched) whenever they differ from the last ones published
+(once at start, empty, so a reader learns that nobody is there).
 
 Threads: the three subscriptions run inline in Zenoh's callback thread (a
 step takes microseconds and its puts do not block) and the ticks on the

@@ -17,6 +17,8 @@ import msgspec
 Limit = Annotated[float, msgspec.Meta(
     gt=0.0, le=20.0, description="metres: far edge of a zone (a room is within 20 m)",
     extra={"live": True})]
+Timeout = Annotated[float, msgspec.Meta(gt=0.0, le=60.0, extra={"live": True})]
+"""Seconds, live: how long an angle-radar sighting counts."""
 Hold = Annotated[float, msgspec.Meta(
     ge=0.0, le=3600.0, description="seconds: how long a condition must last (0: at once)",
     extra={"live": True})]
@@ -57,9 +59,8 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         gt=0.0, le=5.0, description="metres: a target this near a track's predicted "
         "position continues it", extra={"live": True})] = 0.6
     # A missed report or two, or a person hidden behind another for a moment, keeps the id.
-    track_coast_s: Annotated[float, msgspec.Meta(
-        gt=0.0, le=60.0, description="seconds: a track no report matched this long is dropped",
-        extra={"live": True})] = 1.0
+    track_coast_s: Annotated[Timeout, msgspec.Meta(
+        description="seconds: a track no report matched this long is dropped")] = 1.0
     # Three targets per LD2450, a few sensors: 8 is more than a desk robot meets at once.
     max_tracks: Annotated[int, msgspec.Meta(
         ge=1, le=64, description="most radar tracks (persons) at once",
@@ -74,10 +75,9 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         ge=0.0, le=20.0, description="metres: ... and this near its distance",
         extra={"live": True})] = 1.0
     # An LD2450 reports 10 times a second, also with nobody in view.
-    radar_timeout_s: Annotated[float, msgspec.Meta(
-        gt=0.0, le=60.0, description="seconds: angle radars count as reporting this long "
-        "after a report (then radar/presence makes the person again)",
-        extra={"live": True})] = 1.0
+    radar_timeout_s: Annotated[Timeout, msgspec.Meta(
+        description="seconds: angle radars count as reporting this long after a report "
+        "(then radar/presence makes the person again)")] = 1.0
     # Timers fire within a tick of their deadline: 50 ms is below what a person notices.
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the timers (ticks)")] = 0.05

@@ -9,6 +9,7 @@ from first contact, their face visible only in the camera's field of view.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any
 
@@ -113,7 +114,7 @@ def test_a_person_walking_past_is_followed_from_first_contact_without_a_jump(
     seq = walk_past(rig, speed_deg_s)
     assert seq[0][1] == pytest.approx(-70.0) and seq[0][2] == "radar"  # first contact
     assert {"radar", "face"} <= {src for _, _, src in seq}
-    steps = [abs(b[1] - a[1]) for a, b in zip(seq, seq[1:], strict=False)]
+    steps = [abs(b[1] - a[1]) for a, b in itertools.pairwise(seq)]
     # The largest step is the radar and the face disagreeing (< the fusion angle)
     # plus the walk during one radar report and the face timeout.
     limit = FUSION_DEG + speed_deg_s * 0.6
