@@ -9,6 +9,10 @@ from __future__ import annotations
 import argparse
 import statistics
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from tempfile import mkdtemp
 from typing import Any
 
 import psutil
@@ -66,3 +70,24 @@ def options(doc: str | None, parts: tuple[str, ...]) -> argparse.ArgumentParser:
                       help="leave a part out (repeatable)")
     return made
 
+
+
+@contextmanager
+def services_up(names: tuple[str, ...], config: str, prefix: str) -> Iterator[str]:
+    """A router and `buddybot run NAME` for each name, with `config` as their
+    robot.toml, logs in a fresh temporary folder; yields the router's endpoint
+    and stops everything after."""
+    from buddybot.tools.testing import Router, run_service
+
+    folder = Path(mkdtemp(prefix=prefix))
+    path = folder / "robot.toml"
+    path.write_text(config)
+    router = Router(log_dir=folder)
+    procs = [run_service(name, router.endpoint, "--config", str(path), log_dir=folder)
+             for name in names]
+    try:
+        yield router.endpoint
+    finally:
+        for proc in procs:
+            proc.stop()
+        router.stop()

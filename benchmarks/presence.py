@@ -20,15 +20,13 @@ from __future__ import annotations
 import argparse
 import threading
 import time
-from pathlib import Path
-from tempfile import mkdtemp
 
-from common import summary
+from common import services_up, summary
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Router, retry_until, run_service
+from buddybot.tools.testing import Collector, retry_until
 
 CONFIG = """
 [controller]
@@ -101,25 +99,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=50)
     args = parser.parse_args()
-    folder = Path(mkdtemp(prefix="buddybot-bench-presence-"))
-    config = folder / "robot.toml"
-    config.write_text(CONFIG)
-    router = Router(log_dir=folder)
-    procs = [run_service(name, router.endpoint, "--config", str(config), log_dir=folder)
-             for name in ("people", "controller")]
-    try:
-        with Node("bench", connect=[router.endpoint]) as node:
+    with services_up(("people", "controller"), CONFIG, "buddybot-bench-presence-") as endpoint:
+        with Node("bench", connect=[endpoint]) as node:
             Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
             lat = run_visits(node, args.count)
-        with (Node("bench-a", connect=[router.endpoint]) as a,
-              Node("bench-b", connect=[router.endpoint]) as b):
+        with (Node("bench-a", connect=[endpoint]) as a,
+              Node("bench-b", connect=[endpoint]) as b):
             base = run_loopback(a, b, args.count)
-        print(summary("radar/presence -> people -> controller -> EYE_AWAKE", lat))
-        print(summary("loopback probe -> router -> probe", base))
-    finally:
-        for proc in procs:
-            proc.stop()
-        router.stop()
+    print(summary("radar/presence -> people -> controller -> EYE_AWAKE", lat))
+    print(summary("loopback probe -> router -> probe", base))
     return 0
 
 

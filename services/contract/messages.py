@@ -474,7 +474,7 @@ PersonId = Annotated[int, msgspec.Meta(ge=1, description="visits since start, ne
 Yaw = Annotated[float, msgspec.Meta(ge=-3.15, le=3.15, description="rad, + = robot's left")]
 Pitch = Annotated[float, msgspec.Meta(ge=-1.58, le=1.58, description="rad, + = up")]
 MAX_PEOPLE = 64
-"""Most persons one `PeopleState` carries (the sensors show one today)."""
+"""Most persons one `PeopleState` carries (angle radars show several)."""
 
 
 class Person(Message):
@@ -491,6 +491,8 @@ class Person(Message):
     yaw_rad: Yaw | None = None
     pitch_rad: Pitch | None = None
     name: Annotated[str, msgspec.Meta(max_length=256)] | None = None
+    bearing_rad: Yaw | None = None
+    """The bearing of their angle-radar track now; None: no angle radar tracks them."""
 
 
 class PeopleState(Message):

@@ -42,6 +42,14 @@ visitor comes back before it started.
 
 Gaze: every face gives a `Look` at once (the seed's behaviour); when no
 face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
+Look before see: while an angle radar tracks the followed person
+(`radar(now, gaze)`, the direction of their track) and no face is
+visible, every new radar direction gives a `Look` at once, the eyes do not
+look around, and they do not return to centre; when a face appears the
+face's gaze takes over (the people service gave the face to that person
+only if it lies within its fusion angle of the radar's bearing, so the
+eyes do not jump), and when the face is lost again the radar direction
+comes back at the face timeout. Without angle radars nothing changes.
 
 `state(now)` reports what the machine believes and what holds back the
 next sound (`waiting`: recovery, sound or device busy, greeted, no face
@@ -202,6 +210,13 @@ class Behaviour:
         self._yielded = False  # a lease holds the speaker: no sound of ours starts
         self._last_face: float | None = None
         self._face_since: float | None = None
+        self._radar_gaze: Gaze | None = None
+        """The followed person's direction from an angle radar; None: not tracked."""
+        self._radar_stamp: int | None = None
+        self._radar_looked: Gaze | None = None
+        """The radar direction last sent as a `Look` (None: the face or centre since)."""
+        self._last_look: float | None = None
+        """When a face or radar direction was last looked at (the centring hold)."""
         # derived state
         self._present = False
         self._noticed_at = now
@@ -321,8 +336,19 @@ class Behaviour:
         if not self._face_visible(now):
             self._face_since = now
         self._last_face = now
+        self._last_look = now
         self._gaze_centred = False
+        self._radar_looked = None
         return [Look(gaze, stamp_ns), *self._step(now)]
+
+    def radar(self, now: float, gaze: Gaze | None, stamp_ns: int | None = None
+              ) -> list[Command]:
+        """The followed person's direction from an angle radar (eyes frame), or None
+        when no angle radar tracks them: looked at at once while no face is visible."""
+        self._radar_gaze, self._radar_stamp = gaze, stamp_ns
+        out: list[Command] = []
+        self._radar_look(now, out)
+        return out + self._step(now)
 
     def device_free(self, now: float, free: bool) -> list[Command]:
         self._device_free = free
@@ -511,11 +537,27 @@ class Behaviour:
         self.counters["greetings"] += 1
         self._play(now, SoundKind.GREETING, self.s.greeting_sound, out)
 
+    def _radar_look(self, now: float, out: list[Command]) -> bool:
+        """Look at the radar direction if it is live, no face is visible and it is
+        not the one last sent; True while the radar holds the gaze."""
+        gaze = self._radar_gaze
+        if gaze is None or self._face_visible(now):
+            return False
+        if gaze != self._radar_looked:
+            self._radar_looked = gaze
+            self._last_look = now
+            self._gaze_centred = False
+            out.append(Look(gaze, self._radar_stamp))
+        return True
+
     def _gaze(self, now: float, out: list[Command]) -> None:
-        if self._gaze_centred or self._last_face is None:
+        if self._radar_look(now, out):
             return
-        if now - self._last_face >= self.s.gaze_hold_s:
+        if self._gaze_centred or self._last_look is None:
+            return
+        if now - self._last_look >= self.s.gaze_hold_s:
             self._gaze_centred = True
+            self._radar_looked = None
             out.append(Look(None))
 
     def _desired_expression(self, now: float) -> ExpressionAction | None:
@@ -529,7 +571,7 @@ class Behaviour:
         goal = self._goal
         if goal is not None and goal.kind is SoundKind.GREETING and not goal.cancel_sent:
             return ExpressionAction.EYE_GRIN
-        if phase is Phase.ENGAGED or not self.s.look_around:
+        if phase is Phase.ENGAGED or not self.s.look_around or self._radar_gaze is not None:
             return ExpressionAction.EYE_AWAKE
         last_seen = max(self._noticed_at, self._last_face or self._noticed_at)
         if now - last_seen >= self.s.look_around_after_s:

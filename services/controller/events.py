@@ -17,9 +17,11 @@ camera neither waits for the decision thread nor fills the inbox.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from buddybot.contract import messages as m
+from buddybot.controller.transform import Gaze
 
 RADAR_SEES: frozenset[m.SeenBy] = frozenset({"RADAR", "BOTH"})
 """The `seen_by` values of a person the radar shows now."""
@@ -34,7 +36,7 @@ class PeopleChanged:
     person_id: int | None = None
 
 
-def people_changed(msg: m.PeopleState) -> PeopleChanged:
+def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChanged:
     """The controller's presence from the people service's state.
 
     `in_range` = a person present whom the radar sees now (`seen_by` RADAR or
@@ -44,13 +46,39 @@ def people_changed(msg: m.PeopleState) -> PeopleChanged:
     or CAMERA only) is not in range: the controller's shorter absence hold
     decides the departure (docs/design.md 4.3). With several such
     persons the nearest is the one (the lowest id on a tie), so the choice does
-    not depend on the list's order.
+    not depend on the list's order; `follow`, the person followed so far, stays
+    the one while the radar sees them (angle radars show several persons: the
+    eyes do not hop to whoever steps nearer).
     """
     seen = [p for p in msg.people if p.seen_by in RADAR_SEES]
     if not seen:
         return PeopleChanged(False)
+    if follow is not None and any(p.id == follow for p in seen):
+        return PeopleChanged(True, follow)
     nearest = min(seen, key=lambda p: (p.distance_m, p.id))
     return PeopleChanged(True, nearest.id)
+
+
+@dataclass(frozen=True, slots=True)
+class RadarGaze:
+    """The followed person's direction from an angle radar, as a gaze in the eyes
+    frame (None: no angle radar tracks them), with the stamp of `people/state`."""
+
+    gaze: Gaze | None
+    stamp_ns: int | None = None
+
+
+def radar_point(msg: m.PeopleState,
+                person_id: int | None) -> tuple[float, float, float] | None:
+    """Where the followed person is in the camera's frame by their angle-radar
+    track: their bearing and distance, at their `pitch_rad` (the last face's, or
+    0: the camera's level). None when no angle radar tracks them."""
+    person = next((p for p in msg.people if p.id == person_id), None)
+    if person is None or person.bearing_rad is None:
+        return None
+    d, bearing = person.distance_m, person.bearing_rad
+    pitch = person.pitch_rad or 0.0
+    return (d * math.cos(bearing), d * math.sin(bearing), d * math.tan(pitch))
 
 
 @dataclass(frozen=True, slots=True)
@@ -87,4 +115,4 @@ class CancelReply:
     success: bool
 
 
-Event = PeopleChanged | DeviceFree | SoundStatus | GoalReply | CancelReply
+Event = PeopleChanged | RadarGaze | DeviceFree | SoundStatus | GoalReply | CancelReply

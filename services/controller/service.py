@@ -63,8 +63,10 @@ from buddybot.controller.events import (
     Event,
     GoalReply,
     PeopleChanged,
+    RadarGaze,
     SoundStatus,
     people_changed,
+    radar_point,
 )
 from buddybot.controller.leases import LeaseTable
 from buddybot.controller.settings import ControllerSettings
@@ -125,6 +127,8 @@ class Controller:
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
         self._last_people: PeopleChanged | None = None
         """The last presence posted (under `_cond`): the next is posted only if it differs."""
+        self._last_radar: RadarGaze | None = None
+        """The last radar direction posted (under `_cond`), likewise."""
         self._cond = threading.Condition()
         self._lock = threading.Lock()
         """Guards `behaviour` and the publishers' order: the decision thread and the
@@ -186,14 +190,30 @@ class Controller:
 
     def _on_people(self, msg: m.PeopleState, _key: str) -> None:
         # `people/state` changes with every face frame of a visitor (distance,
-        # direction); only a change of who is in range is news for the behaviour.
-        change = people_changed(msg)
+        # direction); only a change of who is in range, or of the followed
+        # person's radar direction, is news for the behaviour.
         with self._cond:
-            if change == self._last_people:
-                return
-            self._last_people = change
-            self._inbox.append(change)
-            self._cond.notify()
+            follow = None if self._last_people is None else self._last_people.person_id
+            change = people_changed(msg, follow)
+            point = radar_point(msg, change.person_id)
+            gaze = None
+            if point is not None:
+                try:
+                    gaze = face_gaze(self.transform, point)
+                except ValueError:  # cannot happen with a valid message; never NaN gaze
+                    gaze = None
+            radar = RadarGaze(gaze, msg.stamp_ns if gaze is not None else None)
+            news = False
+            if change != self._last_people:
+                self._last_people = change
+                self._inbox.append(change)
+                news = True
+            if radar.gaze != (None if self._last_radar is None else self._last_radar.gaze):
+                self._last_radar = radar
+                self._inbox.append(radar)
+                news = True
+            if news:
+                self._cond.notify()
 
     def _on_device_free(self, msg: m.Bool, _key: str) -> None:
         self._post(DeviceFree(msg.data))
@@ -342,6 +362,8 @@ class Controller:
             match event:
                 case PeopleChanged(in_range=in_range, person_id=person_id):
                     commands = b.presence(now, in_range, person_id)
+                case RadarGaze(gaze=gaze, stamp_ns=stamp_ns):
+                    commands = b.radar(now, gaze, stamp_ns)
                 case DeviceFree(free=free):
                     commands = b.device_free(now, free)
                 case SoundStatus(goal_id=goal_id, state=state, age_s=age_s):

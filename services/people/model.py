@@ -5,18 +5,34 @@ Inputs are typed samples with the stamp of their sensor data (`RadarSeen`,
 `PersonEvent`s they cause and `state()` the persons now present. Nothing
 here knows Zenoh, threads or a clock: time is what the inputs say.
 
-Who is there. The LD2410 sees the nearest person and the face detector
-follows one face, so the model holds one person per visit (the types carry
-ids and tuples, ready for several). The radar is a level (IN_RANGE holds
-until OUT_OF_RANGE, as `radar/presence` is published on change only); the
-camera sees a person while its last face is younger than `face_timeout_s`.
-A person arrives with the first sample that shows someone and leaves once
-neither sensor has shown them for `absence_hold_s`: a flicker shorter than
-that is the same person, a return after it is a new person with a new id.
+Who is there. Without angle radars the LD2410 sees the nearest person and
+the face detector follows one face, so the model holds one *untracked*
+person per visit. The radar is a level (IN_RANGE holds until OUT_OF_RANGE,
+as `radar/presence` is published on change only); the camera sees a person
+while its last face is younger than `face_timeout_s`. A person arrives with
+the first sample that shows someone and leaves once neither sensor has
+shown them for `absence_hold_s`: a flicker shorter than that is the same
+person, a return after it is a new person with a new id.
 
-Where. The distance is the camera's while it sees the face (per frame and
-precise), otherwise the newest measurement of either sensor; the zone
-follows it with hysteresis (`zones.zone_after`).
+Angle radars (LD2450, `TargetsSeen`): `tracker.Tracker` keeps an id per
+target across reports and sensors, and every track is a *tracked* person
+(seen by RADAR while the track lives). The followed face belongs to the
+tracked person whose bearing is within `fusion_angle_deg` of the face's
+direction and whose distance is within `fusion_distance_m` (the person
+holding it keeps it within twice those, so two people close together do
+not trade it every frame); that person is seen by BOTH, with the camera's
+distance and direction. A face no track matches belongs to the untracked
+person, as without angle radars, and a new track that matches that face
+turns the untracked person into a tracked one (the camera saw them
+first). While an angle radar reported within `radar_timeout_s`,
+`radar/presence` does not show the untracked person (the angle radars
+are the radar then; it keeps the one level the presence service derives
+from them). A new track near where a tracked person lost theirs (within
+twice `track_gate_m`), while that person is still held, continues that
+person. Direction: the face's while the camera sees it, else the track's
+bearing with the last face pitch (0, the camera's level, when the camera
+never saw them: the radar measures no height). At most `MAX_PEOPLE`
+persons.
 
 Engagement (ROS4HRI style), re-evaluated on every input and timer:
 
@@ -43,7 +59,9 @@ import math
 from dataclasses import dataclass
 from typing import assert_never
 
+from buddybot.contract.messages import MAX_PEOPLE
 from buddybot.people.settings import PeopleSettings
+from buddybot.people.tracker import Report, SensorId, Target, Tracker, TrackerLimits
 from buddybot.people.zones import Zone, zone_after, zone_of
 
 _NS_PER_S = 1_000_000_000
@@ -95,7 +113,20 @@ class Tick:
     now_ns: int
 
 
-Input = RadarSeen | FaceSeen | Tick
+@dataclass(frozen=True, slots=True)
+class TargetsSeen:
+    """One angle-radar report (`RadarTargets`): its targets in the camera's frame."""
+
+    stamp_ns: int
+    sensor: SensorId
+    """(device_id, radar_id)."""
+    targets: tuple[Target, ...]
+
+    def __post_init__(self) -> None:
+        _check_sample(self.stamp_ns, 0.0)
+
+
+Input = RadarSeen | FaceSeen | TargetsSeen | Tick
 
 # --- persons -----------------------------------------------------------------------------
 
@@ -132,10 +163,13 @@ class Person:
     engagement: Engagement
     engagement_since_ns: int
     yaw_rad: float | None = None
-    """Direction of their face when the camera last saw it; None: not yet seen."""
+    """Their direction: the face's when the camera last saw it, for a tracked person
+    the radar's bearing while the camera does not see them; None: not yet known."""
     pitch_rad: float | None = None
     name: str | None = None
     """Who they are, once something recognises them."""
+    bearing_rad: float | None = None
+    """The bearing of their angle-radar track now (+ = left); None: no track."""
 
 
 # --- events ------------------------------------------------------------------------------
@@ -195,21 +229,37 @@ class _Track:
     engagement_since_ns: int
     yaw_rad: float | None
     pitch_rad: float | None
+    track_id: int | None = None
+    """Their radar track (None: the untracked person of radar presence and the face)."""
+    radar_xy: tuple[float, float] | None = None
+    """Where their track was last (kept after it is dropped, to continue it)."""
+    bearing_rad: float | None = None
 
     def person(self) -> Person:
         return Person(id=self.id, distance_m=self.distance_m, zone=self.zone,
                       seen_by=self.seen_by, zone_since_ns=self.zone_since_ns,
                       arrived_ns=self.arrived_ns, engagement=self.engagement,
                       engagement_since_ns=self.engagement_since_ns,
-                      yaw_rad=self.yaw_rad, pitch_rad=self.pitch_rad)
+                      yaw_rad=self.yaw_rad, pitch_rad=self.pitch_rad,
+                      bearing_rad=self.bearing_rad)
 
 
 def _ns(seconds: float) -> int:
     return round(seconds * _NS_PER_S)
 
 
+def _angle_between(a: float, b: float) -> float:
+    """|a - b| wrapped into [0, pi]."""
+    return abs(math.remainder(a - b, math.tau))
+
+
+_MAX_SENSORS = 64
+"""Angle radars whose last stamp is remembered (the oldest is forgotten)."""
+
+
 class PeopleModel:
-    """Fuses radar presence and the followed face into persons; single-threaded."""
+    """Fuses radar presence, angle-radar tracks and the followed face into persons;
+    single-threaded."""
 
     def __init__(self, settings: PeopleSettings) -> None:
         self.s = settings
@@ -217,12 +267,23 @@ class PeopleModel:
         """The newest time seen (stamps and ticks); it never goes back."""
         self._radar: RadarSeen | None = None
         self._face: FaceSeen | None = None
-        self._track: _Track | None = None
+        self._face_holder: int | None = None
+        """The tracked person the face belongs to; None: the untracked person."""
+        self._persons: dict[int, _Track] = {}
+        self._untracked: int | None = None
+        """The id of the person radar presence and unmatched faces show, if present."""
+        self._tracker = Tracker(self._limits())
+        self._reports: dict[SensorId, int] = {}
+        """Each angle radar's newest report stamp."""
+        self._angle_until: int | None = None
+        """Angle radars count as reporting until then."""
         self._last_id = 0
+        self.refused = 0
+        """Arrivals refused because `MAX_PEOPLE` were present."""
 
     def state(self) -> tuple[Person, ...]:
-        """The persons present now (seen, or missed for less than `absence_hold_s`)."""
-        return () if self._track is None else (self._track.person(),)
+        """The persons present now (seen, or missed for less than `absence_hold_s`), by id."""
+        return tuple(self._persons[i].person() for i in sorted(self._persons))
 
     def step(self, event: Input) -> list[PersonEvent]:
         """Apply one input; the events it causes, in order."""
@@ -241,9 +302,40 @@ class PeopleModel:
                     return []
                 out = self._advance(event.stamp_ns)
                 self._face = event
-                return out + self._sensed(event.stamp_ns, event.distance_m, event)
+                self._face_holder = self._holder(event)
+                if self._face_holder is None:
+                    return out + self._sensed(event.stamp_ns, event.distance_m, event)
+                return out + self._face_on(self._persons[self._face_holder], event)
+            case TargetsSeen():
+                last = self._reports.get(event.sensor)
+                if last is not None and event.stamp_ns < last:
+                    return []
+                out = self._advance(event.stamp_ns)
+                self._remember_report(event)
+                self._tracker.limits = self._limits()
+                started = self._tracker.update(
+                    Report(event.stamp_ns, event.sensor, event.targets))
+                return out + self._tracked(event.stamp_ns, started)
             case _:
                 assert_never(event)
+
+    @property
+    def tracks_refused(self) -> int:
+        """Targets that found no track because `max_tracks` existed."""
+        return self._tracker.refused
+
+    def _limits(self) -> TrackerLimits:
+        s = self.s
+        return TrackerLimits(s.track_gate_m, s.track_coast_s, s.max_tracks)
+
+    def _remember_report(self, event: TargetsSeen) -> None:
+        self._reports.pop(event.sensor, None)
+        self._reports[event.sensor] = event.stamp_ns
+        while len(self._reports) > _MAX_SENSORS:
+            self._reports.pop(next(iter(self._reports)))
+        until = event.stamp_ns + _ns(self.s.radar_timeout_s)
+        self._angle_until = until if self._angle_until is None else max(self._angle_until,
+                                                                         until)
 
     # -- time --
 
@@ -254,52 +346,77 @@ class PeopleModel:
         while (deadline := self._next_deadline()) is not None and deadline <= target:
             at = deadline if self._now is None else max(self._now, deadline)
             self._now = at
+            self._tracker.limits = self._limits()
+            self._drop_tracks(self._tracker.expire(at))
             out += self._evaluate(at, deadline)
         self._now = target
         return out
 
     def _next_deadline(self) -> int | None:
-        """When the present person's state may change next without input."""
-        track = self._track
-        if track is None:
-            return None
+        """When a person's state may change next without input."""
         due: list[int] = []
-        if Sensor.CAMERA in track.seen_by and self._face is not None:
-            due.append(self._face.stamp_ns + _ns(self.s.face_timeout_s))
-        if track.engagement is Engagement.ENGAGING:
-            due.append(track.engagement_since_ns + _ns(self.s.engage_dwell_s))
-        elif track.engagement is Engagement.DISENGAGING:
-            due.append(track.engagement_since_ns + _ns(self.s.disengage_hold_s))
-        if not track.seen_by:
-            due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
+        for track in self._persons.values():
+            if Sensor.CAMERA in track.seen_by and self._face is not None:
+                due.append(self._face.stamp_ns + _ns(self.s.face_timeout_s))
+            if track.engagement is Engagement.ENGAGING:
+                due.append(track.engagement_since_ns + _ns(self.s.engage_dwell_s))
+            elif track.engagement is Engagement.DISENGAGING:
+                due.append(track.engagement_since_ns + _ns(self.s.disengage_hold_s))
+            if not track.seen_by:
+                due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
+        coast = self._tracker.next_deadline()
+        if coast is not None:
+            due.append(coast)
+        if (self._untracked is not None and self._angle_until is not None
+                and self._now is not None and self._angle_until > self._now):
+            due.append(self._angle_until)
         return min(due, default=None)
 
-    def _seen_by(self, at: int) -> Sensor:
+    def _angle_radars(self, at: int) -> bool:
+        return self._angle_until is not None and at < self._angle_until
+
+    def _face_fresh(self, at: int) -> bool:
+        return self._face is not None and at < self._face.stamp_ns + _ns(self.s.face_timeout_s)
+
+    def _untracked_seen(self, at: int) -> Sensor:
+        """What shows the untracked person (whether or not they are present yet)."""
         seen = Sensor.NONE
-        if self._radar is not None and self._radar.in_range:
+        if self._radar is not None and self._radar.in_range and not self._angle_radars(at):
             seen |= Sensor.RADAR
-        if self._face is not None and at < self._face.stamp_ns + _ns(self.s.face_timeout_s):
+        if self._face_holder is None and self._face_fresh(at):
             seen |= Sensor.CAMERA
         return seen
 
-    # -- inputs --
+    def _seen_by(self, track: _Track, at: int) -> Sensor:
+        if track.track_id is None:
+            return self._untracked_seen(at)
+        seen = Sensor.RADAR if self._tracker.alive(track.track_id) else Sensor.NONE
+        if self._face_holder == track.id and self._face_fresh(at):
+            seen |= Sensor.CAMERA
+        return seen
+
+    # -- inputs: radar presence and the face of the untracked person --
 
     def _sensed(self, stamp: int, distance_m: float | None,
                 face: FaceSeen | None) -> list[PersonEvent]:
-        """A sample was taken: arrival, distance and zone, then the state."""
+        """A sample of the untracked person was taken: arrival, distance and zone,
+        then the state."""
         assert self._now is not None  # _advance ran
         at = self._now
-        seen = self._seen_by(at)
+        seen = self._untracked_seen(at)
         source = Sensor.CAMERA if face is not None else Sensor.RADAR
         # The radar's distance counts only while the camera does not see the face.
         trusted = Sensor.CAMERA if Sensor.CAMERA in seen else Sensor.RADAR
         measured = distance_m if source is trusted and source in seen else None
         out: list[PersonEvent] = []
-        track = self._track
+        track = None if self._untracked is None else self._persons[self._untracked]
         if track is None:
             if measured is None:
-                return []
+                return self._evaluate(at, stamp)
             track = self._arrive(stamp, measured, seen)
+            if track is None:
+                return self._evaluate(at, stamp)
+            self._untracked = track.id
             out.append(Arrived(track.id, stamp, track.person()))
         elif measured is not None:
             out += self._move(track, stamp, measured)
@@ -307,14 +424,118 @@ class PeopleModel:
             track.yaw_rad, track.pitch_rad = face.yaw_rad, face.pitch_rad
         return out + self._evaluate(at, stamp)
 
-    def _arrive(self, stamp: int, distance_m: float, seen: Sensor) -> _Track:
+    # -- inputs: angle radars and the face on a tracked person --
+
+    def _holder(self, face: FaceSeen) -> int | None:
+        """The tracked person this face is on, or None (the untracked person's)."""
+        holder = None if self._face_holder is None else self._persons[self._face_holder]
+        if holder is not None and holder.bearing_rad is None:
+            return holder.id  # their track is lost (standing still?): the camera still has them
+        horizontal = face.distance_m * math.cos(face.pitch_rad)
+        angle = math.radians(self.s.fusion_angle_deg)
+        best: tuple[float, int] | None = None
+        for track in self._persons.values():
+            if track.bearing_rad is None or track.radar_xy is None:
+                continue  # no live track
+            widen = 2.0 if track.id == self._face_holder else 1.0
+            off = _angle_between(face.yaw_rad, track.bearing_rad)
+            near = abs(horizontal - math.hypot(*track.radar_xy))
+            if off > angle * widen or near > self.s.fusion_distance_m * widen:
+                continue
+            if track.id == self._face_holder:
+                return track.id
+            if best is None or (off, track.id) < best:
+                best = (off, track.id)
+        return None if best is None else best[1]
+
+    def _face_on(self, track: _Track, face: FaceSeen) -> list[PersonEvent]:
+        assert self._now is not None
+        out = self._move(track, face.stamp_ns, face.distance_m)
+        track.yaw_rad, track.pitch_rad = face.yaw_rad, face.pitch_rad
+        return out + self._evaluate(self._now, face.stamp_ns)
+
+    def _tracked(self, stamp: int, started: list[int]) -> list[PersonEvent]:
+        """After a report: new tracks continue or make persons, every tracked
+        person follows their track, then the state."""
+        assert self._now is not None
+        at = self._now
+        tracks = {t.id: t for t in self._tracker.tracks()}
+        out: list[PersonEvent] = []
+        for track_id in started:
+            t = tracks[track_id]
+            person = self._continued(t.x_m, t.y_m, t.bearing_rad, t.distance_m, at)
+            if person is not None:
+                person.track_id = track_id
+                if person.id == self._untracked:
+                    self._untracked = None
+                    self._face_holder = person.id
+                continue
+            person = self._arrive(stamp, t.distance_m, Sensor.RADAR, track_id)
+            if person is None:
+                continue
+            person.radar_xy, person.bearing_rad = (t.x_m, t.y_m), t.bearing_rad
+            person.yaw_rad, person.pitch_rad = t.bearing_rad, 0.0
+            out.append(Arrived(person.id, stamp, person.person()))
+        for person in [self._persons[i] for i in sorted(self._persons)]:
+            now = tracks.get(person.track_id) if person.track_id is not None else None
+            if now is None:
+                continue
+            person.radar_xy, person.bearing_rad = (now.x_m, now.y_m), now.bearing_rad
+            if Sensor.CAMERA in self._seen_by(person, at):
+                continue
+            out += self._move(person, stamp, now.distance_m)
+            person.yaw_rad = now.bearing_rad
+            person.pitch_rad = 0.0 if person.pitch_rad is None else person.pitch_rad
+        return out + self._evaluate(at, stamp)
+
+    def _continued(self, x: float, y: float, bearing: float, distance: float,
+                   at: int) -> _Track | None:
+        """The person a new track continues: one who lost their track less than
+        `absence_hold_s` ago and was last within twice the gate, else the untracked
+        person if the face they hold lies at the track's bearing and distance."""
+        best: tuple[float, int] | None = None
+        for person in self._persons.values():
+            if person.track_id is None or self._tracker.alive(person.track_id):
+                continue
+            assert person.radar_xy is not None
+            d = math.hypot(x - person.radar_xy[0], y - person.radar_xy[1])
+            if d <= 2.0 * self.s.track_gate_m and (best is None or (d, person.id) < best):
+                best = (d, person.id)
+        if best is not None:
+            return self._persons[best[1]]
+        if self._untracked is None or self._face is None or self._face_holder is not None:
+            return None
+        untracked = self._persons[self._untracked]
+        if Sensor.CAMERA not in self._untracked_seen(at):
+            return None
+        face = self._face
+        off = _angle_between(face.yaw_rad, bearing)
+        near = abs(face.distance_m * math.cos(face.pitch_rad) - distance)
+        if off <= math.radians(self.s.fusion_angle_deg) and near <= self.s.fusion_distance_m:
+            return untracked
+        return None
+
+    def _drop_tracks(self, dropped: list[int]) -> None:
+        if not dropped:
+            return
+        gone = set(dropped)
+        for person in self._persons.values():
+            if person.track_id in gone:
+                person.bearing_rad = None
+
+    def _arrive(self, stamp: int, distance_m: float, seen: Sensor,
+                track_id: int | None = None) -> _Track | None:
+        if len(self._persons) >= MAX_PEOPLE:
+            self.refused += 1
+            return None
         self._last_id += 1
-        self._track = _Track(
+        track = _Track(
             id=self._last_id, arrived_ns=stamp, distance_m=distance_m,
             zone=zone_of(distance_m, self.s), zone_since_ns=stamp, seen_by=seen,
             lost_since_ns=stamp, engagement=Engagement.NONE, engagement_since_ns=stamp,
-            yaw_rad=None, pitch_rad=None)
-        return self._track
+            yaw_rad=None, pitch_rad=None, track_id=track_id)
+        self._persons[track.id] = track
+        return track
 
     def _move(self, track: _Track, stamp: int, distance_m: float) -> list[PersonEvent]:
         track.distance_m = distance_m
@@ -328,12 +549,15 @@ class PeopleModel:
     # -- state --
 
     def _evaluate(self, at: int, stamp: int) -> list[PersonEvent]:
-        """Bring the present person's sensors, presence and engagement up to time
-        `at`; changes are stamped `stamp`, or a hold's end if that is later."""
-        track = self._track
-        if track is None:
-            return []
-        seen = self._seen_by(at)
+        """Bring every present person's sensors, presence and engagement up to time
+        `at`, by id; changes are stamped `stamp`, or a hold's end if that is later."""
+        out: list[PersonEvent] = []
+        for person_id in sorted(self._persons):
+            out += self._evaluate_one(self._persons[person_id], at, stamp)
+        return out
+
+    def _evaluate_one(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
+        seen = self._seen_by(track, at)
         if seen != track.seen_by:
             if not seen:
                 track.lost_since_ns = stamp
@@ -376,5 +600,9 @@ class PeopleModel:
             EngagementChanged(track.id, stamp, track.engagement, Engagement.GONE)]
         track.engagement, track.engagement_since_ns = Engagement.GONE, stamp
         out.append(Left(track.id, stamp, track.person()))
-        self._track = None
+        del self._persons[track.id]
+        if self._untracked == track.id:
+            self._untracked = None
+        if self._face_holder == track.id:
+            self._face_holder = None
         return out

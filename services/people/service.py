@@ -1,14 +1,14 @@
 """`buddybot run people`: the thin adapter between Zenoh and `model.PeopleModel`.
 
-Reads `radar/presence` (latched) and `camera/<camera>/face`, turns each
-message into the model's input with the message's own stamp, and runs a
-`Tick` every `tick_s` so holds and timeouts fire without input. Every event
-the model returns goes out on `people/events` at once, in order; the
-persons present go out on `people/state` (latched) whenever they differ
-from the last ones published (once at start, empty, so a reader learns
-that nobody is there).
+Reads `radar/presence` (latched), `radar/*/targets` (every angle-radar
+report) and `camera/<camera>/face`, turns each message into the model's
+input with the message's own stamp, and runs a `Tick` every `tick_s` so
+holds and timeouts fire without input. Every event the model returns goes
+out on `people/events` at once, in order; the persons present go out on
+`people/state` (latched) whenever they differ from the last ones published
+(once at start, empty, so a reader learns that nobody is there).
 
-Threads: the two subscriptions run inline in Zenoh's callback thread (a
+Threads: the three subscriptions run inline in Zenoh's callback thread (a
 step takes microseconds and its puts do not block) and the ticks on the
 node's timer thread; one lock serialises the model and the publishers, so
 the events leave in the model's order. A malformed message never reaches
@@ -43,10 +43,12 @@ from buddybot.people.model import (
     PersonEvent,
     RadarSeen,
     Sensor,
+    TargetsSeen,
     Tick,
     ZoneChanged,
 )
 from buddybot.people.settings import PeopleSettings
+from buddybot.people.tracker import Target
 from buddybot.people.zones import Zone
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
@@ -94,6 +96,14 @@ def face_seen(msg: m.FacePosition) -> FaceSeen:
                     yaw_rad=math.atan2(y, x), pitch_rad=math.atan2(z, math.hypot(x, y)))
 
 
+def targets_seen(msg: m.RadarTargets) -> TargetsSeen:
+    """An angle-radar report: each target's position in the camera's frame (its
+    height is dropped: the tracker works on the floor plan)."""
+    return TargetsSeen(
+        stamp_ns=msg.stamp_ns, sensor=(msg.device_id, msg.radar_id),
+        targets=tuple(Target(t.position.x, t.position.y) for t in msg.targets))
+
+
 # --- model -> messages (pure) -------------------------------------------------------------
 
 
@@ -116,7 +126,7 @@ def person_message(p: Person) -> m.Person:
         id=p.id, distance_m=p.distance_m, zone=ZONES[p.zone], seen_by=SENSORS[p.seen_by],
         zone_since_ns=p.zone_since_ns, arrived_ns=p.arrived_ns,
         engagement=ENGAGEMENTS[p.engagement], engagement_since_ns=p.engagement_since_ns,
-        yaw_rad=p.yaw_rad, pitch_rad=p.pitch_rad, name=p.name)
+        yaw_rad=p.yaw_rad, pitch_rad=p.pitch_rad, name=p.name, bearing_rad=p.bearing_rad)
 
 
 def state_message(people: tuple[Person, ...], stamp_ns: int) -> m.PeopleState:
@@ -185,11 +195,21 @@ class PeopleService:
         with self._lock:
             self._publish_state(m.now_ns())
         self.node.subscribe(keys.PRESENCE, self._on_presence)
+        self.node.subscribe(keys.RADAR_TARGETS, self._on_targets, device="*")
         self.node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
         self.node.every(self.settings.tick_s, self.tick, name="people-tick")
 
     def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
         self.step(radar_seen(msg))
+
+    def _on_targets(self, msg: m.RadarTargets, _key: str) -> None:
+        try:
+            seen = targets_seen(msg)
+        except ValueError as exc:  # a non-finite position
+            self.node.diagnostics.increment("bad_targets")
+            log.debug("ignored radar targets: %s", exc)
+            return
+        self.step(seen)
 
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
         try:
@@ -205,6 +225,8 @@ class PeopleService:
         values = self.node.diagnostics.values
         values["people"] = len(self._published or ())
         values["events"] = self._events
+        values["tracks_refused"] = self.model.tracks_refused
+        values["people_refused"] = self.model.refused
 
     def step(self, given: Input) -> None:
         """Feed one input; publish its events, then the state if it changed."""

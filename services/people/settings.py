@@ -1,8 +1,9 @@
 """Config table `[people]` (pure msgspec struct).
 
 Zone limits follow Hall's proxemics (the far edge of each zone, metres);
-timings are seconds. The reason for each default is next to it. The zone
-and timing fields are live (`buddybot param set people ...`): the model
+timings are seconds; the angle radars' tracker and the face fusion have
+their own fields. The reason for each default is next to it. Every field but
+`camera` and `tick_s` is live (`buddybot param set people ...`): the model
 reads its settings on every input and tick. `camera` and `tick_s` are read
 once at start.
 """
@@ -16,6 +17,8 @@ import msgspec
 Limit = Annotated[float, msgspec.Meta(
     gt=0.0, le=20.0, description="metres: far edge of a zone (a room is within 20 m)",
     extra={"live": True})]
+Timeout = Annotated[float, msgspec.Meta(gt=0.0, le=60.0, extra={"live": True})]
+"""Seconds, live: how long an angle-radar sighting counts."""
 Hold = Annotated[float, msgspec.Meta(
     ge=0.0, le=3600.0, description="seconds: how long a condition must last (0: at once)",
     extra={"live": True})]
@@ -50,6 +53,31 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     disengage_hold_s: Hold = 2.0
     # Out of view for a moment is the same visit; below the simulated ~10 s between visits.
     absence_hold_s: Hold = 5.0
+    # Angle radars (LD2450): a brisk walk moves 0.15 m between two reports (10/s) and
+    # a target jitters by ~0.1 m; two people side by side stand ~0.6 m apart.
+    track_gate_m: Annotated[float, msgspec.Meta(
+        gt=0.0, le=5.0, description="metres: a target this near a track's predicted "
+        "position continues it", extra={"live": True})] = 0.6
+    # A missed report or two, or a person hidden behind another for a moment, keeps the id.
+    track_coast_s: Annotated[Timeout, msgspec.Meta(
+        description="seconds: a track no report matched this long is dropped")] = 1.0
+    # Three targets per LD2450, a few sensors: 8 is more than a desk robot meets at once.
+    max_tracks: Annotated[int, msgspec.Meta(
+        ge=1, le=64, description="most radar tracks (persons) at once",
+        extra={"live": True})] = 8
+    # A face's bearing and the radar's agree within a few degrees when both are placed
+    # right; 10 degrees also absorbs a mounting pose measured by eye.
+    fusion_angle_deg: Annotated[float, msgspec.Meta(
+        ge=0.0, le=90.0, description="degrees: a face this near a track's bearing is that "
+        "person's", extra={"live": True})] = 10.0
+    # The face's distance comes from its size (+-20 %): 1 m covers it at 3-4 m.
+    fusion_distance_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=20.0, description="metres: ... and this near its distance",
+        extra={"live": True})] = 1.0
+    # An LD2450 reports 10 times a second, also with nobody in view.
+    radar_timeout_s: Annotated[Timeout, msgspec.Meta(
+        description="seconds: angle radars count as reporting this long after a report "
+        "(then radar/presence makes the person again)")] = 1.0
     # Timers fire within a tick of their deadline: 50 ms is below what a person notices.
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the timers (ticks)")] = 0.05

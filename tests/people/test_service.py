@@ -39,6 +39,7 @@ from buddybot.people.service import (
     radar_seen,
     state_message,
     state_stamp,
+    targets_seen,
 )
 from buddybot.people.settings import PeopleSettings
 from buddybot.people.zones import Zone
@@ -112,6 +113,8 @@ def test_a_person_message_carries_every_field_and_decodes() -> None:
                                                                             T0 + 3)
     assert (msg.engagement, msg.yaw_rad, msg.pitch_rad, msg.name) == ("DISENGAGING", 0.25,
                                                                       -0.5, "Ada")
+    assert msg.bearing_rad is None
+    assert person_message(_person(bearing_rad=0.5)).bearing_rad == 0.5
     state = state_message((p,), T0 + 3)
     wire = keys.PEOPLE_STATE.codec.encode(state)
     assert keys.PEOPLE_STATE.codec.decode(wire, m.PeopleState) == state
@@ -234,6 +237,31 @@ def test_a_live_setting_is_used_by_the_next_step() -> None:
     service.step(Tick(T0 + S // 5))
     engaged = [x for x in node.out if getattr(x, "engagement", None) == "ENGAGED"]
     assert [e.stamp_ns for e in engaged] == [T0 + S // 10]
+
+
+def radar_targets(stamp_ns: int, *points: tuple[float, float], device_id: int = 1,
+                  radar_id: int = 0) -> m.RadarTargets:
+    """An angle-radar report with targets at `points` (camera frame; sensor at the camera)."""
+    return m.RadarTargets(stamp_ns=stamp_ns, device_id=device_id, radar_id=radar_id, targets=[
+        m.RadarTarget(slot=i, x_m=-y, y_m=x, speed_mps=0.0, resolution_m=0.32,
+                      position=m.Point(x=x, y=y, z=0.0), bearing_rad=math.atan2(y, x),
+                      distance_m=math.hypot(x, y)) for i, (x, y) in enumerate(points)])
+
+
+def test_a_radar_report_becomes_the_models_targets_in_the_camera_frame() -> None:
+    seen = targets_seen(radar_targets(T0, (2.0, 0.5), (1.0, -1.0), device_id=3, radar_id=1))
+    assert seen.stamp_ns == T0 and seen.sensor == (3, 1)
+    assert [(t.x_m, t.y_m) for t in seen.targets] == [(2.0, 0.5), (1.0, -1.0)]
+
+
+def test_radar_targets_make_persons_with_their_bearing() -> None:
+    service, node = _service()
+    service._on_targets(radar_targets(T0, (2.0, 0.5), (1.0, -1.0)), "radar/1/targets")
+    state = node.out[-1]
+    assert isinstance(state, m.PeopleState)
+    assert [(p.id, p.seen_by) for p in state.people] == [(1, "RADAR"), (2, "RADAR")]
+    assert state.people[1].bearing_rad == pytest.approx(math.atan2(0.5, 2.0))
+    assert state.people[1].yaw_rad == state.people[1].bearing_rad
 
 
 # --- the process -------------------------------------------------------------------------
@@ -372,3 +400,15 @@ def test_engage_dwell_is_live(spawn: Spawn, probe: Node, endpoint: str, tmp_path
     refused = param(endpoint, "set", "people", "tick_s", "0.1")
     assert refused.returncode != 0
     assert proc.alive()
+
+
+@pytest.mark.integration
+def test_angle_radar_targets_are_persons(spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    _proc, events, state = _start(spawn, probe, tmp_path)
+    pub = probe.publisher(keys.RADAR_TARGETS, device="1")
+    stamp = m.now_ns()
+    retry_until(lambda: pub.put(radar_targets(stamp, (2.0, 0.5), (1.0, -1.0))) or len(
+        events.messages) >= 2, 30, 0.2, "two ARRIVED")
+    assert [(e.kind, e.stamp_ns) for e in events.messages[:2]] == [("ARRIVED", stamp)] * 2
+    last = state.wait_for(lambda s: len(s.people) == 2, 10, "two persons")
+    assert {p.seen_by for p in last.people} == {"RADAR"}
