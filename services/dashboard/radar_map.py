@@ -60,22 +60,25 @@ class Zone:
     name: str = ""
 
 
-def _number(d: Mapping[str, Any], name: str) -> float | None:
-    for key in (name, f"{name}_m"):
-        v = d.get(key)
-        if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v):
-            return float(v)
-    return None
+def _span(value: Any) -> tuple[float, float] | None:
+    """A zone's `[low, high]` metres, in either order; None unless two finite numbers."""
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        return None
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+               for v in value):
+        return None
+    low, high = float(value[0]), float(value[1])
+    return (min(low, high), max(low, high))
 
 
 def parse_zones(value: Any) -> list[Zone] | None:
-    """`[radar_presence] zones` (a live parameter's value or the config table's
-    field, as plain data) -> zones; None when there is no such list.
+    """`[radar_presence] zones` (radar-presence's live parameter or the config
+    table's field, as plain data) -> zones; None when there is no such list.
 
-    A zone is a table with `mode` ("detect" or "ignore") and its bounds
-    `x_min`, `x_max`, `y_min`, `y_max` (metres, with or without an `_m`
-    suffix); anything else in it is ignored, and a zone missing a bound or
-    with an unknown mode is skipped, so one bad zone never hides the others.
+    A zone is a table `{name, mode, x = [near, far], y = [right, left]}`
+    (metres of the camera's frame, as radar-presence reads it; mode `detect`
+    or `ignore`). The dashboard only draws them: a zone it cannot read is
+    skipped, so one bad zone never hides the others.
     """
     if isinstance(value, msgspec.Struct):
         value = msgspec.to_builtins(value)
@@ -87,14 +90,13 @@ def parse_zones(value: Any) -> list[Zone] | None:
             item = msgspec.to_builtins(item)
         if not isinstance(item, dict):
             continue
-        mode = str(item.get("mode", "")).lower()
-        bounds = [_number(item, k) for k in ("x_min", "x_max", "y_min", "y_max")]
-        if mode not in ("detect", "ignore") or any(b is None for b in bounds):
+        mode = item.get("mode")
+        x, y = _span(item.get("x")), _span(item.get("y"))
+        if mode not in ("detect", "ignore") or x is None or y is None:
             continue
-        x0, x1, y0, y1 = (float(b) for b in bounds if b is not None)
         name = item.get("name")
-        out.append(Zone(cast(ZoneMode, mode), min(x0, x1), max(x0, x1), min(y0, y1),
-                        max(y0, y1), name[:40] if isinstance(name, str) else ""))
+        out.append(Zone(cast(ZoneMode, mode), x[0], x[1], y[0], y[1],
+                        name[:40] if isinstance(name, str) else ""))
     return out
 
 

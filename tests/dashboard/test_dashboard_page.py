@@ -399,8 +399,8 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
     says (read from the canvas' pixels), and the screenshot is kept
     (docs/images/dashboard-map.png is a copy of one)."""
     serve_params(probe, "radar-presence", {
-        "range_m": 2.0, "zones": [{"mode": "ignore", "name": "TV", "x_min": 2.6, "x_max": 3.6,
-                                   "y_min": 1.6, "y_max": 2.6}]})
+        "range_m": 2.0, "zones": [{"name": "TV", "mode": "ignore", "x": [2.6, 3.6],
+                                   "y": [1.6, 2.6]}]})
     port = start_dashboard(spawn)
     page = open_page(browser, port)
     faces = probe.publisher(keys.FACES, camera="front")
@@ -455,11 +455,21 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
     info = page.inner_text("#map-info")
     assert "3 targets" in info and "camera view 56°" in info, info
     assert "zones from params/radar-presence" in info, info
+    page.wait_for_function("(window.dash.nodes || []).some((n) => n.name === 'dashboard' "
+                           "&& n.alive)", timeout=20_000)
     SHOTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(SHOTS / "dashboard-map.png"), full_page=True)
     size = page.evaluate("[document.documentElement.scrollWidth, "
                          "document.documentElement.scrollHeight]")
     assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+    # An LD2410 as well: two tabs switch between the map and the distance plots.
+    assert page.is_hidden("#radar-tabs")
+    probe.publisher(keys.RADAR_FRAMES, device="7").put(sensor_frame([0] * 9, [0] * 9))
+    page.wait_for_selector("#radar-tabs", state="visible", timeout=15_000)
+    page.click("#radar-tabs button[data-view='distance']")
+    assert page.is_visible("#sensors") and page.is_hidden("#map-box")
+    page.click("#radar-tabs button[data-view='map']")
+    assert page.is_visible("#map-box") and page.is_hidden("#sensors")
     # Silent: the targets go, the trails fade out.
     page.wait_for_function("window.dash.map.sensors[0].silent "
                            "&& window.dash.map.sensors[0].targets.length === 0", timeout=15_000)

@@ -13,13 +13,11 @@ from buddybot.dashboard import map_geometry as geo
 from buddybot.dashboard import radar_map as rm
 
 
-def report(points: list[tuple[float, float]], device: int = 4, radar: int = 0,
-           slots: list[int] | None = None) -> m.RadarTargets:
-    slots = slots or list(range(len(points)))
+def report(points: list[tuple[float, float]], device: int = 4, radar: int = 0) -> m.RadarTargets:
     return m.RadarTargets(stamp_ns=1, device_id=device, radar_id=radar, targets=[
         m.RadarTarget(slot=s, x_m=-y, y_m=x, speed_mps=0.0, resolution_m=0.3,
                       position=m.Point(x=x, y=y, z=0.0), bearing_rad=math.atan2(y, x),
-                      distance_m=math.hypot(x, y)) for s, (x, y) in zip(slots, points)])
+                      distance_m=math.hypot(x, y)) for s, (x, y) in enumerate(points)])
 
 
 def person(pid: int, distance: float, yaw: float | None) -> m.Person:
@@ -121,8 +119,7 @@ def test_the_followed_person_from_controller_state_and_people_state() -> None:
 def test_zones_fov_and_their_sources_in_the_scene() -> None:
     rmap = rm.RadarMap()
     rmap.add(report([(1.0, 0.0)]), 10.0)
-    zones = rm.parse_zones([{"mode": "ignore", "name": "TV", "x_min": 2.6, "x_max": 3.6,
-                             "y_min": 1.6, "y_max": 2.6}])
+    zones = rm.parse_zones([{"mode": "ignore", "name": "TV", "x": [2.6, 3.6], "y": [1.6, 2.6]}])
     assert zones is not None
     rmap.set_zones(zones, rm.PRESENCE_PARAMS)
     rmap.set_fov((math.radians(28), math.radians(-28)), "here")
@@ -142,13 +139,16 @@ def test_zones_fov_and_their_sources_in_the_scene() -> None:
     (None, None),
     ("garbage", None),
     ([], []),
-    ([{"mode": "detect", "x_min_m": 0.5, "x_max_m": 4.0, "y_min_m": 2.0, "y_max_m": -2.0}],
-     [rm.Zone("detect", 0.5, 4.0, -2.0, 2.0)]),
-    ([{"mode": "IGNORE", "x_min": 1, "x_max": 2, "y_min": 0, "y_max": 1, "name": "door"},
-      {"mode": "off", "x_min": 1, "x_max": 2, "y_min": 0, "y_max": 1},
-      {"mode": "ignore", "x_min": 1, "x_max": 2, "y_min": 0},
-      {"mode": "ignore", "x_min": True, "x_max": 2, "y_min": 0, "y_max": 1},
-      {"mode": "ignore", "x_min": float("nan"), "x_max": 2, "y_min": 0, "y_max": 1},
+    ([{"name": "room", "mode": "detect", "x": [0.5, 4.0], "y": [2.0, -2.0]}],
+     [rm.Zone("detect", 0.5, 4.0, -2.0, 2.0, "room")]),
+    ([{"name": "door", "mode": "ignore", "x": [1, 2], "y": [0, 1]},
+      {"name": "off", "mode": "off", "x": [1, 2], "y": [0, 1]},
+      {"name": "IGNORE", "mode": "IGNORE", "x": [1, 2], "y": [0, 1]},
+      {"name": "half", "mode": "ignore", "x": [1, 2]},
+      {"name": "three", "mode": "ignore", "x": [1, 2, 3], "y": [0, 1]},
+      {"name": "bool", "mode": "ignore", "x": [True, 2], "y": [0, 1]},
+      {"name": "nan", "mode": "ignore", "x": [float("nan"), 2], "y": [0, 1]},
+      {"name": "text", "mode": "ignore", "x": "1..2", "y": [0, 1]},
       "not a table", 7],
      [rm.Zone("ignore", 1.0, 2.0, 0.0, 1.0, "door")]),
 ])
@@ -158,7 +158,7 @@ def test_zones_are_read_leniently_one_bad_zone_never_hides_the_others(
 
 
 def test_many_zones_are_bounded() -> None:
-    zone = {"mode": "ignore", "x_min": 1, "x_max": 2, "y_min": 0, "y_max": 1}
+    zone = {"name": "z", "mode": "ignore", "x": [1, 2], "y": [0, 1]}
     zones = rm.parse_zones([zone] * 1000)
     assert zones is not None and len(zones) == rm.MAX_ZONES
 
@@ -188,12 +188,12 @@ def test_params_replies_and_the_config_tables_are_read_by_name() -> None:
     refused = m.ParamReply(node="x", table="x", error="unknown")
     assert rm.params_value(refused, "fx") is None
     config = SimpleNamespace(
-        radar_presence=SimpleNamespace(zones=[{"mode": "detect", "x_min": 0, "x_max": 3,
-                                               "y_min": -1, "y_max": 1}]),
+        radar_presence=SimpleNamespace(zones=[{"name": "room", "mode": "detect", "x": [0, 3],
+                                               "y": [-1, 1]}]),
         face_detector=SimpleNamespace(fx=600.0, cx=None, hfov_deg=None),
         camera=SimpleNamespace(width=1280))
     got = rm.Configured.read(config)
-    assert got.zones == [rm.Zone("detect", 0.0, 3.0, -1.0, 1.0)]
+    assert got.zones == [rm.Zone("detect", 0.0, 3.0, -1.0, 1.0, "room")]
     assert dict(got.camera) == {"fx": 600.0} and got.width == 1280
     # Today's config has no zones field and the camera no width: not known, no error.
     bare = rm.Configured.read(SimpleNamespace(radar_presence=SimpleNamespace(),
