@@ -18,7 +18,7 @@ from typing import Any
 
 from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
-from buddybot.dashboard import model
+from buddybot.dashboard import model, radar_map
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime.errors import NoReplyError, ServiceError
 from buddybot.runtime.leasing import BROKEN_BY_OPERATOR, LeaseHolder, LeaseRefused, release
@@ -32,6 +32,7 @@ _warn = RateLimitedLog(log)
 CALL_TIMEOUT_S = 3.0
 """How long a button's bus call may take before the page is told it failed."""
 PRESENCE_NODE = "radar-presence"
+DETECTOR_NODE = "face-detector"
 AUDIO_NODE = "audio"
 OPERATOR_RESOURCES: list[m.Resource] = ["expression", "gaze", "audio"]
 """What the operator switch takes: the whole robot's face and voice."""
@@ -107,6 +108,9 @@ class Bus:
         def on_radar(msg: m.LD2410TargetDataFrameArray, _key: str) -> None:
             box.put_frames([(msg.stamp_ns / 1e9, msg)])
 
+        def on_targets(msg: m.RadarTargets, _key: str) -> None:
+            box.put(f"targets:{msg.device_id}/{msg.radar_id}", msg)
+
         def on_direction(msg: m.EyesDirection, _key: str) -> None:
             box.put("direction", (msg, (time.time_ns() - msg.stamp_ns) / 1e6))
 
@@ -114,7 +118,9 @@ class Bus:
             box.put(f"diag:{msg.node}", msg)
 
         node.subscribe(keys.RADAR_FRAMES, on_radar, device="*")
+        node.subscribe(keys.RADAR_TARGETS, on_targets, device="*")
         node.subscribe(keys.PRESENCE, latest("presence"))
+        node.subscribe(keys.PEOPLE_STATE, latest("people"))
         node.subscribe(keys.FACES, latest("faces"), camera=self.s.camera)
         node.subscribe(keys.CONTROLLER_STATE, latest("controller"))
         node.subscribe(keys.EXPRESSION, latest("expression"))
@@ -151,6 +157,10 @@ class Bus:
     def refresh_params(self) -> None:
         reply = self._params(PRESENCE_NODE, m.ParamRequest(op="list"))
         self.mailbox.put("rules", None if reply is None else model.presence_rules(reply))
+        self.mailbox.put("zones", radar_map.parse_zones(radar_map.params_value(reply, "zones")))
+        camera = self._params(DETECTOR_NODE, m.ParamRequest(op="list"))
+        self.mailbox.put("camera_params", None if camera is None or camera.error
+                         else radar_map.number_params(camera, radar_map.CAMERA_FIELDS))
         sounds = self._params(AUDIO_NODE, m.ParamRequest(op="get", name="sounds"))
         self.mailbox.put("sounds", model.sound_names(sounds, self.configured_sounds))
 

@@ -21,7 +21,7 @@ import msgspec
 from aiohttp import WSMsgType, web
 
 from buddybot.contract import messages as m
-from buddybot.dashboard import model
+from buddybot.dashboard import model, radar_map
 from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime.limits import BoundedDict, clip
@@ -67,7 +67,8 @@ class Page(PageOutbox[tuple[str, Any]]):
 class Board:
     """What the pages show now, and the pages; used only on the event loop."""
 
-    def __init__(self, s: DashboardSettings, eye_port: int, sounds: list[str]) -> None:
+    def __init__(self, s: DashboardSettings, eye_port: int, sounds: list[str],
+                 configured: radar_map.Configured | None = None) -> None:
         self.s = s
         self.eye_port = eye_port
         self.pages: set[Page] = set()
@@ -78,6 +79,13 @@ class Board:
         self.nodes = model.NodeTable()
         self.latency = model.Latency()
         self.sounds = sounds
+        self.map = radar_map.RadarMap()
+        self.configured = configured or radar_map.Configured()
+        self._live_zones: list[radar_map.Zone] | None = None
+        self._live_camera: dict[str, float] | None = None
+        self._frame_width: int | None = None
+        self._map_dirty = False
+        self._update_map_sources()
         self.on_pages_changed: Callable[[int], None] = lambda _n: None
         self.refused = 0
         self.forbidden = 0
@@ -121,10 +129,52 @@ class Board:
         for page in self.pages:
             page.put(slot, value)
 
+    def _update_map_sources(self) -> None:
+        c = self.configured
+        self.map.set_zones(*radar_map.choose_zones(self._live_zones, c.zones))
+        self.map.set_fov(*radar_map.choose_fov(self._live_camera, c.camera,
+                                               self._frame_width or c.width))
+
+    def _map_input(self, slot: str, value: Any, now: float) -> bool:
+        """Feed the map what it draws from; True when `slot` is the map's alone."""
+        if slot.startswith("targets:"):
+            self.map.add(value, now)
+            self._map_dirty = True
+            return True
+        if slot == "people":
+            self.map.people = value
+            self._map_dirty = True
+            return True
+        if slot == "zones":
+            self._live_zones = value
+        elif slot == "camera_params":
+            self._live_camera = value
+        elif slot == "faces" and value.width != self._frame_width:
+            self._frame_width = value.width
+        elif slot == "controller":
+            self.map.controller = value
+            self._map_dirty = True
+            return False
+        else:
+            return False
+        self._update_map_sources()
+        self._map_dirty = True
+        return slot != "faces"
+
+    def refresh_map(self, now: float | None = None) -> None:
+        """Send the map's scene when it changed (also as trails age, from the
+        service's loop); nothing before an angle radar was heard."""
+        self._map_dirty = False
+        scene = self.map.scene(now_s() if now is None else now)
+        if scene is not None and scene != self.state.get("map"):
+            self._send("map", scene)
+
     def deliver(self, batch: list[tuple[str, Any]]) -> None:
         """A batch from the mailbox: update what is remembered, push it to the pages."""
         now = now_s()
         for slot, value in batch:
+            if self._map_input(slot, value, now):
+                continue
             if slot == "radar":
                 views: list[dict[str, Any]] = []
                 for t, frames in value:
@@ -161,6 +211,8 @@ class Board:
                 self._send(slot, msgspec.to_builtins(value))
             else:
                 self._send(slot, value)
+        if self._map_dirty:
+            self.refresh_map(now)
 
     def set_bus(self, up: bool) -> None:
         if self.state["status"].get("bus") != up:

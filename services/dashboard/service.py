@@ -40,6 +40,7 @@ from functools import partial
 
 from aiohttp import web
 
+from buddybot.dashboard import radar_map
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
@@ -85,7 +86,7 @@ def _other_tables(ctx: ServiceContext, s: DashboardSettings) -> tuple[int, dict[
 async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
-    board = Board(s, eye_port, sorted(sounds))
+    board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
     app = App(board)
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()
@@ -122,6 +123,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             if node is None:
                 continue
             board.set_bus(node.connected())
+            board.refresh_map()
             d = node.diagnostics.values
             d["pages"] = len(board.pages)
             d["images_sent"] = board.images_sent

@@ -7,6 +7,7 @@ DOM (presence, nodes), never from the page's own variables alone.
 
 from __future__ import annotations
 
+import math
 import statistics
 import time
 from collections.abc import Callable
@@ -357,3 +358,119 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
     finally:
         up.stop(30)
         print(up.output()[-3000:])
+
+
+# --- the angle radars' map -------------------------------------------------------------
+
+MAP_COLOURS = [(0xff, 0xa6, 0x57), (0x79, 0xc0, 0xff)]
+"""The page's first two sensor colours (dashboard.js MAP_COLOURS)."""
+
+
+def radar_targets(points: list[tuple[float, float]], device: int = 4) -> m.RadarTargets:
+    """An angle-radar report with targets at camera-frame (x, y) points (sensor at the
+    camera, facing forward: its own x is the robot's right)."""
+    targets = [m.RadarTarget(
+        slot=i, x_m=-y, y_m=x, speed_mps=0.3, resolution_m=0.32,
+        position=m.Point(x=x, y=y, z=0.0), bearing_rad=math.atan2(y, x),
+        distance_m=math.hypot(x, y)) for i, (x, y) in enumerate(points)]
+    return m.RadarTargets(stamp_ns=m.now_ns(), device_id=device, radar_id=0, targets=targets)
+
+
+def walk(step: int) -> list[tuple[float, float]]:
+    """Three people at report `step` (10 per second): one crossing from the robot's
+    left, one coming closer on its right, one almost standing far ahead."""
+    t = step / 10
+    return [(2.0, 1.3 - 0.35 * t), (3.0 - 0.3 * t, -1.4 + 0.05 * t),
+            (4.2 + 0.03 * math.sin(3 * t), 0.6 + 0.04 * t)]
+
+
+def serve_params(probe: Node, node: str, values: dict[str, Any]) -> None:
+    """Answer `params/<node>` as that service would (op "list"), from the probe."""
+    infos = [m.ParamInfo(name=k, value=v, type="", range="", live=True) for k, v in values.items()]
+    probe.serve(keys.PARAMS, lambda _req: m.ParamReply(node=node, table=node.replace("-", "_"),
+                                                       params=infos), node=node)
+
+
+def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    """Three LD2450 targets with trails, an ignore zone (radar-presence's live
+    `zones`), the camera's view (fx from the config over the faces' width) and
+    the followed person: each target is drawn where its camera-frame position
+    says (read from the canvas' pixels), and the screenshot is kept
+    (docs/images/dashboard-map.png is a copy of one)."""
+    serve_params(probe, "radar-presence", {
+        "range_m": 2.0, "zones": [{"name": "TV", "mode": "ignore", "x": [2.6, 3.6],
+                                   "y": [1.6, 2.6]}]})
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    faces = probe.publisher(keys.FACES, camera="front")
+    faces.put(m.FaceDetections(stamp_ns=m.now_ns(), frame_id="cam", width=640, height=480))
+    probe.publisher(keys.CONTROLLER_STATE).put(m.ControllerState(
+        stamp_ns=m.now_ns(), phase="engaged", in_range=True, person_id=3))
+    radar = probe.publisher(keys.RADAR_TARGETS, device="4")
+    people = probe.publisher(keys.PEOPLE_STATE)
+    step = 0
+
+    def report() -> None:
+        nonlocal step
+        now = m.now_ns()
+        pts = walk(step)
+        radar.put(radar_targets(pts))
+        x, y = pts[0]
+        people.put(m.PeopleState(stamp_ns=now, people=[m.Person(
+            id=3, distance_m=math.hypot(x, y), zone="SOCIAL", seen_by="RADAR",
+            zone_since_ns=now, arrived_ns=now, engagement="ENGAGED", engagement_since_ns=now,
+            yaw_rad=math.atan2(y, x))]))
+        step += 1
+
+    # Two and a half seconds of walking (trails), until the page has all of it.
+    deadline = time.monotonic() + 60
+    while step < 25 or not page.evaluate("""() => {
+            const v = window.dash.map;
+            return v && v.sensors.length === 1 && v.sensors[0].targets.length === 3
+                && v.zones.length === 1 && v.fov && v.people.some((p) => p.followed);
+        }"""):
+        assert time.monotonic() < deadline, "the page never got the whole map"
+        report()
+        time.sleep(0.1)
+    page.evaluate("window.dashMap()")
+    drawn = page.evaluate("""() => {
+        const v = window.dash.map, c = document.getElementById('map'), g = c.getContext('2d');
+        const at = (p) => Array.from(g.getImageData(Math.round(p[0]), Math.round(p[1]), 1, 1).data);
+        return {origin: v.origin, scale: v.scale, size: [c.width, c.height],
+                targets: v.sensors[0].targets.map((t) => ({at: t.at, rgba: at(t.at)})),
+                shown: !document.getElementById('map-box').hidden,
+                plots: !document.getElementById('sensors').hidden};
+    }""")
+    assert drawn["shown"] and not drawn["plots"]
+    ou, ov = drawn["origin"]
+    for (x, y), target in zip(walk(step - 1), drawn["targets"], strict=True):
+        # x forward drawn up, y (the robot's left) drawn left, one scale.
+        expected = (ou - y * drawn["scale"], ov - x * drawn["scale"])
+        assert np.abs(np.array(target["at"]) - expected).max() < 2.0, (target, (x, y))
+        assert np.abs(np.array(target["rgba"][:3]) - MAP_COLOURS[0]).max() < 10, target
+    page.wait_for_function(
+        "document.getElementById('map-info').textContent.includes('following person 3')",
+        timeout=10_000)
+    info = page.inner_text("#map-info")
+    assert "3 targets" in info and "camera view 56°" in info, info
+    assert "zones from params/radar-presence" in info, info
+    page.wait_for_function("(window.dash.nodes || []).some((n) => n.name === 'dashboard' "
+                           "&& n.alive)", timeout=20_000)
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "dashboard-map.png"), full_page=True)
+    size = page.evaluate("[document.documentElement.scrollWidth, "
+                         "document.documentElement.scrollHeight]")
+    assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+    # An LD2410 as well: two tabs switch between the map and the distance plots.
+    assert page.is_hidden("#radar-tabs")
+    probe.publisher(keys.RADAR_FRAMES, device="7").put(sensor_frame([0] * 9, [0] * 9))
+    page.wait_for_selector("#radar-tabs", state="visible", timeout=15_000)
+    page.click("#radar-tabs button[data-view='distance']")
+    assert page.is_visible("#sensors") and page.is_hidden("#map-box")
+    page.click("#radar-tabs button[data-view='map']")
+    assert page.is_visible("#map-box") and page.is_hidden("#sensors")
+    # Silent: the targets go, the trails fade out.
+    page.wait_for_function("window.dash.map.sensors[0].silent "
+                           "&& window.dash.map.sensors[0].targets.length === 0", timeout=15_000)
+    assert page.errors == []

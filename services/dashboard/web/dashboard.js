@@ -147,6 +147,7 @@ const handlers = {
     showControl();
   },
   leases(v) { D.leases = v; showControl(); showLeases(); },
+  map(v) { D.map = v; showRadarView(); scheduleMap(); },
   reply(r) { showReply(r); },
 };
 
@@ -251,12 +252,146 @@ function drawAllRadar() {
     radarQueued = false;
     for (const key of Object.keys(D.sensors)) { drawPlot(D.sensors[key]); drawBars(D.sensors[key]); }
   });
+  showRadarView();
 }
 setInterval(drawAllRadar, 200);  // the time axis moves on between frames
 setInterval(() => { showController(); showPresenceAge(); }, 500);
 function showPresenceAge() {
   if (D.presence) put($("p-since"), ago(D.presence.stamp_ns));
 }
+
+// --- the angle radars' top-down map --------------------------------------------------
+// The server sends the scene in canvas pixels (services/dashboard/radar_map.py and
+// map_geometry.py decide what goes where); the page only paints it. Shown in place
+// of the distance plots once an angle radar reports; with LD2410 sensors as well,
+// two tabs switch between them.
+const MAP_COLOURS = ["#ffa657", "#79c0ff", "#d2a8ff", "#f778ba", "#56d4dd", "#e3b341"];
+const FOLLOWED = "#3fb950";
+const RADAR_TITLES = {
+  distance: 'Radar <span class="dim">distance over time and gate energies per sensor</span>',
+  map: 'Radar map <span class="dim">from above, forward up</span>',
+};
+for (const b of document.querySelectorAll("#radar-tabs button")) {
+  b.onclick = () => { D.radarView = b.dataset.view; showRadarView(); scheduleMap(); drawAllRadar(); };
+}
+function showRadarView() {
+  const both = !!D.map && Object.keys(D.sensors).length > 0;
+  const view = D.map ? (both && D.radarView) || "map" : "distance";
+  const tabs = $("radar-tabs");
+  if (tabs.hidden === both) tabs.hidden = !both;
+  for (const b of tabs.querySelectorAll("button")) b.classList.toggle("on", b.dataset.view === view);
+  if ($("map-box").hidden !== (view !== "map")) {
+    $("map-box").hidden = view !== "map";
+    $("sensors").hidden = view === "map";
+    $("radar-title").innerHTML = RADAR_TITLES[view];
+  }
+}
+let mapQueued = false;
+function scheduleMap() {
+  if (mapQueued) return;
+  mapQueued = true;
+  requestAnimationFrame(() => { mapQueued = false; drawMap(); });
+}
+function poly(g, pts) {
+  g.beginPath(); g.moveTo(pts[0][0], pts[0][1]);
+  for (const p of pts.slice(1)) g.lineTo(p[0], p[1]);
+  g.closePath();
+}
+function drawMap() {
+  const v = D.map, c = $("map");
+  if (!v || $("map-box").hidden) return;
+  if (c.width !== v.size[0] || c.height !== v.size[1]) { c.width = v.size[0]; c.height = v.size[1]; }
+  const g = c.getContext("2d"), [W, H] = v.size, [ou, ov] = v.origin, now = nowS();
+  g.clearRect(0, 0, W, H);
+  g.font = "22px sans-serif"; g.lineWidth = 1.5;
+  // Distance rings, labelled straight ahead.
+  g.strokeStyle = "#2c323c"; g.fillStyle = "#8b93a0";
+  for (const r of v.rings) {
+    g.beginPath(); g.arc(ou, ov, r.px, 0, 2 * Math.PI); g.stroke();
+    g.fillText(`${r.m} m`, ou + 6, ov - r.px + 20);
+  }
+  g.beginPath(); g.moveTo(ou, 0); g.lineTo(ou, H); g.moveTo(0, ov); g.lineTo(W, ov); g.stroke();
+  // The camera's field of view.
+  if (v.fov) {
+    g.fillStyle = "rgba(88, 166, 255, 0.09)"; poly(g, v.fov.poly); g.fill();
+    g.strokeStyle = "rgba(88, 166, 255, 0.55)"; g.setLineDash([10, 8]); g.lineWidth = 2;
+    const p = v.fov.poly, a = p[1], b = p[p.length - 1];
+    g.beginPath(); g.moveTo(ou, ov); g.lineTo(a[0], a[1]); g.moveTo(ou, ov); g.lineTo(b[0], b[1]); g.stroke();
+    g.setLineDash([]);
+  }
+  // Presence zones: detect green, ignore red and hatched.
+  for (const z of v.zones) {
+    const ignore = z.mode === "ignore", colour = ignore ? "#f85149" : "#3fb950";
+    g.fillStyle = ignore ? "rgba(248, 81, 73, 0.16)" : "rgba(63, 185, 80, 0.10)";
+    poly(g, z.poly); g.fill();
+    if (ignore) {
+      g.save(); poly(g, z.poly); g.clip();
+      g.strokeStyle = "rgba(248, 81, 73, 0.35)"; g.lineWidth = 2; g.beginPath();
+      for (let k = -H; k < W; k += 18) { g.moveTo(k, H); g.lineTo(k + H, 0); }
+      g.stroke(); g.restore();
+    }
+    g.strokeStyle = colour; g.lineWidth = 2.5; poly(g, z.poly); g.stroke();
+    const left = Math.min(...z.poly.map((p) => p[0])), top = Math.min(...z.poly.map((p) => p[1]));
+    g.fillStyle = colour; g.fillText(z.name || z.mode, Math.max(4, left + 6), Math.max(20, top + 22));
+  }
+  // Trails (fading with age), then the targets now.
+  g.lineCap = "round";
+  for (const s of v.sensors) {
+    const colour = MAP_COLOURS[s.index % MAP_COLOURS.length];
+    g.strokeStyle = colour; g.lineWidth = 7;
+    for (const t of s.trails) {
+      for (let i = 1; i < t.length; i++) {
+        g.globalAlpha = Math.max(0, Math.min(1, 1 - (now - t[i][2]) / v.trail_s)) * 0.8;
+        g.beginPath(); g.moveTo(t[i - 1][0], t[i - 1][1]); g.lineTo(t[i][0], t[i][1]); g.stroke();
+      }
+    }
+    g.globalAlpha = 1;
+  }
+  // People: the followed one ringed in green with a line from the robot.
+  for (const p of v.people) {
+    const colour = p.followed ? FOLLOWED : "#8b93a0";
+    g.strokeStyle = colour; g.fillStyle = colour; g.lineWidth = p.followed ? 4 : 2;
+    const label = `person ${p.id}${p.name ? " " + p.name : ""}`;
+    if (p.at) {
+      if (p.followed) {
+        g.setLineDash([6, 6]); g.beginPath(); g.moveTo(ou, ov); g.lineTo(p.at[0], p.at[1]); g.stroke();
+        g.setLineDash([]);
+      }
+      g.beginPath(); g.arc(p.at[0], p.at[1], 24, 0, 2 * Math.PI); g.stroke();
+      g.fillText(label, p.at[0] - 40, p.at[1] - 32);
+    } else if (p.followed) {  // no bearing: everywhere at that distance
+      g.setLineDash([4, 10]); g.beginPath(); g.arc(ou, ov, p.ring_px, 0, 2 * Math.PI); g.stroke();
+      g.setLineDash([]); g.fillText(`${label}, no bearing`, ou + 8, ov - p.ring_px - 8);
+    }
+  }
+  for (const s of v.sensors) {
+    const colour = MAP_COLOURS[s.index % MAP_COLOURS.length];
+    for (const t of s.targets) {
+      const [u, w] = t.at;
+      g.fillStyle = colour; g.beginPath(); g.arc(u, w, 13, 0, 2 * Math.PI); g.fill();
+      g.strokeStyle = "#101318"; g.lineWidth = 3; g.stroke();
+      g.fillStyle = "#e3e6ea"; g.fillText(`${fmt(t.distance_m, 1)} m`, u + 30, w + 8);
+    }
+  }
+  // The robot: a wedge pointing forward (up).
+  g.fillStyle = "#a371f7";
+  g.beginPath(); g.moveTo(ou, ov - 22); g.lineTo(ou + 16, ov + 14); g.lineTo(ou - 16, ov + 14); g.closePath(); g.fill();
+  // Legend: one line per sensor, bottom left.
+  g.font = "24px sans-serif";
+  v.sensors.forEach((s, i) => {
+    g.fillStyle = MAP_COLOURS[s.index % MAP_COLOURS.length];
+    g.fillText(`● radar ${s.key}${s.silent ? " (silent)" : ""}`, 12, H - 14 - 30 * (v.sensors.length - 1 - i));
+  });
+  const n = v.sensors.reduce((k, s) => k + s.targets.length, 0);
+  const followed = v.people.find((p) => p.followed);
+  const parts = [`${n} target${n === 1 ? "" : "s"}, trails ${fmt(v.trail_s, 0)} s`];
+  if (followed) parts.push(`following person ${followed.id} at ${fmt(followed.distance_m, 1)} m`
+    + (followed.yaw_deg === null ? "" : `, ${fmt(followed.yaw_deg, 0)}°`));
+  parts.push(v.fov ? `camera view ${fmt(v.fov.hfov_deg, 0)}° (${v.fov.from})` : "camera view unknown");
+  if (v.zones.length) parts.push(`zones from ${v.zones_from}`);
+  later($("map-info"), parts.join(" · "));
+}
+window.dashMap = drawMap;  // tests draw at once instead of waiting for the next frame
 
 const PLOT = { left: 44, right: 10, top: 12, bottom: 28 };
 function drawPlot(s) {
