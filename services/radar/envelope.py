@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass, field
+from typing import Any
 
 COMMAND_HEAD = b"\xfd\xfc\xfb\xfa"
 COMMAND_TAIL = b"\x04\x03\x02\x01"
@@ -200,3 +201,119 @@ class ParserStats:
         self.last_error = why
         if why in self.errors or len(self.errors) < 32:
             self.errors[why] = self.errors.get(why, 0) + 1
+
+
+class UnusualFrame(ProtocolError):
+    """A frame whose framing is intact but whose content we do not know."""
+
+
+class NeedMore(Exception):
+    """The frame at the scan position is not complete yet (raised by `_report_end`)."""
+
+
+class FrameParser:
+    """The scan both models' parsers share: report frames of the model, command frames.
+
+    Feed arbitrary chunks with `feed()`; get every complete valid frame back.
+    A subclass names its report head (`REPORT_HEAD`), says where a report
+    frame starting at a position ends (`_report_end`: raise NeedMore to wait,
+    ProtocolError to reject the head) and decodes it (`_decode_report`).
+
+    The buffer never grows past one maximal frame plus a chunk: bytes that
+    cannot start a frame are discarded (counted in `skipped_bytes`); a
+    rejected head costs one byte, so a stray head in garbage or a partial
+    frame after a reconnect costs at most that frame, never the stream.
+    Linear time: the next header of each kind is searched once with
+    `bytearray.find` and remembered until the scan passes it, so a chunk full
+    of report frames never rescans its remainder for a command header that
+    is not there (which made one 4 MB `feed()` take minutes).
+    """
+
+    REPORT_HEAD = b""
+    REPORT_MARK = "report"  # what frames of REPORT_HEAD are counted as
+
+    def __init__(self) -> None:
+        self._buf = bytearray()
+        self.stats = ParserStats()
+
+    def reset(self) -> None:
+        """Forget a partial frame (after a reconnect the stream restarts)."""
+        self._buf.clear()
+
+    def _report_end(self, buf: bytearray, start: int, end: int) -> int:
+        """Where the report frame at `start` ends (checked framing), or NeedMore."""
+        raise NotImplementedError
+
+    def _decode_report(self, frame: bytes) -> object:
+        """A whole report frame -> its typed frame (UnusualFrame/ProtocolError if not)."""
+        raise NotImplementedError
+
+    def _command_end(self, buf: bytearray, start: int, end: int) -> int:
+        if end - start < 6:
+            raise NeedMore
+        (length,) = struct.unpack_from("<H", buf, start + 4)
+        if length > MAX_COMMAND_LENGTH:
+            raise ProtocolError("length too large")
+        frame_end: int = start + 6 + length + 4
+        if frame_end > end:
+            raise NeedMore
+        if buf[frame_end - 4:frame_end] != COMMAND_TAIL:
+            raise ProtocolError("bad tail")
+        return frame_end
+
+    def feed(self, chunk: bytes | bytearray | memoryview) -> list[Any]:
+        buf = self._buf
+        buf += chunk
+        out: list[Any] = []
+        stats = self.stats
+        head = self.REPORT_HEAD
+        firsts = (head[0], COMMAND_HEAD[0])
+        pos = 0
+        end = len(buf)
+        r = c = -2  # next report/command header at or after pos (-1: none; -2: not searched)
+        while True:
+            if r != -1 and r < pos:
+                r = buf.find(head, pos)
+            if c != -1 and c < pos:
+                c = buf.find(COMMAND_HEAD, pos)
+            if r < 0 and c < 0:
+                # Keep a possible partial header (up to 3 bytes) for the next chunk.
+                keep = max(pos, end - 3)
+                while keep < end and buf[keep] not in firsts:
+                    keep += 1
+                stats.skipped_bytes += keep - pos
+                pos = keep
+                break
+            start = r if c < 0 or (0 <= r < c) else c
+            stats.skipped_bytes += start - pos
+            pos = start
+            is_report = start == r
+            try:
+                frame_end = (self._report_end(buf, start, end) if is_report
+                             else self._command_end(buf, start, end))
+                frame = (self._decode_report(bytes(buf[start:frame_end])) if is_report
+                         else decode_command_payload(bytes(buf[start + 6:frame_end - 4])))
+            except NeedMore:
+                break
+            except UnusualFrame as exc:
+                # Sound framing, content we do not know: skip the whole frame.
+                stats.unusual_frames += 1
+                stats.intact_frames += 1
+                stats.last_error = str(exc)
+                pos = frame_end
+                continue
+            except ProtocolError as exc:
+                stats.bad(str(exc))
+                pos = start + 1
+                continue
+            if is_report:
+                stats.reports += 1
+            elif isinstance(frame, Ack):
+                stats.acks += 1
+            else:
+                stats.commands += 1
+            stats.intact_frames += 1
+            out.append(frame)
+            pos = frame_end
+        del buf[:pos]
+        return out

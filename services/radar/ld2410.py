@@ -37,17 +37,20 @@ from buddybot.radar.envelope import (
     CMD_READ_MAC,  # noqa: F401
     CMD_RESTART,  # noqa: F401
     CMD_SET_BAUD_RATE,  # noqa: F401
-    COMMAND_HEAD,
-    COMMAND_TAIL,
-    MAX_COMMAND_LENGTH,
+    COMMAND_HEAD,  # noqa: F401
+    COMMAND_TAIL,  # noqa: F401
+    MAX_COMMAND_LENGTH,  # noqa: F401
     SHARED_COMMAND_NAMES,
     Ack,
     Command,
     EnableInfo,  # noqa: F401
-    ParserStats,
+    FrameParser,
+    NeedMore,
+    ParserStats,  # noqa: F401
     ProtocolError,
+    UnusualFrame,
     bluetooth,  # noqa: F401
-    decode_command_payload,
+    decode_command_payload,  # noqa: F401
     decode_enable,  # noqa: F401
     decode_firmware,  # noqa: F401
     decode_mac,  # noqa: F401
@@ -127,10 +130,6 @@ NOISE_DETECTION_STATUS: dict[int, str] = {0: "not started", 1: "in progress", 2:
 
 BLUETOOTH_PASSWORD_LENGTH = 6
 """The Bluetooth password is exactly 6 ASCII characters (factory: "HiLink")."""
-
-
-class UnusualFrame(ProtocolError):
-    """A frame whose framing is intact but whose content we do not know."""
 
 
 # --- frames ------------------------------------------------------------------------
@@ -424,98 +423,36 @@ def _early_report_check(length: int, kind: int, head: int) -> str:
     return "bad data type"
 
 
-class Parser:
-    """Feed arbitrary chunks with `feed()`; get every complete valid frame back.
+class Parser(FrameParser):
+    """LD2410 reports (`F4 F3 F2 F1`, length, payload, `F8 F7 F6 F5`) and command frames.
 
-    The buffer never grows past one maximal frame plus a chunk: bytes that
-    cannot start a frame are discarded (counted in `skipped_bytes`).
-
-    Linear time: the next header of each kind is searched once with
-    `bytearray.find` and remembered until the scan passes it, so a chunk
-    full of report frames never rescans its remainder for a command
-    header that is not there (which made one 4 MB `feed()` take minutes).
+    Every check of `FrameParser`, plus: the declared length is bounded and a
+    false report head is rejected as soon as its first 8 bytes disagree
+    (data type, 0xAA head), instead of holding real frames back until its
+    claimed length has arrived.
     """
 
-    def __init__(self) -> None:
-        self._buf = bytearray()
-        self.stats = ParserStats()
+    REPORT_HEAD = REPORT_HEAD
 
-    def reset(self) -> None:
-        """Forget a partial frame (after a reconnect the stream restarts)."""
-        self._buf.clear()
+    def _report_end(self, buf: bytearray, start: int, end: int) -> int:
+        if end - start < 6:
+            raise NeedMore
+        (length,) = struct.unpack_from("<H", buf, start + 4)
+        if length > MAX_REPORT_LENGTH:
+            raise ProtocolError("length too large")
+        if end - start >= 8:
+            why = _early_report_check(length, buf[start + 6], buf[start + 7])
+            if why:
+                raise ProtocolError(why)
+        frame_end: int = start + 6 + length + 4
+        if frame_end > end:
+            raise NeedMore
+        if buf[frame_end - 4:frame_end] != REPORT_TAIL:
+            raise ProtocolError("bad tail")
+        return frame_end
+
+    def _decode_report(self, frame: bytes) -> Report:
+        return _decode_report(frame[6:-4])
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[Frame]:
-        buf = self._buf
-        buf += chunk
-        out: list[Frame] = []
-        stats = self.stats
-        pos = 0
-        end = len(buf)
-        r = c = -2  # next report/command header at or after pos (-1: none; -2: not searched)
-        while True:
-            if r != -1 and r < pos:
-                r = buf.find(REPORT_HEAD, pos)
-            if c != -1 and c < pos:
-                c = buf.find(COMMAND_HEAD, pos)
-            if r < 0 and c < 0:
-                # Keep a possible partial header (up to 3 bytes) for the next chunk.
-                keep = max(pos, end - 3)
-                while keep < end and buf[keep] not in (0xF4, 0xFD):
-                    keep += 1
-                stats.skipped_bytes += keep - pos
-                pos = keep
-                break
-            start = r if c < 0 or (0 <= r < c) else c
-            stats.skipped_bytes += start - pos
-            pos = start
-            if end - start < 6:
-                break
-            (length,) = struct.unpack_from("<H", buf, start + 4)
-            is_report = start == r
-            limit = MAX_REPORT_LENGTH if is_report else MAX_COMMAND_LENGTH
-            if length > limit:
-                self.stats.bad("length too large")
-                pos = start + 1
-                continue
-            if is_report and end - start >= 8:
-                # Reject a false header as soon as its first bytes disagree, instead
-                # of holding real frames back until its claimed length has arrived.
-                why = _early_report_check(length, buf[start + 6], buf[start + 7])
-                if why:
-                    self.stats.bad(why)
-                    pos = start + 1
-                    continue
-            frame_end = start + 6 + length + 4
-            if frame_end > end:
-                break
-            tail = REPORT_TAIL if is_report else COMMAND_TAIL
-            if buf[frame_end - 4:frame_end] != tail:
-                self.stats.bad("bad tail")
-                pos = start + 1
-                continue
-            payload = bytes(buf[start + 6:frame_end - 4])
-            try:
-                frame: Frame = (_decode_report(payload) if is_report
-                                 else decode_command_payload(payload))
-            except UnusualFrame as exc:
-                # Sound framing, content we do not know: skip the whole frame.
-                stats.unusual_frames += 1
-                stats.intact_frames += 1
-                stats.last_error = str(exc)
-                pos = frame_end
-                continue
-            except ProtocolError as exc:
-                self.stats.bad(str(exc))
-                pos = start + 1
-                continue
-            if isinstance(frame, Report):
-                stats.reports += 1
-            elif isinstance(frame, Ack):
-                stats.acks += 1
-            else:
-                stats.commands += 1
-            stats.intact_frames += 1
-            out.append(frame)
-            pos = frame_end
-        del buf[:pos]
-        return out
+        return super().feed(chunk)

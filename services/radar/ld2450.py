@@ -14,8 +14,8 @@ the wrong side). An empty slot is all zeros. The zone rectangles of the
 zone filter commands (0x00C1/0x00C2), by contrast, are plain two's
 complement int16, as the protocol document's example and ESPHome agree.
 
-Commands use the LD2410's envelope (`envelope.py`). The parser never
-trusts a frame: the head, the fixed length and the `55 CC` end are
+Commands use the LD2410's envelope, and the parser the same scan
+(`envelope.py`): the head, the fixed length and the `55 CC` end are
 checked; a bad frame is dropped and counted, and scanning restarts one
 byte after the rejected head, so garbage costs at most that frame. It runs
 in time linear in its input however the input is chunked, and its buffer
@@ -28,15 +28,12 @@ import struct
 from dataclasses import dataclass
 
 from buddybot.radar.envelope import (
-    COMMAND_HEAD,
-    COMMAND_TAIL,
-    MAX_COMMAND_LENGTH,
     SHARED_COMMAND_NAMES,
     Ack,
     Command,
-    ParserStats,
+    FrameParser,
+    NeedMore,
     ProtocolError,
-    decode_command_payload,
     encode_command,
     need,
 )
@@ -248,84 +245,23 @@ def decode_zone_filter(data: bytes) -> ZoneFilter:
 # --- the incremental parser --------------------------------------------------------
 
 
-class Parser:
-    """Feed arbitrary chunks with `feed()`; get every complete valid frame back.
+class Parser(FrameParser):
+    """LD2450 reports (`AA FF 03 00`, 24 bytes of slots, `55 CC`) and command frames,
+    with every check of `FrameParser`; a report has no length field, so its
+    end is judged once 30 bytes have arrived."""
 
-    The same scheme as the LD2410 parser: the next header of each kind is
-    found once with `bytearray.find` and remembered until the scan passes
-    it (linear time), bytes that cannot start a frame are discarded and
-    counted in `skipped_bytes`, at most 3 bytes of a possible partial
-    header are kept between chunks.
-    """
+    REPORT_HEAD = REPORT_HEAD
 
-    def __init__(self) -> None:
-        self._buf = bytearray()
-        self.stats = ParserStats()
+    def _report_end(self, buf: bytearray, start: int, end: int) -> int:
+        frame_end = start + REPORT_SIZE
+        if frame_end > end:
+            raise NeedMore
+        if buf[frame_end - 2:frame_end] != REPORT_END:
+            raise ProtocolError("bad 0x55 0xCC end")
+        return frame_end
 
-    def reset(self) -> None:
-        """Forget a partial frame (after a reconnect the stream restarts)."""
-        self._buf.clear()
+    def _decode_report(self, frame: bytes) -> Report:
+        return decode_report(frame)
 
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[Frame]:
-        buf = self._buf
-        buf += chunk
-        out: list[Frame] = []
-        stats = self.stats
-        pos = 0
-        end = len(buf)
-        r = c = -2  # next report/command header at or after pos (-1: none; -2: not searched)
-        while True:
-            if r != -1 and r < pos:
-                r = buf.find(REPORT_HEAD, pos)
-            if c != -1 and c < pos:
-                c = buf.find(COMMAND_HEAD, pos)
-            if r < 0 and c < 0:
-                keep = max(pos, end - 3)
-                while keep < end and buf[keep] not in (0xAA, 0xFD):
-                    keep += 1
-                stats.skipped_bytes += keep - pos
-                pos = keep
-                break
-            start = r if c < 0 or (0 <= r < c) else c
-            stats.skipped_bytes += start - pos
-            pos = start
-            if start == r:
-                frame_end = start + REPORT_SIZE
-                if frame_end > end:
-                    break
-                if buf[frame_end - 2:frame_end] != REPORT_END:
-                    stats.bad("bad 0x55 0xCC end")
-                    pos = start + 1
-                    continue
-                frame: Frame = decode_report(buf[start:frame_end])
-                stats.reports += 1
-            else:
-                if end - start < 6:
-                    break
-                (length,) = struct.unpack_from("<H", buf, start + 4)
-                if length > MAX_COMMAND_LENGTH:
-                    stats.bad("length too large")
-                    pos = start + 1
-                    continue
-                frame_end = start + 6 + length + 4
-                if frame_end > end:
-                    break
-                if buf[frame_end - 4:frame_end] != COMMAND_TAIL:
-                    stats.bad("bad tail")
-                    pos = start + 1
-                    continue
-                try:
-                    frame = decode_command_payload(bytes(buf[start + 6:frame_end - 4]))
-                except ProtocolError as exc:
-                    stats.bad(str(exc))
-                    pos = start + 1
-                    continue
-                if isinstance(frame, Ack):
-                    stats.acks += 1
-                else:
-                    stats.commands += 1
-            stats.intact_frames += 1
-            out.append(frame)
-            pos = frame_end
-        del buf[:pos]
-        return out
+        return super().feed(chunk)

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from buddybot.radar import envelope as e
 from buddybot.radar import ld2450 as p
 from buddybot.radar.ld2450_scenarios import AngleScenario, Person
+from buddybot.radar.sim_commands import AnswersCommands
 
 FIRMWARE = (0x0000, 0x0202, 0x23090617)  # type, major (2.02), minor: V2.02.23090617
 RESOLUTION_MM = 320
@@ -29,7 +30,7 @@ def _inside(zone: p.Zone, person: Person) -> bool:
 
 
 @dataclass
-class SimulatedLD2450:
+class SimulatedLD2450(AnswersCommands):
     """Protocol state of one LD2450."""
 
     scenario: AngleScenario
@@ -80,23 +81,6 @@ class SimulatedLD2450:
         return scene.garbage + frame
 
     # -- commands --
-
-    def handle(self, command: e.Command, now: float) -> bytes:
-        """The ACK for one command frame (b"" if this sensor does not answer)."""
-        self.commands.append(command.command)
-        if not self.answer_commands:
-            return b""
-        word, value = command.command, command.value
-        if word == e.CMD_ENABLE_CONFIG:
-            self.config_mode = True
-            return e.encode_ack(word, 0, struct.pack("<HH", 1, 0x40))
-        if not self.config_mode:
-            return e.encode_ack(word, 1)
-        try:
-            data = self._apply(word, value, now)
-        except (ValueError, struct.error):
-            return e.encode_ack(word, 1)
-        return e.encode_ack(word, 0, data)
 
     def _apply(self, word: int, value: bytes, now: float) -> bytes:
         """Execute a configuration command; ValueError -> failure ACK."""

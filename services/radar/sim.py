@@ -28,6 +28,7 @@ from buddybot.radar import ld2450
 from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, AngleScenario
 from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.scenarios import SCENARIOS, Scenario, Target
+from buddybot.radar.sim_commands import AnswersCommands
 
 log = logging.getLogger("buddybot.radar.sim")
 
@@ -45,7 +46,7 @@ def default_parameters() -> p.Parameters:
 
 
 @dataclass
-class SimulatedLD2410:
+class SimulatedLD2410(AnswersCommands):
     """Protocol state of one sensor: no I/O, driven by explicit time."""
 
     scenario: Scenario
@@ -124,23 +125,6 @@ class SimulatedLD2410:
         )
 
     # -- commands --
-
-    def handle(self, command: p.Command, now: float) -> bytes:
-        """The ACK for one command frame (b"" if this sensor does not answer)."""
-        self.commands.append(command.command)
-        if not self.answer_commands:
-            return b""
-        word, value = command.command, command.value
-        if word == p.CMD_ENABLE_CONFIG:
-            self.config_mode = True
-            return p.encode_ack(word, 0, struct.pack("<HH", 1, 0x40))
-        if not self.config_mode:
-            return p.encode_ack(word, 1)
-        try:
-            data = self._apply(word, value, now)
-        except (ValueError, struct.error):
-            return p.encode_ack(word, 1)
-        return p.encode_ack(word, 0, data)
 
     def _apply(self, word: int, value: bytes, now: float) -> bytes:
         """Execute a configuration command; ValueError -> failure ACK."""
