@@ -84,9 +84,7 @@ class SimulatedLD2450(AnswersCommands):
 
     def _apply(self, word: int, value: bytes, now: float) -> bytes:
         """Execute a configuration command; ValueError -> failure ACK."""
-        if word == e.CMD_END_CONFIG:
-            self.config_mode = False
-        elif word == p.CMD_SINGLE_TARGET:
+        if word == p.CMD_SINGLE_TARGET:
             self.tracking_mode = 1
         elif word == p.CMD_MULTI_TARGET:
             self.tracking_mode = 2
@@ -98,13 +96,6 @@ class SimulatedLD2450(AnswersCommands):
             self.zone_filter = p.decode_zone_filter(value)
         elif word == p.CMD_QUERY_ZONE_FILTER:
             return p.encode_zone_filter(self.zone_filter)
-        elif word == e.CMD_READ_FIRMWARE:
-            return e.encode_firmware(*self.firmware)
-        elif word == e.CMD_SET_BAUD_RATE:
-            (index,) = struct.unpack("<H", value)
-            if index not in e.BAUD_RATES.values():
-                raise ValueError("bad baud index")
-            self.baud_index = index
         elif word == e.CMD_FACTORY_RESET:
             self.factory_resets += 1
             self.tracking_mode = 2
@@ -114,9 +105,6 @@ class SimulatedLD2450(AnswersCommands):
             self.restarts += 1
             self.config_mode = False
             self._silent_until = now + 0.5
-        elif word == e.CMD_BLUETOOTH:
-            (flag,) = struct.unpack("<H", value)
-            self.bluetooth = bool(flag)
         elif word == e.CMD_READ_MAC:
             return self.mac if self.bluetooth else bytes.fromhex("080504030201")
         else:

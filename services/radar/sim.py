@@ -128,9 +128,7 @@ class SimulatedLD2410(AnswersCommands):
 
     def _apply(self, word: int, value: bytes, now: float) -> bytes:
         """Execute a configuration command; ValueError -> failure ACK."""
-        if word == p.CMD_END_CONFIG:
-            self.config_mode = False
-        elif word == p.CMD_SET_MAX_GATES:
+        if word == p.CMD_SET_MAX_GATES:
             words = _words(value, (0, 1, 2))
             moving, still, duration = words[0], words[1], words[2]
             if not (2 <= moving <= 8 and 2 <= still <= 8 and duration <= 0xFFFF):
@@ -151,13 +149,6 @@ class SimulatedLD2410(AnswersCommands):
                 ms[g], ss[g] = moving, still
             self.params = replace(self.params, moving_sensitivity=tuple(ms),
                                   still_sensitivity=tuple(ss))
-        elif word == p.CMD_READ_FIRMWARE:
-            return p.encode_firmware(*self.firmware)
-        elif word == p.CMD_SET_BAUD_RATE:
-            (index,) = struct.unpack("<H", value)
-            if index not in p.BAUD_RATES.values():
-                raise ValueError("bad baud index")
-            self.baud_index = index
         elif word == p.CMD_FACTORY_RESET:
             self.factory_resets += 1
             self.params = default_parameters()
@@ -170,9 +161,6 @@ class SimulatedLD2410(AnswersCommands):
             self.config_mode = False
             self.engineering = False
             self._silent_until = now + 0.5
-        elif word == p.CMD_BLUETOOTH:
-            (flag,) = struct.unpack("<H", value)
-            self.bluetooth = bool(flag)
         elif word == p.CMD_READ_MAC:
             return self.mac
         elif word == p.CMD_AUTO_THRESHOLDS:

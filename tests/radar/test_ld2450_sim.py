@@ -9,19 +9,7 @@ from buddybot.radar import ld2450 as p
 from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, Person, Scene
 from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.sim import PtySensor
-from tests.radar.rig import open_port
-
-
-def ack_of(data: bytes) -> p.Ack:
-    [frame] = p.Parser().feed(data)
-    assert isinstance(frame, p.Ack)
-    return frame
-
-
-def cmd(frame: bytes) -> p.Command:
-    [command] = p.Parser().feed(frame)
-    assert isinstance(command, p.Command)
-    return command
+from tests.radar.rig import ack_of, cmd, open_port
 
 
 def three(t: float, rng: object) -> Scene:
