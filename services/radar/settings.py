@@ -54,7 +54,9 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         "recognised at connect")] = msgspec.field(default_factory=dict)
     mount: Annotated[list[RadarMount], msgspec.Meta(
         description="[[radar_bridge.mount]] entries: each angle radar's pose relative "
-        "to the camera (default: at the camera, facing forward)")] = msgspec.field(
+        "to the camera (default: at the camera, facing forward)",
+        examples=[[{"sensor": 1, "x": 0.0, "y": 0.05, "z": -0.1, "yaw": 0.35,
+                    "mirror_x": False}]])] = msgspec.field(
         default_factory=list)
     sim: Annotated[bool, msgspec.Meta(
         description="add a built-in simulated sensor on a pseudo-terminal (configured "
