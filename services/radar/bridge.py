@@ -1,4 +1,9 @@
-"""`buddybot run radar-bridge`: 1..N LD2410 sensors on pyserial URLs -> `radar/<device>/frames`.
+"""`buddybot run radar-bridge`: 1..N LD2410/LD2450 sensors on pyserial URLs -> the bus.
+
+LD2410 reports go to `radar/<device>/frames`; LD2450 reports to
+`radar/<device>/targets`, each target placed in the camera's frame by the
+sensor's `[[radar_bridge.mount]]`. A sensor's model is recognised from its
+first report frames at every connect (`models.py`), unless `models` names it.
 
 The seed's radar_lld, as a thin adapter: one reader thread per sensor
 opens its URL (`/dev/ttyUSB0`, `socket://esp32.local:8881`,
@@ -32,10 +37,13 @@ import serial
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.radar import ld2410
+from buddybot.radar import ld2410, ld2450
 from buddybot.radar.client import LD2410Client, RadarError
-from buddybot.radar.convert import report_to_frame
-from buddybot.radar.ld2410 import Parser, ProtocolError, Report
+from buddybot.radar.convert import report_to_frame, report_to_targets
+from buddybot.radar.ld2410 import ProtocolError, Report
+from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS
+from buddybot.radar.models import AUTO, LD2450, MODELS, Frame, Sniffer, describe
+from buddybot.radar.mounting import IDENTITY, Mount
 from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.runtime.backoff import Backoff
@@ -73,16 +81,20 @@ class SensorStatus:
     # Whether this firmware's engineering reports end with light level and OUT pin.
     light_and_out: bool = False
     noise_detection: str = ""
+    model: str = "unknown"  # as recognised from the frames: "LD2410 basic", "LD2450", ...
+    model_changes: int = 0
+    implausible_targets: int = 0
 
 
 class SensorReader:
     """Reads one sensor forever: open, parse, publish; on failure back off and reopen."""
 
     def __init__(self, url: str, radar_id: int, baudrate: int,
-                 publish: Callable[[int, Report, int], None], on_change: Callable[[], None],
+                 publish: Callable[[int, Frame, int], None], on_change: Callable[[], None],
                  stop: threading.Event, backoff: tuple[float, float], silence_s: float,
-                 log: Any, query_firmware: bool = True) -> None:
+                 log: Any, query_firmware: bool = True, model: str = AUTO) -> None:
         self.status = SensorStatus(url, radar_id)
+        self._model = model
         self._query_firmware = query_firmware
         self._baud = baudrate
         self._publish = publish
@@ -91,7 +103,6 @@ class SensorReader:
         self._backoff = Backoff(*backoff)  # (initial, maximum): this sensor's own series
         self._silence_s = silence_s
         self._log = log
-        self._parser = Parser()
         self.thread = threading.Thread(target=self._run, name=f"radar-{radar_id}", daemon=True)
 
     def _run(self) -> None:
@@ -124,7 +135,6 @@ class SensorReader:
         st.ever_connected = True
         st.connected = True
         st.last_error = ""
-        self._parser.reset()
         self._log.info("radar %d connected: %s", st.radar_id, clip(st.url))
         self._on_change()
 
@@ -163,6 +173,23 @@ class SensorReader:
         self._log.info("radar %d firmware %s (light level and OUT pin: %s)", st.radar_id,
                        st.firmware, "yes" if st.light_and_out else "no")
 
+    def _recognised(self, model: str) -> None:
+        st = self.status
+        if model == st.model:
+            return
+        if st.model.split()[0] == model.split()[0]:  # LD2410 basic <-> engineering
+            st.model = model
+            self._on_change()
+            return
+        if st.model != "unknown":
+            st.model_changes += 1
+            self._log.warning("radar %d (%s) changed model: %s -> %s", st.radar_id,
+                              clip(st.url), st.model, model)
+        else:
+            self._log.info("radar %d (%s) is an %s", st.radar_id, clip(st.url), model)
+        st.model = model
+        self._on_change()
+
     def _read(self, port: Any) -> None:
         # Bytes buffered while nobody read (or before an unplug) are stale.
         with contextlib.suppress(AttributeError, NotImplementedError):
@@ -171,31 +198,34 @@ class SensorReader:
         if self._query_firmware:
             self._firmware(port)
         st.last_frame = time.monotonic()
-        parser = self._parser
-        stats = parser.stats
-        skipped_at_open = stats.skipped_bytes
-        intact = stats.intact_frames
+        sniffer = Sniffer(self._model)  # the model is recognised again at every connect
+        skipped_at_open = 0
+        intact = 0
         while not self._stop.is_set():
             data = port.read(port.in_waiting or 1)
             now = time.monotonic()
             if data:
                 stamp = time.time_ns()
-                for frame in parser.feed(data):
+                for frame in sniffer.feed(data):
+                    kind = describe(frame)
+                    if kind is None:
+                        continue
+                    self._recognised(kind)
+                    st.frames += 1
                     if isinstance(frame, Report):
-                        st.frames += 1
                         st.noise_detection = NOISE_STATES.get(frame.target_state,
                                                               st.noise_detection)
-                        self._publish(st.radar_id, frame, stamp)
-                if stats.intact_frames != intact:
+                    self._publish(st.radar_id, frame, stamp)
+                if sniffer.intact_frames != intact:
                     # Any intact frame (also one we could not use) shows the line works.
-                    intact = stats.intact_frames
+                    intact = sniffer.intact_frames
                     st.last_frame = now
-                st.bad_frames = stats.bad_frames
-                st.unusual_frames = stats.unusual_frames
-                st.skipped_bytes = stats.skipped_bytes
+                st.bad_frames = sniffer.bad_frames
+                st.unusual_frames = sniffer.unusual_frames
+                st.skipped_bytes = sniffer.skipped_bytes
             if now - st.last_frame > self._silence_s:
-                hint = " (bytes arrive but never a frame: wrong baud rate?)" \
-                    if parser.stats.skipped_bytes > skipped_at_open else ""
+                hint = " (bytes arrive but never a frame: wrong baud rate, or another model " \
+                    "than configured?)" if sniffer.skipped_bytes > skipped_at_open else ""
                 raise serial.SerialException(f"no valid frame for {self._silence_s:g} s{hint}")
 
 
@@ -204,20 +234,45 @@ class Bridge:
 
     def __init__(self, node: Node, urls: list[str], device_id: int, baudrate: int,
                  backoff: tuple[float, float], silence_s: float,
-                 query_firmware: bool = True) -> None:
+                 query_firmware: bool = True, models: list[str] | None = None,
+                 mounts: list[Mount] | None = None) -> None:
         self.node = node
         self.device_id = device_id
         self._pub = node.publisher(keys.RADAR_FRAMES, device=str(device_id))
+        self._targets_pub = node.publisher(keys.RADAR_TARGETS, device=str(device_id))
+        self._mounts = mounts or [IDENTITY] * len(urls)
+        models = models or [AUTO] * len(urls)
         self._lock = threading.Lock()
         self._warn = RateLimitedLog(node.log)
         self.publish_errors = 0
         self.readers = [
             SensorReader(url, i, baudrate, self._publish, self._report, node.stop_event,
-                         backoff, silence_s, node.log, query_firmware)
+                         backoff, silence_s, node.log, query_firmware, models[i])
             for i, url in enumerate(urls)
         ]
 
-    def _publish(self, radar_id: int, report: Report, stamp_ns: int) -> None:
+    def _publish(self, radar_id: int, report: Frame, stamp_ns: int) -> None:
+        if isinstance(report, ld2450.Report):
+            self._publish_targets(radar_id, report, stamp_ns)
+        elif isinstance(report, Report):
+            self._publish_frame(radar_id, report, stamp_ns)
+
+    def _put(self, pub: Any, msg: Any) -> None:
+        try:
+            with self._lock:  # one publisher per key, several reader threads
+                pub.put(msg)
+        except Exception as exc:  # a Zenoh hiccup must not end the sensor's reader
+            self.publish_errors += 1
+            self._warn.warning("put", "publishing radar reports failed: %s", clip(repr(exc)))
+
+    def _publish_targets(self, radar_id: int, report: ld2450.Report, stamp_ns: int) -> None:
+        converted = report_to_targets(report, self.device_id, radar_id, stamp_ns,
+                                      self._mounts[radar_id])
+        if converted.implausible:
+            self.readers[radar_id].status.implausible_targets += converted.implausible
+        self._put(self._targets_pub, converted.message)
+
+    def _publish_frame(self, radar_id: int, report: Report, stamp_ns: int) -> None:
         st = self.readers[radar_id].status
         frame, clamped, bad_out_pin = report_to_frame(report, radar_id, st.light_and_out)
         if clamped:
@@ -226,12 +281,7 @@ class Bridge:
             st.bad_out_pin += 1
         msg = m.LD2410TargetDataFrameArray(stamp_ns=stamp_ns, device_id=self.device_id,
                                            sensors=[frame])
-        try:
-            with self._lock:  # one publisher, several reader threads
-                self._pub.put(msg)
-        except Exception as exc:  # a Zenoh hiccup must not end the sensor's reader
-            self.publish_errors += 1
-            self._warn.warning("put", "publishing frames failed: %s", clip(repr(exc)))
+        self._put(self._pub, msg)
 
     def _report(self) -> None:
         """Diagnostics: level from the sensors' connection state, counters per sensor."""
@@ -240,10 +290,13 @@ class Bridge:
         values: dict[str, m.DiagnosticValue] = {"sensors": len(self.readers),
                                                 "connected": len(self.readers) - len(down)}
         totals = {"frames": 0, "bad_frames": 0, "reconnects": 0, "clamped_energies": 0,
-                  "unusual_frames": 0, "bad_out_pin": 0}
+                  "unusual_frames": 0, "bad_out_pin": 0, "implausible_targets": 0}
         for r in self.readers:
             st = r.status
             values[f"radar{st.radar_id}.url"] = clip(st.url)
+            values[f"radar{st.radar_id}.model"] = st.model
+            values[f"radar{st.radar_id}.model_changes"] = st.model_changes
+            values[f"radar{st.radar_id}.implausible_targets"] = st.implausible_targets
             values[f"radar{st.radar_id}.firmware"] = st.firmware
             values[f"radar{st.radar_id}.unusual_frames"] = st.unusual_frames
             values[f"radar{st.radar_id}.bad_out_pin"] = st.bad_out_pin
@@ -261,6 +314,7 @@ class Bridge:
             totals["clamped_energies"] += st.clamped
             totals["unusual_frames"] += st.unusual_frames
             totals["bad_out_pin"] += st.bad_out_pin
+            totals["implausible_targets"] += st.implausible_targets
             if st.last_error:
                 values[f"radar{st.radar_id}.error"] = clip(st.last_error)
         values.update(totals)
@@ -298,8 +352,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings_option(parser, "--baudrate", struct=option, field="baudrate")
     settings_option(parser, "--sim", struct=option, field="sim",
                     action=argparse.BooleanOptionalAction)
+    settings_option(parser, "--sim-model", struct=option, field="sim_model",
+                    choices=list(MODELS))
     settings_option(parser, "--sim-scenario", struct=option, field="sim_scenario",
-                    choices=sorted(SCENARIOS))
+                    choices=sorted(set(SCENARIOS) | set(ANGLE_SCENARIOS)))
     settings_option(parser, "--sim-speed", struct=option, field="sim_speed")
 
 
@@ -312,6 +368,9 @@ class BridgeOptions:
     baudrate: int
     sim_scenario: str | None  # None: no simulated sensor
     sim_speed: float
+    sim_model: str = "LD2410"
+    models: list[str] = field(default_factory=list)  # per sensor (the sim last)
+    mounts: list[Mount] = field(default_factory=list)  # per sensor (the sim last)
 
 
 def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> RadarBridgeSettings:
@@ -325,10 +384,51 @@ def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> Radar
     s = merge(cfg, args)
     if s.sim and not given(args, RadarBridgeSettings, "sensors"):
         s = msgspec.structs.replace(s, sensors=[])
-    if s.sim and s.sim_scenario not in SCENARIOS:
-        raise ConfigError(f"radar_bridge.sim_scenario: unknown {s.sim_scenario!r}; "
-                          f"one of {sorted(SCENARIOS)}")
+    if s.sim_model not in MODELS:
+        raise ConfigError(f"radar_bridge.sim_model: unknown {s.sim_model!r}; one of "
+                          f"{list(MODELS)}")
+    scenarios = ANGLE_SCENARIOS if s.sim_model == LD2450 else SCENARIOS
+    if s.sim and s.sim_scenario not in scenarios:
+        raise ConfigError(f"radar_bridge.sim_scenario: {s.sim_scenario!r} is not an "
+                          f"{s.sim_model} scenario; one of {sorted(scenarios)}")
+    per_sensor(s)
     return s
+
+
+def _count(s: RadarBridgeSettings) -> int:
+    return len(s.sensors) + (1 if s.sim else 0)
+
+
+def per_sensor(s: RadarBridgeSettings) -> tuple[list[str], list[Mount]]:
+    """Each sensor's model setting and mount, by index (the simulated sensor last).
+
+    ConfigError, naming the key, for a model that is not one, an index that is
+    no sensor, or two mounts for one sensor.
+    """
+    count = _count(s)
+    models = [AUTO] * count
+    for key, model in s.models.items():
+        if not key.isdigit() or int(key) >= count:
+            raise ConfigError(f"radar_bridge.models: {key!r} is not a sensor index "
+                              f"(0..{count - 1}; there are {count} sensor(s))")
+        if model not in (AUTO, *MODELS):
+            raise ConfigError(f"radar_bridge.models.{key}: unknown model {model!r}; one "
+                              f"of {[AUTO, *MODELS]}")
+        models[int(key)] = model
+    if s.sim:
+        models[-1] = s.sim_model
+    mounts = [IDENTITY] * count
+    seen: set[int] = set()
+    for n, entry in enumerate(s.mount):
+        where = f"radar_bridge.mount[{n}].sensor"
+        if entry.sensor >= count:
+            raise ConfigError(f"{where}: {entry.sensor} is not a sensor index "
+                              f"(0..{count - 1}; there are {count} sensor(s))")
+        if entry.sensor in seen:
+            raise ConfigError(f"{where}: sensor {entry.sensor} has two mounts")
+        seen.add(entry.sensor)
+        mounts[entry.sensor] = Mount(entry.x, entry.y, entry.z, entry.yaw, entry.mirror_x)
+    return models, mounts
 
 
 def settings_from(ctx: ServiceContext) -> RadarBridgeSettings:
@@ -338,8 +438,10 @@ def settings_from(ctx: ServiceContext) -> RadarBridgeSettings:
 
 def options_from(s: RadarBridgeSettings) -> BridgeOptions:
     """What to open: the sensors, plus the simulated one when `sim` is on."""
+    models, mounts = per_sensor(s)
     return BridgeOptions(list(s.sensors), s.device_id, s.baudrate,
-                         s.sim_scenario if s.sim else None, s.sim_speed)
+                         s.sim_scenario if s.sim else None, s.sim_speed, s.sim_model,
+                         models, mounts)
 
 
 def resolve_options(args: argparse.Namespace, cfg: RadarBridgeSettings) -> BridgeOptions:
@@ -355,7 +457,8 @@ def run(ctx: ServiceContext) -> int:
     urls = list(opts.urls)
     sims: list[PtySensor] = []
     if opts.sim_scenario is not None:
-        sims.append(PtySensor(opts.sim_scenario, speed=opts.sim_speed).start())
+        sims.append(PtySensor(opts.sim_scenario, speed=opts.sim_speed,
+                              model=opts.sim_model).start())
         urls.append(sims[-1].path)
     if not urls:
         raise UsageError("no sensor: give --sensor URL (repeatable) or --sim")
@@ -363,7 +466,7 @@ def run(ctx: ServiceContext) -> int:
     LiveSettings(cfg).serve(node)  # readable and dumpable; every field needs a restart
     bridge = Bridge(node, urls, opts.device_id, opts.baudrate,
                     (cfg.reconnect_initial_s, cfg.reconnect_max_s),
-                    cfg.silence_timeout_s, cfg.query_firmware)
+                    cfg.silence_timeout_s, cfg.query_firmware, opts.models, opts.mounts)
     try:
         bridge.start()
         node.spin()

@@ -1,5 +1,9 @@
 """Configuration commands over an open port: send, wait for the matching ACK, check status.
 
+The LD2410 and the LD2450 share the command envelope (envelope.py), so one
+client talks to both: the shared words (firmware, baud rate, restart,
+factory reset, Bluetooth, MAC) work on either, the others on their model.
+
 Works with any object that has `read(n)`, `write(data)` and `in_waiting`
 (a pyserial port, whatever its URL), so it imports nothing from serial.
 Every operation is wrapped in enable configuration ... end configuration,
@@ -15,6 +19,7 @@ from contextlib import contextmanager
 from typing import Protocol
 
 from buddybot.radar import ld2410 as p
+from buddybot.radar import ld2450
 
 
 class Port(Protocol):
@@ -44,7 +49,7 @@ class LD2410Client:
 
     def command(self, frame: bytes, word: int) -> p.Ack:
         """Send `frame` and return the ACK for `word`; RadarError if none or failed."""
-        name = p.COMMAND_NAMES.get(word, f"0x{word:04X}")
+        name = p.COMMAND_NAMES.get(word) or ld2450.COMMAND_NAMES.get(word, f"0x{word:04X}")
         for _ in range(self.attempts):
             self.port.write(frame)
             ack = self._wait_ack(word)
@@ -138,3 +143,23 @@ class LD2410Client:
 
     def set_bluetooth_password(self, password: str) -> None:
         self.command(p.set_bluetooth_password(password), p.CMD_BLUETOOTH_PASSWORD)
+
+    # -- LD2450 --
+
+    def set_tracking_mode(self, multi: bool) -> None:
+        """LD2450: track up to three targets (multi) or one (single)."""
+        if multi:
+            self.command(ld2450.multi_target(), ld2450.CMD_MULTI_TARGET)
+        else:
+            self.command(ld2450.single_target(), ld2450.CMD_SINGLE_TARGET)
+
+    def read_tracking_mode(self) -> str:
+        ack = self.command(ld2450.query_tracking_mode(), ld2450.CMD_QUERY_TRACKING_MODE)
+        return ld2450.decode_tracking_mode(ack.data)
+
+    def read_zone_filter(self) -> ld2450.ZoneFilter:
+        ack = self.command(ld2450.query_zone_filter(), ld2450.CMD_QUERY_ZONE_FILTER)
+        return ld2450.decode_zone_filter(ack.data)
+
+    def set_zone_filter(self, zf: ld2450.ZoneFilter) -> None:
+        self.command(ld2450.set_zone_filter(zf), ld2450.CMD_SET_ZONE_FILTER)

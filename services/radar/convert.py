@@ -1,5 +1,8 @@
 """Report frame -> contract message, clamping or emptying what the contract forbids.
 
+LD2410 reports become `LD2410TargetDataFrame`s; LD2450 reports become
+`RadarTargets`, placed in the camera's frame by the sensor's mount.
+
 Pure (msgspec types only). The contract declares energies 0..100 and a
 subscriber drops a message that breaks it; real LD2410s occasionally
 report an energy above 100, so the value is clamped to 100 and counted
@@ -17,7 +20,9 @@ from __future__ import annotations
 from typing import NamedTuple
 
 from buddybot.contract import messages as m
+from buddybot.radar import ld2450
 from buddybot.radar.ld2410 import Report
+from buddybot.radar.mounting import IDENTITY, Mount, place
 
 ENERGY_MAX = 100
 
@@ -67,3 +72,35 @@ def report_to_frame(report: Report, radar_id: int, light_and_out: bool = False) 
         out_pin=out,
     )
     return Converted(frame, int(clamped), bad_out)
+
+
+class ConvertedTargets(NamedTuple):
+    """The message, and how many of its targets lie outside the documented field."""
+
+    message: m.RadarTargets
+    implausible: int
+
+
+def report_to_targets(report: ld2450.Report, device_id: int, radar_id: int, stamp_ns: int,
+                      mount: Mount = IDENTITY) -> ConvertedTargets:
+    """One LD2450 report -> `RadarTargets`, each target also placed in the camera's frame.
+
+    A target beyond the sensor's documented field (x +-4000 mm, y 0..8000 mm)
+    is still published (it is what the sensor said, and every value fits the
+    contract) but counted, so diagnostics show a sensor reporting nonsense.
+    """
+    targets = []
+    implausible = 0
+    for slot, t in report.targets():
+        implausible += not t.plausible()
+        x_m, y_m = t.x_mm / 1000.0, t.y_mm / 1000.0
+        placed = place(x_m, y_m, mount)
+        targets.append(m.RadarTarget(
+            slot=slot, x_m=x_m, y_m=y_m, speed_mps=t.speed_cms / 100.0,
+            resolution_m=t.resolution_mm / 1000.0,
+            position=m.Point(x=placed.x, y=placed.y, z=placed.z),
+            bearing_rad=placed.bearing_rad, distance_m=placed.distance_m,
+        ))
+    message = m.RadarTargets(stamp_ns=stamp_ns, device_id=device_id, radar_id=radar_id,
+                             targets=targets)
+    return ConvertedTargets(message, implausible)

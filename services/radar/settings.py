@@ -48,6 +48,27 @@ class RadarZone(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
                                  f"a side needs at least {ZONE_MIN_SIDE_M} m")
 
 
+class RadarMount(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[[radar_bridge.mount]]`: where one angle radar sits relative to the camera
+    (ROS axes: x forward, y left, z up). A sensor without an entry is at the
+    camera, facing forward. See buddybot.radar.mounting."""
+
+    sensor: Annotated[int, msgspec.Meta(
+        ge=0, le=1023, description="the sensor's index in `sensors` (its radar_id)")]
+    x: Annotated[float, msgspec.Meta(
+        ge=-10.0, le=10.0, description="m, forward of the camera")] = 0.0
+    y: Annotated[float, msgspec.Meta(
+        ge=-10.0, le=10.0, description="m, to the camera's left")] = 0.0
+    z: Annotated[float, msgspec.Meta(
+        ge=-10.0, le=10.0, description="m, above the camera")] = 0.0
+    yaw: Annotated[float, msgspec.Meta(
+        ge=-3.1416, le=3.1416,
+        description="rad, where the sensor faces: + = turned toward the robot's left")] = 0.0
+    mirror_x: Annotated[bool, msgspec.Meta(
+        description="the sensor's x axis points the other way (module mounted upside "
+        "down)")] = False
+
+
 class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Sensors are pyserial URLs; `radar_id` is their index in this list."""
 
@@ -62,13 +83,26 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=1200, le=4_000_000,
         description="serial speed in bit/s; 256000 is the LD2410 factory default, "
         "a pty or socket:// URL ignores it")] = 256000
+    models: Annotated[dict[str, str], msgspec.Meta(
+        description="per sensor index, its model when it must not be recognised from "
+        "its frames: \"LD2410\" or \"LD2450\" (e.g. {1 = \"LD2450\"}); the others are "
+        "recognised at connect")] = msgspec.field(default_factory=dict)
+    mount: Annotated[list[RadarMount], msgspec.Meta(
+        description="[[radar_bridge.mount]] entries: each angle radar's pose relative "
+        "to the camera (default: at the camera, facing forward)",
+        examples=[[{"sensor": 1, "x": 0.0, "y": 0.05, "z": -0.1, "yaw": 0.35,
+                    "mirror_x": False}]])] = msgspec.field(
+        default_factory=list)
     sim: Annotated[bool, msgspec.Meta(
-        description="add a built-in simulated LD2410 on a pseudo-terminal (configured "
+        description="add a built-in simulated sensor on a pseudo-terminal (configured "
         "sensors are then left alone unless given with --sensor)")] = False
+    sim_model: Annotated[str, msgspec.Meta(
+        description="the simulated sensor's model: \"LD2410\" or \"LD2450\"")] = "LD2410"
     sim_scenario: Annotated[str, msgspec.Meta(
         min_length=1,
         description="what the simulated sensor sees (a name in "
-        "buddybot.radar.scenarios.SCENARIOS)")] = "visit"
+        "buddybot.radar.scenarios.SCENARIOS, or for an LD2450 in "
+        "buddybot.radar.ld2450_scenarios.ANGLE_SCENARIOS)")] = "visit"
     sim_speed: Annotated[float, msgspec.Meta(
         gt=0.0, le=1000.0,
         description="scenario time scale (x wall time): 0 would freeze the visitor, "

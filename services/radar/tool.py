@@ -1,4 +1,4 @@
-"""`buddybot radar ...`: configure an LD2410 on a port (any pyserial URL).
+"""`buddybot radar ...`: configure an LD2410 or LD2450 on a port (any pyserial URL).
 
     buddybot radar info --port /dev/ttyUSB0
     buddybot radar engineering on --port socket://esp32.local:8881
@@ -13,6 +13,12 @@
     buddybot radar noise-status --port URL                           (LD2410C)
     buddybot radar bluetooth-auth --password HiLink --port URL       (LD2410C)
     buddybot radar bluetooth-password NEWPW1 --port URL              (LD2410C)
+    buddybot radar firmware --port URL                               (both models)
+    buddybot radar tracking-mode multi --port URL                    (LD2450; or single, query)
+    buddybot radar zones --port URL                                  (LD2450)
+    buddybot radar set-zones --mode ignore-inside --zone=-500,0,500,1500 --port URL  (LD2450)
+
+restart, factory-reset, baud-rate, bluetooth and mac work on both models.
 
 Every verb runs inside enable configuration ... end configuration. The
 port must not be read by a running radar bridge at the same time. Exit
@@ -27,7 +33,7 @@ import time
 
 import serial
 
-from buddybot.radar import ld2410
+from buddybot.radar import ld2410, ld2450
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.ld2410 import Parameters, ProtocolError
 from buddybot.radar.settings import RadarBridgeSettings
@@ -89,6 +95,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     p.add_argument("--password", required=True, help="6 ASCII characters (factory: HiLink)")
     p = action("bluetooth-password", "LD2410C: set the Bluetooth password (after restart)")
     p.add_argument("password", help="the new password: 6 printable ASCII characters")
+    action("firmware", "the firmware version (LD2410 and LD2450)")
+    p = action("tracking-mode", "LD2450: track one target or up to three, or ask which")
+    p.add_argument("mode", choices=["single", "multi", "query"])
+    action("zones", "LD2450: the zone filter (mode and three rectangles, mm)")
+    p = action("set-zones", "LD2450: set the zone filter")
+    p.add_argument("--mode", required=True, choices=list(ld2450.ZONE_MODES.values()),
+                   help="off; detect-only-inside: only targets inside a zone count; "
+                        "ignore-inside: targets inside a zone are dropped")
+    p.add_argument("--zone", action="append", default=[], metavar="X1,Y1,X2,Y2",
+                   help="a rectangle by two corners in the sensor's x/y, mm (up to 3, "
+                        "repeatable; the others are cleared; write --zone=-500,0,500,1500 when "
+                        "X1 is negative)")
 
 
 def _params_dict(params: Parameters) -> dict[str, object]:
@@ -100,6 +118,28 @@ def _params_dict(params: Parameters) -> dict[str, object]:
         "still_sensitivity": list(params.still_sensitivity),
         "no_one_duration_s": params.no_one_duration_s,
     }
+
+
+def _zones_dict(zf: ld2450.ZoneFilter) -> dict[str, object]:
+    return {"mode": zf.mode_name,
+            "zones": [[z.x1, z.y1, z.x2, z.y2] for z in zf.zones if z != ld2450.EMPTY_ZONE]}
+
+
+def zone_filter(mode: str, zones: list[str]) -> ld2450.ZoneFilter:
+    """`--mode`/`--zone` -> the filter; ProtocolError for what the sensor cannot take."""
+    numbers = {name: n for n, name in ld2450.ZONE_MODES.items()}
+    if len(zones) > ld2450.ZONES:
+        raise ProtocolError(f"at most {ld2450.ZONES} zones, got {len(zones)}")
+    rects = []
+    for text in zones:
+        parts = text.split(",")
+        if len(parts) != 4 or not all(p.strip().lstrip("-").isdigit() for p in parts):
+            raise ProtocolError(f"--zone {text!r}: want X1,Y1,X2,Y2 in mm (integers)")
+        rects.append(ld2450.Zone(*(int(p) for p in parts)))
+    rects += [ld2450.EMPTY_ZONE] * (ld2450.ZONES - len(rects))
+    zf = ld2450.ZoneFilter(numbers[mode], tuple(rects))
+    ld2450.encode_zone_filter(zf)  # the range checks
+    return zf
 
 
 def execute(client: LD2410Client, args: argparse.Namespace) -> dict[str, object]:
@@ -162,6 +202,18 @@ def execute(client: LD2410Client, args: argparse.Namespace) -> dict[str, object]
             client.set_bluetooth_password(args.password)
             result["bluetooth_password"] = "set"
             result["note"] = "takes effect after a restart"
+        elif action == "firmware":
+            result["firmware"] = client.read_firmware()
+            result["protocol_version"] = enable.protocol_version
+        elif action == "tracking-mode":
+            if args.mode != "query":
+                client.set_tracking_mode(args.mode == "multi")
+            result["tracking_mode"] = client.read_tracking_mode()
+        elif action == "zones":
+            result.update(_zones_dict(client.read_zone_filter()))
+        elif action == "set-zones":
+            client.set_zone_filter(zone_filter(args.mode, args.zone))
+            result.update(_zones_dict(client.read_zone_filter()))
     return result
 
 
@@ -186,6 +238,8 @@ def _check_values(args: argparse.Namespace) -> None:
         ld2410.bluetooth_auth(args.password)
     elif args.action == "bluetooth-password":
         ld2410.set_bluetooth_password(args.password)
+    elif args.action == "set-zones":
+        zone_filter(args.mode, args.zone)
 
 
 def _print(result: dict[str, object], as_json: bool) -> None:

@@ -6,10 +6,14 @@ from __future__ import annotations
 
 import math
 import random
+from collections.abc import Callable
+from typing import Any
 
 import serial
+from hypothesis import strategies as st
 
 from buddybot.contract import messages as m
+from buddybot.radar import envelope, ld2410
 from buddybot.radar.scenarios import NOBODY, Scenario, Target
 from buddybot.radar.sim import PtySensor
 from buddybot.tools.testing import Collector, retry_until
@@ -64,3 +68,62 @@ def radar_target(x: float, y: float, speed: float = 0.0, slot: int = 0) -> m.Rad
     return m.RadarTarget(slot=slot, x_m=-y, y_m=x, speed_mps=speed, resolution_m=0.36,
                          position=m.Point(x=x, y=y, z=0.0), bearing_rad=math.atan2(y, x),
                          distance_m=math.hypot(x, y))
+
+
+def ack_of(data: bytes) -> envelope.Ack:
+    """The one ACK in `data` (a simulator's answer; either model's envelope)."""
+    [frame] = ld2410.Parser().feed(data)
+    assert isinstance(frame, envelope.Ack)
+    return frame
+
+
+def cmd(frame: bytes) -> envelope.Command:
+    """A command frame as a simulator receives it."""
+    [command] = ld2410.Parser().feed(frame)
+    assert isinstance(command, envelope.Command)
+    return command
+
+
+def check_any_chunking(make_parser: Callable[[], Any], stream: bytes,
+                       frames: list[Any]) -> None:
+    """A parser yields exactly `frames` from `stream` split at every byte boundary,
+    and fed byte by byte (both models' parsers)."""
+    for i in range(len(stream) + 1):
+        parser = make_parser()
+        got = parser.feed(stream[:i]) + parser.feed(stream[i:])
+        assert got == frames, i
+        assert parser.stats.bad_frames == 0
+    parser = make_parser()
+    assert [f for b in stream for f in parser.feed(bytes([b]))] == frames
+
+
+MUTATIONS = ["intact", "intact", "truncate", "delete", "insert", "overwrite"]
+
+
+def mutate(draw: Any, frame: bytes, noise: Any, structural: list[int]) -> tuple[bytes, str]:
+    """One frame left intact or with exactly one mutation (for both models' fuzz tests):
+    cut short, a byte deleted, noise inserted, or a structural byte (head, length,
+    markers, tail: `structural` offsets) changed."""
+    data = bytearray(frame)
+    kind = draw(st.sampled_from(MUTATIONS))
+    if kind == "truncate":
+        data = data[: draw(st.integers(1, len(data) - 1))]
+    elif kind == "delete":
+        del data[draw(st.integers(0, len(data) - 1))]
+    elif kind == "insert":
+        at = draw(st.integers(1, len(data) - 1))
+        data[at:at] = draw(noise)
+    elif kind == "overwrite":
+        at = draw(st.sampled_from(structural))
+        data[at] = (data[at] + draw(st.integers(1, 255))) % 256
+    return bytes(data), kind
+
+
+def feed_in_cuts(parser: Any, data: bytes, cuts: list[int]) -> list[Any]:
+    """Everything `parser` yields from `data` fed in pieces split at `cuts`."""
+    got: list[Any] = []
+    last = 0
+    for cut in [*cuts, len(data)]:
+        got += parser.feed(data[last:cut])
+        last = cut
+    return got

@@ -64,3 +64,24 @@ def test_out_of_contract_message_is_refused_at_decode() -> None:
           b'"stationary_energy":0,"detection_distance":1}]}'
     with pytest.raises(msgspec.ValidationError):
         keys.RADAR_FRAMES.codec.decode(raw, m.LD2410TargetDataFrameArray)
+
+
+def test_ld2450_report_to_targets_places_each_target_and_counts_implausible_ones() -> None:
+    import math
+
+    from buddybot.radar import ld2450
+    from buddybot.radar.convert import report_to_targets
+    from buddybot.radar.mounting import Mount
+
+    report = ld2450.Report((None, ld2450.Target(-1000, 1000, -25, 320),
+                            ld2450.Target(5000, 9000, 0, 360)))
+    msg, implausible = report_to_targets(report, 2, 1, 123, Mount(z=0.5))
+    assert (msg.device_id, msg.radar_id, msg.stamp_ns, msg.model) == (2, 1, 123, "LD2450")
+    first, second = msg.targets
+    assert (first.slot, first.x_m, first.y_m, first.speed_mps, first.resolution_m) == (
+        1, -1.0, 1.0, -0.25, 0.32)
+    assert (first.position.x, first.position.y, first.position.z) == (1.0, 1.0, 0.5)
+    assert first.bearing_rad == math.atan2(1.0, 1.0) and first.distance_m == math.hypot(1, 1)
+    assert second.slot == 2 and implausible == 1
+    empty, none = report_to_targets(ld2450.Report((None, None, None)), 0, 0, 1)
+    assert empty.targets == [] and none == 0

@@ -10,6 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from buddybot.radar import ld2410 as p
+from tests.radar.rig import check_any_chunking, feed_in_cuts, mutate
 
 # The protocol document's examples (HLK-LD2410 serial protocol, report frames and ACKs).
 DOC_BASIC = bytes.fromhex("F4F3F2F1 0D00 02AA 02 5100 00 0000 3B 0000 5500 F8F7F6F5")
@@ -205,18 +206,8 @@ STREAM_FRAMES = [report(), report(engineering=True), report(state=0, md=0, me=0,
 STREAM = b"".join(p.encode_report(f) for f in STREAM_FRAMES)
 
 
-def test_split_at_every_byte_boundary() -> None:
-    for i in range(len(STREAM) + 1):
-        parser = p.Parser()
-        got = parser.feed(STREAM[:i]) + parser.feed(STREAM[i:])
-        assert got == STREAM_FRAMES, i
-        assert parser.stats.bad_frames == 0
-
-
-def test_byte_by_byte() -> None:
-    parser = p.Parser()
-    got = [f for b in STREAM for f in parser.feed(bytes([b]))]
-    assert got == STREAM_FRAMES
+def test_split_at_every_byte_boundary_and_byte_by_byte() -> None:
+    check_any_chunking(p.Parser, STREAM, STREAM_FRAMES)
 
 
 def test_garbage_between_frames_and_stray_headers() -> None:
@@ -388,22 +379,11 @@ def mutated_streams(
     kinds: list[str] = []
     for frame in frames:
         out += draw(noise())
-        data = bytearray(p.encode_report(frame))
-        kind = draw(st.sampled_from(["intact", "intact", "truncate", "delete", "insert",
-                                     "overwrite"]))
+        encoded = p.encode_report(frame)
+        data, kind = mutate(draw, encoded, noise(1, 5), _structural_offsets(encoded))
         kinds.append(kind)
         if kind == "intact":
             intact.append(frame)
-        elif kind == "truncate":
-            data = data[: draw(st.integers(1, len(data) - 1))]
-        elif kind == "delete":
-            del data[draw(st.integers(0, len(data) - 1))]
-        elif kind == "insert":
-            at = draw(st.integers(1, len(data) - 1))
-            data[at:at] = draw(noise(1, 5))
-        else:
-            at = draw(st.sampled_from(_structural_offsets(data)))
-            data[at] = (data[at] + draw(st.integers(1, 255))) % 256
         out += data
     cuts = draw(st.lists(st.integers(0, len(out)), max_size=6))
     return bytes(out), frames, intact, sorted(cuts), kinds
@@ -415,11 +395,7 @@ def test_mutated_streams_yield_every_intact_frame_and_nothing_unsent(
         case: tuple[bytes, list[p.Report], list[p.Report], list[int], list[str]]) -> None:
     data, sent, intact, cuts, _kinds = case
     parser = p.Parser()
-    got: list[p.Frame] = []
-    last = 0
-    for cut in [*cuts, len(data)]:
-        got += parser.feed(data[last:cut])
-        last = cut
+    got: list[p.Frame] = feed_in_cuts(parser, data, cuts)
     # A false header claiming more bytes than have arrived holds the frames
     # behind it until it can be judged: at most one frame period on a live
     # stream, where bytes keep coming (here: filler).

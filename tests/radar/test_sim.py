@@ -11,19 +11,7 @@ import serial
 from buddybot.radar import ld2410 as p
 from buddybot.radar.scenarios import SCENARIOS, Target
 from buddybot.radar.sim import PtySensor, SimulatedLD2410
-from tests.radar.rig import open_port
-
-
-def ack_of(data: bytes) -> p.Ack:
-    [frame] = p.Parser().feed(data)
-    assert isinstance(frame, p.Ack)
-    return frame
-
-
-def cmd(frame: bytes) -> p.Command:
-    [command] = p.Parser().feed(frame)
-    assert isinstance(command, p.Command)
-    return command
+from tests.radar.rig import ack_of, cmd, open_port
 
 
 def test_sim_needs_configuration_mode_and_answers_like_the_protocol() -> None:

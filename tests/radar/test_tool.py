@@ -142,3 +142,60 @@ def test_tool_bluetooth_password_and_permissions(sensor: PtySensor) -> None:
         out = radar("bluetooth-password", bad, "--port", sensor.path)
         assert out.returncode == 2 and "6 printable ASCII" in out.stderr, bad
     assert sim.bluetooth_password == "abc123"
+
+
+# --- LD2450 ------------------------------------------------------------------------------
+
+
+@pytest.fixture
+def angle_sensor(tmp_path: Path):  # type: ignore[no-untyped-def]
+    with PtySensor("three-people", link=tmp_path / "ttyLD2450", model="LD2450") as sim:
+        yield sim
+
+
+@pytest.mark.integration
+def test_tool_ld2450_commands(angle_sensor: PtySensor) -> None:
+    from buddybot.radar import ld2450
+
+    sim = angle_sensor.sim
+    port = angle_sensor.path
+    out = radar("firmware", "--port", port, "--json")
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout)["firmware"] == "V2.02.23090617"
+    out = radar("tracking-mode", "single", "--port", port, "--json")
+    assert json.loads(out.stdout) == {"tracking_mode": "single"} and sim.tracking_mode == 1
+    assert "tracking_mode: single" in radar("tracking-mode", "query", "--port", port).stdout
+    assert radar("tracking-mode", "multi", "--port", port).returncode == 0
+    assert sim.tracking_mode == 2
+    out = radar("set-zones", "--mode", "ignore-inside", "--zone=-500,0,500,1500",
+                "--zone", "1000,1000,2000,3000", "--port", port, "--json")
+    assert out.returncode == 0, out.stderr
+    zones = {"mode": "ignore-inside", "zones": [[-500, 0, 500, 1500], [1000, 1000, 2000, 3000]]}
+    assert json.loads(out.stdout) == zones
+    assert sim.zone_filter.mode == ld2450.ZONE_IGNORE
+    assert json.loads(radar("zones", "--port", port, "--json").stdout) == zones
+    assert json.loads(radar("mac", "--port", port, "--json").stdout)["mac"] == "c4:f2:a1:b0:5e:77"
+    assert radar("bluetooth", "off", "--port", port).returncode == 0 and not sim.bluetooth
+    assert radar("baud-rate", "115200", "--port", port).returncode == 0
+    assert sim.baud_index == 5
+    assert radar("factory-reset", "--port", port).returncode == 0
+    assert sim.factory_resets == 1 and sim.zone_filter.mode == ld2450.ZONE_OFF
+    assert radar("restart", "--port", port).returncode == 0 and sim.restarts == 1
+
+
+@pytest.mark.parametrize("zones", [
+    ["1,2,3"], ["a,b,c,d"], ["0,0,40000,1"], ["0,0,1,1"] * 4,
+])
+def test_bad_zones_are_refused_before_the_port_is_opened(zones: list[str]) -> None:
+    from buddybot.radar import tool
+
+    with pytest.raises(p.ProtocolError):
+        tool.zone_filter("detect-only-inside", zones)
+
+
+def test_zones_from_the_command_line() -> None:
+    from buddybot.radar import ld2450, tool
+
+    zf = tool.zone_filter("ignore-inside", ["-500,0,500,1500"])
+    assert zf.mode == ld2450.ZONE_IGNORE
+    assert zf.zones == (ld2450.Zone(-500, 0, 500, 1500), ld2450.EMPTY_ZONE, ld2450.EMPTY_ZONE)
