@@ -23,12 +23,49 @@ a live stream of 45-byte reads.
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+
+# The shared envelope, re-exported: `ld2410.encode_command` etc. keep working.
+from buddybot.radar.envelope import (
+    ACK_FLAG,  # noqa: F401
+    BAUD_RATES,  # noqa: F401
+    CMD_BLUETOOTH,  # noqa: F401
+    CMD_ENABLE_CONFIG,  # noqa: F401
+    CMD_END_CONFIG,  # noqa: F401
+    CMD_FACTORY_RESET,  # noqa: F401
+    CMD_READ_FIRMWARE,  # noqa: F401
+    CMD_READ_MAC,  # noqa: F401
+    CMD_RESTART,  # noqa: F401
+    CMD_SET_BAUD_RATE,  # noqa: F401
+    COMMAND_HEAD,
+    COMMAND_TAIL,
+    MAX_COMMAND_LENGTH,
+    SHARED_COMMAND_NAMES,
+    Ack,
+    Command,
+    EnableInfo,  # noqa: F401
+    ParserStats,
+    ProtocolError,
+    bluetooth,  # noqa: F401
+    decode_command_payload,
+    decode_enable,  # noqa: F401
+    decode_firmware,  # noqa: F401
+    decode_mac,  # noqa: F401
+    enable_config,  # noqa: F401
+    encode_ack,  # noqa: F401
+    encode_command,
+    encode_firmware,  # noqa: F401
+    end_config,  # noqa: F401
+    factory_reset,  # noqa: F401
+    need,
+    read_firmware,  # noqa: F401
+    read_mac,  # noqa: F401
+    restart,  # noqa: F401
+    set_baud_rate,  # noqa: F401
+)
 
 REPORT_HEAD = b"\xf4\xf3\xf2\xf1"
 REPORT_TAIL = b"\xf8\xf7\xf6\xf5"
-COMMAND_HEAD = b"\xfd\xfc\xfb\xfa"
-COMMAND_TAIL = b"\x04\x03\x02\x01"
 
 TYPE_ENGINEERING = 0x01
 TYPE_BASIC = 0x02
@@ -36,7 +73,6 @@ DATA_HEAD = 0xAA
 DATA_END = b"\x55\x00"
 BASIC_LENGTH = 0x000D
 MAX_GATE = 8
-ACK_FLAG = 0x0100
 
 # Target state byte: 0..3 = bit 0 moving, bit 1 still. LD2410C firmware
 # sends 4..6 while it measures the room's background noise (0x000B): no
@@ -49,7 +85,6 @@ MAX_TARGET_STATE = STATE_NOISE_DETECTION_FAILED
 # Longest payloads we accept; anything longer is a false header (the real
 # longest report is 35 bytes, the longest ACK, read parameters, 28 bytes).
 MAX_REPORT_LENGTH = 13 + 2 * (MAX_GATE + 1) + 2 + 2
-MAX_COMMAND_LENGTH = 64
 
 # Command words (HiLink's protocol document; 0x000B/0x001B and 0x00A8/0x00A9
 # are LD2410C additions).
@@ -60,20 +95,12 @@ CMD_READ_PARAMETERS = 0x0061
 CMD_ENGINEERING_ON = 0x0062
 CMD_ENGINEERING_OFF = 0x0063
 CMD_SET_SENSITIVITY = 0x0064
-CMD_READ_FIRMWARE = 0x00A0
-CMD_SET_BAUD_RATE = 0x00A1
-CMD_FACTORY_RESET = 0x00A2
-CMD_RESTART = 0x00A3
-CMD_BLUETOOTH = 0x00A4
-CMD_READ_MAC = 0x00A5
 CMD_BLUETOOTH_AUTH = 0x00A8
 CMD_BLUETOOTH_PASSWORD = 0x00A9
 CMD_SET_RESOLUTION = 0x00AA
 CMD_READ_RESOLUTION = 0x00AB
 CMD_SET_LIGHT_CONTROL = 0x00AD
 CMD_READ_LIGHT_CONTROL = 0x00AE
-CMD_END_CONFIG = 0x00FE
-CMD_ENABLE_CONFIG = 0x00FF
 
 COMMAND_NAMES: dict[int, str] = {
     CMD_AUTO_THRESHOLDS: "start background noise detection (auto thresholds)",
@@ -83,26 +110,14 @@ COMMAND_NAMES: dict[int, str] = {
     CMD_ENGINEERING_ON: "engineering mode on",
     CMD_ENGINEERING_OFF: "engineering mode off",
     CMD_SET_SENSITIVITY: "set gate sensitivity",
-    CMD_READ_FIRMWARE: "read firmware version",
-    CMD_SET_BAUD_RATE: "set baud rate",
-    CMD_FACTORY_RESET: "factory reset",
-    CMD_RESTART: "restart",
-    CMD_BLUETOOTH: "bluetooth on/off",
-    CMD_READ_MAC: "read MAC address",
     CMD_BLUETOOTH_AUTH: "bluetooth authentication (get permissions)",
     CMD_BLUETOOTH_PASSWORD: "set bluetooth password",
     CMD_SET_RESOLUTION: "set distance resolution",
     CMD_READ_RESOLUTION: "read distance resolution",
     CMD_SET_LIGHT_CONTROL: "set light / OUT control",
     CMD_READ_LIGHT_CONTROL: "read light / OUT control",
-    CMD_END_CONFIG: "end configuration",
-    CMD_ENABLE_CONFIG: "enable configuration",
+    **SHARED_COMMAND_NAMES,
 }
-
-BAUD_RATES: dict[int, int] = {
-    9600: 1, 19200: 2, 38400: 3, 57600: 4, 115200: 5, 230400: 6, 256000: 7, 460800: 8,
-}
-"""Baud rate -> the index the sensor wants (0x00A1)."""
 
 RESOLUTIONS: dict[int, float] = {0: 0.75, 1: 0.20}
 """Distance-resolution index (0x00AA/0x00AB) -> metres per gate."""
@@ -112,10 +127,6 @@ NOISE_DETECTION_STATUS: dict[int, str] = {0: "not started", 1: "in progress", 2:
 
 BLUETOOTH_PASSWORD_LENGTH = 6
 """The Bluetooth password is exactly 6 ASCII characters (factory: "HiLink")."""
-
-
-class ProtocolError(ValueError):
-    """Bytes that do not form what the protocol says they must."""
 
 
 class UnusualFrame(ProtocolError):
@@ -150,27 +161,6 @@ class Report:
     out_pin: int | None = None
 
 
-@dataclass(frozen=True, slots=True)
-class Ack:
-    """A command ACK: the command word it answers, status (0 = success), data."""
-
-    command: int
-    status: int
-    data: bytes = b""
-
-    @property
-    def ok(self) -> bool:
-        return self.status == 0
-
-
-@dataclass(frozen=True, slots=True)
-class Command:
-    """A command frame as the sensor receives it (used by the simulator)."""
-
-    command: int
-    value: bytes = b""
-
-
 Frame = Report | Ack | Command
 
 
@@ -200,26 +190,6 @@ def encode_report(report: Report) -> bytes:
     return REPORT_HEAD + struct.pack("<H", len(payload)) + payload + REPORT_TAIL
 
 
-def encode_command(command: int, value: bytes = b"") -> bytes:
-    """A host->sensor command frame: head, length, word, value, tail."""
-    body = struct.pack("<H", command) + value
-    return COMMAND_HEAD + struct.pack("<H", len(body)) + body + COMMAND_TAIL
-
-
-def encode_ack(command: int, status: int = 0, data: bytes = b"") -> bytes:
-    """A sensor->host ACK frame for `command` (the simulator's answer)."""
-    body = struct.pack("<HH", command | ACK_FLAG, status) + data
-    return COMMAND_HEAD + struct.pack("<H", len(body)) + body + COMMAND_TAIL
-
-
-def enable_config() -> bytes:
-    return encode_command(CMD_ENABLE_CONFIG, struct.pack("<H", 1))
-
-
-def end_config() -> bytes:
-    return encode_command(CMD_END_CONFIG)
-
-
 def set_max_gates(moving_gate: int, still_gate: int, no_one_duration_s: int) -> bytes:
     """0x0060: farthest moving/still gate (2..8) and the no-one duration (0..65535 s)."""
     if not (2 <= moving_gate <= MAX_GATE and 2 <= still_gate <= MAX_GATE):
@@ -247,32 +217,6 @@ def set_gate_sensitivity(gate: int | None, moving: int, still: int) -> bytes:
     gate_value = 0xFFFF if gate is None else gate
     value = struct.pack("<HIHIHI", 0, gate_value, 1, moving, 2, still)
     return encode_command(CMD_SET_SENSITIVITY, value)
-
-
-def read_firmware() -> bytes:
-    return encode_command(CMD_READ_FIRMWARE)
-
-
-def set_baud_rate(baud: int) -> bytes:
-    if baud not in BAUD_RATES:
-        raise ProtocolError(f"unsupported baud rate {baud}; one of {sorted(BAUD_RATES)}")
-    return encode_command(CMD_SET_BAUD_RATE, struct.pack("<H", BAUD_RATES[baud]))
-
-
-def factory_reset() -> bytes:
-    return encode_command(CMD_FACTORY_RESET)
-
-
-def restart() -> bytes:
-    return encode_command(CMD_RESTART)
-
-
-def bluetooth(on: bool) -> bytes:
-    return encode_command(CMD_BLUETOOTH, struct.pack("<H", 1 if on else 0))
-
-
-def read_mac() -> bytes:
-    return encode_command(CMD_READ_MAC, struct.pack("<H", 1))
 
 
 def start_auto_thresholds(duration_s: int) -> bytes:
@@ -350,23 +294,6 @@ class Parameters:
     no_one_duration_s: int
 
 
-@dataclass(frozen=True, slots=True)
-class EnableInfo:
-    protocol_version: int
-    buffer_size: int
-
-
-def _need(data: bytes, n: int, what: str) -> None:
-    if len(data) < n:
-        raise ProtocolError(f"{what}: ACK data has {len(data)} bytes, need {n}")
-
-
-def decode_enable(data: bytes) -> EnableInfo:
-    _need(data, 4, "enable configuration")
-    version, size = struct.unpack_from("<HH", data)
-    return EnableInfo(version, size)
-
-
 def encode_parameters(p: Parameters) -> bytes:
     """ACK data of 0x0061 (for the simulator)."""
     return (bytes((DATA_HEAD, p.max_gate, p.max_moving_gate, p.max_still_gate))
@@ -375,28 +302,17 @@ def encode_parameters(p: Parameters) -> bytes:
 
 
 def decode_parameters(data: bytes) -> Parameters:
-    _need(data, 4, "read parameters")
+    need(data, 4, "read parameters")
     if data[0] != DATA_HEAD:
         raise ProtocolError(f"read parameters: expected head 0xAA, got 0x{data[0]:02X}")
     n = data[1]
     if n > MAX_GATE:
         raise ProtocolError(f"read parameters: max gate {n} > {MAX_GATE}")
-    _need(data, 4 + 2 * (n + 1) + 2, "read parameters")
+    need(data, 4 + 2 * (n + 1) + 2, "read parameters")
     moving = tuple(data[4:5 + n])
     still = tuple(data[5 + n:6 + 2 * n])
     (duration,) = struct.unpack_from("<H", data, 6 + 2 * n)
     return Parameters(n, data[2], data[3], moving, still, duration)
-
-
-def encode_firmware(firmware_type: int, major: int, minor: int) -> bytes:
-    return struct.pack("<HHI", firmware_type, major, minor)
-
-
-def decode_firmware(data: bytes) -> str:
-    """`V1.07.22091615`: major word 0x0107 -> 1.07, minor dword printed in hex."""
-    _need(data, 8, "read firmware version")
-    _type, major, minor = struct.unpack_from("<HHI", data)
-    return f"V{major >> 8}.{major & 0xFF:02x}.{minor:08x}"
 
 
 def firmware_major(version: str) -> int | None:
@@ -418,7 +334,7 @@ def firmware_has_light_and_out(version: str | None) -> bool:
 
 def decode_auto_thresholds_status(data: bytes) -> str:
     """0x001B: "not started", "in progress" or "completed"."""
-    _need(data, 2, "query background noise detection")
+    need(data, 2, "query background noise detection")
     (status,) = struct.unpack_from("<H", data)
     if status not in NOISE_DETECTION_STATUS:
         raise ProtocolError(f"query background noise detection: unknown status {status}")
@@ -426,16 +342,11 @@ def decode_auto_thresholds_status(data: bytes) -> str:
 
 
 def decode_resolution(data: bytes) -> float:
-    _need(data, 2, "read distance resolution")
+    need(data, 2, "read distance resolution")
     (index,) = struct.unpack_from("<H", data)
     if index not in RESOLUTIONS:
         raise ProtocolError(f"read distance resolution: unknown index {index}")
     return RESOLUTIONS[index]
-
-
-def decode_mac(data: bytes) -> str:
-    _need(data, 6, "read MAC address")
-    return ":".join(f"{b:02x}" for b in data[:6])
 
 
 @dataclass(frozen=True, slots=True)
@@ -448,35 +359,13 @@ class LightControl:
 
 
 def decode_light_control(data: bytes) -> LightControl:
-    _need(data, 3, "read light control")
+    need(data, 3, "read light control")
     if data[0] > 2 or data[2] > 1:
         raise ProtocolError(f"read light control: bad values {data[:3].hex(' ')}")
     return LightControl(data[0], data[1], data[2])
 
 
 # --- the incremental parser --------------------------------------------------------
-
-
-@dataclass
-class ParserStats:
-    """Counters a driver reports in diagnostics.
-
-    `intact_frames` counts every frame whose framing was sound (reports,
-    ACKs, commands and `unusual_frames`: well-formed reports with content
-    we do not know, such as a future target state). A driver takes any of
-    them as a sign that the line works: a sensor in an unusual mode is not
-    a wedged adapter.
-    """
-
-    reports: int = 0
-    acks: int = 0
-    commands: int = 0
-    bad_frames: int = 0
-    unusual_frames: int = 0
-    intact_frames: int = 0
-    skipped_bytes: int = 0
-    last_error: str = ""
-    errors: dict[str, int] = field(default_factory=dict)
 
 
 def _check_state(state: int) -> None:
@@ -524,18 +413,6 @@ def _decode_report(payload: bytes) -> Report:
     )
 
 
-def _decode_command(payload: bytes) -> Ack | Command:
-    if len(payload) < 2:
-        raise ProtocolError("short command")
-    (word,) = struct.unpack_from("<H", payload)
-    if word & ACK_FLAG:
-        if len(payload) < 4:
-            raise ProtocolError("short ACK")
-        (status,) = struct.unpack_from("<H", payload, 2)
-        return Ack(word & ~ACK_FLAG, status, bytes(payload[4:]))
-    return Command(word, bytes(payload[2:]))
-
-
 def _early_report_check(length: int, kind: int, head: int) -> str:
     """What can be judged from a report's first 8 bytes ("" = plausible so far)."""
     if kind == TYPE_BASIC:
@@ -567,13 +444,6 @@ class Parser:
         """Forget a partial frame (after a reconnect the stream restarts)."""
         self._buf.clear()
 
-    def _bad(self, why: str) -> None:
-        self.stats.bad_frames += 1
-        self.stats.last_error = why
-        errors = self.stats.errors
-        if why in errors or len(errors) < 32:  # reasons are ours, but stay bounded
-            errors[why] = errors.get(why, 0) + 1
-
     def feed(self, chunk: bytes | bytearray | memoryview) -> list[Frame]:
         buf = self._buf
         buf += chunk
@@ -604,7 +474,7 @@ class Parser:
             is_report = start == r
             limit = MAX_REPORT_LENGTH if is_report else MAX_COMMAND_LENGTH
             if length > limit:
-                self._bad("length too large")
+                self.stats.bad("length too large")
                 pos = start + 1
                 continue
             if is_report and end - start >= 8:
@@ -612,7 +482,7 @@ class Parser:
                 # of holding real frames back until its claimed length has arrived.
                 why = _early_report_check(length, buf[start + 6], buf[start + 7])
                 if why:
-                    self._bad(why)
+                    self.stats.bad(why)
                     pos = start + 1
                     continue
             frame_end = start + 6 + length + 4
@@ -620,12 +490,13 @@ class Parser:
                 break
             tail = REPORT_TAIL if is_report else COMMAND_TAIL
             if buf[frame_end - 4:frame_end] != tail:
-                self._bad("bad tail")
+                self.stats.bad("bad tail")
                 pos = start + 1
                 continue
             payload = bytes(buf[start + 6:frame_end - 4])
             try:
-                frame: Frame = _decode_report(payload) if is_report else _decode_command(payload)
+                frame: Frame = (_decode_report(payload) if is_report
+                                 else decode_command_payload(payload))
             except UnusualFrame as exc:
                 # Sound framing, content we do not know: skip the whole frame.
                 stats.unusual_frames += 1
@@ -634,7 +505,7 @@ class Parser:
                 pos = frame_end
                 continue
             except ProtocolError as exc:
-                self._bad(str(exc))
+                self.stats.bad(str(exc))
                 pos = start + 1
                 continue
             if isinstance(frame, Report):

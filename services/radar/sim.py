@@ -1,11 +1,12 @@
-"""A simulated LD2410 that speaks the real byte protocol through a pseudo-terminal.
+"""A simulated LD2410 or LD2450 speaking the real byte protocol through a pseudo-terminal.
 
-`SimulatedLD2410` is the sensor's brain (configuration state, command
-ACKs, report frames from a scenario); `PtySensor` puts it behind a pty so
-the bridge and the tools exercise exactly the serial path they use with
-hardware. `unplug()`/`replug()` re-create the pty behind the same path
-(a symlink), which is what a USB sensor does when it is pulled and put
-back.
+`SimulatedLD2410` (here) and `SimulatedLD2450` (ld2450_sim.py) are the
+sensors' brains (configuration state, command ACKs, report frames from a
+scenario); `PtySensor` puts one behind a pty (`model="LD2410"` or
+`"LD2450"`) so the bridge and the tools exercise exactly the serial path
+they use with hardware. `unplug()`/`replug()` re-create the pty behind the
+same path (a symlink), which is what a USB sensor does when it is pulled
+and put back.
 """
 
 from __future__ import annotations
@@ -23,11 +24,15 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from buddybot.radar import ld2410 as p
+from buddybot.radar import ld2450
+from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, AngleScenario
+from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.scenarios import SCENARIOS, Scenario, Target
 
 log = logging.getLogger("buddybot.radar.sim")
 
 FRAME_PERIOD_S = 0.1  # the module reports about 10 times per second
+MODELS = ("LD2410", "LD2450")
 DEFAULT_MOVING_SENSITIVITY = (50, 50, 40, 30, 20, 15, 15, 15, 15)
 DEFAULT_STILL_SENSITIVITY = (0, 0, 40, 40, 30, 30, 20, 20, 20)
 FIRMWARE = (0x0100, 0x0107, 0x22091615)  # type, major (1.07), minor
@@ -233,17 +238,41 @@ def _words(value: bytes, expected: tuple[int, ...]) -> list[int]:
     return out
 
 
-class PtySensor:
-    """A SimulatedLD2410 on a pty; `path` (a symlink if `link` is given) is its port."""
+def scenario_names(model: str) -> list[str]:
+    """The scenarios the simulated `model` knows."""
+    return sorted(ANGLE_SCENARIOS if model == "LD2450" else SCENARIOS)
 
-    def __init__(self, scenario: str | Scenario = "visit", *, link: Path | None = None,
-                 speed: float = 1.0, engineering: bool = True, seed: int = 1,
-                 answer_commands: bool = True, firmware: tuple[int, int, int] = FIRMWARE,
-                 aux_bytes: tuple[int, int] | None = None) -> None:
-        fn = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
-        self.sim = SimulatedLD2410(fn, engineering=engineering, seed=seed,
-                                   answer_commands=answer_commands, firmware=firmware,
-                                   aux_bytes=aux_bytes)
+
+class PtySensor:
+    """A simulated sensor on a pty; `path` (a symlink if `link` is given) is its port.
+
+    `model` chooses the brain: "LD2410" (scenarios.py, `engineering`,
+    `firmware`, `aux_bytes` apply) or "LD2450" (ld2450_scenarios.py).
+    """
+
+    def __init__(self, scenario: str | Scenario | AngleScenario = "visit", *,
+                 link: Path | None = None, speed: float = 1.0, engineering: bool = True,
+                 seed: int = 1, answer_commands: bool = True,
+                 firmware: tuple[int, int, int] | None = None,
+                 aux_bytes: tuple[int, int] | None = None, model: str = "LD2410") -> None:
+        if model not in MODELS:
+            raise ValueError(f"unknown model {model!r}; one of {MODELS}")
+        self.model = model
+        self.sim: SimulatedLD2410 | SimulatedLD2450
+        self._parser: p.Parser | ld2450.Parser
+        if model == "LD2450":
+            angle = ANGLE_SCENARIOS[scenario] if isinstance(scenario, str) else scenario
+            self.sim = SimulatedLD2450(angle, seed=seed,  # type: ignore[arg-type]
+                                       answer_commands=answer_commands)
+            if firmware is not None:
+                self.sim.firmware = firmware
+            self._parser = ld2450.Parser()
+        else:
+            fn = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
+            self.sim = SimulatedLD2410(fn, engineering=engineering,  # type: ignore[arg-type]
+                                       seed=seed, answer_commands=answer_commands,
+                                       firmware=firmware or FIRMWARE, aux_bytes=aux_bytes)
+            self._parser = p.Parser()
         self.speed = speed
         self.link = link
         self.frames_sent = 0
@@ -255,7 +284,6 @@ class PtySensor:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._t0 = time.monotonic()
-        self._parser = p.Parser()
         self._open()
 
     @property
@@ -269,7 +297,8 @@ class PtySensor:
     # -- lifetime --
 
     def start(self) -> PtySensor:
-        self._thread = threading.Thread(target=self._run, name="ld2410-sim", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"{self.model}-sim",
+                                        daemon=True)
         self._thread.start()
         return self
 
