@@ -7,14 +7,17 @@ from __future__ import annotations
 
 import argparse
 import random
+import time
 from collections.abc import Callable
 
 import pytest
+import serial
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar import bridge
 from buddybot.radar import ld2410 as p
+from buddybot.radar import ld2450 as p2
 from buddybot.radar.scenarios import Target
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.radar.sim import PtySensor
@@ -202,6 +205,58 @@ def test_a_stream_server_that_drops_and_reboots_is_read_again_losing_nothing_rea
         assert published == sorted(published) and len(set(published)) == len(published)
         assert server.connections == 3
         assert bridge.alive()
+    finally:
+        server.close()
+
+
+def ld2450_recording(n: int) -> bytes:
+    """Frame n of a recorded LD2450 stream: two people, frame n's number in the
+    first one's x (sign-magnitude on the wire: odd frames left, even right)."""
+    x = n % 4000 if n % 2 == 0 else -(n % 4000)
+    return p2.encode_report(p2.Report((p2.Target(x, 1500, -20, 360), None,
+                                       p2.Target(-800, 2400, 0, 320))))
+
+
+def read_ld2450(port: serial.SerialBase, parser: p2.Parser, want: int) -> list[p2.Report]:
+    """Read as the bridge reads (whatever is waiting, or one byte) until `want` reports."""
+    reports: list[p2.Report] = []
+    deadline = time.monotonic() + 20
+    while len(reports) < want:
+        assert time.monotonic() < deadline, f"{len(reports)} of {want} LD2450 reports"
+        reports += [f for f in parser.feed(port.read(port.in_waiting or 1))
+                    if isinstance(f, p2.Report)]
+    return reports
+
+
+def test_ld2450_bytes_cross_a_stream_server_whole_and_a_reboot_is_seen() -> None:
+    """Real LD2450 frames from an ESP32-like stream server, read through pyserial's
+    socket:// as the bridge reads a port: every report whole and in order; a
+    drop and a reboot are errors the bridge turns into a reconnect."""
+    server = StreamServer(ld2450_recording, period_s=0.02)
+    try:
+        parser = p2.Parser()
+        port = serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        reports = read_ld2450(port, parser, 20)
+        xs = [r.slots[0].x_mm for r in reports if r.slots[0] is not None]
+        frames = [abs(x) for x in xs]
+        assert frames == list(range(frames[0], frames[0] + len(frames)))
+        assert all((x > 0) == (n % 2 == 0) for x, n in zip(xs, frames, strict=True))
+        assert all(r.slots[1] is None and r.slots[2] == p2.Target(-800, 2400, 0, 320)
+                   for r in reports)
+        assert parser.stats.bad_frames == 0
+
+        server.reboot()
+        with pytest.raises(serial.SerialException, match="disconnected"):
+            while True:  # what is still buffered, then the close
+                parser.feed(port.read(port.in_waiting or 1))
+        port.close()
+        with pytest.raises(serial.SerialException, match="Connection refused"):
+            serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        server.come_back()
+        port = serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        parser.reset()
+        assert len(read_ld2450(port, p2.Parser(), 5)) >= 5
+        port.close()
     finally:
         server.close()
 
