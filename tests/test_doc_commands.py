@@ -59,7 +59,8 @@ INLINE = re.compile(r"`((?:\.venv/bin/)?buddybot [^`]+)`")
 PLACEHOLDERS = {"VERB", "SERVICE", "ACTION"}
 """Synopsis words standing for a choice: a span containing one is not parsed."""
 EXTERNAL = {"zenoh", "sudo", "install", "systemctl", "journalctl", "openssl", "pip",
-            "apt-get", "git", "chromium", "espeak-ng", "sox", "ssh"}
+            "apt-get", "git", "chromium", "espeak-ng", "sox", "ssh", "esphome",
+            "cd", "cp"}
 """Programs of the host (not this repository) that docs may show."""
 QUICK = {"keys", "config", "schemas"}
 """Verbs that only read or check: run as processes (with `--help` and `--version`)."""

@@ -46,6 +46,7 @@ from buddybot.radar.models import AUTO, LD2450, MODELS, Frame, Sniffer, describe
 from buddybot.radar.mounting import IDENTITY, Mount
 from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.settings import RadarBridgeSettings
+from buddybot.radar.urls import url_problem
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.errors import ConfigError, UsageError
 from buddybot.runtime.limits import clip
@@ -377,11 +378,18 @@ def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> Radar
     """`[radar_bridge]` with the command line on top: what the bridge runs with.
 
     Ranges (`--baudrate 0`, `--sim-speed 0`) are refused by `merge` naming
-    the flag. One rule is more than a field set: with the simulated sensor on
+    the flag, and so is a network URL that can never open (`urls.py`: a
+    `socket://` without its port would otherwise be retried forever). One
+    rule is more than a field set: with the simulated sensor on
     (flag or config), configured hardware is left alone, unless sensors were
     given explicitly with `--sensor` (those are read alongside it).
     """
     s = merge(cfg, args)
+    for i, url in enumerate(s.sensors):
+        if (problem := url_problem(url)) is not None:
+            where = "--sensor" if given(args, RadarBridgeSettings, "sensors") \
+                else f"radar_bridge.sensors[{i}]"
+            raise ConfigError(f"{where}: {clip(url, 80)}: {problem}")
     if s.sim and not given(args, RadarBridgeSettings, "sensors"):
         s = msgspec.structs.replace(s, sensors=[])
     if s.sim_model not in MODELS:

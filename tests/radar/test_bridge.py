@@ -7,24 +7,24 @@ from __future__ import annotations
 
 import argparse
 import random
-import socket
-import threading
 import time
 from collections.abc import Callable
 
 import pytest
+import serial
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar import bridge
 from buddybot.radar import ld2410 as p
-from buddybot.radar.scenarios import SCENARIOS, Target
+from buddybot.radar import ld2450 as p2
+from buddybot.radar.scenarios import Target
 from buddybot.radar.settings import RadarBridgeSettings
-from buddybot.radar.sim import FRAME_PERIOD_S, PtySensor, SimulatedLD2410
+from buddybot.radar.sim import PtySensor
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import LOOPBACK, Collector, Process, retry_until
-from tests.radar.rig import diag_value, frames_of, standing, wait_more_frames
+from buddybot.tools.testing import Collector, Process, retry_until
+from tests.radar.rig import StreamServer, diag_value, frames_of, standing, wait_more_frames
 
 IN, OUT = m.PresenceState.IN_RANGE, m.PresenceState.OUT_OF_RANGE
 Spawn = Callable[..., Process]
@@ -64,6 +64,17 @@ def test_zero_or_negative_is_refused_naming_the_flag_not_replaced(
     # Not `args.x or cfg.x`, which silently turns 0 into the config value.
     with pytest.raises(ConfigError, match=flag):
         bridge.resolve_options(parse(*argv), RadarBridgeSettings())
+
+
+def test_a_network_url_that_can_never_open_is_refused_at_start() -> None:
+    """Not retried forever with pyserial's "'<=' not supported ..." as the reason."""
+    cfg = RadarBridgeSettings(sensors=["/dev/ttyUSB0", "socket://radar-esp32.local"])
+    with pytest.raises(ConfigError, match=r"radar_bridge.sensors\[1\]: .*no port"):
+        bridge.resolve_options(parse(), cfg)
+    with pytest.raises(ConfigError, match="--sensor: socket://:4001: no host"):
+        bridge.resolve_options(parse("--sensor", "socket://:4001"), RadarBridgeSettings())
+    opts = bridge.resolve_options(parse("--sensor", "socket://radar-esp32.local:4001"), cfg)
+    assert opts.urls == ["socket://radar-esp32.local:4001"]
 
 
 # --- the process -----------------------------------------------------------------------
@@ -130,56 +141,124 @@ def test_bridge_reports_a_missing_sensor_and_reads_the_others(
     assert bridge.alive()
 
 
-class TcpSensor:
-    """An ESP32/ser2net-style serial-over-TCP bridge: a simulated LD2410 behind a socket."""
+def ld2410_recording(n: int) -> bytes:
+    """Frame n of a recorded LD2410 stream: a person standing, frame n's number in
+    its detection distance so the test can tell every frame apart."""
+    return p.encode_report(p.Report(2, 0, 0, 150, 60, n))
 
-    def __init__(self) -> None:
-        self.sim = SimulatedLD2410(SCENARIOS["nobody"])
-        self.server = socket.create_server((LOOPBACK, 0))
-        self.port = self.server.getsockname()[1]
-        self.connections = 0
-        self.drop = threading.Event()
-        self.stop = threading.Event()
-        self.thread = threading.Thread(target=self._serve, daemon=True)
-        self.thread.start()
 
-    def _serve(self) -> None:
-        self.server.settimeout(0.2)
-        while not self.stop.is_set():
-            try:
-                conn, _ = self.server.accept()
-            except TimeoutError:
-                continue
-            self.connections += 1
-            self.drop.clear()
-            with conn:
-                while not (self.stop.is_set() or self.drop.is_set()):
-                    try:
-                        conn.sendall(self.sim.report(0.0, time.monotonic()))
-                    except OSError:
-                        break
-                    self.stop.wait(FRAME_PERIOD_S)
+def numbers(collector: Collector[m.LD2410TargetDataFrameArray]) -> list[int]:
+    return [f.detection_distance for msg in collector.messages for f in msg.sensors]
 
-    def close(self) -> None:
-        self.stop.set()
-        self.thread.join(5)
-        self.server.close()
+
+def assert_no_gap(published: list[int], sent: list[int]) -> None:
+    """Published frames are one run of the frames sent, in order, ending with the
+    last frame sent whole: nothing received was lost."""
+    assert published, "nothing published"
+    first = published[0]
+    assert published == sent[sent.index(first):], (published, sent)
 
 
 @pytest.mark.integration
-def test_tcp_sensor_drop_is_retried(spawn: Spawn, probe: Node) -> None:
-    tcp = TcpSensor()
+def test_a_stream_server_that_drops_and_reboots_is_read_again_losing_nothing_read(
+        spawn: Spawn, probe: Node) -> None:
+    """An ESP32 stream server on 127.0.0.1: the bridge reads `socket://` like a
+    local port. The server drops the connection (reconnect at once), then
+    reboots (connecting refused for a while, diagnostics say so): every frame
+    the bridge received is published, in order, and reading goes on."""
+    server = StreamServer(ld2410_recording)
     try:
         frames = Collector(probe, keys.RADAR_FRAMES)
         diag = Collector(probe, keys.DIAGNOSTICS, node="radar-bridge")
-        spawn("radar-bridge", "--sensor", f"socket://{LOOPBACK}:{tcp.port}")
+        bridge = spawn("radar-bridge", "--sensor", server.url)
+        wait_more_frames(frames, 0, 10, 30)
+
+        server.drop()
+        connected = len(numbers(frames))
+        diag.wait_for(lambda d: int(diag_value(d, "radar0.reconnects") or 0) >= 1, 30,
+                      "reconnected after the drop")
+        first = server.sent[0]
+        retry_until(lambda: first[-1] in numbers(frames), 10, what="the last frame before the drop")
+        assert_no_gap(numbers(frames)[:numbers(frames).index(first[-1]) + 1], first)
+        assert connected <= numbers(frames).index(first[-1]) + 1
         wait_more_frames(frames, 0, 5, 30)
-        tcp.drop.set()  # the TCP connection drops (Wi-Fi gone, ser2net restarted)
-        diag.wait_for(lambda d: int(diag_value(d, "reconnects") or 0) >= 1, 30, "reconnect")
-        wait_more_frames(frames, 0, 5)
-        assert tcp.connections >= 2
+
+        server.reboot()
+        before = server.sent[-1]
+        retry_until(lambda: before[-1] in numbers(frames), 10, what="the last frame before reboot")
+        down = diag.wait_for(lambda d: "Connection refused" in str(diag_value(d, "radar0.error")),
+                             30, "connecting refused while the ESP32 reboots")
+        assert down.level == "ERROR" and diag_value(down, "radar0.connected") is False
+        assert "radar 0" in down.message
+
+        server.come_back()
+        up = diag.wait_for(lambda d: diag_value(d, "radar0.connected") is True
+                           and int(diag_value(d, "radar0.reconnects") or 0) >= 2, 30,
+                           "reconnected after the reboot")
+        assert up.level == "OK"
+        wait_more_frames(frames, 0, 10, 30)
+        published = numbers(frames)
+        for sent in server.sent:  # each connection: one run, ending with its last frame
+            mine = [n for n in published if sent[0] <= n <= sent[-1]]
+            if sent is not server.sent[-1]:
+                assert_no_gap(mine, sent)
+        assert published == sorted(published) and len(set(published)) == len(published)
+        assert server.connections == 3
+        assert bridge.alive()
     finally:
-        tcp.close()
+        server.close()
+
+
+def ld2450_recording(n: int) -> bytes:
+    """Frame n of a recorded LD2450 stream: two people, frame n's number in the
+    first one's x (sign-magnitude on the wire: odd frames left, even right)."""
+    x = n % 4000 if n % 2 == 0 else -(n % 4000)
+    return p2.encode_report(p2.Report((p2.Target(x, 1500, -20, 360), None,
+                                       p2.Target(-800, 2400, 0, 320))))
+
+
+def read_ld2450(port: serial.SerialBase, parser: p2.Parser, want: int) -> list[p2.Report]:
+    """Read as the bridge reads (whatever is waiting, or one byte) until `want` reports."""
+    reports: list[p2.Report] = []
+    deadline = time.monotonic() + 20
+    while len(reports) < want:
+        assert time.monotonic() < deadline, f"{len(reports)} of {want} LD2450 reports"
+        reports += [f for f in parser.feed(port.read(port.in_waiting or 1))
+                    if isinstance(f, p2.Report)]
+    return reports
+
+
+def test_ld2450_bytes_cross_a_stream_server_whole_and_a_reboot_is_seen() -> None:
+    """Real LD2450 frames from an ESP32-like stream server, read through pyserial's
+    socket:// as the bridge reads a port: every report whole and in order; a
+    drop and a reboot are errors the bridge turns into a reconnect."""
+    server = StreamServer(ld2450_recording, period_s=0.02)
+    try:
+        parser = p2.Parser()
+        port = serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        reports = read_ld2450(port, parser, 20)
+        xs = [r.slots[0].x_mm for r in reports if r.slots[0] is not None]
+        frames = [abs(x) for x in xs]
+        assert frames == list(range(frames[0], frames[0] + len(frames)))
+        assert all((x > 0) == (n % 2 == 0) for x, n in zip(xs, frames, strict=True))
+        assert all(r.slots[1] is None and r.slots[2] == p2.Target(-800, 2400, 0, 320)
+                   for r in reports)
+        assert parser.stats.bad_frames == 0
+
+        server.reboot()
+        with pytest.raises(serial.SerialException, match="disconnected"):
+            while True:  # what is still buffered, then the close
+                parser.feed(port.read(port.in_waiting or 1))
+        port.close()
+        with pytest.raises(serial.SerialException, match="Connection refused"):
+            serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        server.come_back()
+        port = serial.serial_for_url(server.url, baudrate=256000, timeout=0.2)
+        parser.reset()
+        assert len(read_ld2450(port, p2.Parser(), 5)) >= 5
+        port.close()
+    finally:
+        server.close()
 
 
 @pytest.mark.integration
