@@ -84,7 +84,8 @@ class StatusMonitor:
         self.node = node
         self._lock = threading.Lock()
         self._subs: list[Subscription] = []
-        self._watch(keys.RADAR_FRAMES, self._on_frames)
+        self._watch(keys.RADAR_FRAMES, self._on_radar)
+        self._watch(keys.RADAR_TARGETS, self._on_radar)
         self._watch(keys.PRESENCE, self._on_presence)
         self._watch(keys.FACE, self._on_face)
         self._watch(keys.EXPRESSION, self._on_expression)
@@ -106,7 +107,8 @@ class StatusMonitor:
 
         self._subs.append(self.node.subscribe_raw(key, on_sample, history=topic.latched))
 
-    def _on_frames(self, _msg: m.LD2410TargetDataFrameArray) -> None:
+    def _on_radar(self, _msg: m.LD2410TargetDataFrameArray | m.RadarTargets) -> None:
+        """A report of either radar model: the rate says the radars are alive."""
         self.status.radar_arrivals.append(time.monotonic())
 
     def _on_presence(self, msg: m.PresenceDetection) -> None:

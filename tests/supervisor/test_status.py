@@ -1,11 +1,18 @@
-"""The `up` status line, formatted from a RobotStatus without a robot."""
+"""The `up` status line: formatted from a RobotStatus without a robot, and kept
+up to date from the robot's traffic."""
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 
+import pytest
+
+from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.supervisor.status import RobotStatus, format_status, rate_hz
+from buddybot.runtime.node import Node
+from buddybot.supervisor.status import RobotStatus, StatusMonitor, format_status, rate_hz
+from buddybot.tools.testing import retry_until
 
 
 def test_rate_counts_only_the_window() -> None:
@@ -41,3 +48,31 @@ def test_a_duplicate_node_is_shown() -> None:
                          duplicates=["camera"])
     line = format_status(status, now=10.0)
     assert line.startswith("nodes 2/2 (DUPLICATE: camera) | ")
+
+
+@pytest.mark.integration
+def test_the_radar_rate_counts_reports_of_either_model(
+        node_factory: Callable[..., Node]) -> None:
+    """An LD2450-only robot shows its radar alive: `radar/*/targets` reports count
+    as LD2410 frame arrays do."""
+    monitor = StatusMonitor(node_factory("status", probe=True), expected=[])
+    sender = node_factory("sender")
+    try:
+        targets = sender.publisher(keys.RADAR_TARGETS, device="0")
+        frames = sender.publisher(keys.RADAR_FRAMES, device="1")
+
+        def sent(count: int) -> bool:
+            targets.put(m.RadarTargets(stamp_ns=m.now_ns(), device_id=0, radar_id=0))
+            return len(monitor.status.radar_arrivals) >= count
+
+        retry_until(lambda: sent(3), 30, 0.05, "three LD2450 reports counted")
+        before = len(monitor.status.radar_arrivals)
+
+        def sent_frames() -> bool:
+            frames.put(m.LD2410TargetDataFrameArray(stamp_ns=m.now_ns(), device_id=1,
+                                                    sensors=[]))
+            return len(monitor.status.radar_arrivals) > before
+
+        retry_until(sent_frames, 30, 0.05, "an LD2410 frame array counted too")
+    finally:
+        monitor.close()
