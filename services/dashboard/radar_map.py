@@ -42,7 +42,7 @@ MAX_GAP_S = 0.6
 MAX_TRAIL_POINTS = 400
 """Positions kept per sensor (3 targets x 10 Hz x 3 s is 90)."""
 MAX_ZONES = 16
-MAP_SIZE = (800, 740)
+MAP_SIZE = (800, 660)
 """The map canvas in pixels (drawn at half size: sharp on a high-density screen)."""
 
 ZoneMode = Literal["detect", "ignore"]
