@@ -1,0 +1,263 @@
+"""Our messages <-> ROS 2 CDR payloads, with bounds on everything that comes in.
+
+Outgoing (our message -> CDR): `FacePosition` -> geometry_msgs/msg/PointStamped
+(header.stamp from `stamp_ns`, header.frame_id from `frame_id`; the
+confidence has no field there), `Image` -> sensor_msgs/msg/Image (`bgr8`)
+or sensor_msgs/msg/CompressedImage (`jpeg`), `Bool` -> std_msgs/msg/Bool,
+and every message of `interfaces.MESSAGES` -> its `buddybot_interfaces`
+twin (same field names; an optional value is a sequence of at most one).
+
+Incoming (CDR -> our message), never decoded unchecked: a payload larger
+than its type's limit, without a plain CDR header, short, with a string or
+sequence length beyond the payload, or with bytes left over is refused
+before anything reaches our types (`deserialize`); the decoded values then pass the
+contract's own checks (ranges, enums, string lengths) through
+`msgspec.convert`. Every refusal is a `ConvertError` that says why.
+"""
+
+from __future__ import annotations
+
+from typing import Any, TypeVar
+
+import msgspec
+import numpy as np
+from msgspec import inspect as mi
+from rosbags.serde import SerdeError
+
+from buddybot.contract import jpeg
+from buddybot.contract import messages as m
+from buddybot.ros2 import interfaces, types, wire
+
+MAX_IMAGE_PAYLOAD = m.MAX_SIDE * m.MAX_SIDE * 3 + 4096
+"""Largest image payload taken in (the contract's largest bgr8 frame)."""
+MAX_PAYLOAD = 1 << 20
+"""Largest payload of any other type taken in (1 MiB)."""
+
+OURS: dict[type[m.Message], str] = {
+    cls: f"{types.OURS}/msg/{cls.__name__}" for cls in interfaces.MESSAGES}
+
+
+M = TypeVar("M", bound=m.Message)
+
+
+class ConvertError(ValueError):
+    """A payload or message that cannot cross the bridge; the message says why."""
+
+
+# --- CDR with bounds ---------------------------------------------------------
+
+
+def serialize(message: object, ros_type: str) -> bytes:
+    """CDR (little-endian, with its header) of a rosbags message object."""
+    return bytes(types.typestore().serialize_cdr(message, ros_type))
+
+
+def deserialize(payload: bytes | memoryview, ros_type: str) -> Any:
+    """A rosbags message object from `payload`, checked: the type's size limit
+    first, the plain-CDR header, then rosbags' deserializer, which refuses a
+    string or sequence length beyond the payload (tests/ros2/test_convert.py
+    holds it to that) and more than 3 bytes (CDR alignment) left over; whatever it
+    raises becomes a `ConvertError`."""
+    limit = MAX_IMAGE_PAYLOAD if ros_type in (types.IMAGE, types.COMPRESSED_IMAGE) \
+        else MAX_PAYLOAD
+    if len(payload) > limit:
+        raise ConvertError(f"{ros_type}: payload of {len(payload)} bytes (limit {limit})")
+    try:
+        wire.encapsulation(payload)
+        return types.typestore().deserialize_cdr(payload, ros_type)
+    except (wire.WireError, SerdeError) as exc:
+        raise ConvertError(f"{ros_type}: {exc}") from exc
+    except (IndexError, KeyError, TypeError, OverflowError, MemoryError) as exc:
+        raise ConvertError(f"{ros_type}: malformed CDR ({type(exc).__name__}: {exc})") from exc
+
+
+# --- stamps and headers --------------------------------------------------------
+
+
+def _time(stamp_ns: int) -> Any:
+    cls = types.typestore().types["builtin_interfaces/msg/Time"]
+    return cls(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
+
+
+def _header(stamp_ns: int, frame_id: str) -> Any:
+    cls = types.typestore().types["std_msgs/msg/Header"]
+    return cls(stamp=_time(stamp_ns), frame_id=frame_id)
+
+
+def _stamp_ns(header: Any) -> int:
+    return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
+
+
+def _checked(cls: type[M], fields: dict[str, Any], ros_type: str) -> M:
+    try:
+        return msgspec.convert(fields, cls)
+    except msgspec.ValidationError as exc:
+        raise ConvertError(f"{ros_type} -> {cls.__name__}: {exc}") from exc
+
+
+# --- standard types ---------------------------------------------------------------
+
+
+def face_to_ros(face: m.FacePosition) -> bytes:
+    """geometry_msgs/msg/PointStamped of a face (its confidence is not carried)."""
+    store = types.typestore()
+    point = store.types["geometry_msgs/msg/Point"](x=face.point.x, y=face.point.y,
+                                                   z=face.point.z)
+    msg = store.types[types.POINT_STAMPED](header=_header(face.stamp_ns, face.frame_id),
+                                           point=point)
+    return serialize(msg, types.POINT_STAMPED)
+
+
+def face_from_ros(payload: bytes | memoryview, confidence: float = 1.0) -> m.FacePosition:
+    """A face from a PointStamped (which has no confidence: `confidence` is used)."""
+    msg = deserialize(payload, types.POINT_STAMPED)
+    return _checked(m.FacePosition, {
+        "stamp_ns": _stamp_ns(msg.header), "frame_id": msg.header.frame_id,
+        "point": {"x": msg.point.x, "y": msg.point.y, "z": msg.point.z},
+        "confidence": confidence}, types.POINT_STAMPED)
+
+
+def image_to_ros(image: m.Image) -> tuple[str, bytes]:
+    """(ROS type, payload): sensor_msgs/msg/Image for `bgr8`, CompressedImage for `jpeg`."""
+    store = types.typestore()
+    data = np.frombuffer(image.data, dtype=np.uint8)
+    if image.encoding == "bgr8":
+        msg = store.types[types.IMAGE](
+            header=_header(image.stamp_ns, image.frame_id), height=image.height,
+            width=image.width, encoding="bgr8", is_bigendian=0, step=image.width * 3, data=data)
+        return types.IMAGE, serialize(msg, types.IMAGE)
+    msg = store.types[types.COMPRESSED_IMAGE](
+        header=_header(image.stamp_ns, image.frame_id), format="jpeg", data=data)
+    return types.COMPRESSED_IMAGE, serialize(msg, types.COMPRESSED_IMAGE)
+
+
+def image_from_ros(payload: bytes | memoryview, ros_type: str) -> m.Image:
+    """Our image from a bgr8 sensor_msgs/msg/Image or a JPEG CompressedImage;
+    any other encoding or format is refused."""
+    msg = deserialize(payload, ros_type)
+    stamp, frame_id = _stamp_ns(msg.header), msg.header.frame_id
+    if ros_type == types.IMAGE:
+        if msg.encoding != "bgr8":
+            raise ConvertError(f"{ros_type}: encoding {msg.encoding[:32]!r} (only bgr8)")
+        if msg.step != msg.width * 3 or len(msg.data) != msg.step * msg.height:
+            raise ConvertError(f"{ros_type}: {len(msg.data)} bytes do not make a "
+                               f"{msg.width}x{msg.height} bgr8 image with step {msg.step}")
+        fields = {"width": msg.width, "height": msg.height, "encoding": "bgr8"}
+    elif ros_type == types.COMPRESSED_IMAGE:
+        if msg.format.split(";")[0].strip().lower() not in ("jpeg", "jpg", "bgr8"):
+            raise ConvertError(f"{ros_type}: format {msg.format[:32]!r} (only jpeg)")
+        try:
+            header = jpeg.read_header(msg.data.tobytes())
+        except jpeg.JpegError as exc:
+            raise ConvertError(f"{ros_type}: {exc}") from exc
+        fields = {"width": header.width, "height": header.height, "encoding": "jpeg"}
+    else:
+        raise ConvertError(f"{ros_type} is not an image type")
+    return _checked(m.Image, {"stamp_ns": stamp, "frame_id": frame_id,
+                              "data": msg.data.tobytes(), **fields}, ros_type)
+
+
+def bool_to_ros(value: m.Bool) -> bytes:
+    return serialize(types.typestore().types[types.BOOL](data=value.data), types.BOOL)
+
+
+def bool_from_ros(payload: bytes | memoryview, stamp_ns: int) -> m.Bool:
+    """std_msgs/msg/Bool has no stamp: the arrival time `stamp_ns` is used."""
+    msg = deserialize(payload, types.BOOL)
+    return _checked(m.Bool, {"stamp_ns": stamp_ns, "data": bool(msg.data)}, types.BOOL)
+
+
+# --- buddybot_interfaces -----------------------------------------------------------
+
+
+def _field_types(cls: type[m.Message]) -> dict[str, Any]:
+    info = mi.type_info(cls)
+    assert isinstance(info, mi.StructType)
+    return {f.name: f.type for f in info.fields}
+
+
+def _bare(t: Any) -> Any:
+    return t.type if isinstance(t, mi.Metadata) else t
+
+
+def _optional(t: Any) -> Any | None:
+    """The `X` of `X | None`, else None."""
+    t = _bare(t)
+    if isinstance(t, mi.UnionType):
+        return next(x for x in t.types if not isinstance(x, mi.NoneType))
+    return None
+
+
+_DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32, "uint64": np.uint64,
+           "int8": np.int8, "int16": np.int16, "int32": np.int32, "int64": np.int64,
+           "float64": np.float64, "bool": np.bool_}
+
+
+def _to_ros(message: m.Message) -> Any:
+    cls = type(message)
+    ros_type = f"{types.OURS}/msg/{cls.__name__}"
+    values: dict[str, Any] = {}
+    for name, t in _field_types(cls).items():
+        value = getattr(message, name)
+        field = interfaces.ros_field(t, name)
+        inner = _optional(t)
+        if inner is not None and not isinstance(_bare(inner), mi.ListType):
+            value = [] if value is None else [value]
+        elif inner is not None:
+            value = [] if value is None else value
+        values[name] = _ros_value(value, field.ros_type)
+    return types.typestore().types[ros_type](**values)
+
+
+def _ros_value(value: Any, ros_type: str) -> Any:
+    if isinstance(value, m.Message):
+        return _to_ros(value)
+    if ros_type.endswith("]"):
+        base = ros_type.split("[")[0]
+        if base in _DTYPES:
+            return np.array([int(v) if base != "float64" else v for v in value],
+                            dtype=_DTYPES[base])
+        return [_ros_value(v, base) for v in value]
+    if isinstance(value, int) and not isinstance(value, bool):
+        return int(value)
+    return value
+
+
+def to_ros(message: m.Message) -> tuple[str, bytes]:
+    """(ROS type, CDR payload) of a message of `interfaces.MESSAGES`."""
+    if type(message) not in OURS:
+        raise ConvertError(f"{type(message).__name__} has no buddybot_interfaces type")
+    return OURS[type(message)], serialize(_to_ros(message), OURS[type(message)])
+
+
+def _from_ros(msg: Any, cls: type[m.Message]) -> dict[str, Any]:
+    fields: dict[str, Any] = {}
+    for name, t in _field_types(cls).items():
+        fields[name] = _plain(getattr(msg, name), t)
+    return fields
+
+
+def _plain(value: Any, t: Any) -> Any:
+    inner = _optional(t)
+    if inner is not None:
+        if isinstance(_bare(inner), mi.ListType):
+            return _plain(value, inner) if len(value) else None
+        if len(value) > 1:
+            raise ConvertError(f"an optional value holds {len(value)} values")
+        return _plain(value[0], inner) if len(value) else None
+    bare = _bare(t)
+    if isinstance(bare, mi.ListType):
+        return [_plain(v, bare.item_type) for v in value]
+    if isinstance(bare, mi.StructType) and issubclass(bare.cls, m.Message):
+        return _from_ros(value, bare.cls)
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def from_ros(payload: bytes | memoryview, cls: type[M]) -> M:
+    """Our message `cls` (of `interfaces.MESSAGES`) from its CDR payload, checked."""
+    if cls not in OURS:
+        raise ConvertError(f"{cls.__name__} has no buddybot_interfaces type")
+    msg = deserialize(payload, OURS[cls])
+    return _checked(cls, _from_ros(msg, cls), OURS[cls])

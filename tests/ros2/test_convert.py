@@ -1,0 +1,271 @@
+"""Our messages <-> CDR, checked against an implementation that is not ours.
+
+The other implementation is mcap-ros2-support's dynamic CDR decoder and
+encoder (`mcap_ros2._dynamic`: its own CDR reader/writer and its own copy of
+rosidl's `.msg` parser). For our types it reads the checked-in `.msg` files
+of ros2/buddybot_interfaces; for the standard ones the standard definitions.
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+
+from buddybot.contract import messages as m
+from buddybot.ros2 import convert, interfaces, types
+from buddybot.ros2.convert import ConvertError
+
+MSG = interfaces.ROOT / "msg"
+SEPARATOR = "=" * 80
+
+
+def schema_of_ours(name: str, nested: tuple[str, ...] = ()) -> str:
+    """mcap's schema text of one of our messages, from the checked-in files only."""
+    text = (MSG / f"{name}.msg").read_text()
+    for sub in nested:
+        text += f"{SEPARATOR}\nMSG: {interfaces.PACKAGE}/{sub}\n" + (MSG / f"{sub}.msg").read_text()
+    return text
+
+
+STANDARD = {
+    types.POINT_STAMPED: "std_msgs/Header header\ngeometry_msgs/Point point\n",
+    types.IMAGE: ("std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\n"
+                  "uint8 is_bigendian\nuint32 step\nuint8[] data\n"),
+    types.COMPRESSED_IMAGE: "std_msgs/Header header\nstring format\nuint8[] data\n",
+    types.BOOL: "bool data\n",
+}
+"""The standard definitions as ROS 2 Jazzy ships them (field lines only)."""
+DEPENDENCIES = (f"{SEPARATOR}\nMSG: std_msgs/Header\n"
+                "builtin_interfaces/Time stamp\nstring frame_id\n"
+                f"{SEPARATOR}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+                f"{SEPARATOR}\nMSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n")
+
+
+def their_decoder(ros_type: str, schema: str) -> Any:
+    name = ros_type.replace("/msg/", "/")
+    return generate_dynamic(name, schema)[name]
+
+
+def their_encoder(ros_type: str, schema: str) -> Any:
+    name = ros_type.replace("/msg/", "/")
+    return serialize_dynamic(name, schema)[name]
+
+
+FRAMES = m.LD2410TargetDataFrameArray(stamp_ns=1_700_000_000_000_000_000, device_id=3, sensors=[
+    m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING_AND_STATIONARY,
+                            movement_distance=65535, movement_energy=100, stationary_distance=87,
+                            stationary_energy=40, detection_distance=90, max_moving_gate=8,
+                            max_stationary_gate=8, moving_gate_energy=[0, 5, 100] * 3,
+                            stationary_gate_energy=[7] * 9, light_level=255, out_pin=1),
+    m.LD2410TargetDataFrame(radar_id=1, target_state=m.TargetState.NO_TARGET,
+                            movement_distance=0, movement_energy=0, stationary_distance=0,
+                            stationary_energy=0, detection_distance=0),
+])
+OURS = [
+    FRAMES,
+    m.PresenceDetection(stamp_ns=5, target_state=m.PresenceTarget.STANDING,
+                        presence_state=m.PresenceState.IN_RANGE, distance_m=1.25),
+    m.ScreenExpression(stamp_ns=6, action=m.ExpressionAction.ANIMATE_STAR),
+    m.EyeControl(stamp_ns=7, yaw=-0.5, pitch=0.25, target_distance_cm=120.0),
+    m.EyesDirection(stamp_ns=8, yaw=30.0, pitch=-10.0, target_distance_cm=80.5),
+    m.EyesDirection(stamp_ns=8, yaw=30.0, pitch=-10.0),
+    m.PupilControl(stamp_ns=9, dilation_percentage=62.5),
+    m.EyeLidControl(stamp_ns=10, eye_id=m.EyeId.BOTH, top_lid_position=50.0,
+                    bottom_lid_position=12.5),
+]
+FACE = m.FacePosition(stamp_ns=1_700_000_000_123_456_789, frame_id="camera_link",
+                      point=m.Point(x=0.8, y=-0.1, z=0.05), confidence=1.0)
+
+
+def _nested(msg: m.Message) -> tuple[str, ...]:
+    return ("LD2410TargetDataFrame",) if isinstance(msg, m.LD2410TargetDataFrameArray) else ()
+
+
+@pytest.mark.parametrize("msg", OURS, ids=lambda msg: type(msg).__name__)
+def test_our_messages_round_trip(msg: m.Message) -> None:
+    ros_type, payload = convert.to_ros(msg)
+    assert ros_type == f"buddybot_interfaces/msg/{type(msg).__name__}"
+    assert convert.from_ros(payload, type(msg)) == msg
+
+
+@pytest.mark.parametrize("msg", OURS, ids=lambda msg: type(msg).__name__)
+def test_their_decoder_reads_our_bytes(msg: m.Message) -> None:
+    ros_type, payload = convert.to_ros(msg)
+    decoded = their_decoder(ros_type, schema_of_ours(type(msg).__name__, _nested(msg)))(payload)
+    if isinstance(msg, m.LD2410TargetDataFrameArray):
+        first, second = decoded.sensors
+        assert (decoded.stamp_ns, decoded.device_id) == (msg.stamp_ns, 3)
+        assert (first.movement_distance, first.target_state, first.light_level) == \
+            (65535, 3, b"\xff")
+        assert list(first.moving_gate_energy) == [0, 5, 100] * 3
+        assert (second.max_moving_gate, list(second.moving_gate_energy)) == (b"", [])
+    else:
+        for name in msg.__struct_fields__:
+            value, theirs = getattr(msg, name), getattr(decoded, name)
+            if value is None:
+                assert len(theirs) == 0
+            elif name == "target_distance_cm" and isinstance(msg, m.EyesDirection):
+                assert list(theirs) == [value]
+            else:
+                assert theirs == value, name
+
+
+@pytest.mark.parametrize("msg", OURS, ids=lambda msg: type(msg).__name__)
+def test_we_read_their_encoders_bytes(msg: m.Message) -> None:
+    ros_type, ours = convert.to_ros(msg)
+    schema = schema_of_ours(type(msg).__name__, _nested(msg))
+    decoded = their_decoder(ros_type, schema)(ours)
+    theirs = their_encoder(ros_type, schema)(decoded)
+    assert convert.from_ros(theirs, type(msg)) == msg
+
+
+def test_a_face_is_a_point_stamped_for_them() -> None:
+    payload = convert.face_to_ros(FACE)
+    decoded = their_decoder(types.POINT_STAMPED, STANDARD[types.POINT_STAMPED] + DEPENDENCIES)(
+        payload)
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (1_700_000_000, 123_456_789)
+    assert decoded.header.frame_id == "camera_link"
+    assert (decoded.point.x, decoded.point.y, decoded.point.z) == (0.8, -0.1, 0.05)
+    assert convert.face_from_ros(payload) == FACE
+
+
+def test_their_point_stamped_becomes_our_face() -> None:
+    encode = their_encoder(types.POINT_STAMPED, STANDARD[types.POINT_STAMPED] + DEPENDENCIES)
+    payload = encode({"header": {"stamp": {"sec": 12, "nanosec": 5}, "frame_id": "cam"},
+                      "point": {"x": 1.0, "y": 2.0, "z": 3.0}})
+    face = convert.face_from_ros(payload, confidence=0.5)
+    assert face == m.FacePosition(stamp_ns=12_000_000_005, frame_id="cam",
+                                  point=m.Point(x=1.0, y=2.0, z=3.0), confidence=0.5)
+
+
+def test_a_bgr8_image_both_ways() -> None:
+    pixels = np.arange(4 * 3 * 3, dtype=np.uint8).tobytes()
+    image = m.Image(stamp_ns=2_000_000_001, frame_id="cam", width=4, height=3, encoding="bgr8",
+                    data=pixels)
+    ros_type, payload = convert.image_to_ros(image)
+    assert ros_type == types.IMAGE
+    schema = STANDARD[types.IMAGE] + DEPENDENCIES
+    decoded = their_decoder(ros_type, schema)(payload)
+    assert (decoded.width, decoded.height, decoded.step, decoded.encoding) == (4, 3, 12, "bgr8")
+    assert bytes(decoded.data) == pixels
+    assert convert.image_from_ros(their_encoder(ros_type, schema)(decoded), ros_type) == image
+
+
+def test_a_jpeg_image_is_a_compressed_image() -> None:
+    data = Path(__file__).resolve().parents[2] / "services" / "camera" / "data"
+    jpeg = next((p.read_bytes() for p in sorted(data.glob("*.jp*g"))), None)
+    if jpeg is None:
+        import cv2
+        ok, buf = cv2.imencode(".jpg", np.zeros((6, 10, 3), np.uint8))
+        assert ok
+        jpeg = buf.tobytes()
+    from buddybot.contract import jpeg as jpeg_header
+    header = jpeg_header.read_header(jpeg)
+    image = m.Image(stamp_ns=1, frame_id="cam", width=header.width, height=header.height,
+                    encoding="jpeg", data=jpeg)
+    ros_type, payload = convert.image_to_ros(image)
+    assert ros_type == types.COMPRESSED_IMAGE
+    decoded = their_decoder(ros_type, STANDARD[ros_type] + DEPENDENCIES)(payload)
+    assert (decoded.format, bytes(decoded.data)) == ("jpeg", jpeg)
+    assert convert.image_from_ros(payload, ros_type) == image
+
+
+def test_bool_both_ways() -> None:
+    payload = convert.bool_to_ros(m.Bool(stamp_ns=1, data=True))
+    assert their_decoder(types.BOOL, STANDARD[types.BOOL])(payload).data is True
+    theirs = their_encoder(types.BOOL, STANDARD[types.BOOL])({"data": False})
+    assert convert.bool_from_ros(theirs, stamp_ns=42) == m.Bool(stamp_ns=42, data=False)
+
+
+# --- what is refused -----------------------------------------------------------------
+
+
+def _expression(action: int) -> bytes:
+    return convert.to_ros(m.ScreenExpression(stamp_ns=1, action=m.ExpressionAction(action)))[1]
+
+
+def _string_with_length(claimed: int) -> bytes:
+    """A Bool-free PointStamped whose frame_id claims `claimed` bytes."""
+    payload = bytearray(convert.face_to_ros(FACE))
+    struct.pack_into("<I", payload, 4 + 8, claimed)
+    return bytes(payload)
+
+
+@pytest.mark.parametrize(("payload", "reason"), [
+    (b"", "encapsulation"),
+    (b"\x00\x01\x00", "encapsulation"),
+    (b"\x00\x07\x00\x00" + bytes(16), "encapsulation"),
+    (convert.face_to_ros(FACE)[:20], "string length"),
+    (convert.face_to_ros(FACE) + bytes(8), "size"),
+    (_string_with_length(0xFFFF_FFFF), None),
+    (_string_with_length(40), None),
+    (convert.bool_to_ros(m.Bool(stamp_ns=1, data=True)), None),  # another type's bytes
+    (bytes(convert.MAX_PAYLOAD + 1), "limit"),
+], ids=["empty", "short-header", "not-cdr", "cut", "trailing", "string-4G", "string-long",
+        "other-type", "oversize"])
+def test_malformed_point_stamped_is_refused(payload: bytes, reason: str | None) -> None:
+    with pytest.raises(ConvertError, match=reason):
+        convert.face_from_ros(payload)
+
+
+def test_an_absurd_array_length_is_refused() -> None:
+    image = m.Image(stamp_ns=1, frame_id="c", width=1, height=1, encoding="bgr8", data=bytes(3))
+    ros_type, payload = convert.image_to_ros(image)
+    bad = bytearray(payload)
+    struct.pack_into("<I", bad, len(bad) - 3 - 4, 0x7FFF_FFFF)
+    with pytest.raises(ConvertError):
+        convert.image_from_ros(bytes(bad), ros_type)
+
+
+def test_values_outside_the_contract_are_refused() -> None:
+    with pytest.raises(ConvertError, match="action"):
+        convert.from_ros(_expression(3)[:-1] + b"\x63", m.ScreenExpression)
+    pupil = bytearray(convert.to_ros(m.PupilControl(stamp_ns=1, dilation_percentage=1.0))[1])
+    struct.pack_into("<d", pupil, len(pupil) - 8, float("nan"))
+    with pytest.raises(ConvertError, match="dilation_percentage"):
+        convert.from_ros(bytes(pupil), m.PupilControl)
+
+
+def test_an_optional_with_two_values_is_refused() -> None:
+    """`float64[<=1]` holding two values (their encoder refuses to write it, so by hand)."""
+    one = convert.to_ros(m.EyesDirection(stamp_ns=1, yaw=0.0, pitch=0.0,
+                                         target_distance_cm=1.0))[1]
+    payload = bytearray(one + struct.pack("<d", 2.0))
+    struct.pack_into("<I", payload, 4 + 24, 2)
+    with pytest.raises(ConvertError, match="2 values"):
+        convert.from_ros(payload, m.EyesDirection)
+
+
+def test_an_image_that_is_not_what_it_says_is_refused() -> None:
+    schema = STANDARD[types.IMAGE] + DEPENDENCIES
+    encode = their_encoder(types.IMAGE, schema)
+    header = {"stamp": {"sec": 1, "nanosec": 0}, "frame_id": "c"}
+    wrong = [
+        ({"encoding": "rgb8", "step": 6, "data": bytes(6)}, "encoding"),
+        ({"encoding": "bgr8", "step": 6, "data": bytes(5)}, "bytes"),
+        ({"encoding": "bgr8", "step": 7, "data": bytes(7)}, "step"),
+    ]
+    for fields, reason in wrong:
+        payload = encode({"header": header, "height": 1, "width": 2, "is_bigendian": 0, **fields})
+        with pytest.raises(ConvertError, match=reason):
+            convert.image_from_ros(payload, types.IMAGE)
+    compressed = their_encoder(types.COMPRESSED_IMAGE, STANDARD[types.COMPRESSED_IMAGE]
+                               + DEPENDENCIES)
+    with pytest.raises(ConvertError, match="format"):
+        convert.image_from_ros(compressed({"header": header, "format": "png", "data": b"x"}),
+                               types.COMPRESSED_IMAGE)
+    with pytest.raises(ConvertError):
+        convert.image_from_ros(compressed({"header": header, "format": "jpeg", "data": b"junk"}),
+                               types.COMPRESSED_IMAGE)
+
+
+def test_a_message_without_an_interface_is_refused() -> None:
+    with pytest.raises(ConvertError, match="Bool"):
+        convert.to_ros(m.Bool(stamp_ns=1, data=True))
+    with pytest.raises(ConvertError, match="Bool"):
+        convert.from_ros(b"", m.Bool)
