@@ -53,9 +53,10 @@ def with_enum_names(schema: dict[str, Any]) -> dict[str, Any]:
     return schema
 
 
-def write(out: Path) -> list[Path]:
+def write_files(out: Path, files: dict[str, str]) -> list[Path]:
+    """Write generated `files` (name relative to `out` -> text) under `out`."""
     written = []
-    for name, text in generate().items():
+    for name, text in files.items():
         path = out / name
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(text)
@@ -63,14 +64,23 @@ def write(out: Path) -> list[Path]:
     return written
 
 
-def drift(out: Path) -> list[str]:
-    """Names of files that are missing, stale, or no longer generated."""
-    expected = generate()
-    problems = [n for n, t in expected.items()
-                if not (out / n).exists() or (out / n).read_text() != t]
-    if out.exists():
-        for path in out.rglob("*.json"):
+def stale_files(out: Path, files: dict[str, str], pattern: str = "*") -> list[str]:
+    """Names of generated `files` that are missing or stale under `out`, and of
+    files matching `pattern` there that are no longer generated."""
+    problems = [n for n, t in files.items()
+                if not (out / n).is_file() or (out / n).read_text() != t]
+    if out.is_dir():
+        for path in out.rglob(pattern):
             rel = path.relative_to(out).as_posix()
-            if rel not in expected:
+            if path.is_file() and rel not in files:
                 problems.append(rel)
     return sorted(problems)
+
+
+def write(out: Path) -> list[Path]:
+    return write_files(out, generate())
+
+
+def drift(out: Path) -> list[str]:
+    """Names of files that are missing, stale, or no longer generated."""
+    return stale_files(out, generate(), "*.json")

@@ -28,6 +28,7 @@ import msgspec
 from msgspec import inspect as mi
 
 from buddybot.contract import messages as m
+from buddybot.contract import schemas
 
 PACKAGE = "buddybot_interfaces"
 ROOT = Path(__file__).resolve().parents[2] / "ros2" / PACKAGE
@@ -270,25 +271,11 @@ def generate() -> dict[str, str]:
 
 def drift(out: Path = ROOT) -> list[str]:
     """Names of files that are missing, stale, or no longer generated."""
-    expected = generate()
-    problems = [n for n, t in expected.items()
-                if not (out / n).is_file() or (out / n).read_text() != t]
-    if out.is_dir():
-        for path in out.rglob("*"):
-            rel = path.relative_to(out).as_posix()
-            if path.is_file() and rel not in expected:
-                problems.append(rel)
-    return sorted(problems)
+    return schemas.stale_files(out, generate())
 
 
 def write(out: Path = ROOT) -> list[Path]:
-    written = []
-    for name, text in generate().items():
-        path = out / name
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(text)
-        written.append(path)
-    return written
+    return schemas.write_files(out, generate())
 
 
 def main(argv: list[str]) -> int:
