@@ -33,7 +33,8 @@ import pytest
 from buddybot.runtime import registry
 
 SERVICES = Path(__file__).resolve().parents[1] / "services"
-AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglove", "people")
+AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglove", "people",
+         "identity")
 BASE = frozenset({"contract", "runtime"})
 ALLOWED: dict[str, frozenset[str]] = {
     "contract": frozenset({"contract"}),
