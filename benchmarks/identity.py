@@ -1,6 +1,6 @@
 """Face identity figures: scores on real photos, time per face on one core, memory, gallery size.
 
-    .venv/bin/python benchmarks/identity.py [--repeat 50] [--sface PATH.onnx]
+    .venv/bin/python benchmarks/identity.py [--repeat 50] [--people 10000]
 
 Photos: tests/identity/photos.py (fetched from the package index into a
 cache on first use). Each photo's face is found by BlazeFace (full range,
@@ -14,8 +14,8 @@ against a gallery of every other independent shot, with the accept rule of
 `identity.matching`. Time: alignment and embedding per face, median and
 p95, the process pinned to one core with one OpenCV thread. Memory: RSS
 added by loading the model and the first embedding. Gallery: save and load
-time of 10,000 people. `--sface` measures OpenCV's SFace as well when its
-ONNX file is at hand (no package on the index ships it: docs/identity.md).
+time of 10,000 people. (OpenCV's SFace is not measured: no
+package on the reachable registries ships its ONNX file, docs/identity.md.)
 """
 
 from __future__ import annotations
@@ -28,7 +28,6 @@ import sys
 import tempfile
 import time
 from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
@@ -134,35 +133,10 @@ def gallery_figures(count: int) -> None:
           f"load {load_ms:.0f} ms, one match against all {match_ms:.1f} ms")
 
 
-def sface(path: Path, shots: list[Photo], nets: tuple[Any, Any], repeat: int) -> None:
-    print(f"\nSFace ({path.name}, OpenCV {cv2.__version__})")
-    try:
-        rec = cv2.FaceRecognizerSF.create(str(path), "")
-    except cv2.error as e:
-        print(f"  FaceRecognizerSF.create failed: {str(e).strip().splitlines()[-1]}")
-        return
-    vecs = {}
-    for p in shots:
-        k = keypoints(nets, p.bgr)
-        x0, y0 = k.min(axis=0)
-        x1, y1 = k.max(axis=0)
-        # YuNet's row layout: box, right eye, left eye, nose, right and left mouth corner.
-        mouth = k[3]
-        row = np.array([x0, y0, x1 - x0, y1 - y0, *k[0], *k[1], *k[2],
-                        mouth[0] - 10, mouth[1], mouth[0] + 10, mouth[1], 1.0], np.float32)
-        chip = rec.alignCrop(p.bgr, row)
-        vecs[p.name] = embedding.unit(rec.feature(chip))
-    chip = rec.alignCrop(shots[0].bgr, row)
-    med, p95 = timed(lambda: rec.feature(chip), repeat)
-    print(f"  feature per face: median {med:.1f} ms, p95 {p95:.1f} ms")
-    report("SFace, scores", shots, vecs)
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--repeat", type=int, default=50)
     parser.add_argument("--people", type=int, default=gallery.MAX_PEOPLE)
-    parser.add_argument("--sface", type=Path)
     args = parser.parse_args()
     os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})
     cv2.setNumThreads(1)
@@ -195,8 +169,6 @@ def main() -> None:
     report("ours: BlazeFace keypoints -> aligned crop -> dlib ResNet", shots, vecs)
     report("reference: dlib's own landmarks and chip -> dlib ResNet", shots,
            dlib_reference(shots, net))
-    if args.sface:
-        sface(args.sface, shots, nets, args.repeat)
     gallery_figures(args.people)
 
 
