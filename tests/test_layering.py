@@ -34,7 +34,7 @@ from buddybot.runtime import registry
 
 SERVICES = Path(__file__).resolve().parents[1] / "services"
 AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglove", "people",
-         "ros2")
+         "ros2", "identity")
 BASE = frozenset({"contract", "runtime"})
 ALLOWED: dict[str, frozenset[str]] = {
     "contract": frozenset({"contract"}),

@@ -1,0 +1,244 @@
+"""The consented gallery: names and face embeddings, never images, in one owner-only file.
+
+A face template is biometric data, kept only after an explicit enrolment
+and easy to erase, so the file is treated as a secret and as untrusted
+input at once:
+
+* written atomically: a temporary file in the same folder (mode 0600 from
+  its creation), flushed and fsynced, then renamed over the old one and the
+  folder fsynced; a crash at any point leaves the old gallery or the new
+  one, never half of one;
+* refused on load, with a message that says what to do, when it is not
+  owner-only (someone else could read the templates or plant a name),
+  not ours (bad header, truncated, checksum mismatch, undecodable), or
+  from another model (`model` differs: its vectors live in another space,
+  and comparing them would give wrong names). The identity stage then runs
+  without names rather than with wrong ones.
+
+Layout: `MAGIC` (one line naming format and version), the SHA-256 of the
+rest, then a msgpack `GalleryFile` with each person's embeddings as raw
+little-endian float32 bytes. Names are trimmed, 1-`MAX_NAME` characters,
+no control characters; at most `MAX_PEOPLE` people of at most
+`MAX_EMBEDDINGS` embeddings each (10,000 people load in about 0.3 s:
+benchmarks/identity.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import stat
+import unicodedata
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import numpy.typing as npt
+
+MAGIC = b"BUDDYBOT-GALLERY 1\n"
+MAX_NAME = 64
+MAX_PEOPLE = 10_000
+MAX_EMBEDDINGS = 16
+DAY_S = 86_400.0
+
+
+class GalleryError(Exception):
+    """The gallery file cannot be used; the message says why and what to do."""
+
+
+class BadName(ValueError):
+    """A name that cannot be enrolled (empty, too long, control characters, taken)."""
+
+
+class PersonRecord(msgspec.Struct, frozen=True):
+    name: str
+    embeddings: bytes
+    """float32 little-endian, `dim` numbers per embedding."""
+    enrolled_s: float
+    last_seen_s: float
+
+
+class GalleryFile(msgspec.Struct, frozen=True):
+    model: str
+    dim: int
+    people: list[PersonRecord]
+
+
+@dataclass
+class Person:
+    """One enrolled person: unit embeddings (K, dim), when enrolled and last recognised."""
+
+    name: str
+    embeddings: npt.NDArray[np.float32]
+    enrolled_s: float
+    last_seen_s: float
+
+
+@dataclass
+class Gallery:
+    """The people of one model, in memory; `save`/`load` move it to and from its file."""
+
+    model: str
+    dim: int = 128
+    people: dict[str, Person] = field(default_factory=dict)
+
+    def enrol(self, name: str, embeddings: list[npt.NDArray[np.float32]], now_s: float,
+              replace: bool = False) -> Person:
+        """Add a person (or replace their embeddings when `replace`); returns the record.
+
+        Refused: a bad name, an existing name without `replace`, no or too
+        many embeddings, a vector of the wrong length or not of unit length,
+        and a new person beyond MAX_PEOPLE.
+        """
+        key = valid_name(name)
+        if key in self.people and not replace:
+            raise BadName(f"{key!r} is already enrolled (enrol with replace to retake)")
+        if key not in self.people and len(self.people) >= MAX_PEOPLE:
+            raise BadName(f"the gallery is full ({MAX_PEOPLE} people): forget someone first")
+        if not 1 <= len(embeddings) <= MAX_EMBEDDINGS:
+            raise ValueError(f"need 1-{MAX_EMBEDDINGS} embeddings, got {len(embeddings)}")
+        rows = np.stack([np.asarray(e, dtype=np.float32).ravel() for e in embeddings])
+        if rows.shape[1] != self.dim:
+            raise ValueError(f"embeddings have {rows.shape[1]} numbers, the model {self.dim}")
+        norms = np.linalg.norm(rows, axis=1)
+        if not (np.isfinite(rows).all() and np.allclose(norms, 1.0, atol=1e-3)):
+            raise ValueError("embeddings must be finite unit vectors")
+        person = Person(key, rows, now_s, now_s)
+        self.people[key] = person
+        return person
+
+    def forget(self, name: str) -> bool:
+        """Erase one person; False when nobody had that name."""
+        return self.people.pop(name.strip(), None) is not None
+
+    def forget_all(self) -> int:
+        """Erase everyone; returns how many were erased."""
+        count = len(self.people)
+        self.people.clear()
+        return count
+
+    def seen(self, name: str, now_s: float) -> None:
+        """Note that `name` was recognised now (what the retention limit counts from)."""
+        if name in self.people:
+            self.people[name].last_seen_s = max(self.people[name].last_seen_s, now_s)
+
+    def expire(self, now_s: float, days: float) -> list[str]:
+        """Forget everyone not seen for more than `days` days; returns their names."""
+        if days <= 0:
+            raise ValueError("the retention limit must be a positive number of days")
+        old = [n for n, p in self.people.items() if now_s - p.last_seen_s > days * DAY_S]
+        for name in old:
+            del self.people[name]
+        return old
+
+    def table(self) -> tuple[list[str], npt.NDArray[np.float32]]:
+        """(name of each row, rows (N, dim)): what `matching.best_match` takes."""
+        names = [p.name for p in self.people.values() for _ in range(len(p.embeddings))]
+        if not names:
+            return [], np.zeros((0, self.dim), np.float32)
+        return names, np.concatenate([p.embeddings for p in self.people.values()])
+
+
+def valid_name(name: str) -> str:
+    """`name` trimmed; BadName when empty, longer than MAX_NAME or holding control chars."""
+    if not isinstance(name, str):
+        raise BadName(f"a name is text, not {type(name).__name__}")
+    key = name.strip()
+    if not key:
+        raise BadName("a name cannot be empty")
+    if len(key) > MAX_NAME:
+        raise BadName(f"a name has at most {MAX_NAME} characters, this one {len(key)}")
+    if any(unicodedata.category(c).startswith("C") for c in key):
+        raise BadName("a name cannot hold control or invisible characters")
+    return key
+
+
+def encode(g: Gallery) -> bytes:
+    """The file's bytes for `g`."""
+    body = msgspec.msgpack.encode(GalleryFile(g.model, g.dim, [
+        PersonRecord(p.name, p.embeddings.astype("<f4").tobytes(), p.enrolled_s, p.last_seen_s)
+        for p in g.people.values()]))
+    return MAGIC + hashlib.sha256(body).digest() + body
+
+
+def decode(data: bytes, model: str, where: str = "gallery") -> Gallery:
+    """Bytes of a gallery file -> Gallery; GalleryError when they are not a usable gallery."""
+    if not data.startswith(MAGIC):
+        raise GalleryError(f"{where} is not a BuddyBot gallery (or of another format version)")
+    digest, body = data[len(MAGIC):len(MAGIC) + 32], data[len(MAGIC) + 32:]
+    if len(digest) < 32 or hashlib.sha256(body).digest() != digest:
+        raise GalleryError(f"{where} is truncated or corrupt (checksum mismatch)")
+    try:
+        file = msgspec.msgpack.decode(body, type=GalleryFile)
+    except msgspec.DecodeError as e:
+        raise GalleryError(f"{where} is corrupt ({e})") from e
+    if file.model != model:
+        raise GalleryError(f"{where} was made with model {file.model!r}, this robot runs "
+                           f"{model!r}: its faces must be enrolled again")
+    if len(file.people) > MAX_PEOPLE:
+        raise GalleryError(f"{where} holds {len(file.people)} people, more than {MAX_PEOPLE}")
+    g = Gallery(model, file.dim)
+    for rec in file.people:
+        count = len(rec.embeddings) // 4
+        if file.dim <= 0 or len(rec.embeddings) % 4 or count == 0 or count % file.dim:
+            raise GalleryError(f"{where}: {rec.name[:MAX_NAME]!r} has malformed embeddings")
+        rows = np.frombuffer(rec.embeddings, dtype="<f4").astype(np.float32)
+        try:
+            g.enrol(rec.name, list(rows.reshape(-1, file.dim)), rec.enrolled_s)
+        except ValueError as e:
+            raise GalleryError(f"{where}: bad entry {rec.name[:MAX_NAME]!r}: {e}") from e
+        g.people[valid_name(rec.name)].last_seen_s = rec.last_seen_s
+    return g
+
+
+def check_private(st: os.stat_result, path: Path) -> None:
+    """GalleryError unless `path` is a regular file of ours that no one else may read or write."""
+    if not stat.S_ISREG(st.st_mode):
+        raise GalleryError(f"{path} is not a regular file")
+    if st.st_uid != os.getuid():
+        raise GalleryError(f"{path} belongs to uid {st.st_uid}, not to this user ({os.getuid()})")
+    if st.st_mode & 0o077:
+        raise GalleryError(f"{path} is accessible to others (mode {stat.S_IMODE(st.st_mode):o}): "
+                           f"it holds biometric data; check who changed it, then chmod 600 it")
+
+
+def load(path: Path, model: str) -> Gallery:
+    """The gallery at `path` (empty when there is no file yet); GalleryError when unusable."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    except FileNotFoundError:
+        return Gallery(model)
+    except OSError as e:
+        raise GalleryError(f"cannot open {path}: {e.strerror}") from e
+    with os.fdopen(fd, "rb") as f:
+        check_private(os.fstat(f.fileno()), path)
+        data = f.read()
+    return decode(data, model, str(path))
+
+
+def save(path: Path, g: Gallery) -> None:
+    """Write `g` to `path` atomically, owner-only (the old file stays whole on any failure)."""
+    data = encode(g)
+    folder = path.parent
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    tmp = folder / f".{path.name}.{os.getpid()}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0),
+                 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    dir_fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
