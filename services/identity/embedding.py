@@ -150,7 +150,7 @@ class Embedder:
         """Load the weights (about 0.3 s); ModelNotFound when dlib or the file is missing."""
         found = locate(path)
         try:
-            import dlib  # type: ignore[import-not-found]
+            import dlib
         except ImportError as e:
             raise ModelNotFound(f"dlib is not installed ({e}); {INSTALL_HINT}") from e
         try:
