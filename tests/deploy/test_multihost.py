@@ -482,11 +482,16 @@ def test_liveliness_grants_name_the_nodes_of_each_host() -> None:
 
 
 class TokenWatch:
-    """Liveliness tokens under nodes/** as a full-read host sees them (puts only)."""
+    """Liveliness tokens under nodes/** as a full-read host sees them (puts only).
+
+    With history: on a busy machine the router can take a token declared by
+    another session before it has this subscription, and a subscriber without
+    history would never hear of it."""
 
     def __init__(self, session: zenoh.Session) -> None:
         self.keys: list[str] = []
-        self._sub = session.liveliness().declare_subscriber(f"{NODES_PREFIX}/**", self._on)
+        self._sub = session.liveliness().declare_subscriber(f"{NODES_PREFIX}/**", self._on,
+                                                            history=True)
 
     def _on(self, sample: zenoh.Sample) -> None:
         if sample.kind == zenoh.SampleKind.PUT:
