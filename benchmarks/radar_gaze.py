@@ -42,7 +42,7 @@ import threading
 import time
 from typing import Any
 
-from common import host, percentile, services_up, summary
+from common import CHROMIUM_ARGS, host, percentile, services_up, summary
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -67,8 +67,6 @@ browser = false
 """
 BEARING_DEG = 40.0
 DISTANCE_M = 2.0
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update"]
 
 WATCH = """([goal, tol]) => {
   // Runs after the page's own frame callback in every frame (registered
