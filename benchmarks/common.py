@@ -27,6 +27,11 @@ ROUTES: dict[str, tuple[keys.Topic, keys.Topic, dict[str, str], dict[str, str]]]
 }
 
 
+CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
+                 "--disable-component-update"]
+"""Headless Debian Chromium for the benchmarks that drive the eye page."""
+
+
 def make_message(kind: str, i: int) -> m.Message:
     """A small control message, or a 640x480 bgr8 image (921,600 bytes)."""
     if kind == "small":

@@ -41,7 +41,7 @@ import urllib.request
 from typing import Any
 
 import psutil
-from common import percentile
+from common import CHROMIUM_ARGS, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -59,8 +59,6 @@ FRAME_MS = 16.67
 """One display frame at 60 Hz."""
 TIMER_MS = 0.2
 """performance.now() resolution in Chromium (0.1 ms) on both ends of an interval."""
-CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-                 "--disable-component-update"]
 
 
 def figures(name: str, values: list[float]) -> None:

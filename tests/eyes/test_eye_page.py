@@ -126,6 +126,8 @@ def test_page_follows_published_direction(
     assert abs(cx0 - W / 2) < 6 and abs(cy0 - H / 2) < 6      # starts looking ahead
 
     gaze(probe, page, 30, 0, 1)
+    # The eased commanded direction (the benchmarks' read-only hook) is there too.
+    assert abs(page.evaluate("window.eyes.base.yaw") - 30) < 0.05
     x_left, _ = pupil_centre(shot(page, "direction_yaw+30"))
     gaze(probe, page, -30, 0, 2)
     x_right, _ = pupil_centre(shot(page, "direction_yaw-30"))

@@ -335,6 +335,7 @@
   const ctx = canvas.getContext("2d", { alpha: false });
   let lastFrame = 0;
   const base = { yaw: 0, pitch: 0 };   // the commanded direction, eased
+  eyes.base = base;              // read-only, for tests and benchmarks (drawn: base + offset)
 
   function resize() {
     const dpr = window.devicePixelRatio || 1;
