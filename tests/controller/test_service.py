@@ -483,6 +483,10 @@ def test_the_chain_radar_presence_people_controller(spawn, tmp_path, stimulus, m
     audio.wait_log(lambda log: "end:greeting" in log, what="greeting")
     greeted = states.wait_for(lambda st: st.greeted, 20, "state: greeted")
     assert greeted.person_id == first
+    # The greeting's end reaches the controller as a status after the player's
+    # log line: leave only once it looks awake again, or the sequence below
+    # depends on which comes first.
+    wait_expressions(expr, [X.EYE_GRIN, X.EYE_AWAKE])
 
     presence(False)
     stimulus.watch(False)
