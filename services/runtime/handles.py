@@ -230,8 +230,12 @@ class RawPublisher(Handle):
         self._z = entity
         self._put = entity.put
 
-    def put(self, payload: bytes) -> None:
-        self._put(payload)
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        """Put `payload`; `attachment` travels with it (rmw_zenoh's sample metadata)."""
+        if attachment is None:
+            self._put(payload)
+        else:
+            self._put(payload, attachment=attachment)
 
     def has_subscribers(self) -> bool:
         """Whether a subscriber matches the key right now."""

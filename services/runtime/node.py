@@ -493,6 +493,7 @@ class Node:
         history: bool = False,
         delivery: Delivery = "inline",
         queue_size: int = 64,
+        remote_only: bool = False,
     ) -> Subscription:
         """Call `callback(key, payload, encoding)` for each sample on an absolute
         key expression (wildcards allowed, catalogue or not), undecoded: for
@@ -501,7 +502,9 @@ class Node:
         `history`: also get the latched value of every matching publisher at
         once (an advanced subscriber that declares nothing else, so a probe
         stays unseen). Deletions are not delivered. A failing callback is
-        counted and logged, never fatal.
+        counted and logged, never fatal. `remote_only`: samples this node
+        publishes itself are not delivered (a bridge that both publishes and
+        takes a key must not hear its own samples back).
         """
         key_expr = _key_expr(key_expr)
 
@@ -522,10 +525,11 @@ class Node:
                 on_error(exc)
 
         return self._subscriber(key_expr, on_sample, history="probe" if history else None,
-                                worker=worker)
+                                worker=worker, remote_only=remote_only)
 
     def _subscriber(self, key: str, on_sample: Callable[[zenoh.Sample], None], *,
-                    history: str | None, worker: Worker | None) -> Subscription:
+                    history: str | None, worker: Worker | None,
+                    remote_only: bool = False) -> Subscription:
         """Declare a subscriber and track its handle. `history`: None (plain),
         "probe" (late joiners get the latched value, nothing else is declared)
         or "full" (also recovery and subscriber detection, as services use).
@@ -534,7 +538,8 @@ class Node:
         guarded = gate.guard(on_sample)
         try:
             if history is None:
-                entity: Any = self._session.declare_subscriber(key, guarded)
+                origin = {"allowed_origin": zenoh.Locality.REMOTE} if remote_only else {}
+                entity: Any = self._session.declare_subscriber(key, guarded, **origin)
             else:
                 extra: dict[str, Any] = {}
                 if history == "full":

@@ -35,7 +35,10 @@ class Entry:
     packages it needs, its stream's rate), imported only when doctor runs, so
     doctor stays area-free."""
     on_request: bool = False
-    """Started by `up` only when asked (`up --foxglove`), never by default."""
+    """Started by `up` only when asked (`up --foxglove`, or its table's
+    `enabled = true`), never by default."""
+    up_flag: str | None = None
+    """The `up` option that asks for an on-request service (`--foxglove`)."""
 
     def exists(self) -> bool:
         """Whether the module is present in this installation."""
@@ -95,7 +98,11 @@ SERVICES: tuple[Entry, ...] = (
           "dashboard", "buddybot.dashboard.settings:DashboardSettings"),
     Entry("foxglove", "buddybot.foxglove.service",
           "Foxglove WebSocket bridge: every key live in the Foxglove app",
-          "foxglove", "buddybot.foxglove.settings:FoxgloveSettings", on_request=True),
+          "foxglove", "buddybot.foxglove.settings:FoxgloveSettings", on_request=True,
+          up_flag="--foxglove"),
+    Entry("ros2-bridge", "buddybot.ros2.service",
+          "ROS 2 bridge: the robot's topics on a ROS 2 graph (rmw_zenoh)",
+          "ros2", "buddybot.ros2.settings:Ros2Settings", on_request=True, up_flag="--ros2"),
 )
 
 TOOLS: tuple[Entry, ...] = (

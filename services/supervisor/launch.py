@@ -266,16 +266,34 @@ def select_services(only: list[str] | None, known: list[registry.Entry],
     return [e for e in installed if e.name in only]
 
 
+def requested(ctx: ServiceContext) -> list[registry.Entry]:
+    """The on-request services `up` starts: those whose option was given
+    (`--foxglove`, `--ros2`), and, without `--only`, those whose table says
+    `enabled = true`. An asked-for service that is not installed is a UsageError."""
+    chosen: list[registry.Entry] = []
+    for entry in registry.SERVICES:
+        if not entry.on_request:
+            continue
+        flag = entry.up_flag
+        asked = flag is not None and getattr(ctx.args, flag.lstrip("-").replace("-", "_"), False)
+        if not asked and entry.table is not None and not getattr(ctx.args, "only", None):
+            asked = bool(getattr(getattr(ctx.config, entry.table, None), "enabled", False))
+        if not asked:
+            continue
+        if not entry.exists():
+            raise UsageError(f"{flag or entry.name}: {entry.name} is not installed here")
+        chosen.append(entry)
+    return chosen
+
+
 def plan_up(ctx: ServiceContext) -> UpPlan:
     """Validate the options of `up` into a plan (UsageError: exit 2, nothing started)."""
     args = ctx.args
     entries = select_services(getattr(args, "only", None), list(registry.SERVICES),
                               registry.available_services())
-    if getattr(args, "foxglove", False) and not any(e.name == "foxglove" for e in entries):
-        foxglove = registry.service("foxglove")
-        if foxglove is None or not foxglove.exists():
-            raise UsageError("--foxglove: the Foxglove bridge is not installed here")
-        entries.append(foxglove)
+    for entry in requested(ctx):
+        if not any(e.name == entry.name for e in entries):
+            entries.append(entry)
     joined = getattr(args, "connect", None)
     if joined and args.listen:
         raise UsageError("--connect joins a running router, --listen starts one: not both")

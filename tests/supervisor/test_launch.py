@@ -91,6 +91,18 @@ def test_on_request_services_start_only_when_asked() -> None:
         "camera", "foxglove"]
 
 
+def test_the_ros2_bridge_starts_with_up_ros2_or_its_enabled_switch() -> None:
+    assert "ros2-bridge" not in {e.name for e in plan_up(_ctx()).entries}
+    assert "ros2-bridge" in {e.name for e in plan_up(_ctx(ros2=True)).entries}
+    assert [e.name for e in plan_up(_ctx(only=["camera"], ros2=True)).entries] == [
+        "camera", "ros2-bridge"]
+    ctx = _ctx()
+    ctx.config = parse_config("[ros2]\nenabled = true\n")
+    assert "ros2-bridge" in {e.name for e in plan_up(ctx).entries}
+    ctx.args.only = ["camera"]  # --only names exactly what starts
+    assert [e.name for e in plan_up(ctx).entries] == ["camera"]
+
+
 def test_connect_joins_without_a_router_and_not_with_listen() -> None:
     plan = plan_up(_ctx(connect=["tcp/127.0.0.1:9999"]))
     assert plan.joins and plan.connect == ["tcp/127.0.0.1:9999"]

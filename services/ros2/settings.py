@@ -1,0 +1,29 @@
+"""Config table `[ros2]` (a pure msgspec struct): where the bridge meets ROS 2.
+
+Off by default: the bridge runs under `up` only with `up --ros2` or
+`enabled = true` (docs/ros2.md).
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import msgspec
+
+NAMESPACE = r"^/$|^(/[A-Za-z_][A-Za-z0-9_]*)+$"
+"""A ROS namespace: `/`, or `/`-separated name tokens (no trailing `/`)."""
+
+
+class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """`[ros2]`: the ROS 2 bridge (rmw_zenoh wire format)."""
+
+    enabled: Annotated[bool, msgspec.Meta(
+        description="start the ROS 2 bridge with `up` (as `up --ros2` does)")] = False
+    # ROS_DOMAIN_ID: rmw_zenoh puts it first in every key, so peers on another
+    # domain never match.
+    domain_id: Annotated[int, msgspec.Meta(
+        ge=0, le=232, description="ROS_DOMAIN_ID of the ROS 2 graph (0..232)")] = 0
+    namespace: Annotated[str, msgspec.Meta(
+        pattern=NAMESPACE, max_length=200,
+        description="namespace of the bridge's node and topics (`/`: the seed's "
+        "/face_position ...)")] = "/"
