@@ -24,6 +24,6 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     domain_id: Annotated[int, msgspec.Meta(
         ge=0, le=232, description="ROS_DOMAIN_ID of the ROS 2 graph (0..232)")] = 0
     namespace: Annotated[str, msgspec.Meta(
-        pattern=NAMESPACE, max_length=200,
+        pattern=NAMESPACE, max_length=200, examples=["/robot1", "/lab/buddy"],
         description="namespace of the bridge's node and topics (`/`: the seed's "
         "/face_position ...)")] = "/"
