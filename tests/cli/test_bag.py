@@ -64,12 +64,24 @@ def test_record_keys_defaults_images_and_errors() -> None:
 class RawCollector:
     """Every sample on `buddybot/**` with its arrival time (monotonic)."""
 
-    def __init__(self, node: Node, key: str = "buddybot/**") -> None:
+    def __init__(self, node: Node, key: str = "buddybot/**",
+                 latched: frozenset[str] = frozenset()) -> None:
         self.items: list[tuple[str, bytes, float]] = []
         self._lock = threading.Lock()
+        self._latched = latched
         node.subscribe_raw(key, self._on)
+        for each in latched:
+            node.subscribe_raw(each, self._on_latched, history=True)
 
     def _on(self, key: str, payload: bytes, _encoding: str) -> None:
+        if key not in self._latched:
+            self._on_latched(key, payload, _encoding)
+
+    def _on_latched(self, key: str, payload: bytes, _encoding: str) -> None:
+        """`latched` keys come through their own subscription with history, as a
+        service subscribes to them: a player's latched publisher does not wait
+        for subscribers (its cache serves those that come later), so its one
+        put can be gone before a plain subscriber is known to it."""
         with self._lock:
             self.items.append((key, payload, time.monotonic()))
 
@@ -149,7 +161,8 @@ def test_record_info_play_round_trip(router: Router, quiet: Node, tmp_path: Path
     assert debug_image not in counts
     assert counts[bag.annotations_key(concrete_key(keys.FACES))] == 1
 
-    received = RawCollector(quiet)
+    latched = frozenset(k for k in recorded if found[k][0].latched)
+    received = RawCollector(quiet, latched=latched)
     played = run_bag(router, "play", str(out), "--wait", "10")
     assert played.returncode == 0, played.stderr
     assert "played" in played.stderr
