@@ -41,6 +41,9 @@ MAGIC = b"BUDDYBOT-GALLERY 1\n"
 MAX_NAME = 64
 MAX_PEOPLE = 10_000
 MAX_EMBEDDINGS = 16
+MAX_FILE_BYTES = 128 * 1024 * 1024
+"""Largest gallery file read: MAX_PEOPLE full people of 512-number embeddings fit
+(dlib's are 128); a larger file is refused before it is read into memory."""
 DAY_S = 86_400.0
 
 
@@ -213,8 +216,12 @@ def load(path: Path, model: str) -> Gallery:
     except OSError as e:
         raise GalleryError(f"cannot open {path}: {e.strerror}") from e
     with os.fdopen(fd, "rb") as f:
-        check_private(os.fstat(f.fileno()), path)
-        data = f.read()
+        st = os.fstat(f.fileno())
+        check_private(st, path)
+        if st.st_size > MAX_FILE_BYTES:
+            raise GalleryError(f"{path} is {st.st_size} bytes, more than a gallery can be "
+                               f"({MAX_FILE_BYTES}): not read")
+        data = f.read(MAX_FILE_BYTES + 1)
     return decode(data, model, str(path))
 
 

@@ -82,6 +82,12 @@ def test_a_truncated_file_is_refused(path: Path, cut: int) -> None:
         gal.load(path, MODEL)
 
 
+def test_an_oversized_file_is_refused_unread(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(gal, "MAX_FILE_BYTES", path.stat().st_size - 1)
+    with pytest.raises(gal.GalleryError, match="more than a gallery can be"):
+        gal.load(path, MODEL)
+
+
 def test_a_flipped_byte_is_refused(path: Path) -> None:
     data = bytearray(path.read_bytes())
     data[-50] ^= 0x40  # inside an embedding: would silently change a face without the checksum
