@@ -32,6 +32,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.ros2 import bridge, convert, wire
 from buddybot.ros2.settings import Ros2Settings
+from buddybot.runtime.diagnostics import RateLimitedLog
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.handles import RawPublisher
 from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
@@ -77,6 +78,8 @@ class Ros2Bridge:
         self.node = node
         self.settings = settings
         self.lease = LeaseHolder(node, ["expression"], "app", CALL_TIMEOUT_S)
+        self._warn = RateLimitedLog(node.log)
+        """A flood of bad ROS samples is counted in full but logged once per 5 s."""
         self._entities = itertools.count(1)
         self.node_id = 0
         self._publishers: dict[str, RosPublisher] = {}
@@ -137,15 +140,15 @@ class Ros2Bridge:
             type_name, type_hash = "", ""
         if type_name != wire.dds_type_name(route.ros_type) or type_hash != route.type_hash:
             self.node.diagnostics.increment("wrong_type")
-            self.node.log.warning("dropped a sample on %s of another type or hash: %s",
-                                  route.ros_name, clip(key))
+            self._warn.warning("wrong_type", "dropped a sample on %s of another type or "
+                               "hash: %s", route.ros_name, clip(key))
             return
         try:
             msg = inc.decode(payload)
         except convert.ConvertError as exc:
             self.node.diagnostics.increment("malformed")
-            self.node.log.warning("dropped a malformed sample on %s: %s", route.ros_name,
-                                  clip(exc))
+            self._warn.warning("malformed", "dropped a malformed sample on %s: %s",
+                               route.ros_name, clip(exc))
             return
         assert isinstance(msg, m.ScreenExpression)
         try:
@@ -153,11 +156,13 @@ class Ros2Bridge:
             self.lease.command(expression=msg.action)
         except LeaseRefused as exc:
             self.node.diagnostics.increment("refused")
-            self.node.log.warning("%s from ROS 2 refused: %s", msg.action.name, clip(exc))
+            self._warn.warning("refused", "%s from ROS 2 refused: %s", msg.action.name,
+                               clip(exc))
             return
         except ServiceError as exc:
             self.node.diagnostics.increment("refused")
-            self.node.log.warning("%s from ROS 2 not delivered: %s", msg.action.name, clip(exc))
+            self._warn.warning("undelivered", "%s from ROS 2 not delivered: %s",
+                               msg.action.name, clip(exc))
             return
         self.node.diagnostics.increment("commands")
         self.node.log.info("expression %s from ROS 2", msg.action.name)
