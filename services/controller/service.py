@@ -260,7 +260,8 @@ class Controller:
                          req.holder, req.priority, ", ".join(req.resources))
                 self._leases_changed(before)
             else:
-                log.info("lease refused to %s: %s", req.holder, decision.reply.message)
+                self._warn.warning("lease_refused", "lease refused to %s: %s", req.holder,
+                                   decision.reply.message)
         return decision.reply
 
     def release(self, req: m.LeaseRelease) -> m.TriggerReply:
@@ -282,8 +283,9 @@ class Controller:
             if eyes.control is not None:
                 self._control_pub.put(eyes.control)
         if not eyes.reply.success:
-            self._warn.warning(f"eyes:{cmd.lease_id}", "eyes command refused: %s",
-                               eyes.reply.message)
+            # One topic for all: a lease id is the caller's text, and a topic per id
+            # would grow the log's table with every invented one.
+            self._warn.warning("eyes_refused", "eyes command refused: %s", eyes.reply.message)
         return eyes.reply
 
     def _token_exists(self, node: str, instance: str) -> bool:
