@@ -221,7 +221,7 @@ def play(ctx: ServiceContext) -> int:
         publishers: dict[str, Publisher[Any]] = {
             c.key: node.publisher_on(c.topic, bag.with_robot(c.key, robot))
             for c in selected if c.topic is not None}
-        _wait_for_subscribers(list(publishers.values()), args.wait, ctx)
+        _wait_for_subscribers(node, list(publishers.values()), args.wait, ctx)
         while not ctx.stop.is_set():
             _play_once(recording, publishers, start_ns, only, args.rate, ctx, stats, tty)
             stats.loops += 1
@@ -261,15 +261,25 @@ def _play_node(ctx: ServiceContext, robot: str) -> Node:
         raise RouterUnreachable(f"{exc} (gave up after {limit:g} s)") from None
 
 
-def _wait_for_subscribers(publishers: list[Publisher[Any]], wait: float,
+def _wait_for_subscribers(node: Node, publishers: list[Publisher[Any]], wait: float,
                           ctx: ServiceContext) -> None:
     """Give discovery a moment, so the first messages reach the subscribers that
-    exist (latched publishers keep their value for later ones anyway)."""
-    end = time.monotonic() + max(0.0, wait)
-    while time.monotonic() < end and not ctx.stop.is_set():
-        if all(p.has_subscribers() for p in publishers):
-            return
-        ctx.stop.wait(0.02)
+    exist. Latched keys are waited for too: their cache dies with the player,
+    so a put made before the router told us of a subscriber is lost for good.
+    An advanced (latched) publisher cannot say whether it is matched, so a
+    plain probe publisher on the same key answers for it."""
+    probes = [node.raw_publisher(p.key, p.topic.encoding) for p in publishers
+              if p.topic.latched]
+    pending = [p for p in publishers if not p.topic.latched] + probes
+    try:
+        end = time.monotonic() + max(0.0, wait)
+        while time.monotonic() < end and not ctx.stop.is_set():
+            if all(p.has_subscribers() for p in pending):
+                return
+            ctx.stop.wait(0.02)
+    finally:
+        for probe in probes:
+            probe.close()
 
 
 def _play_once(recording: bag.Recording, publishers: dict[str, Publisher[Any]],
