@@ -276,6 +276,22 @@ PEOPLE_EVENTS = Topic(
 """Not latched, so STREAM and not STATE (which is always latched): a late joiner must
 not take an old ARRIVED for a new one. An event lost under congestion is not
 fetched again; `people/state` (latched) is what converges."""
+FACE_NAME = Topic(
+    "identity/{camera}/name", "who the followed face is (per track, after a vote); on change",
+    type=m.FaceName, qos=STATE, latched=True,
+)
+IDENTITY_ENROL = Service(
+    "identity/enrol", "remember the one face in front of the camera under a name (consent)",
+    request=m.EnrolRequest, reply=m.EnrolReply,
+)
+IDENTITY_FORGET = Service(
+    "identity/forget", "erase one person's face templates, or all of them",
+    request=m.ForgetRequest, reply=m.ForgetReply,
+)
+IDENTITY_LIST = Service(
+    "identity/list", "the enrolled people's names and when they were last seen",
+    request=m.Trigger, reply=m.KnownPeople,
+)
 LEASES = Topic(
     "leases/state", "who holds the eyes and the speaker, and the last leases that ended",
     type=m.Leases, qos=STATE, latched=True,
@@ -333,9 +349,10 @@ NODE_INFO = Service(
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, RADAR_TARGETS, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION,
     EYE_CONTROL, EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
-    LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+    FACE_NAME, LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
 )
 SERVICES: tuple[Service, ...] = (
+    IDENTITY_ENROL, IDENTITY_FORGET, IDENTITY_LIST,
     LEASE_ACQUIRE, LEASE_RELEASE, EYES_COMMAND, PLAY_SOUND, PLAY_SOUND_CANCEL, PLAY_FILE,
     AUDIO_STOP, AUDIO_PAUSE, AUDIO_RESUME, PARAMS, NODE_INFO,
 )

@@ -513,6 +513,85 @@ class PersonEvent(Message):
     engagement: Engagement
 
 
+# --- identity ----------------------------------------------------------------
+
+PersonName = Annotated[str, msgspec.Meta(
+    min_length=1, max_length=64, description="an enrolled person's name, 1-64 characters")]
+"""The gallery's rule (`identity.gallery.valid_name`) also refuses control characters."""
+Cosine = Annotated[float, msgspec.Meta(ge=-1.0, le=1.0, description="cosine similarity")]
+MAX_KNOWN = 10_000
+"""Most people one gallery holds (and one `KnownPeople` reply lists)."""
+
+
+class FaceName(Message):
+    """Who the followed face is, decided per face track by the identity service.
+
+    Latched, published on change: when the track's vote settles on a name,
+    when the followed face becomes another track or is lost, and at once when
+    the name it carries is forgotten. `name` None: unknown, not yet decided,
+    or no face followed (`track` None).
+    """
+
+    stamp_ns: StampNs
+    frame_id: FrameId
+    track: Annotated[int, msgspec.Meta(ge=1, description="face track, never reused")] | None = None
+    name: PersonName | None = None
+    score: Cosine | None = None
+    """The best match's cosine of the frame that settled the vote."""
+    votes: Annotated[int, msgspec.Meta(ge=0, le=1000)] = 0
+    """Frames of this track that agreed on `name` (or were embedded, while unknown)."""
+
+
+class EnrolRequest(Message):
+    """Remember the one face in front of the camera now under `name` (explicit consent)."""
+
+    name: PersonName
+    samples: Annotated[int, msgspec.Meta(ge=1, le=16, description="frames to embed")] = 5
+    timeout_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0, description="s")] = 10.0
+    replace: bool = False
+    """An existing `name` is refused unless this is set; then its templates are replaced."""
+
+
+class EnrolReply(Message):
+    success: bool
+    message: Text = ""
+    name: PersonName | None = None
+    samples: Annotated[int, msgspec.Meta(ge=0, le=16)] = 0
+    """Embeddings stored for `name`."""
+
+
+class ForgetRequest(Message):
+    """Erase one person's templates, or everybody's (`all`); exactly one of the two."""
+
+    name: PersonName | None = None
+    all: bool = False
+
+
+class ForgetReply(Message):
+    success: bool
+    message: Text = ""
+    forgotten: Annotated[list[PersonName], msgspec.Meta(max_length=MAX_KNOWN)] = msgspec.field(
+        default_factory=list)
+
+
+class KnownPerson(Message):
+    """One enrolled person, without their templates (those never leave the identity service)."""
+
+    name: PersonName
+    enrolled_ns: StampNs
+    last_seen_ns: StampNs | None = None
+    samples: Annotated[int, msgspec.Meta(ge=0, le=16)] = 0
+
+
+class KnownPeople(Message):
+    """Everybody the gallery holds, by name (reply of `identity/list`)."""
+
+    people: Annotated[list[KnownPerson], msgspec.Meta(max_length=MAX_KNOWN)] = msgspec.field(
+        default_factory=list)
+    retention_days: Annotated[float, msgspec.Meta(ge=0.0, le=36500.0)] | None = None
+    """People not seen for this long are forgotten; None: kept until forgotten."""
+
+
 # --- leases ------------------------------------------------------------------
 
 LeasePriority = Literal["builtin", "app", "operator"]
@@ -721,6 +800,13 @@ ALL_MESSAGES: tuple[type[Message], ...] = (
     Person,
     PeopleState,
     PersonEvent,
+    FaceName,
+    EnrolRequest,
+    EnrolReply,
+    ForgetRequest,
+    ForgetReply,
+    KnownPerson,
+    KnownPeople,
     LeaseRequest,
     LeaseReply,
     LeaseRelease,
