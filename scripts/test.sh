@@ -23,6 +23,7 @@ $quick || scripts/test-packages.sh || true
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
 MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
 .venv/bin/python -m buddybot schemas --check
+.venv/bin/python -m buddybot reference --check
 pytest=(.venv/bin/python -m pytest --durations=15)
 if $quick; then
     exec "${pytest[@]}" -n "$(nproc)" -m "not integration and not browser" "$@"

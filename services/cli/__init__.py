@@ -12,6 +12,7 @@
     buddybot bag record|play|info FILE      record keys to MCAP, replay, describe
     buddybot doctor [--quick]               is the robot healthy?
     buddybot schemas [--check]              regenerate / check schemas/
+    buddybot reference [--check]            regenerate / check docs/reference/
     buddybot radar ...                      LD2410 configuration tools
     buddybot foxglove [--port P]            every key live in the Foxglove app
     buddybot app run|new|list               apps: run one, start one, list them
@@ -42,6 +43,7 @@ from buddybot.runtime.errors import EXIT_USAGE
 from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
+         "reference",
          "doctor", "param", "lease", "topics", "node", "foxglove", "bag", "app")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
