@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 import msgspec
+import results
 from common import percentile
 
 from buddybot.audio.player import decode_file
@@ -224,4 +225,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

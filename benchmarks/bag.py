@@ -31,6 +31,7 @@ import time
 from pathlib import Path
 
 import psutil
+import results
 from common import percentile
 
 from buddybot.runtime.node import Node
@@ -151,4 +152,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

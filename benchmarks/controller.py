@@ -21,6 +21,7 @@ import time
 import timeit
 
 import msgspec
+import results
 import zenoh
 from common import summary
 
@@ -150,4 +151,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(results.run(__file__, main))

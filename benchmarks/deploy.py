@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+import results
 import zenoh
 from common import ROUTES, make_message, percentile, reply_for
 
@@ -195,4 +196,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

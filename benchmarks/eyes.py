@@ -41,6 +41,7 @@ import urllib.request
 from typing import Any
 
 import psutil
+import results
 from common import CHROMIUM_ARGS, percentile
 
 from buddybot.contract import keys
@@ -358,4 +359,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

@@ -63,6 +63,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import results  # noqa: E402
+
 from buddybot.camera import blazeface as bf  # noqa: E402
 from buddybot.camera import frames as frames_mod  # noqa: E402
 from buddybot.camera import models  # noqa: E402
@@ -482,4 +484,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(__file__, main))

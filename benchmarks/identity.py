@@ -36,6 +36,8 @@ import psutil
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+import results  # noqa: E402
+
 from buddybot.identity import embedding, gallery, matching  # noqa: E402
 from tests.identity.photos import Photo, detectors, keypoints, photos  # noqa: E402
 
@@ -173,4 +175,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(__file__, main))

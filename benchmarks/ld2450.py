@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 
 import psutil
+import results
 from common import best_parse_rate
 
 from buddybot.contract import keys
@@ -126,4 +127,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

@@ -32,6 +32,7 @@ import time
 from pathlib import Path
 
 import psutil
+import results
 from common import host, options, percentile
 
 from buddybot.contract import keys
@@ -258,4 +259,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

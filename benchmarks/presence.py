@@ -21,6 +21,7 @@ import argparse
 import threading
 import time
 
+import results
 from common import services_up, summary
 
 from buddybot.contract import keys
@@ -112,4 +113,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(results.run(__file__, main))

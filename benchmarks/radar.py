@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import psutil
+import results
 from common import best_parse_rate
 
 from buddybot.contract import keys
@@ -214,4 +215,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

@@ -42,6 +42,7 @@ import threading
 import time
 from typing import Any
 
+import results
 from common import CHROMIUM_ARGS, host, percentile, services_up, summary
 
 from buddybot.contract import keys
@@ -290,4 +291,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(results.run(__file__, main))

@@ -52,6 +52,7 @@ from tempfile import mkdtemp
 from typing import Any
 
 import psutil
+import results
 from common import percentile
 
 from buddybot.contract import keys
@@ -317,4 +318,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(results.run(__file__, main))

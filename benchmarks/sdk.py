@@ -27,6 +27,7 @@ import sys
 import threading
 import time
 
+import results
 from common import host, options, percentile
 
 from buddybot.contract import keys
@@ -165,4 +166,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(results.run(__file__, main))

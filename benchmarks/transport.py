@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable
 from typing import Any
 
+import results
 import zenoh
 from common import ROUTES, make_message, percentile, reply_for
 
@@ -206,4 +207,4 @@ if __name__ == "__main__":
     if len(sys.argv) == 5 and sys.argv[1] == "--echo":
         echo_main(*sys.argv[2:5])
     else:
-        main()
+        sys.exit(results.run(__file__, main))
