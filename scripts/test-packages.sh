@@ -6,22 +6,11 @@
 #
 # chromium: the browser tests (Playwright drives Debian's build, no download);
 # espeak-ng: the text-to-speech tests; sox: FLAC/Ogg copies of the test sounds.
-# Installs with apt-get when run as root; otherwise prints the one command that
-# would, and the tests needing a missing program skip with that reason.
+# Installs them as root or with sudo without a password (scripts/apt-packages.sh);
+# otherwise prints the one command that would, and the tests needing a missing
+# program skip with that reason.
 set -euo pipefail
+cd "$(dirname "$0")/.."
 packages=("$@")
 [ ${#packages[@]} -gt 0 ] || packages=(chromium espeak-ng sox)
-missing=()
-for package in "${packages[@]}"; do
-    # Each of these packages installs a program of its own name.
-    command -v "$package" >/dev/null 2>&1 || missing+=("$package")
-done
-[ ${#missing[@]} -gt 0 ] || exit 0
-if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
-    echo "installing ${missing[*]} (Debian packages) for the tests..." >&2
-    apt-get update -qq >/dev/null
-    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
-else
-    echo "not installed: ${missing[*]}; the tests needing them will be skipped." >&2
-    echo "to run them: sudo apt-get install ${missing[*]}" >&2
-fi
+scripts/apt-packages.sh "the tests needing them are skipped without them" "${packages[@]}"

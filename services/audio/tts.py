@@ -23,6 +23,10 @@ class TtsError(Exception):
     """Speech could not be rendered; the message says why."""
 
 
+ESPEAK = "espeak-ng"
+"""The program that speaks: looked up on PATH when a text is rendered."""
+
+
 def cache_dir() -> Path:
     return Path(tempfile.gettempdir()) / "buddybot-tts"
 
@@ -30,7 +34,7 @@ def cache_dir() -> Path:
 def render(text: str, *, voice: str = "en-us", folder: Path | None = None,
            timeout_s: float = 20.0) -> Path:
     """The WAV file speaking `text` (rendered on first use)."""
-    exe = shutil.which("espeak-ng")
+    exe = shutil.which(ESPEAK)
     if exe is None:
         raise TtsError("text-to-speech needs espeak-ng, which is not installed")
     folder = folder or cache_dir()

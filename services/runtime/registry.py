@@ -90,7 +90,7 @@ SERVICES: tuple[Entry, ...] = (
     Entry("eye-renderer", "buddybot.eyes.renderer", "web page drawing the eyes, one per display",
           "eye_renderer", "buddybot.eyes.settings:EyeRendererSettings"),
     Entry("audio", "buddybot.audio.action", "play_sound action server",
-          "audio", "buddybot.audio.settings:AudioSettings"),
+          "audio", "buddybot.audio.settings:AudioSettings", doctor="buddybot.audio.doctor:ACTION"),
     Entry("audio-player", "buddybot.audio.player_service", "plays sound files (miniaudio)",
           "audio_player", "buddybot.audio.settings:AudioPlayerSettings",
           doctor="buddybot.audio.doctor:PLAYER"),
