@@ -55,14 +55,7 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import (
-    AcceptErrorLog,
-    Guard,
-    GuardedSite,
-    HostAllowList,
-    Limits,
-    ListenerWatch,
-)
+from buddybot.runtime.web_guard import AcceptErrorLog, GuardedSite, ListenerWatch, guard_for
 
 log = logging.getLogger("buddybot.dashboard")
 
@@ -102,7 +95,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
     board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
-    guard = guard_of(s)
+    guard = guard_for(s, s.host, log)
     accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
     app = App(board, guard)
     runner = web.AppRunner(app.make(), access_log=None)
@@ -165,13 +158,6 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             if app.bus is not None:
                 await asyncio.to_thread(app.bus.close)
             node.close()
-
-
-def guard_of(s: DashboardSettings) -> Guard:
-    """The dashboard's names and flood limits, from its settings."""
-    return Guard(HostAllowList.make(s.host, s.allowed_hosts),
-                 Limits(s.header_timeout_s, s.max_connections,
-                        s.max_connections_per_address), log)
 
 
 def _apply(loop: asyncio.AbstractEventLoop, bus: Bus, board: Board,

@@ -11,17 +11,10 @@ from typing import Annotated
 
 import msgspec
 
-from buddybot.runtime.endpoints import (
-    AllowedHosts,
-    HeaderTimeout,
-    Host,
-    MaxConnections,
-    MaxPerAddress,
-    Port,
-)
+from buddybot.runtime.endpoints import Host, Port, WebSurface
 
 
-class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+class DashboardSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
     """`[dashboard]`: the live dashboard page and its server.
 
     Live (`buddybot param set dashboard ...` applies at once): what the pages
@@ -71,11 +64,3 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
         ge=1, le=64, extra={"live": True},
         description="dashboard pages connected at once at most (lowering it cuts no page "
         "already connected)")] = 8
-    # The names the dashboard is served at besides the defaults: a request for any
-    # other (a DNS-rebinding site's own name) is refused with 421.
-    allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)
-    # Flood limits (runtime/web_guard.py): slow headers are cut, a client over
-    # a cap first evicts the oldest connection still sending its headers.
-    header_timeout_s: HeaderTimeout = 10.0
-    max_connections: MaxConnections = 256
-    max_connections_per_address: MaxPerAddress = 64

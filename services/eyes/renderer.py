@@ -80,10 +80,9 @@ from buddybot.runtime.web_guard import (
     AcceptErrorLog,
     Guard,
     GuardedSite,
-    HostAllowList,
-    Limits,
     ListenerWatch,
     evict_for,
+    guard_for,
     origin_allowed,
     request_port,
 )
@@ -594,7 +593,7 @@ async def serve(ctx: ServiceContext, host: str, port: int,
                          max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8],
                          style=library.get(s.style)),
               s.max_pages, tuple(s.allowed_origins), s.page_stall_s, library)
-    guard = guard_of(s, host)
+    guard = guard_for(s, host, log)
     accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
     runner = web.AppRunner(make_app(hub, guard), access_log=None)
     await runner.setup()
@@ -693,13 +692,6 @@ def load_styles(ctx: ServiceContext, s: EyeRendererSettings) -> styles.StyleLibr
     library = styles.load(path)
     library.get(s.style)
     return library
-
-
-def guard_of(s: EyeRendererSettings, host: str) -> Guard:
-    """The renderer's names (bound on `host`) and flood limits, from its settings."""
-    return Guard(HostAllowList.make(host, s.allowed_hosts),
-                 Limits(s.header_timeout_s, s.max_connections,
-                        s.max_connections_per_address), log)
 
 
 def where_served(base: str, listen_host: str) -> dict[str, str]:

@@ -53,7 +53,7 @@ from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import Guard, HostAllowList, Limits
+from buddybot.runtime.web_guard import guard_for
 
 __all__ = ["add_arguments", "run", "settings_from"]
 
@@ -261,10 +261,8 @@ def _text(payload: bytes) -> str:
 def gate_of(settings: FoxgloveSettings, upstream_port: int) -> Gate:
     """The gate in front of the SDK's server, from `[foxglove]`; a proxied
     connection holds three descriptors (client, upstream, the SDK's end)."""
-    guard = Guard(HostAllowList.make(settings.host, settings.allowed_hosts),
-                  Limits(settings.header_timeout_s, settings.max_connections,
-                         settings.max_connections_per_address),
-                  logging.getLogger("buddybot.foxglove"), per_connection=3)
+    guard = guard_for(settings, settings.host, logging.getLogger("buddybot.foxglove"),
+                      per_connection=3)
     return Gate(guard, settings.allowed_origins, upstream_port)
 
 

@@ -9,7 +9,7 @@ classifying functions are pure; `accepting` and `port_holder` are the two
 small looks at this machine (a TCP connect, psutil). `Host` and `Port` are
 the config fields of a server's address (`[dashboard]`, `[eye_renderer]`,
 `[foxglove]`), bounded alike, and so are their flood limits and extra
-names (`AllowedHosts`, `HeaderTimeout`, `MaxConnections`, `MaxPerAddress`).
+names (`WebSurface`, which their settings extend).
 """
 
 from __future__ import annotations
@@ -48,6 +48,20 @@ MaxConnections = Annotated[int, msgspec.Meta(
     "the descriptor limit)")]
 MaxPerAddress = Annotated[int, msgspec.Meta(
     ge=1, le=65536, description="client connections held at once from one address")]
+
+
+class WebSurface(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+    """The config fields every web surface shares (`[dashboard]`, `[eye_renderer]`,
+    `[foxglove]` extend it): the names it is also served at, and its flood
+    limits (runtime/web_guard.py applies them)."""
+
+    # A request for any other name (a DNS-rebinding site's own) gets 421.
+    allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)
+    # Slow headers are cut; a client over a cap first evicts the oldest
+    # connection still sending its headers.
+    header_timeout_s: HeaderTimeout = 10.0
+    max_connections: MaxConnections = 256
+    max_connections_per_address: MaxPerAddress = 64
 
 
 @dataclass(frozen=True)

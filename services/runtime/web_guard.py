@@ -45,7 +45,7 @@ from urllib.parse import urlsplit
 from aiohttp import web
 
 from buddybot.runtime.diagnostics import RateLimitedLog
-from buddybot.runtime.endpoints import host_names, is_wildcard
+from buddybot.runtime.endpoints import WebSurface, host_names, is_wildcard
 from buddybot.runtime.limits import clip
 
 log = logging.getLogger("buddybot.web")
@@ -465,6 +465,15 @@ class Guard:
             return await handler(request)
 
         return check_host
+
+
+def guard_for(s: WebSurface, bind_host: str, logger: logging.Logger,
+              per_connection: int = 1) -> Guard:
+    """A surface's guard from its settings: served at `bind_host` and the
+    names of `allowed_hosts`, under its flood limits."""
+    return Guard(HostAllowList.make(bind_host, s.allowed_hosts),
+                 Limits(s.header_timeout_s, s.max_connections, s.max_connections_per_address),
+                 logger, per_connection)
 
 
 class GuardedSite(web.TCPSite):
