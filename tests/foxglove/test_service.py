@@ -26,15 +26,8 @@ from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
 from buddybot.foxglove.service import urls
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import (
-    Collector,
-    HeldSockets,
-    Process,
-    buddybot_argv,
-    free_port,
-    http_status,
-    retry_until,
-)
+from buddybot.tools import testing as attack
+from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
 
 from .ws_client import CallFailed, FoxgloveClient
 
@@ -107,7 +100,7 @@ ORIGIN_CASES = [
 
 @pytest.mark.integration
 def test_only_the_foxglove_app_and_this_machine_may_connect(bridge: int) -> None:
-    got = [(host, origin, http_status(bridge, "/", origin=origin, websocket=True,
+    got = [(host, origin, attack.http_status(bridge, "/", origin=origin, websocket=True,
                                       host=None if host is None else f"{host}:{bridge}"))
            for host, origin, _status in ORIGIN_CASES]
     assert got == ORIGIN_CASES
@@ -123,7 +116,7 @@ def test_a_descriptor_flood_leaves_the_bridge_serving_and_healthy(
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="foxglove")
     proc = spawn("foxglove", "--port", str(port), nofile=256)
     proc.wait_for_output("foxglove bridge serving", timeout=30)
-    flood = HeldSockets(port, 300)
+    flood = attack.HeldSockets(port, 300)
     try:
         async def connect() -> dict[str, object]:
             client = await FoxgloveClient.connect(port)
