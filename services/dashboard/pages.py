@@ -321,7 +321,8 @@ class App:
     async def websocket(self, request: web.Request) -> web.StreamResponse:
         b = self.board
         origin = request.headers.get("Origin")
-        if not origin_allowed(origin, self.guard.hosts, port=request_port(request.host)):
+        if not origin_allowed(origin, self.guard.hosts_of(request.transport),
+                              port=request_port(request.host)):
             b.forbidden += 1
             _warn.warning("origin", "refused a WebSocket from origin %s (not a name the "
                           "dashboard is served at; see dashboard.allowed_hosts)",

@@ -496,7 +496,8 @@ def make_app(hub: Hub, guard: Guard) -> web.Application:
             return web.Response(status=400, text=f"bad eye {clip(eye, 40)!r}: "
                                 "use left, right or both\n")
         origin = request.headers.get("Origin")
-        if not origin_allowed(origin, guard.hosts, port=request_port(request.host),
+        if not origin_allowed(origin, guard.hosts_of(request.transport),
+                              port=request_port(request.host),
                               listed=hub.allowed_origins):
             hub.forbidden += 1
             _warn.warning("origin", "refused a WebSocket from origin %s (not a name the "

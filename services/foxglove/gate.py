@@ -180,7 +180,7 @@ class Gate:
         conn.done = True
         fields = head_fields(head)
         host = fields.get("host")
-        if not self.guard.hosts.allows(host):
+        if not self.guard.hosts_of(writer.transport).allows(host):
             self.guard.host_refused(host)
             await _answer(writer, 421, "Misdirected Request",
                           f"{clip(host, 80)} is not served here (see foxglove.allowed_hosts)")

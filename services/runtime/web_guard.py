@@ -115,6 +115,14 @@ class HostAllowList:
             names.add(_normal(bind_host))
         return cls(frozenset(n for n in names if n))
 
+    def reached_at(self, local_address: str | None) -> HostAllowList:
+        """These names plus the address the connection came in on (an address an
+        interface got after start, e.g. from DHCP, names this machine too; a
+        rebinding site can only send a DNS name, never our address)."""
+        if not local_address or _normal(local_address) in self.names:
+            return self
+        return HostAllowList(self.names | {_normal(local_address.split("%")[0])})
+
     def allows(self, host_header: str | None) -> bool:
         """Whether a request's `Host` names this service (no Host: HTTP/1.0, a
         program; it names nothing a browser could be tricked into)."""
@@ -438,6 +446,12 @@ class Guard:
                            "held (at most %d, %d per address)", clip(address, 60),
                            len(self.table.conns), self.table.total, self.table.per_address)
 
+    def hosts_of(self, transport: asyncio.BaseTransport | None) -> HostAllowList:
+        """The allow-list for a connection: the names plus its local address."""
+        sockname = transport.get_extra_info("sockname") if transport is not None else None
+        local = str(sockname[0]) if isinstance(sockname, tuple) and sockname else None
+        return self.hosts.reached_at(local)
+
     def headers_done(self, transport: asyncio.BaseTransport | None) -> None:
         conn = self.pending.pop(transport, None) if transport is not None else None
         if conn is not None:
@@ -458,7 +472,7 @@ class Guard:
                              ) -> web.StreamResponse:
             self.headers_done(request.transport)
             host = request.headers.get("Host")
-            if not self.hosts.allows(host):
+            if not self.hosts_of(request.transport).allows(host):
                 self.host_refused(host)
                 return web.Response(status=421, text=f"{clip(host, 80)} is not served here "
                                     "(see allowed_hosts)\n")

@@ -36,6 +36,16 @@ def test_default_names_are_loopback_this_machine_and_the_bind_address() -> None:
     assert "10.0.0.7" in HostAllowList.make("10.0.0.7", hostname="b").names
 
 
+def test_the_address_a_connection_came_in_on_names_this_machine() -> None:
+    """An address an interface got after start (DHCP): the socket's own address."""
+    hosts = HostAllowList.make("0.0.0.0", hostname="b", addresses=[])
+    assert not hosts.allows("192.168.1.77:8090")
+    assert hosts.reached_at("192.168.1.77").allows("192.168.1.77:8090")
+    assert hosts.reached_at("fe80::5%eth0").allows("[fe80::5]:8090")
+    assert not hosts.reached_at("192.168.1.77").allows("evil.test:8090")
+    assert hosts.reached_at("127.0.0.1") is hosts
+
+
 @pytest.mark.parametrize(("host", "ok"), [
     ("127.0.0.1:8090", True), ("LOCALHOST", True), ("[::1]:8090", True),
     ("buddy.local.:8090", True), ("robot.example.org", True),
