@@ -25,7 +25,11 @@ The parts, each in its own module:
 * this module: the options, and the order of things: the HTTP server
   starts before the node, so the page loads (and says "connecting") while
   there is no router;
-* a WebSocket from another web site is refused (the page has buttons).
+* a WebSocket from another web site is refused (the page has buttons), a
+  request for a name the dashboard is not served at gets 421, and floods
+  are bounded (`runtime/web_guard.py`: header timeout, connection caps,
+  accept errors logged at a bounded rate; a listener that stops serving
+  sets the diagnostics to ERROR and stops the watchdog's pings).
 
 A port already in use is one line and exit status 1 (`buddybot up`
 restarts it; the port may be free again).
@@ -36,6 +40,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import logging
 from functools import partial
 
 from aiohttp import web
@@ -50,6 +55,9 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.web_guard import AcceptErrorLog, GuardedSite, ListenerWatch, guard_for
+
+log = logging.getLogger("buddybot.dashboard")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -87,10 +95,12 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
     board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
-    app = App(board)
+    guard = guard_for(s, s.host, log)
+    accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
+    app = App(board, guard)
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()
-    site = web.TCPSite(runner, s.host or None, s.port)
+    site = GuardedSite(runner, s.host or None, s.port, guard)
     try:
         await site.start()
     except OSError as exc:
@@ -98,6 +108,8 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
         raise ServeError(serve_failure(s.host or "0.0.0.0", s.port,
                                        str(exc.strerror or exc))) from None
     port = runner.addresses[0][1] if runner.addresses else s.port
+    watch = ListenerWatch(site.listener)
+    ctx.alive_checks.append(watch.alive)
     print(f"dashboard serving http://{local_host(s.host)}:{port}/", flush=True)
 
     loop = asyncio.get_running_loop()
@@ -131,6 +143,11 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             d["pages_refused"] = board.refused
             d["origins_refused"] = board.forbidden
             d["samples"] = mailbox.received
+            d["pages_evicted"] = board.evicted
+            d["accept_errors"] = accept_log.accept_errors
+            d.update(guard.counters())
+            if not watch.alive():
+                node.diagnostics.set("ERROR", f"not serving pages: {watch.dead}")
     finally:
         ctx.stop.set()
         await runner.cleanup()

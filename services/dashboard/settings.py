@@ -11,10 +11,10 @@ from typing import Annotated
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import Host, Port, WebSurface
 
 
-class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+class DashboardSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
     """`[dashboard]`: the live dashboard page and its server.
 
     Live (`buddybot param set dashboard ...` applies at once): what the pages

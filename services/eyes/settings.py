@@ -10,7 +10,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import Host, Port, WebSurface
 
 DEFAULT_PUPIL_CURVE: tuple[tuple[float, float], ...] = ((30.0, 75.0), (100.0, 55.0), (300.0, 30.0))
 """(distance cm, dilation % of the iris) points: 30 cm (face close to the robot)
@@ -45,7 +45,7 @@ class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
 EyeName = Literal["left", "right"]
 
 
-class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+class EyeRendererSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
     """`[eye_renderer]`: the web eye renderer and its kiosk windows.
 
     Live (`extra={"live": True}`, `buddybot param set eye-renderer ...` applies
@@ -102,8 +102,8 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         max_length=4096, description="JSON file of extra eye styles, read at start "
         "(empty: the built-in ones only)")] = ""
     # At most this many pages connected at once (two kiosk windows, a few
-    # phones); over it a new WebSocket is closed at once with code 1013 and a
-    # reason, so a flood of connections cannot starve the real eyes.
+    # phones); over it a new page takes the slot of the quietest one (a real
+    # page pings every 2 s), so clients that only read cannot starve the eyes.
     max_pages: Annotated[int, msgspec.Meta(
         ge=1, le=256, extra={"live": True},
         description="pages connected at once at most (lowering it cuts no page already "
@@ -114,7 +114,7 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=0.2, le=60.0, extra={"live": True},
         description="seconds a page's sends may not drain before it is dropped")] = 2.0
     # Browser origins allowed to open the WebSocket besides the server's own
-    # (same host and port), e.g. ["http://buddy.local:8080"]. A request with no
+    # (a name of allowed_hosts at its port), e.g. ["http://tablet.local:8080"]. A request with no
     # Origin header is not a browser page and is allowed.
     allowed_origins: Annotated[list[Annotated[str, msgspec.Meta(
         pattern=r"^https?://[^/?#\s]+$", max_length=200, examples=["http://buddy.local:8080"],
@@ -140,4 +140,3 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=0.0, le=1000.0, extra={"live": True},
         description="ms between sending a blink or saccade and its start on every "
         "page")] = 60.0
-

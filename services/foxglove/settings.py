@@ -11,10 +11,13 @@ from typing import Annotated
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import Host, Port, WebSurface
+
+DEFAULT_ORIGINS = ("https://app.foxglove.dev", "file://")
+"""The Foxglove web app's origin and the desktop app's (its pages are files)."""
 
 
-class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
+class FoxgloveSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
     """`[foxglove]`: the Foxglove WebSocket bridge."""
 
     # Loopback by default: anyone who can connect can call the bridge's services.
@@ -38,3 +41,13 @@ class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True)
     max_channels: Annotated[int, msgspec.Meta(
         ge=1, le=4096, description="Foxglove channels at most (keys seen beyond are "
         "counted and not shown)")] = 256
+    # Browser origins that may connect: the Foxglove web app and the desktop
+    # app (an Electron page, Origin "file://"); pages served from this
+    # machine's loopback always may. A client sending no Origin is a program,
+    # not a page, and passes. Anything else gets 403 at the gate (gate.py).
+    allowed_origins: Annotated[list[Annotated[str, msgspec.Meta(
+        pattern=r"^(https?://[^/?#\s]+|file://|null)$", max_length=200,
+        examples=["https://app.foxglove.dev", "http://studio.example.org:8080"])]],
+        msgspec.Meta(max_length=64, description="browser origins allowed to connect "
+                     "(pages from this machine's loopback always are)")] = msgspec.field(
+        default_factory=lambda: list(DEFAULT_ORIGINS))

@@ -7,6 +7,7 @@ import argparse
 import pytest
 
 from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.sdnotify import Notifier
 from buddybot.runtime.service import resolve
 
 
@@ -21,3 +22,27 @@ def test_absent_flags_take_the_config() -> None:
     ctx = resolve(argparse.Namespace(config=None, robot=None, connect=None), "test")
     assert ctx.robot == "buddy"
     assert ctx.connect == list(ctx.config.zenoh.connect)
+
+
+class CountingNotifier(Notifier):
+    def __init__(self) -> None:
+        super().__init__(None)
+        self.pings = 0
+
+    def watchdog(self) -> bool:
+        self.pings += 1
+        return True
+
+
+def test_the_watchdog_is_fed_only_while_every_alive_check_holds() -> None:
+    """A web listener that died must stop the pings, so systemd restarts the service."""
+    notifier = CountingNotifier()
+    ctx = resolve(argparse.Namespace(config=None, robot=None, connect=None), "test")
+    ctx.notifier = notifier
+    listening = [True]
+    ctx.alive_checks.append(lambda: listening[0])
+    ctx.feed_watchdog()
+    listening[0] = False
+    ctx.feed_watchdog()
+    ctx.feed_watchdog()
+    assert notifier.pings == 1 and not ctx.alive()
