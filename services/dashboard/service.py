@@ -25,7 +25,9 @@ The parts, each in its own module:
 * this module: the options, and the order of things: the HTTP server
   starts before the node, so the page loads (and says "connecting") while
   there is no router;
-* a WebSocket from another web site is refused (the page has buttons).
+* a WebSocket from another web site is refused (the page has buttons);
+* beyond loopback a login (`login.py`: operators press, viewers watch),
+  optionally over HTTPS with the deployment's certificate and key.
 
 A port already in use is one line and exit status 1 (`buddybot up`
 restarts it; the port may be free again).
@@ -36,16 +38,19 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import ssl
 from functools import partial
 
 from aiohttp import web
 
-from buddybot.dashboard import radar_map
+from buddybot.dashboard import login, radar_map
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime import web_auth
+from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host, serve_failure
-from buddybot.runtime.errors import ServeError
+from buddybot.runtime.errors import ConfigError, ServeError
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
@@ -62,6 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings_option(parser, "--history-s", struct=struct, field="history_s")
     settings_option(parser, "--eye-url", struct=struct, field="eye_url", metavar="URL")
     settings_option(parser, "--eye-port", struct=struct, field="eye_port", metavar="PORT")
+    settings_option(parser, "--login", struct=struct, field="login")
+    settings_option(parser, "--tls-cert", struct=struct, field="tls_cert", metavar="FILE")
+    settings_option(parser, "--tls-key", struct=struct, field="tls_key", metavar="FILE")
 
 
 def settings_from(ctx: ServiceContext) -> DashboardSettings:
@@ -83,14 +91,48 @@ def _other_tables(ctx: ServiceContext, s: DashboardSettings) -> tuple[int, dict[
     return port, sounds
 
 
+def tls_context(ctx: ServiceContext, s: DashboardSettings) -> ssl.SSLContext | None:
+    """The HTTPS context of `tls_cert`/`tls_key` (None: plain HTTP); ConfigError when unusable."""
+    if bool(s.tls_cert) != bool(s.tls_key):
+        raise ConfigError("[dashboard] tls_cert and tls_key go together: set both or neither")
+    if not s.tls_cert:
+        return None
+    cert = resolve_path(ctx.config, s.tls_cert)
+    key = resolve_path(ctx.config, s.tls_key)
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:
+        context.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError) as exc:
+        raise ConfigError(f"[dashboard] tls_cert {cert} / tls_key {key}: "
+                          f"{getattr(exc, 'strerror', None) or exc}") from None
+    return context
+
+
+def make_gate(s: DashboardSettings, secure: bool) -> login.Gate | None:
+    """The login gate when the page is served beyond loopback (or `login = "always"`);
+    the secrets are made on first start."""
+    if not web_auth.login_required(s.host, s.login):
+        return None
+    store = web_auth.SecretStore(web_auth.state_dir())
+    try:
+        made = store.ensure()
+    except (web_auth.SecretError, OSError) as exc:
+        raise ConfigError(f"dashboard login secrets: {exc}") from None
+    for role in made:
+        print(f"dashboard: made the {role} secret in {web_auth.secret_path(role, store.folder)} "
+              f"(`buddybot secret show {role}` prints it)", flush=True)
+    return login.Gate(store, secure, s.session_hours * 3600.0)
+
+
 async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
     board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
-    app = App(board)
+    tls = tls_context(ctx, s)
+    app = App(board, make_gate(s, tls is not None))
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()
-    site = web.TCPSite(runner, s.host or None, s.port)
+    site = web.TCPSite(runner, s.host or None, s.port, ssl_context=tls)
     try:
         await site.start()
     except OSError as exc:
@@ -98,7 +140,9 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
         raise ServeError(serve_failure(s.host or "0.0.0.0", s.port,
                                        str(exc.strerror or exc))) from None
     port = runner.addresses[0][1] if runner.addresses else s.port
-    print(f"dashboard serving http://{local_host(s.host)}:{port}/", flush=True)
+    scheme = "https" if tls else "http"
+    print(f"dashboard serving {scheme}://{local_host(s.host)}:{port}/"
+          f"{' (login required)' if app.gate else ''}", flush=True)
 
     loop = asyncio.get_running_loop()
     mailbox = Mailbox(loop, board.deliver)
@@ -124,6 +168,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
                 continue
             board.set_bus(node.connected())
             board.refresh_map()
+            await app.end_stale_sessions()
             d = node.diagnostics.values
             d["pages"] = len(board.pages)
             d["images_sent"] = board.images_sent

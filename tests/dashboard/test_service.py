@@ -41,9 +41,10 @@ from buddybot.tools.testing import (
 pytestmark = pytest.mark.integration
 
 
-def start_dashboard(spawn: Callable[..., Process], *args: str) -> tuple[Process, int]:
+def start_dashboard(spawn: Callable[..., Process], *args: str,
+                    env: dict[str, str] | None = None) -> tuple[Process, int]:
     port = free_port()
-    proc = spawn("dashboard", "--port", str(port), *args)
+    proc = spawn("dashboard", "--port", str(port), *args, env=env)
     wait_port(port, 30)
     return proc, port
 
