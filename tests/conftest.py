@@ -175,8 +175,9 @@ def spawn(endpoint: str, log_dir: Path) -> Iterator[Callable[..., Process]]:
     started: list[Process] = []
 
     def start(service: str, *args: str, robot: str = "buddy",
-              env: dict[str, str] | None = None) -> Process:
-        proc = run_service(service, endpoint, *args, robot=robot, log_dir=log_dir, env=env)
+              env: dict[str, str] | None = None, nofile: int | None = None) -> Process:
+        proc = run_service(service, endpoint, *args, robot=robot, log_dir=log_dir, env=env,
+                           nofile=nofile)
         started.append(proc)
         return proc
 

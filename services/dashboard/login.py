@@ -17,24 +17,31 @@ import time
 
 from aiohttp import web
 
-from buddybot.dashboard import model
 from buddybot.runtime import web_auth
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import RateLimitedLog
+from buddybot.runtime.web_guard import HostAllowList, origin_allowed, request_port
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)
 
 OPERATOR = "operator"
 VIEWER = "viewer"
+PRIORITY = {OPERATOR: 2, VIEWER: 1}
+"""Page-slot priority of a logged-in page (above `web_guard.ANONYMOUS`): an
+operator can always get a slot, taken from a viewer's or an idle page's."""
 MAX_FORM_BYTES = 4096
 
 
 class Gate:
     """Who a request is; the login and logout routes."""
 
-    def __init__(self, store: web_auth.SecretStore, secure: bool, lifetime_s: float) -> None:
+    def __init__(self, store: web_auth.SecretStore, secure: bool, lifetime_s: float,
+                 hosts: HostAllowList | None = None) -> None:
         self.store = store
+        self.hosts = hosts
+        """The names the dashboard is served at: a login form posted from any other
+        page's origin is refused (the same rule as the WebSocket's)."""
         self.secure = secure
         self.lifetime_s = lifetime_s
         self.refused_logins = 0
@@ -63,7 +70,7 @@ class Gate:
 
     async def login(self, request: web.Request) -> web.StreamResponse:
         origin = request.headers.get("Origin")
-        if not model.origin_allowed(origin, request.host):
+        if not origin_allowed(origin, self.hosts, port=request_port(request.host)):
             return web.Response(status=403, text="log in from the dashboard's own page\n")
         if (request.content_length or 0) > MAX_FORM_BYTES:
             return web.Response(status=413, text="login form too large\n")

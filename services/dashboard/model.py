@@ -18,7 +18,7 @@ a clock value; everything here is deterministic and tested on its own
   error for the page;
 * `leases_view`: `leases/state` as the lease panel shows it, the
   dashboard's own lease marked;
-* `presence_rules`, `sound_names`, `eye_page_url`, `origin_allowed`: small
+* `presence_rules`, `sound_names`, `eye_page_url`: small
   conversions with rules worth testing.
 """
 
@@ -425,18 +425,6 @@ def eye_page_url(configured: str, eye_port: int, page_host: str | None) -> str:
     if ":" in host:  # IPv6 literal
         host = f"[{host}]"
     return f"http://{host}:{eye_port}/eyes?eye=both"
-
-
-def origin_allowed(origin: str | None, host: str | None) -> bool:
-    """A WebSocket may come from the dashboard's own page only (host and port as the
-    browser typed them), or from no browser at all (no Origin header): another web
-    site open in the same browser must not press the robot's buttons."""
-    if origin is None:
-        return True
-    if not host:
-        return False
-    parsed = urlsplit(origin)
-    return parsed.scheme in ("http", "https") and parsed.netloc.lower() == host.lower()
 
 
 def enum_names() -> dict[str, dict[int, str]]:

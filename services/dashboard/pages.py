@@ -30,6 +30,14 @@ from buddybot.runtime import web_auth
 from buddybot.runtime.limits import BoundedDict, clip
 from buddybot.runtime.node import RateLimitedLog
 from buddybot.runtime.page_outbox import PageOutbox
+from buddybot.runtime.web_guard import (
+    ANONYMOUS,
+    IDLE_S,
+    Guard,
+    evict_for,
+    origin_allowed,
+    request_port,
+)
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)
@@ -53,10 +61,10 @@ class Page(PageOutbox[tuple[str, Any]]):
     """One connected page: its outbox (newest per slot, radar frames appended)
     and its sender."""
 
-    def __init__(self, transport: asyncio.Transport | None, role: str = login.OPERATOR,
-                 cookie: str | None = None) -> None:
+    def __init__(self, transport: asyncio.Transport | None, priority: int = ANONYMOUS,
+                 role: str = login.OPERATOR, cookie: str | None = None) -> None:
         self.outbox = model.Outbox()
-        super().__init__(transport, self.outbox.take)
+        super().__init__(transport, self.outbox.take, priority)
         self.images_skipped = 0
         self.role = role
         """operator (buttons) or viewer (watch only); operator on loopback without login."""
@@ -97,6 +105,7 @@ class Board:
         self._update_map_sources()
         self.on_pages_changed: Callable[[int], None] = lambda _n: None
         self.refused = 0
+        self.evicted = 0
         self.forbidden = 0
         self.viewer_refused = 0
         self.bad_requests = 0
@@ -128,6 +137,21 @@ class Board:
             page.put(slot, value)
         self.pages.add(page)
         self.on_pages_changed(len(self.pages))
+
+    def make_room(self, priority: int) -> bool:
+        """Whether a page of `priority` may join: a free slot, or one taken
+        from a page it outranks or equals (the longest quiet first), cut now."""
+        if len(self.pages) < self.s.max_pages:
+            return True
+        victim = evict_for(self.pages, priority, IDLE_S)
+        if victim is None:
+            return False
+        self.leave(victim)
+        victim.cut()
+        self.evicted += 1
+        _warn.warning("evict", "a page was cut to make room for a new one (%d pages, "
+                      "dashboard.max_pages)", self.s.max_pages)
+        return True
 
     def leave(self, page: Page) -> None:
         if page in self.pages:
@@ -262,18 +286,21 @@ def _read_static() -> dict[str, bytes]:
 class App:
     """The aiohttp application and the glue between the pages and the bus."""
 
-    def __init__(self, board: Board, gate: login.Gate | None = None) -> None:
+    def __init__(self, board: Board, guard: Guard, gate: login.Gate | None = None) -> None:
         self.board = board
+        self.guard = guard
         self.gate = gate
         """None: served on loopback, no login (every page is the operator's)."""
         self.pages_by_socket: dict[web.WebSocketResponse, Page] = {}
+        self.priority_of: Callable[[web.Request], int] = lambda _request: ANONYMOUS
+        """The slot priority of a page's request (a login hands operators more)."""
         self.bus: Bus | None = None
         self.calls = asyncio.Semaphore(MAX_PENDING_CALLS)
         self.sockets: set[web.WebSocketResponse] = set()
         self.files = _read_static()
 
     def make(self) -> web.Application:
-        app = web.Application()
+        app = web.Application(middlewares=[self.guard.middleware()])
         app.router.add_get("/", self.index)
         app.router.add_get("/static/{name}", self.static)
         app.router.add_get("/ws", self.websocket)
@@ -311,30 +338,33 @@ class App:
         return web.json_response({
             "pages": len(b.pages), "bus": b.state["status"].get("bus", False),
             "images_sent": b.images_sent, "bad_requests": b.bad_requests,
-            "refused": b.refused, "forbidden": b.forbidden,
+            "refused": b.refused, "evicted": b.evicted, "forbidden": b.forbidden,
             "viewer_refused": b.viewer_refused,
+            **self.guard.counters(),
             "watching_images": self.bus is not None and self.bus.image_sub is not None})
 
     async def websocket(self, request: web.Request) -> web.StreamResponse:
         b = self.board
         origin = request.headers.get("Origin")
-        if not model.origin_allowed(origin, request.host):
+        if not origin_allowed(origin, self.guard.hosts, port=request_port(request.host)):
             b.forbidden += 1
-            _warn.warning("origin", "refused a WebSocket from origin %s (the page is %s)",
-                          clip(origin, 80), clip(request.host, 80))
+            _warn.warning("origin", "refused a WebSocket from origin %s (not a name the "
+                          "dashboard is served at; see dashboard.allowed_hosts)",
+                          clip(origin, 80))
             return web.Response(status=403, text="only the dashboard's own page may connect\n")
         role = self._role(request)
         if role is None:
             b.forbidden += 1
             return web.Response(status=401, text="log in first: /login\n")
-        if len(b.pages) >= b.s.max_pages:
+        priority = self.priority_of(request) if self.gate is None else login.PRIORITY[role]
+        if not b.make_room(priority):
             b.refused += 1
             return web.Response(status=503, text=f"too many pages ({b.s.max_pages} max)\n")
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=64 * 1024, compress=False)
         await ws.prepare(request)
         transport = request.transport
-        page = Page(transport if isinstance(transport, asyncio.Transport) else None, role,
-                    request.cookies.get(web_auth.COOKIE) if self.gate else None)
+        page = Page(transport if isinstance(transport, asyncio.Transport) else None, priority,
+                    role, request.cookies.get(web_auth.COOKIE) if self.gate else None)
         b.join(page, request.host)
         self.sockets.add(ws)
         self.pages_by_socket[ws] = page
@@ -343,6 +373,7 @@ class App:
         log.info("page connected (%d pages)", len(b.pages))
         try:
             async for msg in ws:
+                page.touch()
                 if msg.type == WSMsgType.TEXT:
                     task = asyncio.create_task(self.command(page, msg.data))
                     tasks.add(task)

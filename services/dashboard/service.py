@@ -25,7 +25,11 @@ The parts, each in its own module:
 * this module: the options, and the order of things: the HTTP server
   starts before the node, so the page loads (and says "connecting") while
   there is no router;
-* a WebSocket from another web site is refused (the page has buttons);
+* a WebSocket from another web site is refused (the page has buttons), a
+  request for a name the dashboard is not served at gets 421, and floods
+  are bounded (`runtime/web_guard.py`: header timeout, connection caps,
+  accept errors logged at a bounded rate; a listener that stops serving
+  sets the diagnostics to ERROR and stops the watchdog's pings);
 * beyond loopback a login (`login.py`: operators press, viewers watch),
   optionally over HTTPS with the deployment's certificate and key.
 
@@ -38,6 +42,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import logging
 import ssl
 from functools import partial
 
@@ -55,6 +60,16 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.web_guard import (
+    AcceptErrorLog,
+    Guard,
+    GuardedSite,
+    HostAllowList,
+    Limits,
+    ListenerWatch,
+)
+
+log = logging.getLogger("buddybot.dashboard")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -108,7 +123,7 @@ def tls_context(ctx: ServiceContext, s: DashboardSettings) -> ssl.SSLContext | N
     return context
 
 
-def make_gate(s: DashboardSettings, secure: bool) -> login.Gate | None:
+def make_gate(s: DashboardSettings, secure: bool, guard: Guard) -> login.Gate | None:
     """The login gate when the page is served beyond loopback (or `login = "always"`);
     the secrets are made on first start."""
     if not web_auth.login_required(s.host, s.login):
@@ -121,7 +136,7 @@ def make_gate(s: DashboardSettings, secure: bool) -> login.Gate | None:
     for role in made:
         print(f"dashboard: made the {role} secret in {web_auth.secret_path(role, store.folder)} "
               f"(`buddybot secret show {role}` prints it)", flush=True)
-    return login.Gate(store, secure, s.session_hours * 3600.0)
+    return login.Gate(store, secure, s.session_hours * 3600.0, guard.hosts)
 
 
 async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
@@ -129,10 +144,12 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     eye_port, sounds = _other_tables(ctx, s)
     board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
     tls = tls_context(ctx, s)
-    app = App(board, make_gate(s, tls is not None))
+    guard = guard_of(s)
+    accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
+    app = App(board, guard, make_gate(s, tls is not None, guard))
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()
-    site = web.TCPSite(runner, s.host or None, s.port, ssl_context=tls)
+    site = GuardedSite(runner, s.host or None, s.port, guard, ssl_context=tls)
     try:
         await site.start()
     except OSError as exc:
@@ -140,6 +157,8 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
         raise ServeError(serve_failure(s.host or "0.0.0.0", s.port,
                                        str(exc.strerror or exc))) from None
     port = runner.addresses[0][1] if runner.addresses else s.port
+    watch = ListenerWatch(site.listener)
+    ctx.alive_checks.append(watch.alive)
     scheme = "https" if tls else "http"
     print(f"dashboard serving {scheme}://{local_host(s.host)}:{port}/"
           f"{' (login required)' if app.gate else ''}", flush=True)
@@ -176,6 +195,11 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             d["pages_refused"] = board.refused
             d["origins_refused"] = board.forbidden
             d["samples"] = mailbox.received
+            d["pages_evicted"] = board.evicted
+            d["accept_errors"] = accept_log.accept_errors
+            d.update(guard.counters())
+            if not watch.alive():
+                node.diagnostics.set("ERROR", f"not serving pages: {watch.dead}")
     finally:
         ctx.stop.set()
         await runner.cleanup()
@@ -186,6 +210,13 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             if app.bus is not None:
                 await asyncio.to_thread(app.bus.close)
             node.close()
+
+
+def guard_of(s: DashboardSettings) -> Guard:
+    """The dashboard's names and flood limits, from its settings."""
+    return Guard(HostAllowList.make(s.host, s.allowed_hosts),
+                 Limits(s.header_timeout_s, s.max_connections,
+                        s.max_connections_per_address), log)
 
 
 def _apply(loop: asyncio.AbstractEventLoop, bus: Bus, board: Board,

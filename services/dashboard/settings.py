@@ -11,7 +11,14 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import (
+    AllowedHosts,
+    HeaderTimeout,
+    Host,
+    MaxConnections,
+    MaxPerAddress,
+    Port,
+)
 
 
 class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -64,6 +71,14 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
         ge=1, le=64, extra={"live": True},
         description="dashboard pages connected at once at most (lowering it cuts no page "
         "already connected)")] = 8
+    # The names the dashboard is served at besides the defaults: a request for any
+    # other (a DNS-rebinding site's own name) is refused with 421.
+    allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)
+    # Flood limits (runtime/web_guard.py): slow headers are cut, a client over
+    # a cap first evicts the oldest connection still sending its headers.
+    header_timeout_s: HeaderTimeout = 10.0
+    max_connections: MaxConnections = 256
+    max_connections_per_address: MaxPerAddress = 64
     # Beyond loopback anyone on the network could press the buttons: a login
     # (the per-robot secrets of `buddybot secret`) is asked for there.
     login: Annotated[Literal["auto", "always"], msgspec.Meta(
@@ -79,4 +94,3 @@ class DashboardSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True
     tls_key: Annotated[str, msgspec.Meta(
         max_length=4096, examples=["/etc/buddybot/certs/robot.key"],
         description="PEM private key of tls_cert")] = ""
-

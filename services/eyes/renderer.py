@@ -59,7 +59,6 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
-from buddybot.runtime import endpoints
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host
 from buddybot.runtime.errors import UsageError
@@ -70,6 +69,19 @@ from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.page_outbox import PageOutbox
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.web_guard import (
+    ANONYMOUS,
+    IDLE_S,
+    AcceptErrorLog,
+    Guard,
+    GuardedSite,
+    HostAllowList,
+    Limits,
+    ListenerWatch,
+    evict_for,
+    origin_allowed,
+    request_port,
+)
 
 log = logging.getLogger("buddybot.eye-renderer")
 _warn = RateLimitedLog(log)
@@ -185,10 +197,11 @@ class Page(PageOutbox[str]):
     page reads: a page only ever needs the latest value of each topic.
     """
 
-    def __init__(self, eye: str, transport: asyncio.Transport | None) -> None:
+    def __init__(self, eye: str, transport: asyncio.Transport | None,
+                 priority: int = ANONYMOUS) -> None:
         self.eye = eye
         self.outbox = wire.LatestState()
-        super().__init__(transport, self.outbox.take)
+        super().__init__(transport, self.outbox.take, priority)
 
     def push(self, slot: str, text: str) -> None:
         self.outbox.put(slot, text)
@@ -220,6 +233,7 @@ class Hub:
         self.samples = 0     # from the bus (copied from the inbox), before coalescing
         self.dropped = 0     # pages cut because they stopped reading
         self.refused = 0     # connections over max_pages
+        self.evicted = 0     # pages cut to make room for a new one
         self.forbidden = 0   # WebSockets from a foreign origin
         self.motion: motion.MotionScheduler | None = None   # set by `start_motion`
         self.motion_changed = asyncio.Event()   # the scheduler's plan may be sooner
@@ -297,8 +311,25 @@ class Hub:
     def full(self) -> bool:
         return len(self.pages) >= self.max_pages
 
-    def join(self, eye: str, transport: asyncio.Transport | None = None) -> Page:
-        page = Page(eye, transport)
+    def make_room(self, priority: int = ANONYMOUS) -> bool:
+        """Whether a page of `priority` may join: a free slot, or one taken from
+        a page it outranks or equals (idle ones, then the longest quiet, first:
+        the kiosk pages ping every 2 s), cut now."""
+        if not self.full:
+            return True
+        victim = evict_for(self.pages, priority, IDLE_S)
+        if victim is None:
+            return False
+        self.leave(victim)
+        if victim.cut():
+            self.evicted += 1
+            _warn.warning("evict", "page cut (eye=%s) to make room for a new one "
+                          "(eye_renderer.max_pages)", victim.eye)
+        return True
+
+    def join(self, eye: str, transport: asyncio.Transport | None = None,
+             priority: int = ANONYMOUS) -> Page:
+        page = Page(eye, transport, priority)
         page.push("hello", self.hello_text)
         for slot, text in self.state.items():
             page.push(slot, text)
@@ -320,7 +351,8 @@ class Hub:
             per_eye[page.eye] = per_eye.get(page.eye, 0) + 1
         return {"clients": len(self.pages), "pages": per_eye, "max_pages": self.max_pages,
                 "bus": self.bus, "samples": self.samples, "messages": self.messages,
-                "dropped": self.dropped, "refused": self.refused, "forbidden": self.forbidden,
+                "dropped": self.dropped, "refused": self.refused, "evicted": self.evicted,
+                "forbidden": self.forbidden,
                 "motion_events": self.motion_events, "pongs": self.pongs}
 
 
@@ -409,17 +441,17 @@ def _read_static() -> dict[str, bytes]:
     return {name: (folder / name).read_bytes() for name in ("eyes.html", *STATIC)}
 
 
-def make_app(hub: Hub) -> web.Application:
+def make_app(hub: Hub, guard: Guard) -> web.Application:
     """The web application: page, static files, WebSocket, health (the allowed
     origins and the stall time are the hub's, read on each use).
 
     No handler ever waits for a page's sends (each page has its own sender
     task), so `/healthz` and the pages are answered however busy or stuck
-    the WebSockets are.
+    the WebSockets are. Requests for a name the renderer is not served at
+    get 421 (`guard`).
     """
     files = _read_static()
     sockets: set[web.WebSocketResponse] = set()
-    names = endpoints.host_names(socket.gethostname())
 
     async def index(_request: web.Request) -> web.StreamResponse:
         raise web.HTTPFound("/eyes?eye=both")
@@ -440,7 +472,7 @@ def make_app(hub: Hub) -> web.Application:
                             headers={"Cache-Control": "no-cache"})
 
     async def health(_request: web.Request) -> web.StreamResponse:
-        return web.json_response(hub.health())
+        return web.json_response({**hub.health(), **guard.counters()})
 
     async def refuse(request: web.Request, reason: str) -> web.WebSocketResponse:
         """Accept the handshake only to close at once with code 1013 and `reason`
@@ -460,14 +492,15 @@ def make_app(hub: Hub) -> web.Application:
             return web.Response(status=400, text=f"bad eye {clip(eye, 40)!r}: "
                                 "use left, right or both\n")
         origin = request.headers.get("Origin")
-        if not wire.origin_allowed(origin, request.host, hub.allowed_origins, names):
+        if not origin_allowed(origin, guard.hosts, port=request_port(request.host),
+                              listed=hub.allowed_origins):
             hub.forbidden += 1
-            _warn.warning("origin", "refused a WebSocket from origin %s (not %s; "
-                          "eye_renderer.allowed_origins lists more)", clip(origin, 80),
-                          clip(request.host, 80))
+            _warn.warning("origin", "refused a WebSocket from origin %s (not a name the "
+                          "renderer is served at; eye_renderer.allowed_origins lists more)",
+                          clip(origin, 80))
             return web.Response(status=403, text=f"origin {clip(origin, 80)} may not open "
                                 "the eye WebSocket (see eye_renderer.allowed_origins)\n")
-        if hub.full:
+        if not hub.make_room(ANONYMOUS):
             hub.refused += 1
             _warn.warning("full", "refused a page: %d pages connected, the most allowed "
                           "(eye_renderer.max_pages)", len(hub.pages))
@@ -484,12 +517,14 @@ def make_app(hub: Hub) -> web.Application:
                 sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, KERNEL_SEND_BUFFER)
         if isinstance(transport, asyncio.WriteTransport):
             transport.set_write_buffer_limits(high=PAGE_WRITE_BUFFER)
-        client = hub.join(eye, transport if isinstance(transport, asyncio.Transport) else None)
+        client = hub.join(eye, transport if isinstance(transport, asyncio.Transport) else None,
+                          ANONYMOUS)
         sockets.add(ws)
         sender = asyncio.create_task(_sender(ws, client, hub))
         log.info("page connected (eye=%s, %d pages)", eye, len(hub.pages))
         try:
             async for msg in ws:
+                client.touch()
                 if msg.type == WSMsgType.ERROR:
                     break
                 # A page only says "ping" (clock sync); anything else is ignored.
@@ -514,7 +549,7 @@ def make_app(hub: Hub) -> web.Application:
                 async with asyncio.timeout(CLOSE_TIMEOUT_S):
                     await ws.close(code=WSCloseCode.GOING_AWAY, message=b"server shutdown")
 
-    app = web.Application()
+    app = web.Application(middlewares=[guard.middleware()])
     app.router.add_get("/", index)
     app.router.add_get("/eyes", page)
     app.router.add_get("/static/{name}", static)
@@ -554,15 +589,19 @@ async def serve(ctx: ServiceContext, host: str, port: int,
                          max_pitch_deg=s.max_pitch_deg, server_id=uuid.uuid4().hex[:8],
                          style=library.get(s.style)),
               s.max_pages, tuple(s.allowed_origins), s.page_stall_s, library)
-    runner = web.AppRunner(make_app(hub), access_log=None)
+    guard = guard_of(s, host)
+    accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
+    runner = web.AppRunner(make_app(hub, guard), access_log=None)
     await runner.setup()
-    site = web.TCPSite(runner, host, port)
+    site = GuardedSite(runner, host, port, guard)
     try:
         await site.start()
     except OSError as exc:
         await runner.cleanup()
         raise StartupError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
     actual = runner.addresses[0][1] if runner.addresses else port
+    watch = ListenerWatch(site.listener)
+    ctx.alive_checks.append(watch.alive)
     base = f"http://{local_host(host)}:{actual}"
     loop = asyncio.get_running_loop()
     inbox = Inbox(loop, hub.publish_batch)
@@ -607,6 +646,11 @@ async def serve(ctx: ServiceContext, host: str, port: int,
             diag.values["origins_refused"] = hub.forbidden
             diag.values["samples_coalesced"] = inbox.coalesced
             diag.values["motion_events"] = hub.motion_events
+            diag.values["pages_evicted"] = hub.evicted
+            diag.values["accept_errors"] = accept_log.accept_errors
+            diag.values.update(guard.counters())
+            if not watch.alive():
+                diag.set("ERROR", f"not serving the eye pages: {watch.dead}")
     finally:
         ctx.stop.set()   # a node still waiting for its router gives up
         motion_timer.cancel()
@@ -644,6 +688,13 @@ def load_styles(ctx: ServiceContext, s: EyeRendererSettings) -> styles.StyleLibr
     library = styles.load(path)
     library.get(s.style)
     return library
+
+
+def guard_of(s: EyeRendererSettings, host: str) -> Guard:
+    """The renderer's names (bound on `host`) and flood limits, from its settings."""
+    return Guard(HostAllowList.make(host, s.allowed_hosts),
+                 Limits(s.header_timeout_s, s.max_connections,
+                        s.max_connections_per_address), log)
 
 
 def where_served(base: str, listen_host: str) -> dict[str, str]:

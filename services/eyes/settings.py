@@ -10,7 +10,14 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import (
+    AllowedHosts,
+    HeaderTimeout,
+    Host,
+    MaxConnections,
+    MaxPerAddress,
+    Port,
+)
 
 DEFAULT_PUPIL_CURVE: tuple[tuple[float, float], ...] = ((30.0, 75.0), (100.0, 55.0), (300.0, 30.0))
 """(distance cm, dilation % of the iris) points: 30 cm (face close to the robot)
@@ -140,4 +147,11 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=0.0, le=1000.0, extra={"live": True},
         description="ms between sending a blink or saccade and its start on every "
         "page")] = 60.0
-
+    # The names the eye_renderer is served at besides the defaults: a request for any
+    # other (a DNS-rebinding site's own name) is refused with 421.
+    allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)
+    # Flood limits (runtime/web_guard.py): slow headers are cut, a client over
+    # a cap first evicts the oldest connection still sending its headers.
+    header_timeout_s: HeaderTimeout = 10.0
+    max_connections: MaxConnections = 256
+    max_connections_per_address: MaxPerAddress = 64

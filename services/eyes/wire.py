@@ -7,8 +7,7 @@ slot so a page that (re)connects gets the whole current state at once,
 and the same type serves as each client's coalescing outbox: a slow page
 gets the newest gaze, never a growing backlog.
 
-It also holds the WebSocket origin rule (`origin_allowed`), pure so it is
-tested without a server, and the two messages of "one face, many screens"
+It also holds the two messages of "one face, many screens"
 (docs/eyes.md): `motion` (a blink or saccade every page draws at the same
 server time; the newest of each kind is kept in the state, so a page that
 connects late joins the motion under way) and the clock ping/pong a page
@@ -17,11 +16,8 @@ uses to learn the server clock.
 
 from __future__ import annotations
 
-import ipaddress
 import math
-from collections.abc import Collection, Iterable
 from typing import Any
-from urllib.parse import urlsplit
 
 import msgspec
 
@@ -146,73 +142,3 @@ class LatestState:
 
     def __len__(self) -> int:
         return len(self._slots)
-
-
-# --- who may open the WebSocket ------------------------------------------------------
-
-_DEFAULT_PORTS = {"http": 80, "https": 443, "ws": 80, "wss": 443}
-
-
-def _origin_key(scheme: str, netloc: str) -> tuple[str, int] | None:
-    """(host, port) of `netloc` under `scheme`, lower-case; None if unparsable."""
-    try:
-        parts = urlsplit(f"{scheme}://{netloc}")
-        port = parts.port
-    except ValueError:
-        return None
-    if not parts.hostname or parts.username is not None or parts.password is not None:
-        return None
-    return parts.hostname.lower(), port if port is not None else _DEFAULT_PORTS[scheme]
-
-
-def _is_ip(hostname: str) -> bool:
-    try:
-        ipaddress.ip_address(hostname)
-    except ValueError:
-        return False
-    return True
-
-
-def origin_allowed(origin: str | None, host: str | None, allowed: Iterable[str] = (),
-                   names: Collection[str] | None = None) -> bool:
-    """Whether a WebSocket request from `origin` to the server reached as `host`
-    (its Host header) may connect.
-
-    Browsers send Origin with every WebSocket and a page from another site
-    can open one to 127.0.0.1, so only the server's own origin (same host
-    and port as the request went to) and the configured `allowed` origins
-    pass. With `names`, the own origin must also name this machine (an IP
-    address or one of `names`): a site whose DNS name was pointed at the
-    robot (DNS rebinding) has matching Origin and Host, but not our name.
-    No Origin at all is a program, not a browser page: allowed (it could
-    open any socket anyway). "null" (sandboxed frames, files) passes only
-    when listed.
-    """
-    if origin is None:
-        return True
-    origin = origin.strip()
-    if origin in allowed:
-        return True
-    if origin == "null":
-        return False
-    try:
-        parts = urlsplit(origin)
-    except ValueError:
-        return False
-    scheme = parts.scheme.lower()
-    if scheme not in ("http", "https") or parts.path not in ("", "/") or parts.query:
-        return False
-    key = _origin_key(scheme, parts.netloc)
-    if key is None:
-        return False
-    for listed in allowed:
-        try:
-            listed_parts = urlsplit(listed)
-        except ValueError:
-            continue
-        if listed_parts.scheme.lower() == scheme and _origin_key(
-                scheme, listed_parts.netloc) == key:
-            return True
-    if host is None or _origin_key(scheme, host.strip()) != key:
-        return False
-    return names is None or _is_ip(key[0]) or key[0] in names

@@ -104,8 +104,9 @@ class FoxgloveServer(ServerListener):
 
     # -- the server --
 
-    def start(self, host: str, port: int) -> WebSocketServer:
-        """Listen on host:port (ServeError, one line, when it cannot)."""
+    def start(self, host: str = "127.0.0.1", port: int = 0) -> WebSocketServer:
+        """Listen on host:port (ServeError, one line, when it cannot). The bridge
+        puts it on loopback at a free port behind its gate (gate.py)."""
         try:
             self.server = foxglove.start_server(
                 name=SERVER_NAME, host=host or "0.0.0.0", port=port, context=self.context,

@@ -19,13 +19,16 @@ A Foxglove WebSocket server (the `foxglove-sdk` package) fed by one node:
   `eyes/release` gives the expression back to the robot, and
   `audio/play_sound` sends the goal to the audio action and returns its reply.
 
-The server starts before the node, so a busy port fails at once (one line,
+Clients reach the SDK's server (on loopback, at a free port) through the
+gate (`gate.py`): names, origins, header timeout and connection caps are
+checked there. The server starts before the node, so a busy port fails at once (one line,
 exit 1) rather than after the router was found. Bad payloads are counted
 and dropped by the node (`malformed` in diagnostics), never shown.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 import time
 from functools import partial
@@ -38,6 +41,7 @@ import msgspec
 from buddybot.contract import channels, describe, keys
 from buddybot.contract import messages as m
 from buddybot.foxglove import logic
+from buddybot.foxglove.gate import Gate
 from buddybot.foxglove.options import add_arguments, settings_from
 from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
@@ -49,6 +53,7 @@ from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.runtime.web_guard import Guard, HostAllowList, Limits
 
 __all__ = ["add_arguments", "run", "settings_from"]
 
@@ -68,9 +73,11 @@ def urls(host: str, port: int) -> tuple[str, str]:
 class Bridge:
     """The node side: subscriptions, image demand, services."""
 
-    def __init__(self, node: Node, fox: FoxgloveServer, settings: FoxgloveSettings) -> None:
+    def __init__(self, node: Node, fox: FoxgloveServer, settings: FoxgloveSettings,
+                 gate: Gate | None = None) -> None:
         self.node = node
         self.fox = fox
+        self.gate = gate
         self.settings = settings
         self.messages = 0
         self.images_sent = 0
@@ -183,6 +190,10 @@ class Bridge:
         values["images_sent"] = self.images_sent
         values["images_skipped"] = sum(r.skipped for r in self._limiters.values())
         values["image_errors"] = self.image_errors
+        if self.gate is not None:
+            values.update(self.gate.counters())
+            if not self.gate.alive():
+                self.node.diagnostics.set("ERROR", f"not serving: {self.gate.why_dead()}")
 
     # -- Foxglove services (the SDK runs each call on its own thread: blocking is fine) --
 
@@ -247,19 +258,32 @@ def _text(payload: bytes) -> str:
         return "\x00"  # not JSON: parse_message refuses it by name
 
 
+def gate_of(settings: FoxgloveSettings, upstream_port: int) -> Gate:
+    """The gate in front of the SDK's server, from `[foxglove]`; a proxied
+    connection holds three descriptors (client, upstream, the SDK's end)."""
+    guard = Guard(HostAllowList.make(settings.host, settings.allowed_hosts),
+                  Limits(settings.header_timeout_s, settings.max_connections,
+                         settings.max_connections_per_address),
+                  logging.getLogger("buddybot.foxglove"), per_connection=3)
+    return Gate(guard, settings.allowed_origins, upstream_port)
+
+
 def run(ctx: ServiceContext) -> int:
     settings = settings_from(ctx)
     fox = FoxgloveServer(settings.max_channels)
-    server = fox.start(settings.host, settings.port)  # busy port: ServeError, exit 1
+    gate = gate_of(settings, 0)
+    port = gate.start(settings.host, settings.port)  # busy port: ServeError, exit 1
     try:
-        ws, app = urls(settings.host, server.port)
+        gate.upstream_port = fox.start().port  # loopback, a free port: only the gate's
+        ctx.alive_checks.append(gate.alive)
+        ws, app = urls(settings.host, port)
         print(f"foxglove bridge serving {ws}", flush=True)
         where = "every interface" if is_wildcard(settings.host) else settings.host
         node = ctx.node()
         try:
             node.log.info("Foxglove: connect the app to %s (listening on %s), or open %s",
                           ws, where, app)
-            bridge = Bridge(node, fox, settings)
+            bridge = Bridge(node, fox, settings, gate)
             fox.add_services(bridge.services())
             bridge.subscribe_all()
             LiveSettings(settings, bridge.apply_settings).serve(node)
@@ -274,5 +298,6 @@ def run(ctx: ServiceContext) -> int:
         finally:
             node.close()
     finally:
+        gate.stop()
         fox.stop()
     return 0

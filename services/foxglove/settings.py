@@ -11,7 +11,17 @@ from typing import Annotated
 
 import msgspec
 
-from buddybot.runtime.endpoints import Host, Port
+from buddybot.runtime.endpoints import (
+    AllowedHosts,
+    HeaderTimeout,
+    Host,
+    MaxConnections,
+    MaxPerAddress,
+    Port,
+)
+
+DEFAULT_ORIGINS = ("https://app.foxglove.dev", "file://")
+"""The Foxglove web app's origin and the desktop app's (its pages are files)."""
 
 
 class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -38,3 +48,21 @@ class FoxgloveSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True)
     max_channels: Annotated[int, msgspec.Meta(
         ge=1, le=4096, description="Foxglove channels at most (keys seen beyond are "
         "counted and not shown)")] = 256
+    # The names the foxglove is served at besides the defaults: a request for any
+    # other (a DNS-rebinding site's own name) is refused with 421.
+    allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)
+    # Flood limits (runtime/web_guard.py): slow headers are cut, a client over
+    # a cap first evicts the oldest connection still sending its headers.
+    header_timeout_s: HeaderTimeout = 10.0
+    max_connections: MaxConnections = 256
+    max_connections_per_address: MaxPerAddress = 64
+    # Browser origins that may connect: the Foxglove web app and the desktop
+    # app (an Electron page, Origin "file://"); pages served from this
+    # machine's loopback always may. A client sending no Origin is a program,
+    # not a page, and passes. Anything else gets 403 at the gate (gate.py).
+    allowed_origins: Annotated[list[Annotated[str, msgspec.Meta(
+        pattern=r"^(https?://[^/?#\s]+|file://|null)$", max_length=200,
+        examples=["https://app.foxglove.dev", "http://studio.example.org:8080"])]],
+        msgspec.Meta(max_length=64, description="browser origins allowed to connect "
+                     "(pages from this machine's loopback always are)")] = msgspec.field(
+        default_factory=lambda: list(DEFAULT_ORIGINS))

@@ -8,7 +8,8 @@ dashboard, the Foxglove bridge) naming who holds theirs. The parsing and
 classifying functions are pure; `accepting` and `port_holder` are the two
 small looks at this machine (a TCP connect, psutil). `Host` and `Port` are
 the config fields of a server's address (`[dashboard]`, `[eye_renderer]`,
-`[foxglove]`), bounded alike.
+`[foxglove]`), bounded alike, and so are their flood limits and extra
+names (`AllowedHosts`, `HeaderTimeout`, `MaxConnections`, `MaxPerAddress`).
 """
 
 from __future__ import annotations
@@ -32,6 +33,21 @@ Host = Annotated[str, msgspec.Meta(max_length=253)]
 """A config field: the address a server binds (a DNS name is at most 253 characters)."""
 Port = Annotated[int, msgspec.Meta(ge=0, le=65535)]
 """A config field: a TCP port (0: the system picks a free one, or the field's own meaning)."""
+AllowedHosts = Annotated[list[Annotated[str, msgspec.Meta(
+    min_length=1, max_length=253, pattern=r"^[A-Za-z0-9._:\[\]%-]+$",
+    examples=["buddy.example.org", "192.168.1.20"])]], msgspec.Meta(
+    max_length=64, description="names and addresses the service is also served at, "
+    "besides loopback, this machine's hostname and the bind address (a request whose "
+    "Host is none of them is refused with 421)")]
+"""A config field: a web surface's extra names (runtime/web_guard.py)."""
+HeaderTimeout = Annotated[float, msgspec.Meta(
+    ge=0.5, le=120.0, description="seconds a client may take to send its request "
+    "headers before the connection is cut")]
+MaxConnections = Annotated[int, msgspec.Meta(
+    ge=1, le=65536, description="client connections held at once at most (kept below "
+    "the descriptor limit)")]
+MaxPerAddress = Annotated[int, msgspec.Meta(
+    ge=1, le=65536, description="client connections held at once from one address")]
 
 
 @dataclass(frozen=True)

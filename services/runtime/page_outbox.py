@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import time
 from collections.abc import Awaitable, Callable
 from typing import Generic, Protocol, TypeVar
 
@@ -34,11 +35,20 @@ class PageOutbox(Generic[T]):
     Used only on the event loop."""
 
     def __init__(self, transport: asyncio.Transport | None,
-                 take: Callable[[], list[T]]) -> None:
+                 take: Callable[[], list[T]], priority: int = 0) -> None:
         self.transport = transport
         self._take = take
         self._wake = asyncio.Event()
         self.cut_off = False
+        self.priority = priority
+        """Who the page is (0: anonymous); a full server evicts lower ones first
+        (`web_guard.pick_eviction`)."""
+        self.last_active = time.monotonic()
+        """When the page last sent something (`touch`); a reading-only client never does."""
+
+    def touch(self) -> None:
+        """The page sent something: it is in use, not a client that only reads."""
+        self.last_active = time.monotonic()
 
     def wake(self) -> None:
         """Something was put in the store: the sender sends it."""

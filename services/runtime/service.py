@@ -81,6 +81,16 @@ class ServiceContext:
     connect: list[str]
     stop: threading.Event = field(default_factory=threading.Event)
     notifier: Notifier = field(default_factory=Notifier.from_env)
+    alive_checks: list[Callable[[], bool]] = field(default_factory=list)
+    """What must hold for the watchdog to be fed (e.g. a web listener still
+    serving): one False and the pings stop, so systemd restarts the service."""
+
+    def alive(self) -> bool:
+        return all(check() for check in self.alive_checks)
+
+    def _watchdog(self) -> None:
+        if self.alive():
+            self.notifier.watchdog()
 
     def node(self, name: str | None = None, **kwargs: object) -> Node:
         """Open this service's node (waits for the router; Ctrl-C aborts).
@@ -99,7 +109,7 @@ class ServiceContext:
             notifier.ready(f"node {node.name} up (robot {self.robot})")
             if notifier.watchdog_s:
                 notifier.watchdog()
-                node.every(notifier.watchdog_s, notifier.watchdog, name="watchdog")
+                node.every(notifier.watchdog_s, self._watchdog, name="watchdog")
         return node
 
     async def node_in_thread(self) -> Node | None:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import base64
 import os
+import resource
 import signal
 import socket
 import subprocess
@@ -19,6 +20,7 @@ import threading
 import time
 import wave
 from collections.abc import Callable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -68,11 +70,18 @@ def wait_port(port: int, timeout: float = 15.0) -> None:
     retry_until(accepting, timeout, what=f"port {port} accepting")
 
 
+def _limit_files(limit: int) -> None:
+    """In the child before exec: at most `limit` open descriptors."""
+    resource.setrlimit(resource.RLIMIT_NOFILE, (limit, limit))
+
+
 class Process:
     """A child process whose output goes to a log file; stopped on `stop()`."""
 
     def __init__(self, argv: Sequence[str], name: str, log_dir: Path | None = None,
-                 env: dict[str, str] | None = None) -> None:
+                 env: dict[str, str] | None = None, nofile: int | None = None) -> None:
+        """`nofile`: the child's descriptor limit (RLIMIT_NOFILE, soft and hard),
+        to flood it without flooding the machine."""
         self.name = name
         self.argv = list(argv)
         folder = log_dir or Path(tempfile.mkdtemp(prefix="buddybot-test-"))
@@ -83,6 +92,7 @@ class Process:
             self.argv, stdout=self._log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             env={**os.environ, "PYTHONUNBUFFERED": "1", **(env or {})},
             start_new_session=True,
+            preexec_fn=None if nofile is None else partial(_limit_files, nofile),
         )
 
     @property
@@ -206,10 +216,11 @@ class Router(Process):
 
 
 def run_service(service: str, endpoint: str, *args: str, robot: str = "buddy",
-                log_dir: Path | None = None, env: dict[str, str] | None = None) -> Process:
+                log_dir: Path | None = None, env: dict[str, str] | None = None,
+                nofile: int | None = None) -> Process:
     """Start `buddybot run SERVICE --connect ENDPOINT ...` as a child process."""
     argv = buddybot_argv("run", service, "--connect", endpoint, "--robot", robot, *args)
-    return Process(argv, f"{service}-{time.monotonic_ns()}", log_dir, env)
+    return Process(argv, f"{service}-{time.monotonic_ns()}", log_dir, env, nofile)
 
 
 class Collector(Generic[T]):
@@ -259,3 +270,82 @@ class Collector(Generic[T]):
     def clear(self) -> None:
         with self._cond:
             self.items.clear()
+
+
+# --- web surfaces under attack -----------------------------------------------------------
+
+SLOW_HEAD = b"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nX-Slow: "
+"""A request head that never ends (slow headers)."""
+
+
+class HeldSockets:
+    """`count` connections to `port` that each send `head` and then hold on,
+    sending nothing more (a slow-headers flood); `close()` ends them all."""
+
+    def __init__(self, port: int, count: int, head: bytes = SLOW_HEAD) -> None:
+        self.socks: list[socket.socket] = []
+        self.failed = 0
+        for _ in range(count):
+            sock = socket.socket()
+            sock.settimeout(0.5)
+            try:
+                sock.connect((LOOPBACK, port))
+                if head:
+                    sock.sendall(head)
+            except OSError:
+                sock.close()
+                self.failed += 1
+                continue
+            self.socks.append(sock)
+
+    def open_count(self) -> int:
+        """How many the server has not closed yet (a peek: 0 bytes read means closed)."""
+        alive = 0
+        for sock in self.socks:
+            sock.setblocking(False)
+            try:
+                alive += sock.recv(1, socket.MSG_PEEK) != b""
+            except BlockingIOError:
+                alive += 1
+            except OSError:
+                pass
+        return alive
+
+    def close(self) -> None:
+        for sock in self.socks:
+            sock.close()
+        self.socks.clear()
+
+
+def http_status(port: int, path: str = "/", *, host: str | None = None,
+                origin: str | None = None, websocket: bool = False,
+                timeout: float = 10.0, keep: list[socket.socket] | None = None) -> int:
+    """The status a raw HTTP/1.1 request gets (0: no answer within `timeout`),
+    with the Host and Origin given (`host` None: 127.0.0.1:port); `websocket`:
+    a WebSocket handshake. `keep`: the socket is left open there (a page that
+    stays), else closed."""
+    lines = [f"GET {path} HTTP/1.1", f"Host: {host or f'{LOOPBACK}:{port}'}"]
+    if origin is not None:
+        lines.append(f"Origin: {origin}")
+    if websocket:
+        lines += ["Upgrade: websocket", "Connection: Upgrade",
+                  f"Sec-WebSocket-Key: {base64.b64encode(os.urandom(16)).decode()}",
+                  "Sec-WebSocket-Version: 13", "Sec-WebSocket-Protocol: foxglove.sdk.v1"]
+    sock = socket.create_connection((LOOPBACK, port), timeout=timeout)
+    try:
+        sock.sendall(("\r\n".join(lines) + "\r\n\r\n").encode())
+        data = b""
+        while b"\r\n" not in data:
+            chunk = sock.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+    except OSError:
+        data = b""
+    finally:
+        if keep is None or not data:
+            sock.close()
+        else:
+            keep.append(sock)
+    parts = data.split(b" ", 2)
+    return int(parts[1]) if len(parts) > 1 and parts[1].isdigit() else 0

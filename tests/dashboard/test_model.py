@@ -179,19 +179,6 @@ def test_eye_page_url(configured: str, host: str | None, expected: str) -> None:
     assert model.eye_page_url(configured, 8080, host) == expected
 
 
-@pytest.mark.parametrize(("origin", "host", "ok"), [
-    (None, "127.0.0.1:8090", True),
-    ("http://127.0.0.1:8090", "127.0.0.1:8090", True),
-    ("http://BUDDY.local:8090", "buddy.local:8090", True),
-    ("http://evil.example", "127.0.0.1:8090", False),
-    ("http://127.0.0.1:8080", "127.0.0.1:8090", False),
-    ("null", "127.0.0.1:8090", False),
-    ("http://127.0.0.1:8090", None, False),
-])
-def test_origin_allowed(origin: str | None, host: str | None, ok: bool) -> None:
-    assert model.origin_allowed(origin, host) is ok
-
-
 def test_enum_names_are_json_ready() -> None:
     names = msgspec.json.decode(msgspec.json.encode(model.enum_names()))
     assert names["ExpressionAction"]["3"] == "EYE_GRIN"

@@ -31,9 +31,11 @@ from buddybot.runtime.node import Node
 from buddybot.tools.testing import (
     LOOPBACK,
     Collector,
+    HeldSockets,
     Process,
     buddybot_argv,
     free_port,
+    http_status,
     retry_until,
     wait_port,
 )
@@ -42,9 +44,10 @@ pytestmark = pytest.mark.integration
 
 
 def start_dashboard(spawn: Callable[..., Process], *args: str,
-                    env: dict[str, str] | None = None) -> tuple[Process, int]:
+                    env: dict[str, str] | None = None,
+                    nofile: int | None = None) -> tuple[Process, int]:
     port = free_port()
-    proc = spawn("dashboard", "--port", str(port), *args, env=env)
+    proc = spawn("dashboard", "--port", str(port), *args, env=env, nofile=nofile)
     wait_port(port, 30)
     return proc, port
 
@@ -179,6 +182,86 @@ def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
 
     asyncio.run(stale())
     assert proc.alive()
+
+
+FLOOD_LIMIT = 256
+"""The dashboard's descriptor limit in the flood tests (systemd's default is 1,024)."""
+FLOOD = 300
+"""Unfinished requests held against it: more than it has descriptors."""
+
+
+def test_slow_headers_beyond_the_descriptor_limit_lock_nobody_out(
+        spawn: Callable[..., Process]) -> None:
+    proc, port = start_dashboard(spawn, nofile=FLOOD_LIMIT)
+    flood = HeldSockets(port, FLOOD)
+    try:
+        t0 = time.monotonic()
+        status = http_status(port, "/", timeout=20.0)
+        served_s = time.monotonic() - t0
+        held = flood.open_count()
+        ws_status = http_status(port, "/ws", websocket=True, origin=f"http://{LOOPBACK}:{port}")
+    finally:
+        flood.close()
+    print(f"slow headers: {FLOOD} sent under a {FLOOD_LIMIT} limit, {held} still held, "
+          f"a new request answered in {served_s * 1000:.0f} ms")
+    assert status == 200 and ws_status == 101
+    assert held <= 64   # the per-address cap; the rest were cut to make room
+    counters = health(port)
+    assert counters["connections_evicted"] >= FLOOD - 64
+    assert proc.alive()
+    output = proc.output()
+    assert output.count("Traceback") == 0, output[-3000:]
+    assert len(output.splitlines()) < 40, output[-3000:]   # a line per burst, not per event
+
+
+def test_only_the_names_it_is_served_at_and_their_pages(spawn: Callable[..., Process]) -> None:
+    """DNS rebinding: a site whose name points at the robot sends its own name as
+    Host and as Origin; both are refused whatever they match."""
+    _proc, port = start_dashboard(spawn)
+    own = f"http://{LOOPBACK}:{port}"
+    assert http_status(port, "/") == 200
+    assert http_status(port, "/", host="attacker.example") == 421
+    assert http_status(port, "/healthz", host=f"evil.test:{port}") == 421
+    assert http_status(port, "/ws", websocket=True, host=f"evil.test:{port}",
+                       origin=f"http://evil.test:{port}") == 421
+    assert http_status(port, "/ws", websocket=True, origin=f"http://evil.test:{port}") == 403
+    assert http_status(port, "/ws", websocket=True, origin="null") == 403
+    assert http_status(port, "/ws", websocket=True, host=f"localhost:{port}",
+                       origin=f"http://localhost:{port}") == 101
+    assert http_status(port, "/ws", websocket=True, origin=own) == 101
+    counters = health(port)
+    assert counters["hosts_refused"] == 3 and counters["forbidden"] == 2
+
+
+def test_eight_reading_pages_do_not_lock_out_the_ninth(spawn: Callable[..., Process]) -> None:
+    _proc, port = start_dashboard(spawn)
+    url = f"http://{LOOPBACK}:{port}/ws"
+    origin = f"http://{LOOPBACK}:{port}"
+    max_pages = DashboardSettings().max_pages
+
+    async def read_all(ws: aiohttp.ClientWebSocketResponse) -> None:
+        async for _msg in ws:
+            pass
+
+    async def scenario() -> tuple[dict[str, Any], int]:
+        async with aiohttp.ClientSession() as http:
+            readers = [await http.ws_connect(url, origin=origin) for _ in range(max_pages)]
+            tasks = [asyncio.create_task(read_all(ws)) for ws in readers]
+            async with http.ws_connect(url, origin=origin) as ninth:
+                hello = await _next(ninth, "hello")
+                await asyncio.wait_for(asyncio.wait(tasks, return_when="FIRST_COMPLETED"), 20)
+                closed = sum(ws.closed for ws in readers)
+            for ws in readers:
+                await ws.close()
+            for task in tasks:
+                task.cancel()
+        return hello, closed
+
+    hello, closed = asyncio.run(scenario())
+    assert "expressions" in hello
+    assert closed == 1   # the longest quiet reader gave its slot
+    counters = health(port)
+    assert counters["evicted"] == 1 and counters["refused"] == 0
 
 
 async def _next(ws: aiohttp.ClientWebSocketResponse, slot: str,
