@@ -74,7 +74,11 @@ class Gate:
             return web.Response(status=403, text="log in from the dashboard's own page\n")
         if (request.content_length or 0) > MAX_FORM_BYTES:
             return web.Response(status=413, text="login form too large\n")
-        form = await request.post()
+        try:
+            form = await request.post()
+        except (ValueError, web.HTTPException) as exc:  # a body that is no form
+            self.refused_logins += 1
+            return web.Response(status=400, text=f"bad login form: {clip(exc, 120)}\n")
         given = form.get("secret")
         role = web_auth.login_role(given if isinstance(given, str) else "",
                                    self.store.current())

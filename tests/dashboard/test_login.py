@@ -74,6 +74,16 @@ def test_beyond_loopback_only_a_login_gets_in_and_only_an_operator_presses(
             # A wrong secret, a forged cookie: refused.
             async with await log_in(http, base, "not-the-secret") as resp:
                 assert resp.status == 401 and web_auth.COOKIE not in resp.cookies
+            for body, kind in ((b"\xff\x00--x\r\ngarbage", "multipart/form-data; boundary=x"),
+                               (b"secret=" + b"A" * 5000, "application/x-www-form-urlencoded"),
+                               (b'{"secret": 1}', "application/json")):
+                async with http.post(f"{base}/login", data=body, allow_redirects=False,
+                                     headers={"Content-Type": kind}) as resp:
+                    assert resp.status in (400, 401, 413), (kind, resp.status)
+                    assert web_auth.COOKIE not in resp.cookies
+            async with http.post(f"{base}/login", data={"secret": "x"}, allow_redirects=False,
+                                 headers={"Origin": "http://evil.example"}) as resp:
+                assert resp.status == 403
             forged = "operator.9999999999.x.AAAA"
             async with http.get(f"{base}/", allow_redirects=False,
                                 headers={"Cookie": f"{web_auth.COOKIE}={forged}"}) as resp:
