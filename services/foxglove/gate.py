@@ -28,6 +28,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import threading
 import time
 from collections.abc import Collection
@@ -109,8 +110,8 @@ class Gate:
             self._server = future.result(timeout=10.0)
         except OSError as exc:
             self.stop()
-            raise ServeError(serve_failure(host or "0.0.0.0", port,
-                                           str(exc.strerror or exc))) from None
+            why = os.strerror(exc.errno) if exc.errno else str(exc.strerror or exc)
+            raise ServeError(serve_failure(host or "0.0.0.0", port, why)) from None
         self.watch = ListenerWatch(self._server)
         self.port = self._server.sockets[0].getsockname()[1]
         return self.port

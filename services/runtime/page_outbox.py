@@ -43,12 +43,13 @@ class PageOutbox(Generic[T]):
         self.priority = priority
         """Who the page is (0: anonymous); a full server evicts lower ones first
         (`web_guard.pick_eviction`)."""
-        self.last_active = time.monotonic()
+        self.joined = time.monotonic()
+        self.heard: float | None = None
         """When the page last sent something (`touch`); a reading-only client never does."""
 
     def touch(self) -> None:
         """The page sent something: it is in use, not a client that only reads."""
-        self.last_active = time.monotonic()
+        self.heard = time.monotonic()
 
     def wake(self) -> None:
         """Something was put in the store: the sender sends it."""

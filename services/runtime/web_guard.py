@@ -264,22 +264,25 @@ class Slot:
     """A connected page as the slot rule sees it."""
 
     priority: int
-    last_active: float
-    """When it last sent something (joining counts): reading clients never do."""
+    joined: float
+    heard: float | None = None
+    """When it last sent something (None: never); a reading-only client never does."""
 
 
 def pick_eviction(slots: Sequence[Slot], priority: int, now: float,
                   idle_s: float) -> int | None:
     """The index of the page that gives its slot to a newcomer of `priority`, or
-    None (every page outranks it). Lower priorities go first, then pages quiet
-    for `idle_s` or more, then the longest quiet: a newcomer always gets a slot
-    from its equals, and an operator from any anonymous page."""
+    None (every page outranks it). Lower priorities go first, then pages not
+    heard from for `idle_s` (or never: a client that only reads), then the
+    longest quiet: a newcomer always gets a slot from its equals, and an
+    operator from any anonymous page."""
     best: tuple[int, bool, float] | None = None
     index: int | None = None
     for i, s in enumerate(slots):
         if s.priority > priority:
             continue
-        key = (s.priority, now - s.last_active < idle_s, s.last_active)
+        active = s.heard is not None and now - s.heard < idle_s
+        key = (s.priority, active, s.joined if s.heard is None else s.heard)
         if best is None or key < best:
             best, index = key, i
     return index
@@ -289,7 +292,8 @@ class Occupant(Protocol):
     """A page holding a slot (`runtime.page_outbox.PageOutbox` is one)."""
 
     priority: int
-    last_active: float
+    joined: float
+    heard: float | None
 
 
 PageT = TypeVar("PageT", bound=Occupant)
@@ -300,7 +304,7 @@ def evict_for(pages: Iterable[PageT], priority: int, idle_s: float,
     """The page of `pages` that gives its slot to a newcomer of `priority`
     (`pick_eviction`), or None."""
     listed = list(pages)
-    index = pick_eviction([Slot(p.priority, p.last_active) for p in listed], priority,
+    index = pick_eviction([Slot(p.priority, p.joined, p.heard) for p in listed], priority,
                           time.monotonic() if now is None else now, idle_s)
     return None if index is None else listed[index]
 

@@ -26,7 +26,15 @@ from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
 from buddybot.foxglove.service import urls
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
+from buddybot.tools.testing import (
+    Collector,
+    HeldSockets,
+    Process,
+    buddybot_argv,
+    free_port,
+    http_status,
+    retry_until,
+)
 
 from .ws_client import CallFailed, FoxgloveClient
 
@@ -82,6 +90,54 @@ def bridge(spawn: Callable[..., Process]) -> Iterator[int]:
     proc = spawn("foxglove", "--port", str(port), "--max-image-fps", str(FPS_LIMIT))
     proc.wait_for_output("foxglove bridge serving", timeout=30)
     yield port
+
+
+ORIGIN_CASES = [
+    (None, "http://evil.example", 403),          # any web page: refused
+    (None, "null", 403),
+    (None, "https://app.foxglove.dev.evil.example", 403),
+    ("attacker.example", None, 421),              # a name the bridge is not served at
+    ("evil.test", "http://evil.test", 421),       # DNS rebinding
+    (None, "https://app.foxglove.dev", 101),     # the Foxglove web app
+    (None, "file://", 101),                       # the desktop app
+    (None, "http://localhost:5173", 101),         # a page from this machine's loopback
+    (None, None, 101),                            # a program, not a page
+]
+
+
+@pytest.mark.integration
+def test_only_the_foxglove_app_and_this_machine_may_connect(bridge: int) -> None:
+    got = [(host, origin, http_status(bridge, "/", origin=origin, websocket=True,
+                                      host=None if host is None else f"{host}:{bridge}"))
+           for host, origin, _status in ORIGIN_CASES]
+    assert got == ORIGIN_CASES
+
+
+@pytest.mark.integration
+def test_a_descriptor_flood_leaves_the_bridge_serving_and_healthy(
+        spawn: Callable[..., Process], probe: Node) -> None:
+    """300 held sockets under a 256-descriptor limit: the SDK's own listener
+    would lose its accept loop for good; the gate cuts the oldest unfinished
+    ones, a real client still connects and the diagnostics stay OK."""
+    port = free_port()
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="foxglove")
+    proc = spawn("foxglove", "--port", str(port), nofile=256)
+    proc.wait_for_output("foxglove bridge serving", timeout=30)
+    flood = HeldSockets(port, 300)
+    try:
+        async def connect() -> dict[str, object]:
+            client = await FoxgloveClient.connect(port)
+            await client.close()
+            return client.server_info
+
+        info = asyncio.run(connect())
+    finally:
+        flood.close()
+    assert info.get("name") == "buddybot"
+    status = diag.wait_for(lambda s: int(s.values.get("connections_evicted", 0)) > 0,
+                           timeout=20, what="the gate's counters")
+    assert status.level == "OK", status
+    assert proc.alive() and "Traceback" not in proc.output()
 
 
 def bridge_subscribes(probe: Node, key: str) -> bool:

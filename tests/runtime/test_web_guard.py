@@ -138,10 +138,12 @@ def test_descriptor_budget_keeps_descriptors_free() -> None:
 def test_page_slots_go_to_the_newcomer_quietest_and_lowest_first() -> None:
     now = 1000.0
     eight_readers = [Slot(0, now - 100 + i) for i in range(8)]
-    assert pick_eviction(eight_readers, 0, now, idle_s=30) == 0   # the longest quiet
-    active = [Slot(0, now - 1), Slot(0, now - 60), Slot(0, now - 2)]
-    assert pick_eviction(active, 0, now, idle_s=30) == 1          # the idle one
-    mixed = [Slot(2, now - 500), Slot(0, now - 1), Slot(1, now - 900)]
+    assert pick_eviction(eight_readers, 0, now, idle_s=30) == 0   # the longest there
+    pinging = [Slot(0, now - 50, heard=now - 1), Slot(0, now - 0.1),
+               Slot(0, now - 60, heard=now - 40)]
+    assert pick_eviction(pinging, 0, now, idle_s=30) == 2         # idle first
+    assert pick_eviction(pinging[:2], 0, now, idle_s=30) == 1     # then never heard
+    mixed = [Slot(2, now - 500), Slot(0, now - 1, heard=now), Slot(1, now - 900)]
     assert pick_eviction(mixed, 0, now, idle_s=30) == 1           # only its equals
     assert pick_eviction(mixed, 2, now, idle_s=30) == 1           # the anonymous first
     assert pick_eviction([Slot(2, now)], 0, now, idle_s=30) is None
