@@ -21,18 +21,17 @@ else `$XDG_STATE_HOME/buddybot` (`~/.local/state/buddybot`).
 from __future__ import annotations
 
 import base64
-import contextlib
 import hashlib
 import hmac
 import os
 import secrets
-import stat
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
 from buddybot.runtime.endpoints import is_loopback
 from buddybot.runtime.errors import BuddyBotError
+from buddybot.runtime.private_files import private_problem, write_private
 
 ROLES = ("operator", "viewer", "foxglove")
 """Every secret there is; `operator` and `viewer` log in to the dashboard."""
@@ -74,16 +73,6 @@ def login_required(host: str, mode: str) -> bool:
 # --- the files ----------------------------------------------------------------------
 
 
-def _check_private(st: os.stat_result, path: Path) -> None:
-    if not stat.S_ISREG(st.st_mode):
-        raise SecretError(f"{path} is not a regular file")
-    if st.st_uid != os.getuid():
-        raise SecretError(f"{path} belongs to uid {st.st_uid}, not to this user ({os.getuid()})")
-    if st.st_mode & 0o077:
-        raise SecretError(f"{path} is accessible to others (mode {stat.S_IMODE(st.st_mode):o}): "
-                          f"rotate the secret (`buddybot secret rotate`), then chmod 600 it")
-
-
 def read_secret(path: Path) -> str | None:
     """The secret in `path`; None when revoked (empty) or absent; SecretError when unusable."""
     try:
@@ -93,7 +82,10 @@ def read_secret(path: Path) -> str | None:
     except OSError as exc:
         raise SecretError(f"cannot open {path}: {exc.strerror}") from None
     with os.fdopen(fd, "rb") as f:
-        _check_private(os.fstat(f.fileno()), path)
+        problem = private_problem(os.fstat(f.fileno()), path, "rotate the secret "
+                                  "(`buddybot secret rotate`), then chmod 600 it")
+        if problem is not None:
+            raise SecretError(problem)
         data = f.read(MAX_SECRET_CHARS + 1)
     text = data.decode("ascii", "replace").strip()
     if len(text) > MAX_SECRET_CHARS:
@@ -103,22 +95,7 @@ def read_secret(path: Path) -> str | None:
 
 def write_secret(path: Path, text: str) -> None:
     """Replace `path` atomically with `text` (owner-only; "" revokes)."""
-    folder = path.parent
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    tmp = folder / f".{path.name}.{os.getpid()}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0),
-                 0o600)
-    try:
-        os.fchmod(fd, 0o600)
-        with os.fdopen(fd, "w") as f:
-            f.write(text + ("\n" if text else ""))
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
+    write_private(path, (text + "\n" if text else "").encode())
 
 
 def new_secret() -> str:
