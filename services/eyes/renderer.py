@@ -10,8 +10,13 @@ tablet or a phone can be an eye:
   page at `/eyes?eye=left|right|both` (`/ws` carries the data; each page
   gets a greeting with its looks and the whole current state, then updates,
   coalesced per slot so a slow page never builds a backlog; a page that
-  stops reading is cut, at most `max_pages` are connected, and only the
-  server's own origin or listed ones may open the socket);
+  stops reading is cut, at most `max_pages` are connected (a new one takes
+  the quietest page's slot), and only the server's own origin or listed
+  ones may open the socket);
+* only the names it is served at are answered, and floods are bounded
+  (`runtime/web_guard.py`: header timeout, connection caps, accept errors
+  at a bounded rate; a listener that stops serving sets the diagnostics to
+  ERROR and stops the watchdog's pings);
 * the HTTP server starts before the Zenoh node, so the pages show a calm
   "connecting" face while there is no router, never a browser error;
 * one kiosk Chromium window per eye window planned by `placement.py` from

@@ -109,8 +109,8 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         max_length=4096, description="JSON file of extra eye styles, read at start "
         "(empty: the built-in ones only)")] = ""
     # At most this many pages connected at once (two kiosk windows, a few
-    # phones); over it a new WebSocket is closed at once with code 1013 and a
-    # reason, so a flood of connections cannot starve the real eyes.
+    # phones); over it a new page takes the slot of the quietest one (a real
+    # page pings every 2 s), so clients that only read cannot starve the eyes.
     max_pages: Annotated[int, msgspec.Meta(
         ge=1, le=256, extra={"live": True},
         description="pages connected at once at most (lowering it cuts no page already "
@@ -121,7 +121,7 @@ class EyeRendererSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
         ge=0.2, le=60.0, extra={"live": True},
         description="seconds a page's sends may not drain before it is dropped")] = 2.0
     # Browser origins allowed to open the WebSocket besides the server's own
-    # (same host and port), e.g. ["http://buddy.local:8080"]. A request with no
+    # (a name of allowed_hosts at its port), e.g. ["http://tablet.local:8080"]. A request with no
     # Origin header is not a browser page and is allowed.
     allowed_origins: Annotated[list[Annotated[str, msgspec.Meta(
         pattern=r"^https?://[^/?#\s]+$", max_length=200, examples=["http://buddy.local:8080"],

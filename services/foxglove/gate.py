@@ -138,12 +138,16 @@ class Gate:
         if not self.watch.alive():
             return False
         now = time.monotonic()
-        if not self.upstream_gone and now >= self._next_check:
+        if now >= self._next_check:
             self._next_check = now + UPSTREAM_CHECK_S
-            if sdk_listening(self.upstream_port) is False:
-                self.upstream_gone = "the Foxglove server's listening socket is gone"
-                log.error("%s: restart the bridge", self.upstream_gone)
+            self.check_upstream()
         return not self.upstream_gone
+
+    def check_upstream(self) -> None:
+        """Look for the SDK's listening socket now (once gone, it stays gone)."""
+        if not self.upstream_gone and sdk_listening(self.upstream_port) is False:
+            self.upstream_gone = "the Foxglove server's listening socket is gone"
+            log.error("%s: restart the bridge", self.upstream_gone)
 
     def why_dead(self) -> str:
         return self.watch.dead or self.upstream_gone

@@ -137,6 +137,17 @@ def test_unit_restarts_on_failure_and_reads_the_one_env_file(path: Path) -> None
         assert re.search(rf"^#?{var}=", env_text, re.M), f"{var} not in deploy/systemd/env"
 
 
+@pytest.mark.parametrize("path", service_units(), ids=lambda p: p.stem)
+def test_unit_sets_its_descriptor_limit(path: Path) -> None:
+    """`LimitNOFILE` in every unit: the web surfaces size their connection caps
+    from it (runtime/web_guard.py), and none runs on an unstated default."""
+    limit = unit(path)["Service"].get("LimitNOFILE", "")
+    assert limit.isdigit() and int(limit) >= 1024, f"{path.name}: LimitNOFILE={limit!r}"
+    web = {"buddybot-dashboard", "buddybot-eye-renderer", "buddybot-foxglove"}
+    if path.stem in web:
+        assert int(limit) >= 4096
+
+
 def test_env_file_names_the_config_and_the_router() -> None:
     env = env_assignments()
     assert env["BUDDYBOT_CONFIG"] == "/etc/buddybot/robot.toml"
