@@ -16,6 +16,7 @@
     buddybot radar ...                      LD2410 configuration tools
     buddybot foxglove [--port P]            every key live in the Foxglove app
     buddybot app run|new|list               apps: run one, start one, list them
+    buddybot secret show|rotate|revoke      the dashboard/Foxglove login secrets
 
 Exit status: 0 success, 1 failure at run time, 2 bad usage or config.
 """
@@ -44,7 +45,7 @@ from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
          "reference",
-         "doctor", "param", "lease", "topics", "node", "foxglove", "bag", "app")
+         "doctor", "param", "lease", "topics", "node", "foxglove", "bag", "app", "secret")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 

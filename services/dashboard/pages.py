@@ -4,7 +4,9 @@ Each page has its own `Outbox` (newest per slot, radar frames appended) and
 its own sender task: a slow page never delays the others or the bus, a page
 that stops reading is cut after `STALL_S`, and camera frames are skipped
 for a page whose socket is still full (a lower frame rate, not a backlog).
-Only the dashboard's own page may open the WebSocket (it has buttons).
+Only the dashboard's own page may open the WebSocket (it has buttons);
+beyond loopback only with a login (`login.py`), and only an operator's
+page may press them.
 """
 
 from __future__ import annotations
@@ -21,9 +23,10 @@ import msgspec
 from aiohttp import WSMsgType, web
 
 from buddybot.contract import messages as m
-from buddybot.dashboard import model, radar_map
+from buddybot.dashboard import login, model, radar_map
 from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime import web_auth
 from buddybot.runtime.limits import BoundedDict, clip
 from buddybot.runtime.node import RateLimitedLog
 from buddybot.runtime.page_outbox import PageOutbox
@@ -58,10 +61,16 @@ class Page(PageOutbox[tuple[str, Any]]):
     """One connected page: its outbox (newest per slot, radar frames appended)
     and its sender."""
 
-    def __init__(self, transport: asyncio.Transport | None, priority: int = ANONYMOUS) -> None:
+    def __init__(self, transport: asyncio.Transport | None, priority: int = ANONYMOUS,
+                 role: str = login.OPERATOR, cookie: str | None = None) -> None:
         self.outbox = model.Outbox()
         super().__init__(transport, self.outbox.take, priority)
         self.images_skipped = 0
+        self.role = role
+        """operator (buttons) or viewer (watch only); operator on loopback without login."""
+        self.cookie = cookie
+        """The session cookie it connected with (None without login): checked again
+        when a secret changes."""
 
     def put(self, slot: str, value: Any) -> None:
         self.outbox.put(slot, value)
@@ -98,6 +107,7 @@ class Board:
         self.refused = 0
         self.evicted = 0
         self.forbidden = 0
+        self.viewer_refused = 0
         self.bad_requests = 0
         self.images_sent = 0
 
@@ -105,8 +115,9 @@ class Board:
         """A live settings change: `max_pages` holds from the next connection."""
         self.s = s
 
-    def hello(self, page_host: str | None) -> dict[str, Any]:
+    def hello(self, page_host: str | None, role: str = login.OPERATOR) -> dict[str, Any]:
         return {
+            "role": role,
             "camera": self.s.camera, "history_s": self.s.history_s,
             "max_image_fps": self.s.max_image_fps,
             "eye_url": model.eye_page_url(self.s.eye_url, self.eye_port, page_host),
@@ -116,7 +127,7 @@ class Board:
         }
 
     def join(self, page: Page, page_host: str | None) -> None:
-        page.put("hello", self.hello(page_host))
+        page.put("hello", self.hello(page_host, page.role))
         page.put("history", {"span_s": self.s.history_s, "now": now_s(),
                              "sensors": self.radar.snapshot(now_s())})
         page.put("sounds", self.sounds)
@@ -275,9 +286,12 @@ def _read_static() -> dict[str, bytes]:
 class App:
     """The aiohttp application and the glue between the pages and the bus."""
 
-    def __init__(self, board: Board, guard: Guard) -> None:
+    def __init__(self, board: Board, guard: Guard, gate: login.Gate | None = None) -> None:
         self.board = board
         self.guard = guard
+        self.gate = gate
+        """None: served on loopback, no login (every page is the operator's)."""
+        self.pages_by_socket: dict[web.WebSocketResponse, Page] = {}
         self.priority_of: Callable[[web.Request], int] = lambda _request: ANONYMOUS
         """The slot priority of a page's request (a login hands operators more)."""
         self.bus: Bus | None = None
@@ -292,15 +306,25 @@ class App:
         app.router.add_get("/ws", self.websocket)
         app.router.add_get("/healthz", self.health)
         app.router.add_get("/favicon.ico", self.no_icon)
+        if self.gate is not None:
+            self.gate.add_routes(app)
         app.on_shutdown.append(self.close_sockets)
         return app
 
-    async def index(self, _request: web.Request) -> web.StreamResponse:
+    def _role(self, request: web.Request) -> str | None:
+        """The request's role: operator without a gate, else its session's (None: none)."""
+        return login.OPERATOR if self.gate is None else self.gate.role(request)
+
+    async def index(self, request: web.Request) -> web.StreamResponse:
+        if self._role(request) is None:
+            raise web.HTTPSeeOther("/login")
         return web.Response(body=self.files["index.html"], content_type="text/html",
                             headers={"Cache-Control": "no-cache"})
 
     async def static(self, request: web.Request) -> web.StreamResponse:
         name = request.match_info["name"]
+        if self._role(request) is None:
+            raise web.HTTPUnauthorized(text="log in first: /login\n")
         if name not in STATIC:
             raise web.HTTPNotFound()
         return web.Response(body=self.files[name], content_type=STATIC[name],
@@ -315,6 +339,7 @@ class App:
             "pages": len(b.pages), "bus": b.state["status"].get("bus", False),
             "images_sent": b.images_sent, "bad_requests": b.bad_requests,
             "refused": b.refused, "evicted": b.evicted, "forbidden": b.forbidden,
+            "viewer_refused": b.viewer_refused,
             **self.guard.counters(),
             "watching_images": self.bus is not None and self.bus.image_sub is not None})
 
@@ -328,16 +353,22 @@ class App:
                           "dashboard is served at; see dashboard.allowed_hosts)",
                           clip(origin, 80))
             return web.Response(status=403, text="only the dashboard's own page may connect\n")
-        priority = self.priority_of(request)
+        role = self._role(request)
+        if role is None:
+            b.forbidden += 1
+            return web.Response(status=401, text="log in first: /login\n")
+        priority = self.priority_of(request) if self.gate is None else login.PRIORITY[role]
         if not b.make_room(priority):
             b.refused += 1
             return web.Response(status=503, text=f"too many pages ({b.s.max_pages} max)\n")
         ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=64 * 1024, compress=False)
         await ws.prepare(request)
         transport = request.transport
-        page = Page(transport if isinstance(transport, asyncio.Transport) else None, priority)
+        page = Page(transport if isinstance(transport, asyncio.Transport) else None, priority,
+                    role, request.cookies.get(web_auth.COOKIE) if self.gate else None)
         b.join(page, request.host)
         self.sockets.add(ws)
+        self.pages_by_socket[ws] = page
         sender = asyncio.create_task(_sender(ws, page, b))
         tasks: set[asyncio.Task[None]] = set()
         log.info("page connected (%d pages)", len(b.pages))
@@ -356,6 +387,7 @@ class App:
         finally:
             b.leave(page)
             self.sockets.discard(ws)
+            self.pages_by_socket.pop(ws, None)
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await sender
@@ -371,6 +403,11 @@ class App:
             b.bad_requests += 1
             b.reply(page, 0, False, str(exc))
             return
+        if page.role != login.OPERATOR:
+            b.viewer_refused += 1
+            b.reply(page, cmd.id, False, "refused: a viewer may watch; only an operator may "
+                    "press buttons or take the operator lease")
+            return
         bus = self.bus
         if bus is None:
             b.reply(page, cmd.id, False, "not connected to the robot yet")
@@ -385,6 +422,20 @@ class App:
                 log.warning("request %r failed: %r", cmd, exc)
                 ok, text_out = False, f"failed: {clip(exc, 200)}"
         b.reply(page, cmd.id, ok, text_out)
+
+    async def end_stale_sessions(self) -> int:
+        """Close the pages whose session no longer holds (its secret was rotated or
+        revoked, or it expired); how many. Called from the service's loop."""
+        if self.gate is None:
+            return 0
+        stale = [ws for ws, page in self.pages_by_socket.items()
+                 if self.gate.session(page.cookie) is None]
+        for ws in stale:
+            log.info("page cut: its session ended (secret rotated or revoked, or expired)")
+            with contextlib.suppress(TimeoutError):
+                async with asyncio.timeout(2.0):
+                    await ws.close(code=4401, message=b"session ended: log in again")
+        return len(stale)
 
     async def close_sockets(self, _app: web.Application) -> None:
         for ws in list(self.sockets):

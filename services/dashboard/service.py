@@ -29,7 +29,9 @@ The parts, each in its own module:
   request for a name the dashboard is not served at gets 421, and floods
   are bounded (`runtime/web_guard.py`: header timeout, connection caps,
   accept errors logged at a bounded rate; a listener that stops serving
-  sets the diagnostics to ERROR and stops the watchdog's pings).
+  sets the diagnostics to ERROR and stops the watchdog's pings);
+* beyond loopback a login (`login.py`: operators press, viewers watch),
+  optionally over HTTPS with the deployment's certificate and key.
 
 A port already in use is one line and exit status 1 (`buddybot up`
 restarts it; the port may be free again).
@@ -41,21 +43,30 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import ssl
 from functools import partial
 
 from aiohttp import web
 
-from buddybot.dashboard import radar_map
+from buddybot.dashboard import login, radar_map
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime import web_auth
+from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host, serve_failure
-from buddybot.runtime.errors import ServeError
+from buddybot.runtime.errors import ConfigError, ServeError
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import AcceptErrorLog, GuardedSite, ListenerWatch, guard_for
+from buddybot.runtime.web_guard import (
+    AcceptErrorLog,
+    Guard,
+    GuardedSite,
+    ListenerWatch,
+    guard_for,
+)
 
 log = logging.getLogger("buddybot.dashboard")
 
@@ -70,6 +81,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings_option(parser, "--history-s", struct=struct, field="history_s")
     settings_option(parser, "--eye-url", struct=struct, field="eye_url", metavar="URL")
     settings_option(parser, "--eye-port", struct=struct, field="eye_port", metavar="PORT")
+    settings_option(parser, "--login", struct=struct, field="login")
+    settings_option(parser, "--tls-cert", struct=struct, field="tls_cert", metavar="FILE")
+    settings_option(parser, "--tls-key", struct=struct, field="tls_key", metavar="FILE")
 
 
 def settings_from(ctx: ServiceContext) -> DashboardSettings:
@@ -91,16 +105,50 @@ def _other_tables(ctx: ServiceContext, s: DashboardSettings) -> tuple[int, dict[
     return port, sounds
 
 
+def tls_context(ctx: ServiceContext, s: DashboardSettings) -> ssl.SSLContext | None:
+    """The HTTPS context of `tls_cert`/`tls_key` (None: plain HTTP); ConfigError when unusable."""
+    if bool(s.tls_cert) != bool(s.tls_key):
+        raise ConfigError("[dashboard] tls_cert and tls_key go together: set both or neither")
+    if not s.tls_cert:
+        return None
+    cert = resolve_path(ctx.config, s.tls_cert)
+    key = resolve_path(ctx.config, s.tls_key)
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:
+        context.load_cert_chain(cert, key)
+    except (OSError, ssl.SSLError) as exc:
+        raise ConfigError(f"[dashboard] tls_cert {cert} / tls_key {key}: "
+                          f"{getattr(exc, 'strerror', None) or exc}") from None
+    return context
+
+
+def make_gate(s: DashboardSettings, secure: bool, guard: Guard) -> login.Gate | None:
+    """The login gate when the page is served beyond loopback (or `login = "always"`);
+    the secrets are made on first start."""
+    if not web_auth.login_required(s.host, s.login):
+        return None
+    store = web_auth.SecretStore(web_auth.state_dir())
+    try:
+        made = store.ensure()
+    except (web_auth.SecretError, OSError) as exc:
+        raise ConfigError(f"dashboard login secrets: {exc}") from None
+    for role in made:
+        print(f"dashboard: made the {role} secret in {web_auth.secret_path(role, store.folder)} "
+              f"(`buddybot secret show {role}` prints it)", flush=True)
+    return login.Gate(store, secure, s.session_hours * 3600.0, guard.hosts)
+
+
 async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
     board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
+    tls = tls_context(ctx, s)
     guard = guard_for(s, s.host, log)
     accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
-    app = App(board, guard)
+    app = App(board, guard, make_gate(s, tls is not None, guard))
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()
-    site = GuardedSite(runner, s.host or None, s.port, guard)
+    site = GuardedSite(runner, s.host or None, s.port, guard, ssl_context=tls)
     try:
         await site.start()
     except OSError as exc:
@@ -110,7 +158,9 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     port = runner.addresses[0][1] if runner.addresses else s.port
     watch = ListenerWatch(site.listener)
     ctx.alive_checks.append(watch.alive)
-    print(f"dashboard serving http://{local_host(s.host)}:{port}/", flush=True)
+    scheme = "https" if tls else "http"
+    print(f"dashboard serving {scheme}://{local_host(s.host)}:{port}/"
+          f"{' (login required)' if app.gate else ''}", flush=True)
 
     loop = asyncio.get_running_loop()
     mailbox = Mailbox(loop, board.deliver)
@@ -136,6 +186,7 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
                 continue
             board.set_bus(node.connected())
             board.refresh_map()
+            await app.end_stale_sessions()
             d = node.diagnostics.values
             d["pages"] = len(board.pages)
             d["images_sent"] = board.images_sent

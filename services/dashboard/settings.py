@@ -7,7 +7,7 @@ the page has buttons that act on the robot).
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -64,3 +64,18 @@ class DashboardSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
         ge=1, le=64, extra={"live": True},
         description="dashboard pages connected at once at most (lowering it cuts no page "
         "already connected)")] = 8
+    # Beyond loopback anyone on the network could press the buttons: a login
+    # (the per-robot secrets of `buddybot secret`) is asked for there.
+    login: Annotated[Literal["auto", "always"], msgspec.Meta(
+        description="when the page asks for a login: auto (only when served beyond "
+        "loopback) or always")] = "auto"
+    session_hours: Annotated[float, msgspec.Meta(
+        ge=0.1, le=720.0, description="hours a login lasts (rotating or revoking the "
+        "secret ends it at once)")] = 12.0
+    # Paths relative to the config file's folder; both or neither.
+    tls_cert: Annotated[str, msgspec.Meta(
+        max_length=4096, examples=["/etc/buddybot/certs/robot.crt"],
+        description="PEM certificate (chain) to serve HTTPS with (empty: plain HTTP)")] = ""
+    tls_key: Annotated[str, msgspec.Meta(
+        max_length=4096, examples=["/etc/buddybot/certs/robot.key"],
+        description="PEM private key of tls_cert")] = ""

@@ -13,6 +13,8 @@ listens where the bridge is configured to serve. For each connection it:
 * refuses a Host that is not a name the bridge is served at (421) and a
   browser Origin that is not allowed (403): the Foxglove app's origins and
   pages from this machine's loopback by default (`allowed_origins`);
+* beyond loopback, refuses a request without the bridge's token (401,
+  `token.py`), and ends an open connection once its token is rotated away;
 * else forwards the bytes both ways, headers included, untouched.
 
 It runs its own asyncio loop in a thread (the bridge is thread-based).
@@ -30,7 +32,9 @@ import os
 import threading
 import time
 from collections.abc import Collection
+from typing import Any
 
+from buddybot.foxglove.token import RECHECK_S, TokenCheck, given_token
 from buddybot.runtime.endpoints import serve_failure
 from buddybot.runtime.errors import ServeError
 from buddybot.runtime.limits import clip
@@ -78,8 +82,12 @@ def sdk_listening(port: int) -> bool | None:
 class Gate:
     """The gate's listener, its loop thread and what it counted."""
 
-    def __init__(self, guard: Guard, origins: Collection[str], upstream_port: int) -> None:
+    def __init__(self, guard: Guard, origins: Collection[str], upstream_port: int,
+                 token: TokenCheck | None = None) -> None:
         self.guard = guard
+        self.token = token
+        """None: served on loopback, no token asked."""
+        self.tokens_refused = 0
         self.origins = tuple(origins)
         self.upstream_port = upstream_port
         self.origins_refused = 0
@@ -146,6 +154,7 @@ class Gate:
 
     def counters(self) -> dict[str, int]:
         return {**self.guard.counters(), "origins_refused": self.origins_refused,
+                "tokens_refused": self.tokens_refused,
                 "accept_errors": self.accept_log.accept_errors}
 
     # -- one client --
@@ -193,13 +202,38 @@ class Gate:
             await _answer(writer, 403, "Forbidden", f"origin {clip(origin, 80)} may not "
                           "connect (see foxglove.allowed_origins)")
             return
+        token = given_token(head, fields) if self.token is not None else None
+        if self.token is not None and not self.token.allows(token):
+            self.tokens_refused += 1
+            self.guard.warn("token", "refused a Foxglove connection from %s: %s token",
+                            conn.address, "no" if token is None else "a wrong")
+            await _answer(writer, 401, "Unauthorized", "a token is required: connect to "
+                          "ws://HOST:PORT/?token=... (`buddybot secret show foxglove`)")
+            return
         up_reader, up_writer = await asyncio.open_connection("127.0.0.1", self.upstream_port)
         try:
             up_writer.write(head)
-            await asyncio.gather(_pipe(reader, up_writer), _pipe(up_reader, writer),
-                                 return_exceptions=True)
+            piping = asyncio.gather(_pipe(reader, up_writer), _pipe(up_reader, writer),
+                                    return_exceptions=True)
+            if self.token is None:
+                await piping
+            else:
+                await self._while_token_holds(token, piping)
         finally:
             up_writer.transport.abort()
+
+    async def _while_token_holds(self, token: str | None, piping: asyncio.Future[Any]
+                                 ) -> None:
+        """Wait for the connection to end; end it first if its token stops holding."""
+        assert self.token is not None
+        while not piping.done():
+            await asyncio.wait([piping], timeout=RECHECK_S)
+            if not piping.done() and not self.token.allows(token):
+                log.info("a Foxglove connection ended: its token was rotated or revoked")
+                piping.cancel()
+                with contextlib.suppress(asyncio.CancelledError):
+                    await piping
+                return
 
 
 async def _answer(writer: asyncio.StreamWriter, status: int, reason: str, text: str) -> None:

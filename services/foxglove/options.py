@@ -17,6 +17,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings_option(parser, "--port", struct=FoxgloveSettings, field="port")
     settings_option(parser, "--host", struct=FoxgloveSettings, field="host")
     settings_option(parser, "--max-image-fps", struct=FoxgloveSettings, field="max_image_fps")
+    settings_option(parser, "--login", struct=FoxgloveSettings, field="login")
 
 
 def settings_from(ctx: ServiceContext) -> FoxgloveSettings:

@@ -21,9 +21,10 @@ A Foxglove WebSocket server (the `foxglove-sdk` package) fed by one node:
 
 Clients reach the SDK's server (on loopback, at a free port) through the
 gate (`gate.py`): names, origins, header timeout and connection caps are
-checked there. The server starts before the node, so a busy port fails at once (one line,
-exit 1) rather than after the router was found. Bad payloads are counted
-and dropped by the node (`malformed` in diagnostics), never shown.
+checked there, and beyond loopback the token (`token.py`). The server
+starts before the node, so a busy port fails at once (one line, exit 1)
+rather than after the router was found. Bad payloads are counted and
+dropped by the node (`malformed` in diagnostics), never shown.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from buddybot.foxglove.gate import Gate
 from buddybot.foxglove.options import add_arguments, settings_from
 from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
+from buddybot.foxglove.token import token_check
 from buddybot.runtime.endpoints import is_wildcard, local_host
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.handles import Subscription
@@ -263,7 +265,8 @@ def gate_of(settings: FoxgloveSettings, upstream_port: int) -> Gate:
     connection holds three descriptors (client, upstream, the SDK's end)."""
     guard = guard_for(settings, settings.host, logging.getLogger("buddybot.foxglove"),
                       per_connection=3)
-    return Gate(guard, settings.allowed_origins, upstream_port)
+    return Gate(guard, settings.allowed_origins, upstream_port,
+                token_check(settings.host, settings.login))
 
 
 def run(ctx: ServiceContext) -> int:

@@ -7,7 +7,7 @@ can set the eyes' expression and play sounds).
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -51,3 +51,8 @@ class FoxgloveSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
         msgspec.Meta(max_length=64, description="browser origins allowed to connect "
                      "(pages from this machine's loopback always are)")] = msgspec.field(
         default_factory=lambda: list(DEFAULT_ORIGINS))
+    # Beyond loopback anyone on the network could set expressions and play
+    # sounds: a token (`buddybot secret show foxglove`) is asked for there.
+    login: Annotated[Literal["auto", "always"], msgspec.Meta(
+        description="when a client must bring the bridge's token: auto (only when "
+        "served beyond loopback) or always")] = "auto"

@@ -25,10 +25,8 @@ benchmarks/identity.py).
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import os
-import stat
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,6 +34,8 @@ from pathlib import Path
 import msgspec
 import numpy as np
 import numpy.typing as npt
+
+from buddybot.runtime.private_files import private_problem, write_private
 
 MAGIC = b"BUDDYBOT-GALLERY 1\n"
 MAX_NAME = 64
@@ -198,13 +198,10 @@ def decode(data: bytes, model: str, where: str = "gallery") -> Gallery:
 
 def check_private(st: os.stat_result, path: Path) -> None:
     """GalleryError unless `path` is a regular file of ours that no one else may read or write."""
-    if not stat.S_ISREG(st.st_mode):
-        raise GalleryError(f"{path} is not a regular file")
-    if st.st_uid != os.getuid():
-        raise GalleryError(f"{path} belongs to uid {st.st_uid}, not to this user ({os.getuid()})")
-    if st.st_mode & 0o077:
-        raise GalleryError(f"{path} is accessible to others (mode {stat.S_IMODE(st.st_mode):o}): "
-                           f"it holds biometric data; check who changed it, then chmod 600 it")
+    problem = private_problem(st, path, "it holds biometric data; check who changed it, "
+                              "then chmod 600 it")
+    if problem is not None:
+        raise GalleryError(problem)
 
 
 def load(path: Path, model: str) -> Gallery:
@@ -227,25 +224,4 @@ def load(path: Path, model: str) -> Gallery:
 
 def save(path: Path, g: Gallery) -> None:
     """Write `g` to `path` atomically, owner-only (the old file stays whole on any failure)."""
-    data = encode(g)
-    folder = path.parent
-    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
-    tmp = folder / f".{path.name}.{os.getpid()}.tmp"
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0),
-                 0o600)
-    try:
-        os.fchmod(fd, 0o600)
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        raise
-    dir_fd = os.open(folder, os.O_RDONLY)
-    try:
-        os.fsync(dir_fd)
-    finally:
-        os.close(dir_fd)
+    write_private(path, encode(g))

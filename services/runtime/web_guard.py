@@ -36,6 +36,7 @@ import ipaddress
 import logging
 import resource
 import socket
+import ssl
 import time
 from collections.abc import Awaitable, Callable, Collection, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -496,8 +497,8 @@ class GuardedSite(web.TCPSite):
     __slots__ = ("guard",)
 
     def __init__(self, runner: web.BaseRunner, host: str | None, port: int,
-                 guard: Guard) -> None:
-        super().__init__(runner, host, port)
+                 guard: Guard, ssl_context: ssl.SSLContext | None = None) -> None:
+        super().__init__(runner, host, port, ssl_context=ssl_context)
         self.guard = guard
 
     async def start(self) -> None:
@@ -508,7 +509,7 @@ class GuardedSite(web.TCPSite):
         inner: Callable[[], asyncio.Protocol] = server
         self._server = await loop.create_server(
             lambda: _Guarded(self.guard, inner()), self._host, self._port,
-            backlog=self._backlog)
+            ssl=self._ssl_context, backlog=self._backlog)
         sockets = self._server.sockets
         self._bound_port = sockets[0].getsockname()[1] if sockets else self._port
 

@@ -44,9 +44,10 @@ pytestmark = pytest.mark.integration
 
 
 def start_dashboard(spawn: Callable[..., Process], *args: str,
+                    env: dict[str, str] | None = None,
                     nofile: int | None = None) -> tuple[Process, int]:
     port = free_port()
-    proc = spawn("dashboard", "--port", str(port), *args, nofile=nofile)
+    proc = spawn("dashboard", "--port", str(port), *args, env=env, nofile=nofile)
     wait_port(port, 30)
     return proc, port
 

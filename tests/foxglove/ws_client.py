@@ -40,9 +40,10 @@ class FoxgloveClient:
         self.responses: dict[int, bytes | CallFailed] = {}
 
     @classmethod
-    async def connect(cls, port: int) -> FoxgloveClient:
-        ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=[SUBPROTOCOL],
-                                      max_size=None)
+    async def connect(cls, port: int, path: str = "") -> FoxgloveClient:
+        """Connect to `ws://127.0.0.1:PORT` + `path` (e.g. "/?token=...")."""
+        ws = await websockets.connect(f"ws://127.0.0.1:{port}{path}",
+                                      subprotocols=[SUBPROTOCOL], max_size=None)
         client = cls(ws)
         await client.until(lambda: bool(client.server_info), 10, "serverInfo")
         return client

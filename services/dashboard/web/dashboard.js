@@ -70,6 +70,9 @@ function showReply(r) { const el = $("reply"); el.textContent = r.text; el.class
 const handlers = {
   hello(v) {
     D.hello = v; D.enums = v.enums; D.span = v.history_s;
+    D.viewer = v.role === "viewer";  // the server refuses a viewer's presses anyway
+    $("control").disabled = D.viewer;
+    $("control-row").title = D.viewer ? VIEWER_ONLY : "";
     D.offsetMs = v.now * 1000 - Date.now();
     $("camera-name").textContent = v.camera;
     if ($("eye-frame").src !== v.eye_url) $("eye-frame").src = v.eye_url;
@@ -527,6 +530,7 @@ function showNodes() {
 // takes the robot from its own behaviour or an app by surprise.
 const GAZE = { left: [-0.5, 0], right: [0.5, 0], up: [0, 0.35], down: [0, -0.35], centre: [0, 0] };
 const NEEDS_CONTROL = "take control first (the switch above): the robot's own behaviour or an app drives now";
+const VIEWER_ONLY = "logged in as a viewer: you may watch, only an operator may press";
 for (const b of document.querySelectorAll("#gaze-buttons button")) {
   b.dataset.title = b.title;
   const [yaw, pitch] = GAZE[b.dataset.gaze];
@@ -547,8 +551,8 @@ function showControl() {
   else put(el, "off: buttons locked");
   el.className = holding ? "holding" : "dim";
   for (const b of document.querySelectorAll(".needs-control button")) {
-    b.disabled = !holding;
-    b.title = holding ? (b.dataset.title || "") : NEEDS_CONTROL;
+    b.disabled = !holding || D.viewer;
+    b.title = D.viewer ? VIEWER_ONLY : holding ? (b.dataset.title || "") : NEEDS_CONTROL;
   }
 }
 function until(t) {

@@ -1,0 +1,53 @@
+"""Owner-only files: the one way BuddyBot keeps what others must not read.
+
+The identity gallery (biometric data) and the web surfaces' login secrets
+are such files. Both need the same two rules: a file is used only when it
+is a regular file of this user that no one else may read or write, and it
+is written atomically (a temporary file, fsynced, renamed, the folder
+fsynced), owner-only from its first byte, so a crash leaves the old file
+or the new one, never half of one, and never a moment where it is readable.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import stat
+from pathlib import Path
+
+
+def private_problem(st: os.stat_result, path: Path, advice: str) -> str | None:
+    """Why `path` (whose stat is `st`) is not a private file of ours; None when it is.
+    `advice` (what the file holds, what to do) ends the text when others may read it."""
+    if not stat.S_ISREG(st.st_mode):
+        return f"{path} is not a regular file"
+    if st.st_uid != os.getuid():
+        return f"{path} belongs to uid {st.st_uid}, not to this user ({os.getuid()})"
+    if st.st_mode & 0o077:
+        return f"{path} is accessible to others (mode {stat.S_IMODE(st.st_mode):o}): {advice}"
+    return None
+
+
+def write_private(path: Path, data: bytes) -> None:
+    """Replace `path` with `data` atomically, owner-only (its folder made 0700 when new)."""
+    folder = path.parent
+    folder.mkdir(parents=True, exist_ok=True, mode=0o700)
+    tmp = folder / f".{path.name}.{os.getpid()}.tmp"
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | getattr(os, "O_NOFOLLOW", 0),
+                 0o600)
+    try:
+        os.fchmod(fd, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+    dir_fd = os.open(folder, os.O_RDONLY)
+    try:
+        os.fsync(dir_fd)
+    finally:
+        os.close(dir_fd)
