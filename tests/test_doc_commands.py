@@ -66,7 +66,8 @@ PLACEHOLDERS = {"VERB", "SERVICE", "ACTION"}
 """Synopsis words standing for a choice: a span containing one is not parsed."""
 EXTERNAL = {"zenoh", "sudo", "install", "systemctl", "journalctl", "openssl", "pip",
             "apt-get", "git", "chromium", "espeak-ng", "sox", "ssh", "esphome",
-            "cd", "cp"}
+            "cd", "cp", "ls", "udevadm", "v4l2-ctl", "aplay", "speaker-test", "useradd",
+            "usermod"}
 """Programs of the host (not this repository) that docs may show."""
 QUICK = {"keys", "config", "schemas"}
 """Verbs that only read or check: run as processes (with `--help` and `--version`)."""
