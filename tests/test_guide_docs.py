@@ -6,7 +6,8 @@ copies: every page says who it is for in its first line, the index lists
 every page, links lead to files and headings that exist, TOML snippets are
 configurations the config loader accepts, udev rules are well-formed rule
 lines, systemd unit and desktop-entry snippets have their sections, keys and
-a `buddybot` command the CLI accepts, `/etc/buddybot/env` lines name variables
+a `buddybot` command the CLI accepts, the units they name are shipped,
+`/etc/buddybot/env` lines name variables
 of deploy/systemd/env, and repository paths the pages name exist.
 """
 
@@ -23,6 +24,7 @@ from pathlib import Path
 import pytest
 
 from buddybot.runtime.config import parse_config
+from tests.test_design_doc import _slug
 from tests.test_doc_commands import _blocks, buddybot_argv, check_buddybot
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,12 +74,6 @@ def test_the_index_lists_every_page() -> None:
     text = INDEX.read_text(encoding="utf-8")
     for heading in ("## Tutorial", "## How-to guides", "## Reference", "## Explanation"):
         assert heading in text, f"docs/README.md: no section {heading!r}"
-
-
-def _slug(heading: str) -> str:
-    """GitHub's anchor of a heading: lower case, punctuation dropped, spaces to '-'."""
-    text = re.sub(r"[^\w\- ]", "", heading.strip().lower())
-    return text.replace(" ", "-")
 
 
 def _anchors(page: Path) -> set[str]:
@@ -271,3 +267,16 @@ def test_every_dependency_says_why_it_is_there() -> None:
     missing = sorted(_requirement_names() - rows)
     assert not missing, f"docs/dependencies.md has no row for {missing}"
     assert "eclipse-zenoh" in rows and "pytest" in rows
+
+
+USER_UNITS = {"buddybot-eyes-kiosk.service"}
+"""Units a how-to writes out in full (a desktop user's), not shipped in deploy/systemd."""
+
+
+@pytest.mark.parametrize("page", HOWTOS, ids=_ids(HOWTOS))
+def test_units_the_pages_name_are_shipped(page: Path) -> None:
+    named = set(re.findall(r"buddybot[\w.-]*\.(?:service|target)",
+                           page.read_text(encoding="utf-8")))
+    shipped = {p.name for p in (ROOT / "deploy" / "systemd").iterdir()}
+    missing = sorted(named - shipped - USER_UNITS)
+    assert not missing, f"{_rel(page)}: no such unit in deploy/systemd: {missing}"
