@@ -7,8 +7,8 @@ every page, links lead to files and headings that exist, TOML snippets are
 configurations the config loader accepts, udev rules are well-formed rule
 lines, systemd unit and desktop-entry snippets have their sections, keys and
 a `buddybot` command the CLI accepts, the units they name are shipped,
-`/etc/buddybot/env` lines name variables
-of deploy/systemd/env, and repository paths the pages name exist.
+`/etc/buddybot/env` lines name variables of deploy/systemd/env, and
+repository paths the pages name exist.
 """
 
 from __future__ import annotations
