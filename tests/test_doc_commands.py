@@ -22,6 +22,10 @@ that start with `buddybot `. Then:
 * the tutorial of docs/apps.md is run as a reader would, in order, against
   `up --sim` (`test_the_apps_tutorial_runs`, integration): `app new hello`,
   `app run hello.py` as generated and as edited on the page, `[apps]`;
+* so is docs/tutorial.md (`test_the_tutorial_runs`, integration): its
+  `robot.toml`, `config` of it, `scripts/run.sh --config robot.toml` (as the
+  `up` it runs), `echo` of the sound status until the spoken greeting
+  succeeds, `app new` and `app run`; only `apt-get` is not run;
 * other commands: `scripts/...` and `benchmarks/...` run directly must
   exist and be executable; files given to `.venv/bin/python` and paths
   given to pytest must exist; `make TARGET` must be a Makefile target;
@@ -36,6 +40,7 @@ import io
 import os
 import re
 import shlex
+import shutil
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -49,7 +54,8 @@ from buddybot.runtime.service import add_common_arguments
 from buddybot.tools import testing
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+DOCS = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")),
+        *sorted((ROOT / "docs" / "howto").glob("*.md"))]
 GUIDES = [ROOT / "deploy" / "README.md"]
 """Checked for `buddybot` and repository commands only: they show many host tools."""
 FENCE = re.compile(r"^\s*```(\S*)\s*$")
@@ -60,7 +66,8 @@ PLACEHOLDERS = {"VERB", "SERVICE", "ACTION"}
 """Synopsis words standing for a choice: a span containing one is not parsed."""
 EXTERNAL = {"zenoh", "sudo", "install", "systemctl", "journalctl", "openssl", "pip",
             "apt-get", "git", "chromium", "espeak-ng", "sox", "ssh", "esphome",
-            "cd", "cp"}
+            "cd", "cp", "ls", "udevadm", "v4l2-ctl", "aplay", "speaker-test", "useradd",
+            "usermod"}
 """Programs of the host (not this repository) that docs may show."""
 QUICK = {"keys", "config", "schemas"}
 """Verbs that only read or check: run as processes (with `--help` and `--version`)."""
@@ -360,3 +367,83 @@ def test_the_apps_tutorial_runs(tmp_path: Path) -> None:
         assert "[apps] run (robot.toml):\n  hello.py" in listed.stdout, listed.stdout
     finally:
         up.stop(30)
+
+
+# --- docs/tutorial.md: run as a reader would, in order -----------------------------------
+
+TUTORIAL = ROOT / "docs" / "tutorial.md"
+NOT_RUN = {"sudo", "apt-get"}
+"""Tutorial commands that change the host (installing espeak-ng): validated only."""
+
+
+@pytest.mark.integration
+@pytest.mark.skipif(shutil.which("espeak-ng") is None,
+                    reason="the tutorial's greeting is spoken: needs espeak-ng "
+                           "(scripts/test-packages.sh installs it)")
+def test_the_tutorial_runs(tmp_path: Path) -> None:
+    """Every command of docs/tutorial.md, in its order, in a reader's folder: the
+    page's `robot.toml`, `config` of it, `scripts/run.sh` (the `up` it execs) with
+    and without it, `echo` of the sound status until the greeting written on the
+    page has been spoken (rendered by espeak-ng into this test's temporary folder),
+    `app new hello` and `app run hello.py`. A command the test does not know fails it."""
+    (toml,) = [b for b in _blocks(TUTORIAL, "toml") if "[audio.sounds]" in b]
+    assert "say:" in toml
+    # A test host must stay silent: the null device plays in real time like a card.
+    (tmp_path / "robot.toml").write_text(toml + '\n[audio_player]\nbackend = "null"\n')
+    env = {k: v for k, v in os.environ.items() if k != "BUDDYBOT_CONFIG"}
+    tts = tmp_path / "tts"
+    tts.mkdir()
+    endpoint = f"tcp/127.0.0.1:{testing.free_port()}"
+    ports = [str(testing.free_port()) for _ in range(2)]
+    logs = tmp_path / "logs"
+
+    def local(argv: list[str]) -> list[str]:
+        """The page's file names, in the reader's folder."""
+        return [str(tmp_path / a) if a in ("robot.toml", "hello.py") else a for a in argv]
+
+    up: testing.Process | None = None
+    ran: list[str] = []
+    try:
+        for command in (c for c in commands_in(TUTORIAL) if not c.inline):
+            argv = words(command.text)
+            bb = buddybot_argv(argv)
+            if argv[0] in NOT_RUN:
+                continue
+            ran.append(command.text)
+            if argv[0] == "scripts/run.sh":
+                if up is not None:
+                    up.stop(30)
+                up = testing.Process(testing.buddybot_argv(
+                    "up", *local(argv[1:]), "--no-browser", "--listen", endpoint,
+                    "--eye-port", ports[0], "--dashboard-port", ports[1],
+                    "--status-period", "1"), f"up-{len(ran)}", logs, env={"TMPDIR": str(tts)})
+                up.wait_for_output(" | face ", 120)
+            elif bb is not None and bb[0] == "config":
+                done = subprocess.run(testing.buddybot_argv(*local(bb)), cwd=tmp_path, env=env,
+                                      capture_output=True, text=True, timeout=60)
+                assert done.returncode == 0, done.stderr
+                assert "say:Hello" in done.stdout, done.stdout
+            elif bb is not None and bb[0] == "echo":
+                assert up is not None, "the page echoes before it starts the robot"
+                echo = testing.Process(testing.buddybot_argv(*bb, "--connect", endpoint),
+                                       "echo", logs)
+                echo.wait_for_output('"state":"SUCCEEDED"', 120)
+                echo.stop()
+                assert "play_sound 'greeting'" in up.output()
+                assert list((tts / "buddybot-tts").glob("*.wav")), "nothing was spoken"
+            elif bb is not None and bb[:2] == ["app", "new"]:
+                done = subprocess.run(testing.buddybot_argv(*bb), cwd=tmp_path, env=env,
+                                      capture_output=True, text=True, timeout=60)
+                assert done.returncode == 0 and (tmp_path / "hello.py").is_file(), done.stderr
+            elif bb is not None and bb[:2] == ["app", "run"]:
+                app = testing.Process(testing.buddybot_argv(*local(bb), "--connect", endpoint),
+                                      "hello", logs)
+                app.wait_for_output("hello: watching robot buddy; present now:", 60)
+                assert app.stop() == 0
+            else:
+                pytest.fail(f"docs/tutorial.md: this test does not run `{command.text}`")
+    finally:
+        if up is not None:
+            up.stop(30)
+    assert sum(1 for c in ran if c.startswith("scripts/run.sh")) == 2, ran
+    assert any(c.startswith(".venv/bin/buddybot app run") for c in ran), ran
