@@ -22,6 +22,8 @@ import tempfile
 import time
 from pathlib import Path
 
+import results
+
 from buddybot.tools.testing import (
     HeldSockets,
     Process,
@@ -101,4 +103,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(results.run(__file__, main))
