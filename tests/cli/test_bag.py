@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -20,8 +21,9 @@ from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
-from buddybot.tools import bag
+from buddybot.tools import bag, mcap_records
 from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
+from tests.tools.mcap_bomb import write_bomb
 from tests.tools.test_bag import concrete_key, samples, write_recording
 
 
@@ -336,3 +338,35 @@ def test_latched_keys_reach_late_subscribers_and_unknown_channels_are_named(
     assert not late.on(key)  # a plain subscriber after the put gets nothing: history did it
     player.send_signal(signal.SIGINT)
     assert wait_exit(player, 10) == 0
+
+
+@pytest.mark.integration
+def test_a_decompression_bomb_is_refused_before_it_is_inflated(tmp_path: Path) -> None:
+    """34 kB holding a 1 GiB message: refused from the chunk's declared size, with
+    the player's memory a fraction of the message (it took 2.1 GB before)."""
+    path = tmp_path / "bomb.mcap"
+    assert write_bomb(path, 1 << 30) < 64 * 1024
+    for verb in ("play", "info"):
+        result, peak_kb = run_measured(buddybot_argv("bag", verb, str(path)))
+        assert peak_kb < 256 * 1024, peak_kb
+        if verb == "info":  # the summary alone is fine: info reads nothing else
+            assert result.returncode == 0, result.stderr
+            continue
+        assert result.returncode == 1, result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert lines == [f"buddybot bag: {path}: refused: a chunk of 1073741855 bytes is over "
+                         f"the limit of {mcap_records.MAX_CHUNK_BYTES} bytes (64 MiB)"]
+
+
+_MEASURE = ("import resource, subprocess, sys\n"
+            "r = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+            "sys.stderr.write(r.stderr)\n"
+            "print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")
+
+
+def run_measured(argv: list[str]) -> tuple[subprocess.CompletedProcess[str], int]:
+    """Run `argv` under a fresh parent that reports its peak RSS (kB): (result, peak)."""
+    outer = subprocess.run([sys.executable, "-c", _MEASURE, *argv], capture_output=True,
+                           text=True, timeout=120)
+    status, peak = outer.stdout.split()
+    return subprocess.CompletedProcess(argv, int(status), "", outer.stderr), int(peak)
