@@ -237,7 +237,8 @@ def play(ctx: ServiceContext) -> int:
     start_ns = info.start_ns + round(args.start * 1e9) if args.start else None
     if start_ns is not None and start_ns > info.end_ns:
         raise UsageError(f"--start {args.start:g}: the recording lasts {info.duration_s:.1f} s")
-    node = _play_node(ctx, robot or info.metadata.get("robot") or ctx.robot)
+    recorded = info.metadata.get("robot", "")  # the file's word: used only when valid
+    node = _play_node(ctx, robot or (recorded if keys.valid_robot_id(recorded) else ctx.robot))
     stats = PlayStats()
     tty = sys.stderr.isatty()
     with node:

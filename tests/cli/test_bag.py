@@ -460,3 +460,18 @@ def test_a_full_disk_ends_with_an_exact_summary_and_a_recoverable_file(
     assert result.returncode == 0, result.stderr
     assert bag.open_recording(fixed).info.messages == found.messages > 0
     print(f"full disk: {lines[0]}")
+
+
+@pytest.mark.integration
+def test_a_recorded_robot_id_of_thousands_of_characters_is_not_used(
+        router: Router, tmp_path: Path) -> None:
+    """The file's metadata names the player's robot; an invalid one was a traceback."""
+    path = tmp_path / "long-robot.mcap"
+    key = concrete_key(keys.PUPIL)
+    write_recording(path, [(key, keys.PUPIL.codec.encode(
+        m.PupilControl(stamp_ns=m.now_ns(), dilation_percentage=3)), time.time_ns())],
+        robot="r" * 5000)
+    result = run_bag(router, "play", str(path), "--wait", "0")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("played 1 messages on 1 keys")
