@@ -3,6 +3,7 @@
     buddybot bag record -o visit.mcap [--duration S] [KEY ...] [--images]
     buddybot bag play visit.mcap [--rate R] [--loop] [--start S] [--keys KEY ...] [--robot ID]
     buddybot bag info visit.mcap [--json]
+    buddybot bag recover cut.mcap -o visit.mcap
 
 `record` subscribes to every topic of the catalogue but images (`--images`
 adds the camera frames, JPEG-compressed) or to the KEYs given, and writes
@@ -15,6 +16,10 @@ exit 1, nothing published), then republishes each message on its key
 (`--robot` moves it to another robot) with its recorded payload, so stamps
 stay as recorded, at the recorded pace divided by `--rate`. Latched keys
 are published as the services publish them, so late subscribers get them.
+
+`recover` copies what a recorder killed with SIGKILL, or stopped by a full
+disk, left (every record up to the last complete chunk) into a new,
+finished file, and says how many messages it holds and how much was cut.
 
 Exit status: 0 done (or stopped with Ctrl-C), 1 an unreadable file or no
 router, 2 bad usage.
@@ -41,8 +46,8 @@ from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node, Publisher
 from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.session import CONNECT_TIMEOUT_S, RouterUnreachable, zenoh_config
-from buddybot.tools import bag, probing
-from buddybot.tools.bag_record import Recorder
+from buddybot.tools import bag, bag_recover, probing
+from buddybot.tools.bag_record import Progress, Recorder
 
 HELP = "record the robot's keys to an MCAP file, replay one, or describe one"
 PLAY_NODE = "bag-play"
@@ -137,6 +142,8 @@ def record(ctx: ServiceContext) -> int:
                   file=sys.stderr)
     if tty:
         print(file=sys.stderr)
+    if recorder.error is not None:
+        return _failed(args.output, recorder.error, final, elapsed)
     extra = "".join(f", {n} {what}" for n, what in ((final.dropped, "dropped (queue full)"),
                                                      (final.malformed, "malformed (skipped)"),
                                                      (final.unknown, "not in the catalogue"))
@@ -144,10 +151,26 @@ def record(ctx: ServiceContext) -> int:
     keys_seen = len(recorder.writer.stats.per_key)
     print(f"recorded {final.written} messages on {keys_seen} keys, {_megabytes(final.bytes)}, "
           f"{elapsed:.1f} s{extra} -> {args.output}", file=sys.stderr, flush=True)
-    if recorder.error is not None:
-        print(f"buddybot bag: writing {args.output} failed: {recorder.error}", file=sys.stderr)
-        return 1
     return 0
+
+
+def _failed(output: str, error: BaseException, final: Progress, elapsed: float) -> int:
+    """The summary of a recording the disk stopped: what the file really holds
+    (read back, up to its last complete chunk), not what was handed to the writer."""
+    reason = getattr(error, "strerror", None) or str(error) or type(error).__name__
+    try:
+        found = bag_recover.scan(output)
+    except bag.BagError as exc:
+        print(f"buddybot bag: writing {output} failed after {final.written} messages "
+              f"({reason}); nothing readable: {exc}", file=sys.stderr, flush=True)
+        return 1
+    print(f"recorded {found.messages} of {final.written} messages, "
+          f"{_megabytes(found.readable_bytes)} readable of {_megabytes(found.size)} written, "
+          f"{elapsed:.1f} s -> {output}", file=sys.stderr)
+    print(f"buddybot bag: writing {output} failed: {reason}; the file has no summary: "
+          f"`buddybot bag recover {output} -o FILE` copies its {found.messages} messages "
+          "into a finished file", file=sys.stderr, flush=True)
+    return 1
 
 
 def _progress(recorder: Recorder, elapsed: float) -> None:
@@ -214,7 +237,8 @@ def play(ctx: ServiceContext) -> int:
     start_ns = info.start_ns + round(args.start * 1e9) if args.start else None
     if start_ns is not None and start_ns > info.end_ns:
         raise UsageError(f"--start {args.start:g}: the recording lasts {info.duration_s:.1f} s")
-    node = _play_node(ctx, robot or info.metadata.get("robot") or ctx.robot)
+    recorded = info.metadata.get("robot", "")  # the file's word: used only when valid
+    node = _play_node(ctx, robot or (recorded if keys.valid_robot_id(recorded) else ctx.robot))
     stats = PlayStats()
     tty = sys.stderr.isatty()
     with node:
@@ -355,8 +379,30 @@ def print_info(path: str, *, as_json: bool) -> int:
     return 0
 
 
+# --- recover ------------------------------------------------------------------------
+
+
+def _add_recover(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="IN", help="a recording cut short (killed, disk full)")
+    parser.add_argument("-o", "--output", metavar="OUT", required=True,
+                        help="the finished recording to write")
+
+
+def recover(ctx: ServiceContext) -> int:
+    """Copy a cut recording's complete records into a finished file."""
+    args = ctx.args
+    found = bag_recover.recover(args.file, args.output)
+    cut = (f", {found.cut_bytes} bytes after the last complete chunk cut"
+           if found.cut_bytes and not found.finished else "")
+    print(f"recovered {found.messages} messages, {_megabytes(found.readable_bytes)} of "
+          f"{_megabytes(found.size)}{cut} -> {args.output}", file=sys.stderr, flush=True)
+    return 0
+
+
 SUBVERBS = (
     SubVerb("record", "record the robot's keys to an MCAP file", _add_record, record),
     SubVerb("play", "replay an MCAP file on the robot's keys", _add_play, play),
     SubVerb("info", "describe an MCAP file: duration, channels, rates", _add_info, info),
+    SubVerb("recover", "copy what a killed recorder left into a finished MCAP file",
+            _add_recover, recover),
 )

@@ -24,7 +24,7 @@ from buddybot.cli import subverbs
 from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.runtime import options
+from buddybot.runtime import nesting, options
 from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
 from buddybot.runtime.service import ServiceContext
 
@@ -97,10 +97,12 @@ def dump_toml(reply: m.ParamReply) -> bytes:
 def load_table(path: str, table: str) -> dict[str, Any]:
     """The `[table]` of a TOML file (UsageError naming the file when it cannot be used)."""
     try:
-        data = msgspec.toml.decode(Path(path).read_bytes())
+        text = Path(path).read_bytes()
+        nesting.check_depth(text, toml=True)
+        data = msgspec.toml.decode(text)
     except OSError as exc:
         raise UsageError(f"{path}: cannot read: {exc.strerror}") from None
-    except msgspec.DecodeError as exc:
+    except (msgspec.DecodeError, nesting.TooDeep) as exc:
         raise UsageError(f"{path}: not valid TOML: {exc}") from None
     values = data.get(table) if isinstance(data, dict) else None
     if not isinstance(values, dict):

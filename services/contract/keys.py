@@ -22,19 +22,25 @@ from buddybot.contract import messages as m
 
 PREFIX_ROOT = "buddybot"
 DEFAULT_ROBOT = "buddy"
-_ROBOT_ID = re.compile(r"^[A-Za-z0-9_-]+$")
+ID_MAX = 64
+"""The longest robot id or name (node, camera, device) a key chunk may carry: ids
+come from files, flags and the network, and every key, log line and table
+holds them."""
+_ROBOT_ID = re.compile(rf"[A-Za-z0-9_-]{{1,{ID_MAX}}}")
 _PARAM = re.compile(r"\{(\w+)\}")
 
 
 def valid_robot_id(robot: str) -> bool:
-    """A robot id is one key chunk without wildcards or separators."""
-    return bool(_ROBOT_ID.match(robot))
+    """A robot id (or a node's, camera's name) is one key chunk of 1-ID_MAX
+    letters, digits, '-' or '_': no wildcards, separators or line breaks."""
+    return bool(_ROBOT_ID.fullmatch(robot))
 
 
 def prefix(robot: str) -> str:
     """`buddybot/<robot>`: the root of every key of one robot."""
     if not valid_robot_id(robot):
-        raise ValueError(f"invalid robot id {robot!r}: use letters, digits, '-' or '_'")
+        raise ValueError(f"invalid robot id {robot[:ID_MAX]!r}: use 1-{ID_MAX} letters, "
+                         "digits, '-' or '_'")
     return f"{PREFIX_ROOT}/{robot}"
 
 

@@ -35,8 +35,16 @@ from typing import Annotated, Any, Literal
 
 import msgspec
 
+from buddybot.runtime import nesting
 from buddybot.runtime.errors import ConfigError
 
+MAX_FILE_BYTES = 256 * 1024
+"""The largest style file read (the built-in one is 2.5 kB): a file of
+200,000 styles would take the renderer to gigabytes."""
+MAX_STYLES = 256
+"""Styles one file may define."""
+MAX_EXTENDS = 16
+"""Styles one `extends` chain may pass through."""
 EXPRESSIONS = ("AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR")
 """Pose names, in `ExpressionAction` order (contract/messages.py without the EYE_/ANIMATE_
 prefixes, as the page's EXPR table names them)."""
@@ -211,6 +219,8 @@ def parse(data: Any, source: str) -> dict[str, dict[str, Any]]:
     styles = data["styles"]
     if not isinstance(styles, dict):
         raise ConfigError(f"{source}: styles: expected an object of styles by name")
+    if len(styles) > MAX_STYLES:
+        raise ConfigError(f"{source}: styles: {len(styles)} styles, at most {MAX_STYLES}")
     out: dict[str, dict[str, Any]] = {}
     for name, raw in styles.items():
         where = f"styles.{name}"
@@ -272,30 +282,41 @@ def resolve(specs: Mapping[str, Mapping[str, Any]], source: str,
     known = dict(known or {})
     done: dict[str, dict[str, Any]] = {}
 
-    def flat(name: str, chain: tuple[str, ...]) -> dict[str, Any]:
-        if name in done:
-            return done[name]
-        if name in chain:
-            raise ConfigError(f"{source}: styles.{name}.extends: a loop "
-                              f"({' -> '.join((*chain, name))})")
-        spec = specs[name]
-        parent = spec.get("extends")
-        if parent is not None:
-            if parent in specs and parent != name:
-                under = flat(parent, (*chain, name))
-            elif parent in known:
+    def flat(name: str) -> dict[str, Any]:
+        """Follow `extends` up (a loop, not recursion: the chain is the file's
+        to choose), then layer from the top down."""
+        chain: list[str] = []
+        current = name
+        under: dict[str, Any] | None = None
+        while current not in done:
+            if current in chain:
+                raise ConfigError(f"{source}: styles.{current}.extends: a loop "
+                                  f"({' -> '.join([*chain[chain.index(current):], current])})")
+            if len(chain) >= MAX_EXTENDS:
+                raise ConfigError(f"{source}: styles.{name}.extends: a chain longer than "
+                                  f"{MAX_EXTENDS} styles")
+            chain.append(current)
+            parent = specs[current].get("extends")
+            if parent is None:
+                under = dict(known.get(current, {}))
+                break
+            if parent in specs and parent != current:
+                current = parent
+                continue
+            if parent in known:
                 under = dict(known[parent])
-            else:
-                raise ConfigError(f"{source}: styles.{name}.extends = {parent!r}: no such "
-                                  f"style (known: {', '.join(sorted({*specs, *known}))})")
-        else:
-            under = dict(known.get(name, {}))
-        done[name] = _layer(under, spec)
+                break
+            raise ConfigError(f"{source}: styles.{current}.extends = {parent!r}: no such "
+                              f"style (known: {', '.join(sorted({*specs, *known}))})")
+        if under is None:
+            under = done[current]
+        for step in reversed(chain):
+            under = done[step] = _layer(under, specs[step])
         return done[name]
 
     result: dict[str, Style] = {}
     for name in specs:
-        fields = flat(name, ())
+        fields = flat(name)
         missing = [f for f in STYLE_FIELDS if f not in fields]
         if missing:
             raise ConfigError(f"{source}: styles.{name}: missing {', '.join(missing)} "
@@ -317,8 +338,9 @@ def resolve(specs: Mapping[str, Mapping[str, Any]], source: str,
 
 def _decode(text: bytes, source: str) -> Any:
     try:
+        nesting.check_depth(text)
         return msgspec.json.decode(text)
-    except msgspec.DecodeError as exc:
+    except (msgspec.DecodeError, nesting.TooDeep) as exc:
         raise ConfigError(f"{source}: not valid JSON: {exc}") from None
 
 
@@ -336,9 +358,13 @@ def load(style_file: Path | None = None) -> StyleLibrary:
         return StyleLibrary(styles)
     source = str(style_file)
     try:
-        text = style_file.read_bytes()
+        with open(style_file, "rb") as stream:
+            text = stream.read(MAX_FILE_BYTES + 1)
     except OSError as exc:
         raise ConfigError(f"{source}: cannot read style file: {exc.strerror or exc}") from None
+    if len(text) > MAX_FILE_BYTES:
+        raise ConfigError(f"{source}: a style file is at most {MAX_FILE_BYTES // 1024} kB: "
+                          "not read")
     user = parse(_decode(text, source), source)
     known = {name: _known(style) for name, style in styles.items()}
     styles.update(resolve(user, source, known))

@@ -32,7 +32,12 @@ else MOVING; publish on change. What a real LD2410 adds, and the answer:
   recently. So a flood of ids each sent once churns one slot and never
   pushes out a sensor that was already there (and the person it sees),
   not even one still becoming established. A sensor whose first frame
-  comes in the middle of such a flood is only tracked once it ends.
+  comes in the middle of such a flood is only tracked once it ends. Once
+  the table has had to evict, a sensor that falls silent before it was
+  established is forgotten (and counted as evicted) after
+  `stale_after_s`, not reported as silent: the ids a flood leaves in the
+  table would otherwise read "15 of 16 sensor(s) silent" until someone
+  restarted the service.
 * Angle radars (LD2450) report targets with a position instead of one
   distance: `read_targets` keeps those the zones count (zones.py) and
   makes of them the same per-sensor reading, the nearest counted target's
@@ -246,8 +251,25 @@ class PresenceTracker:
         self._evicted += 1
 
     def tick(self, now_s: float) -> Verdict | None:
-        """Time passes: holds expire, silent sensors go stale."""
+        """Time passes: holds expire, silent sensors go stale, and ids that
+        went silent before they were established are forgotten."""
+        self._forget_unestablished(now_s)
         return self._evaluate(now_s, self._last_stamp)
+
+    def _forget_unestablished(self, now_s: float) -> None:
+        """Once the table has had to evict (a flood of ids), a sensor never
+        established that falls silent never proved to be one (the flood's ids
+        each send a frame or two): it is forgotten, and counted as evicted,
+        rather than reported as a silent sensor for ever. Without a flood
+        nothing changes: a sensor dying in its first second is still reported."""
+        if self.evicted == 0:
+            return
+        limit = self.rules.stale_after_s
+        gone = [k for k, s in self._sensors.items()
+                if not s.established and now_s - s.seen_s > limit]
+        for key in gone:
+            self._sensors.pop(key)
+        self._evicted += len(gone)
 
     # -- state --
 

@@ -19,10 +19,11 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import msgspec
 
-from buddybot.contract.keys import DEFAULT_ROBOT, valid_robot_id
-from buddybot.runtime import registry
+from buddybot.contract.keys import DEFAULT_ROBOT, ID_MAX, valid_robot_id
+from buddybot.runtime import nesting, registry
 from buddybot.runtime.appspec import AppSpec, parse_app_spec
 from buddybot.runtime.errors import ConfigError
+from buddybot.runtime.limits import clip
 
 CONFIG_ENV = "BUDDYBOT_CONFIG"
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
@@ -164,13 +165,17 @@ def default_config() -> ConfigBase:
 def parse_config(data: bytes | str, source: str = "<config>") -> ConfigBase:
     """Decode TOML text into a validated Config, or raise ConfigError."""
     try:
+        nesting.check_depth(data, toml=True)
         config = msgspec.toml.decode(data, type=config_type())
+    except nesting.TooDeep as exc:
+        raise ConfigError(f"{source}: not valid TOML: {exc}") from None
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
         raise ConfigError(f"{source}: {_readable(exc)}") from None
     if config.source is not None:
         raise ConfigError(f"{source}: unknown key 'source'")
     if not valid_robot_id(config.robot.id):
-        raise ConfigError(f"{source}: key 'robot.id': {config.robot.id!r} is not a valid id")
+        raise ConfigError(f"{source}: key 'robot.id': {clip(repr(config.robot.id), 80)} is not "
+                          f"a valid id (1-{ID_MAX} letters, digits, '-', '_')")
     config.source = source
     return config
 

@@ -21,7 +21,7 @@ import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
-from buddybot.contract.keys import DEFAULT_ROBOT, valid_robot_id
+from buddybot.contract.keys import DEFAULT_ROBOT, ID_MAX, valid_robot_id
 from buddybot.runtime.config import ConfigBase, default_config, load_config, resolve_path
 from buddybot.runtime.errors import (
     EXIT_FAILURE,
@@ -30,6 +30,7 @@ from buddybot.runtime.errors import (
     ConfigError,
     exit_status,
 )
+from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node, install_signal_handlers
 from buddybot.runtime.sdnotify import Notifier
 from buddybot.runtime.session import (
@@ -155,7 +156,8 @@ def resolve(args: argparse.Namespace, name: str) -> ServiceContext:
     connect = getattr(args, "connect", None)  # append: None or a non-empty list
     connect = list(config.zenoh.connect) if connect is None else connect
     if not valid_robot_id(robot):
-        raise ConfigError(f"--robot: {robot!r} is not a valid id (letters, digits, '-', '_')")
+        raise ConfigError(f"--robot: {clip(repr(robot), 80)} is not a valid id "
+                          f"(1-{ID_MAX} letters, digits, '-', '_')")
     if config.zenoh.config_file:  # relative to the TOML file, like every path in it
         config.zenoh.config_file = str(resolve_path(config, config.zenoh.config_file))
     if config.zenoh.router_config_file:

@@ -37,16 +37,15 @@ import msgspec
 from mcap.exceptions import McapError
 from mcap.reader import SeekingReader
 from mcap.records import Channel as McapChannel
-from mcap.records import DataEnd, Footer
 from mcap.records import Message as McapMessage
 from mcap.records import Schema as McapSchema
-from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 
 from buddybot import __version__
 from buddybot.contract import channels, keyexpr, keys
 from buddybot.runtime import rates
 from buddybot.runtime.errors import BuddyBotError
+from buddybot.tools import mcap_records
 
 METADATA_NAME = "buddybot"
 """The MCAP metadata record holding the robot id and the recorder's version."""
@@ -243,6 +242,8 @@ class BagInfo:
     channels: tuple[ChannelInfo, ...]
     metadata: dict[str, str]
     compression: str
+    chunk_spans: tuple[tuple[int, int], ...] = ()
+    """(offset, length) of every chunk the summary's index points at."""
 
     @property
     def duration_s(self) -> float:
@@ -294,7 +295,7 @@ def read_info(path: str | Path) -> BagInfo:
                            "refusing to use it")
         stream.seek(0)
         try:
-            reader = SeekingReader(stream)
+            reader = SeekingReader(stream, record_size_limit=mcap_records.MAX_RECORD_BYTES)
             summary = reader.get_summary()
             metadata: dict[str, str] = {}
             for record in reader.iter_metadata():
@@ -314,7 +315,8 @@ def read_info(path: str | Path) -> BagInfo:
                                  stats.channel_message_counts.get(cid, 0), topic, skipped))
     compression = sorted({c.compression or "none" for c in summary.chunk_indexes}) or ["none"]
     return BagInfo(str(path), size, stats.message_start_time, stats.message_end_time,
-                   stats.message_count, tuple(infos), metadata, ",".join(compression))
+                   stats.message_count, tuple(infos), metadata, ",".join(compression),
+                   tuple((c.chunk_start_offset, c.chunk_length) for c in summary.chunk_indexes))
 
 
 _FOOTER_BYTES = 1 + 8 + 8 + 8 + 4
@@ -390,7 +392,7 @@ class Recording:
         channel_ids = {cid for cid, c in self.playable.items()
                        if not wanted or any(key_matches(w, c.key) for w in wanted)}
         with open(self.info.path, "rb") as stream:
-            reader = SeekingReader(stream)
+            reader = SeekingReader(stream, record_size_limit=mcap_records.MAX_RECORD_BYTES)
             try:
                 for _schema, channel, message in reader.iter_messages(
                         start_time=start_ns, log_time_order=True):
@@ -417,33 +419,32 @@ def open_recording(path: str | Path) -> Recording:
     info = read_info(path)
     recording = Recording(info)
     counts: dict[int, int] = {}
-    seen_end = False
-    position = "the header"
+    state = mcap_records.Walk()
     try:
-        reader = StreamReader(str(info.path), skip_magic=False, validate_crcs=True)
-        for record in reader.records:
-            if isinstance(record, McapMessage):
+        with open(info.path, "rb") as stream:
+            for record in mcap_records.walk(stream, info.size, state):
+                if not isinstance(record, McapMessage):
+                    continue
                 counts[record.channel_id] = counts.get(record.channel_id, 0) + 1
-                position = f"message {sum(counts.values())}"
                 channel = recording.playable.get(record.channel_id)
                 if channel is not None and channel.topic is not None:
                     try:
                         channels.from_json(channel.topic, record.data)
                     except channels.ChannelError as exc:
-                        raise BagError(f"{info.path}: {position} on {channel.key} is not a "
-                                       f"valid {channel.schema}: {_describe(exc)}") from None
-            elif isinstance(record, DataEnd):
-                position = "the summary"
-                seen_end = True
-            elif isinstance(record, Footer):
-                break
-    except BagError:
-        raise
-    except (McapError, Exception) as exc:  # CRC mismatch, zstd, struct: the file is damaged
-        raise BagError(f"{info.path}: damaged at {position} ({type(exc).__name__}: "
-                       f"{_describe(exc)}); refusing to play any of it") from None
-    if not seen_end:
+                        raise BagError(f"{info.path}: message {sum(counts.values())} on "
+                                       f"{channel.key} is not a valid {channel.schema}: "
+                                       f"{_describe(exc)}") from None
+    except mcap_records.TooLarge as exc:
+        raise BagError(f"{info.path}: refused: {exc}") from None
+    except (mcap_records.Damaged, OSError) as exc:
+        raise BagError(f"{info.path}: damaged after message {sum(counts.values())} "
+                       f"({_describe(exc)}); refusing to play any of it") from None
+    if not state.data_end:
         raise BagError(f"{info.path}: no end of data: truncated; refusing to play it")
+    if any(state.chunks is None or state.chunks.get(start) != length
+           for start, length in info.chunk_spans):
+        raise BagError(f"{info.path}: its index points outside the chunks it holds: "
+                       "damaged; refusing to play it")
     expected = {c.id: c.count for c in info.channels if c.count}
     if counts != expected or sum(counts.values()) != info.messages:
         raise BagError(f"{info.path}: the summary counts {info.messages} messages but the "

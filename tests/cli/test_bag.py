@@ -4,8 +4,10 @@ info, play and their failures."""
 from __future__ import annotations
 
 import json
+import resource
 import signal
 import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -20,8 +22,9 @@ from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
-from buddybot.tools import bag
+from buddybot.tools import bag, bag_recover, mcap_records
 from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
+from tests.tools.mcap_bomb import write_bomb
 from tests.tools.test_bag import concrete_key, samples, write_recording
 
 
@@ -336,3 +339,139 @@ def test_latched_keys_reach_late_subscribers_and_unknown_channels_are_named(
     assert not late.on(key)  # a plain subscriber after the put gets nothing: history did it
     player.send_signal(signal.SIGINT)
     assert wait_exit(player, 10) == 0
+
+
+@pytest.mark.integration
+def test_a_decompression_bomb_is_refused_before_it_is_inflated(tmp_path: Path) -> None:
+    """34 kB holding a 1 GiB message: refused from the chunk's declared size, with
+    the player's memory a fraction of the message (it took 2.1 GB before)."""
+    path = tmp_path / "bomb.mcap"
+    assert write_bomb(path, 1 << 30) < 64 * 1024
+    for verb in ("play", "info"):
+        result, peak_kb = run_measured(buddybot_argv("bag", verb, str(path)))
+        assert peak_kb < 256 * 1024, peak_kb
+        if verb == "info":  # the summary alone is fine: info reads nothing else
+            assert result.returncode == 0, result.stderr
+            continue
+        assert result.returncode == 1, result.stderr
+        lines = result.stderr.strip().splitlines()
+        assert lines == [f"buddybot bag: {path}: refused: a chunk of 1073741855 bytes is over "
+                         f"the limit of {mcap_records.MAX_CHUNK_BYTES} bytes (64 MiB)"]
+
+
+_MEASURE = ("import resource, subprocess, sys\n"
+            "r = subprocess.run(sys.argv[1:], capture_output=True, text=True)\n"
+            "sys.stderr.write(r.stderr)\n"
+            "print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)\n")
+
+
+def run_measured(argv: list[str]) -> tuple[subprocess.CompletedProcess[str], int]:
+    """Run `argv` under a fresh parent that reports its peak RSS (kB): (result, peak)."""
+    outer = subprocess.run([sys.executable, "-c", _MEASURE, *argv], capture_output=True,
+                           text=True, timeout=120)
+    status, peak = outer.stdout.split()
+    return subprocess.CompletedProcess(argv, int(status), "", outer.stderr), int(peak)
+
+
+def noise_jpeg(seed: int) -> bytes:
+    """A JPEG of noise (about 60 kB: it hardly compresses, so chunks fill fast)."""
+    pixels = np.random.default_rng(seed).integers(0, 256, (240, 320, 3), dtype=np.uint8)
+    ok, data = cv2.imencode(".jpg", pixels, [cv2.IMWRITE_JPEG_QUALITY, 90])
+    assert ok
+    return data.tobytes()
+
+
+def publish_images(node: Node, until: Callable[[], bool], limit: int = 2000) -> int:
+    """Camera frames (JPEG) on camera/front/image until `until()`; how many."""
+    key = concrete_key(keys.CAMERA_IMAGE)
+    frames = [noise_jpeg(i) for i in range(4)]
+    sent = 0
+    with node.raw_publisher(key, keys.CAMERA_IMAGE.encoding) as publisher:
+        retry_until(publisher.has_subscribers, 30, 0.05, "the recorder subscribed")
+        while sent < limit and not until():
+            publisher.put(keys.CAMERA_IMAGE.codec.encode(m.Image(
+                stamp_ns=m.now_ns(), frame_id="front", width=320, height=240,
+                encoding="jpeg", data=frames[sent % len(frames)])))
+            sent += 1
+            time.sleep(0.01)  # the publishing rate, not a synchronisation
+    return sent
+
+
+@pytest.mark.integration
+def test_a_recording_killed_with_sigkill_is_recovered_to_its_last_chunk(
+        quiet: Node, tmp_path: Path, bag_process: Callable[..., Process]) -> None:
+    cut = tmp_path / "killed.mcap"
+    recorder = bag_process("record", "-o", str(cut), "camera/*/image")
+    publish_images(quiet, lambda: cut.exists() and cut.stat().st_size > 3 * bag.CHUNK_BYTES)
+    recorder.proc.kill()
+    recorder.proc.wait(30)
+    refused = subprocess.run(buddybot_argv("bag", "info", str(cut)), capture_output=True,
+                             text=True, timeout=60)
+    assert refused.returncode == 1 and "truncated" in refused.stderr
+    fixed = tmp_path / "fixed.mcap"
+    result = subprocess.run(buddybot_argv("bag", "recover", str(cut), "-o", str(fixed)),
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    [line] = result.stderr.strip().splitlines()
+    recovered = int(line.split()[1])
+    assert line.startswith("recovered ") and line.endswith(f"-> {fixed}") and recovered >= 3
+    recording = bag.open_recording(fixed)  # what `play` checks: the whole file
+    assert recording.info.messages == recovered == len(list(recording.messages()))
+    print(f"kill -9: recovered {recovered} messages: {line}")
+
+
+@pytest.mark.integration
+def test_a_full_disk_ends_with_an_exact_summary_and_a_recoverable_file(
+        router: Router, quiet: Node, tmp_path: Path) -> None:
+    """The disk is made full with RLIMIT_FSIZE in the recorder (EFBIG, SIGXFSZ
+    ignored): the summary said "0.0 MB" and the file was unusable before."""
+    out = tmp_path / "full.mcap"
+    limit = 2_000_000
+
+    def small_disk() -> None:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+
+    recorder = subprocess.Popen(
+        buddybot_argv("bag", "record", "-o", str(out), "camera/*/image",
+                      "--connect", router.endpoint),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=small_disk)
+    try:
+        publish_images(quiet, lambda: recorder.poll() is not None)
+        _stdout, stderr = recorder.communicate(timeout=60)
+    finally:
+        if recorder.poll() is None:
+            recorder.kill()
+            recorder.wait(30)
+    assert recorder.returncode == 1, stderr
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 2 and "Traceback" not in stderr, stderr
+    size = out.stat().st_size
+    assert 0 < size <= limit
+    found = bag_recover.scan(out)
+    assert lines[0].startswith(f"recorded {found.messages} of ")
+    assert (f", {found.readable_bytes / 1e6:.1f} MB readable of {size / 1e6:.1f} MB written"
+            in lines[0])
+    assert lines[1].startswith(f"buddybot bag: writing {out} failed: File too large; ")
+    assert f"copies its {found.messages} messages" in lines[1]
+    fixed = tmp_path / "fixed.mcap"
+    result = subprocess.run(buddybot_argv("bag", "recover", str(out), "-o", str(fixed)),
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 0, result.stderr
+    assert bag.open_recording(fixed).info.messages == found.messages > 0
+    print(f"full disk: {lines[0]}")
+
+
+@pytest.mark.integration
+def test_a_recorded_robot_id_of_thousands_of_characters_is_not_used(
+        router: Router, tmp_path: Path) -> None:
+    """The file's metadata names the player's robot; an invalid one was a traceback."""
+    path = tmp_path / "long-robot.mcap"
+    key = concrete_key(keys.PUPIL)
+    write_recording(path, [(key, keys.PUPIL.codec.encode(
+        m.PupilControl(stamp_ns=m.now_ns(), dilation_percentage=3)), time.time_ns())],
+        robot="r" * 5000)
+    result = run_bag(router, "play", str(path), "--wait", "0")
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert result.stderr.strip().splitlines()[-1].startswith("played 1 messages on 1 keys")

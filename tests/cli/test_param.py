@@ -48,6 +48,10 @@ def test_load_table_errors_are_usage_errors(tmp_path: Path) -> None:
     bad.write_text("[t\n")
     with pytest.raises(UsageError, match="not valid TOML"):
         param_cli.load_table(str(bad), "t")
+    deep = tmp_path / "deep.toml"
+    deep.write_text("[t]\na = " + "[" * 33 + "]" * 33 + "\n")
+    with pytest.raises(UsageError, match="nested deeper than 32 levels"):
+        param_cli.load_table(str(deep), "t")
     other = tmp_path / "other.toml"
     other.write_text("[u]\na = 1\n")
     with pytest.raises(UsageError, match=r"no \[t\] table"):
@@ -122,6 +126,13 @@ def test_dump_then_load_round_trip(spawn: Spawn, endpoint: str, tmp_path: Path) 
     assert bb_on(endpoint, "param", "get", "radar-presence", "range_m").stdout.strip() == "1.25"
     again = bb_on(endpoint, "param", "dump", "radar-presence")
     assert again.stdout.splitlines()[1:] == dump.read_text().splitlines()[1:]
+
+    deep = tmp_path / "deep.toml"  # a RecursionError traceback (exit 1) before
+    deep.write_text("[radar_presence]\nrange_m = " + "[" * 5000 + "]" * 5000 + "\n")
+    refused = bb_on(endpoint, "param", "load", "radar-presence", str(deep))
+    assert refused.returncode == 2, refused.stderr
+    assert refused.stderr.strip().splitlines() == [
+        f"buddybot param: {deep}: not valid TOML: nested deeper than 32 levels (line 2)"]
 
 
 @pytest.mark.integration

@@ -482,3 +482,40 @@ def test_the_renderer_refuses_to_start_with_an_unknown_style_or_a_bad_file(
     assert bad.returncode == 2, bad.stderr
     assert "styles.glow.poses.GRIN.top_lid: expected <= 100" in bad.stderr
     assert "Traceback" not in bad.stderr + unknown.stderr
+    # Tracebacks (RecursionError) or gigabytes before: one line each, exit 2.
+    hostile = {"nested": ('{"styles": {"a": ' + "[" * 100_000 + "]" * 100_000 + "}}",
+                          "not valid JSON: nested deeper than 32 levels (line 1)"),
+               "chain": (json.dumps({"styles": chain(200)}),
+                         "styles.s0.extends: a chain longer than 16 styles"),
+               "big": (json.dumps({"styles": {f"s{i}": {"extends": "glow"}
+                                              for i in range(20_000)}}),
+                       "a style file is at most 256 kB: not read")}
+    for name, (text, expected) in hostile.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(text)
+        result = run("--style-file", str(path))
+        assert result.returncode == 2, result.stderr
+        last = result.stderr.strip().splitlines()[-1]
+        assert last == f"buddybot: config error: {path}: {expected}"
+        assert "Traceback" not in result.stderr
+
+
+def chain(n: int) -> dict[str, Any]:
+    """n styles each extending the next, the last one glow: resolved from the top,
+    the whole chain is walked at once."""
+    found: dict[str, Any] = {f"s{i}": {"extends": f"s{i + 1}"} for i in range(n - 1)}
+    found[f"s{n - 1}"] = {"extends": "glow", "color": "#ff8000"}
+    return found
+
+
+def test_extends_chains_and_style_counts_are_bounded(tmp_path: Path) -> None:
+    library = styles.load(write(tmp_path, {"styles": chain(styles.MAX_EXTENDS)}))
+    assert library.get("s0").color == "#ff8000"
+    with pytest.raises(ConfigError, match=r"styles\.s0\.extends: a chain longer than 16 styles"):
+        styles.load(write(tmp_path, {"styles": chain(styles.MAX_EXTENDS + 1)}))
+    with pytest.raises(ConfigError, match="257 styles, at most 256"):
+        styles.load(write(tmp_path, {"styles": {f"s{i}": {"extends": "glow"}
+                                                for i in range(257)}}))
+    loop = {"a": {"extends": "b"}, "b": {"extends": "c"}, "c": {"extends": "b"}}
+    with pytest.raises(ConfigError, match=r"styles.b.extends: a loop \(b -> c -> b\)"):
+        styles.load(write(tmp_path, {"styles": loop}))

@@ -153,6 +153,24 @@ def test_stale_sensor_is_excluded_not_taken_for_nobody() -> None:
     assert c.states == [(IN, MOVING), (OUT, MOVING)]
 
 
+def test_ids_silent_before_they_were_established_are_forgotten_not_silent() -> None:
+    """What a flood leaves in the table: ids heard once. They are not sensors
+    that fell silent (that read "15 of 16 sensor(s) silent" for ever)."""
+    c = Clock(RadarPresenceSettings(stale_after_s=1.5))
+    c.feed(NOBODY, 1.2, sensor="0/0")
+    for i in range(40):
+        c.feed(NOBODY, sensor=f"evil/{i}")
+    c.feed(NOBODY, 0.5, sensor="0/0")
+    assert len(c.tracker.known_sensors()) == 16
+    for _ in range(30):  # the real one keeps talking, the invented ones are gone
+        c.feed(NOBODY, sensor="0/0")
+        c.tracker.tick(c.t)
+    assert c.tracker.known_sensors() == ["0/0"] and c.tracker.stale_sensors(c.t) == []
+    assert c.tracker.evicted == 40
+    c.idle(2.0)  # an established sensor falling silent is still reported
+    assert c.tracker.stale_sensors(c.t) == ["0/0"]
+
+
 def test_stale_sensors_last_person_does_not_keep_presence() -> None:
     c = Clock(RadarPresenceSettings(absence_hold_s=0.5, stale_after_s=1.0))
     c.feed(at(100), sensor="0/0")

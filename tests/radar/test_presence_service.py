@@ -177,6 +177,39 @@ def test_a_flood_of_fake_radar_ids_is_bounded_and_the_real_sensor_still_counts(
     assert service.alive()
 
 
+def test_ids_left_by_a_flood_are_not_reported_as_silent_sensors(
+        sensors: Callable[..., PtySensor], spawn: Spawn, probe: Node) -> None:
+    """After a flood the table holds 15 invented ids next to the real sensor: they
+    read "15 of 16 sensor(s) silent" for minutes before; now they are forgotten
+    once silent and the real sensor is OK again."""
+    sensor = sensors(standing)
+    pdiag = Collector(probe, keys.DIAGNOSTICS, node="radar-presence")
+    spawn("radar-bridge", "--sensor", sensor.path)
+    spawn("radar-presence")
+    pdiag.wait_for(lambda d: d.level == "OK", 30, "presence OK")
+    nobody = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.NO_TARGET,
+                                     movement_distance=0, movement_energy=0,
+                                     stationary_distance=0, stationary_energy=0,
+                                     detection_distance=0)
+    evil = probe.publisher(keys.RADAR_FRAMES, device="evil")
+    sent = 0
+
+    def flood() -> bool:  # new ids each time: each is heard once, as in a flood
+        nonlocal sent
+        for _ in range(4):
+            evil.put(m.LD2410TargetDataFrameArray(
+                stamp_ns=m.now_ns(), device_id=0,
+                sensors=[msgspec.structs.replace(nobody, radar_id=sent + i) for i in range(16)]))
+            sent += 16
+        return any(int(d.values.get("evicted_sensors") or 0) > 0 for d in pdiag.messages)
+
+    retry_until(flood, 30, 0.2, "the invented ids taken")
+    flooded = pdiag.messages[-1].stamp_ns
+    back = pdiag.wait_for(lambda d: d.stamp_ns > flooded and d.level == "OK"
+                          and d.values.get("sensors") == 1, 30, "the invented ids forgotten")
+    assert back.values.get("stale_count") == 0 and int(back.values["evicted_sensors"]) > 0
+
+
 def _near_and_empty() -> tuple[m.LD2410TargetDataFrame, m.LD2410TargetDataFrame]:
     """A moving target at 1.2 m, and the same sensor seeing nobody."""
     near = m.LD2410TargetDataFrame(radar_id=0, target_state=m.TargetState.MOVING,

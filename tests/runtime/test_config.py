@@ -144,3 +144,12 @@ def test_bad_apps_tables_are_refused_naming_the_key(table: str, why: str) -> Non
         parse_config(f"[apps]\n{table}\n", "robot.toml")
     assert str(error.value).startswith("robot.toml: ")
     assert why in str(error.value)
+
+
+def test_robot_ids_are_bounded_and_deep_files_refused() -> None:
+    assert parse_config(f'[robot]\nid = "{"r" * 64}"\n').robot.id == "r" * 64
+    with pytest.raises(ConfigError, match=r"is not a valid id \(1-64 letters") as err:
+        parse_config(f'[robot]\nid = "{"r" * 5000}"\n', "robot.toml")
+    assert len(str(err.value)) < 200
+    with pytest.raises(ConfigError, match=r"robot\.toml: not valid TOML: nested deeper"):
+        parse_config("[robot]\nid = " + "[" * 5000 + "]" * 5000 + "\n", "robot.toml")

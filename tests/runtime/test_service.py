@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+import subprocess
 
 import pytest
 
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.sdnotify import Notifier
 from buddybot.runtime.service import resolve
+from buddybot.tools.testing import buddybot_argv
 
 
 def test_empty_robot_flag_is_refused_not_replaced_by_the_config_id() -> None:
@@ -46,3 +48,13 @@ def test_the_watchdog_is_fed_only_while_every_alive_check_holds() -> None:
     ctx.feed_watchdog()
     ctx.feed_watchdog()
     assert notifier.pings == 1 and not ctx.alive()
+
+
+@pytest.mark.integration
+def test_a_robot_id_of_thousands_of_characters_is_refused_in_one_short_line() -> None:
+    """It was accepted, and became every key's prefix."""
+    result = subprocess.run(buddybot_argv("nodes", "--robot", "r" * 5000, "--timeout", "1"),
+                            capture_output=True, text=True, timeout=60)
+    assert result.returncode == 2, result.stderr
+    [line] = result.stderr.strip().splitlines()
+    assert line.endswith("is not a valid id (1-64 letters, digits, '-', '_')") and len(line) < 200
