@@ -310,11 +310,22 @@ def main() -> None:
               f"n={len(awake_ms)}")
     else:
         print("presence latency: no EYE_AWAKE seen (run longer)")
-    print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}")
+    print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}{'RSS growth kB':>15}")
     for name in ps:
-        print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}")
+        print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}"
+              f"{rss_growth_kb(rss[name]):>15.0f}")
     total_rss = sum(max(v or [0]) for v in rss.values())
-    print(f"{'total':<16}{sum(cpu.values()):>16.1f}{total_rss:>14.1f}")
+    print(f"{'total':<16}{sum(cpu.values()):>16.1f}{total_rss:>14.1f}"
+          f"{sum(rss_growth_kb(v) for v in rss.values()):>15.0f}")
+
+
+def rss_growth_kb(samples_mb: list[float]) -> float:
+    """The soak figure: the median RSS of the run's last fifth minus that of its
+    first fifth (one sample a second), so a leak shows and a spike does not."""
+    fifth = len(samples_mb) // 5
+    if fifth < 1:
+        return 0.0
+    return (statistics.median(samples_mb[-fifth:]) - statistics.median(samples_mb[:fifth])) * 1024
 
 
 if __name__ == "__main__":
