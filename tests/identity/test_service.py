@@ -11,10 +11,13 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import numpy as np
 import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.identity import embedding
+from buddybot.identity import gallery as gal
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, retry_until
 from tests.identity.photos import Photo, detection, detectors
@@ -95,10 +98,10 @@ def camera(probe: Node) -> Iterator[Camera]:
     cam.close()
 
 
-def _start(spawn: Spawn, probe: Node, tmp_path: Path, gallery: Path) -> Process:
+def _start(spawn: Spawn, probe: Node, tmp_path: Path, gallery: Path, extra: str = "") -> Process:
     config = tmp_path / "identity.toml"
     config.write_text(f'[identity]\ngallery = "{gallery}"\nevery_nth = 1\nvotes_needed = 2\n'
-                      "vote_window = 3\nlost_s = 0.3\n")
+                      f"vote_window = 3\nlost_s = 0.3\n{extra}")
     proc = spawn("identity", "--config", str(config))
     retry_until(lambda: any(i.node == "identity" and set(i.services) >= SERVED
                             and {"camera/front/faces", "camera/front/image"} <= set(
@@ -204,3 +207,36 @@ def test_a_corrupt_gallery_gives_no_names_and_is_not_overwritten(
     diag.wait_for(lambda d: d.level == "OK", 30, "OK once replaced")
     reply = _enrol(probe, "Barack", samples=2, timeout_s=30.0)
     assert reply.success, reply
+
+
+@pytest.mark.integration
+def test_without_the_model_it_runs_with_no_names_and_says_how_to_install(
+        spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
+        tmp_path: Path) -> None:
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="identity")
+    _start(spawn, probe, tmp_path, tmp_path / "gallery.bin",
+           f'model = "{tmp_path / "missing.dat"}"\n')
+    status = diag.wait_for(lambda d: d.level == "ERROR", 30, "an ERROR status")
+    assert "no face model" in status.message and "pip install" in status.message
+    camera.show(scenes["obama"])
+    reply = _enrol(probe, "Barack", samples=1, timeout_s=5.0)
+    assert not reply.success and "pip install" in reply.message
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert listed.people == []
+
+
+@pytest.mark.integration
+def test_retention_forgets_who_was_not_seen_for_too_long_at_start(
+        spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    path = tmp_path / "gallery.bin"
+    g = gal.Gallery(embedding.MODEL_ID)
+    rng = np.random.default_rng(0)
+    now = m.now_ns() / 1e9
+    for name, days in (("old", 40.0), ("recent", 2.0)):
+        g.enrol(name, [embedding.unit(rng.normal(size=embedding.DIM))], now - days * 86400)
+    gal.save(path, g)
+    proc = _start(spawn, probe, tmp_path, path, "retention_days = 30\n")
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert [p.name for p in listed.people] == ["recent"] and listed.retention_days == 30
+    assert "forgot old: not seen for 30 days" in proc.wait_for_output("forgot old")
+    assert list(gal.load(path, embedding.MODEL_ID).people) == ["recent"]
