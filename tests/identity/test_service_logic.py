@@ -16,6 +16,7 @@ from buddybot.contract import messages as m
 from buddybot.identity import embedding, gallery
 from buddybot.identity.service import IdentityService, Job
 from buddybot.identity.settings import IdentitySettings
+from buddybot.tools.testing import FakeDiagnostics, RecordingPublisher
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
@@ -26,34 +27,14 @@ def _vector(seed: int) -> np.ndarray:
     return embedding.unit(np.random.default_rng(seed).normal(size=embedding.DIM))
 
 
-class _Pub:
-    def __init__(self, out: list[Any]) -> None:
-        self.out = out
-
-    def put(self, msg: Any) -> None:
-        self.out.append(msg)
-
-
-class _Diagnostics:
-    def __init__(self) -> None:
-        self.values: dict[str, Any] = {}
-        self.level, self.message = "OK", ""
-
-    def increment(self, name: str, by: int = 1) -> None:
-        self.values[name] = self.values.get(name, 0) + by
-
-    def set(self, level: str, message: str) -> None:
-        self.level, self.message = level, message
-
-
 class FakeNode:
     def __init__(self) -> None:
         self.out: list[m.FaceName] = []
-        self.diagnostics = _Diagnostics()
+        self.diagnostics = FakeDiagnostics()
 
-    def publisher(self, topic: keys.Topic, /, **_params: str) -> _Pub:
+    def publisher(self, topic: keys.Topic, /, **_params: str) -> RecordingPublisher:
         assert topic is keys.FACE_NAME
-        return _Pub(self.out)
+        return RecordingPublisher(self.out)
 
 
 class FakeEmbedder:
@@ -96,6 +77,11 @@ def _frame(service: IdentityService, stamp: int, x: float = 0.0) -> None:
         service._answer(job, service._embed(job.image, job.keypoints))
 
 
+def _frames(service: IdentityService, count: int, start: int = T0) -> None:
+    for i in range(count):
+        _frame(service, start + i * S // 30)
+
+
 def _said(node: FakeNode) -> list[tuple[int | None, str | None]]:
     return [(n.track, n.name) for n in node.out]
 
@@ -104,8 +90,7 @@ def test_a_name_after_the_vote_published_on_change_only(tmp_path: Path) -> None:
     _enrolled(tmp_path, ada=1, bob=2)
     service, node = _service(tmp_path)
     service.prepare()
-    for i in range(5):
-        _frame(service, T0 + i * S // 30)
+    _frames(service, 5)
     assert _said(node) == [(None, None), (1, None), (1, "ada")]
     assert node.out[-1].votes == 2 and node.out[-1].score == pytest.approx(1.0, abs=1e-5)
 
@@ -115,8 +100,7 @@ def test_a_stranger_stays_unknown(tmp_path: Path) -> None:
     service, node = _service(tmp_path)
     service.prepare()
     service.embedder.who = 9  # type: ignore[union-attr]
-    for i in range(10):
-        _frame(service, T0 + i * S // 30)
+    _frames(service, 10)
     assert _said(node) == [(None, None), (1, None)]
 
 
@@ -136,8 +120,7 @@ def test_forget_strikes_the_name_of_the_followed_face_at_once(tmp_path: Path) ->
     _enrolled(tmp_path, ada=1, bob=2)
     service, node = _service(tmp_path)
     service.prepare()
-    for i in range(3):
-        _frame(service, T0 + i * S // 30)
+    _frames(service, 3)
     assert _said(node)[-1] == (1, "ada")
     reply = service.forget(m.ForgetRequest(name="ada"))
     assert reply.success and reply.forgotten == ["ada"]
@@ -166,8 +149,7 @@ def test_a_bad_gallery_means_no_names_and_is_only_replaced_by_forget_all(
     service, node = _service(tmp_path)
     service.prepare()
     assert node.diagnostics.level == "ERROR" and "no names" in node.diagnostics.message
-    for i in range(5):
-        _frame(service, T0 + i * S // 30)
+    _frames(service, 5)
     assert all(n.name is None for n in node.out)
     reply = service.forget(m.ForgetRequest(name="ada"))
     assert not reply.success and "not overwritten" in reply.message
@@ -192,8 +174,7 @@ def test_last_seen_is_saved_at_a_bounded_rate(tmp_path: Path) -> None:
     _enrolled(tmp_path, ada=1)
     service, _node = _service(tmp_path, seen_save_s=3600.0)
     service.prepare()
-    for i in range(3):
-        _frame(service, T0 + 100 * S + i * S // 30)
+    _frames(service, 3, start=T0 + 100 * S)
     saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
     assert saved.people["ada"].last_seen_s == T0 / S  # not yet: within seen_save_s
     service.close()
