@@ -74,20 +74,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     metavar="FILE")
 
 
-def settings_from(ctx: ServiceContext) -> tuple[IdentitySettings, Path]:
-    """`[identity]` with the command line on top, and the gallery file it names."""
+def settings_from(ctx: ServiceContext) -> IdentitySettings:
+    """`[identity]` with the command line on top, the camera name checked."""
     settings = merge(ctx.config.section(IdentitySettings), ctx.args)
     if not keys.valid_robot_id(settings.camera):
         raise ConfigError(f"[identity] camera: invalid camera name {settings.camera!r}")
-    path = (resolve_path(ctx.config, settings.gallery,
-                         from_command_line=given(ctx.args, IdentitySettings, "gallery"))
-            if settings.gallery else state_dir() / GALLERY_FILE)
-    return settings, path
+    return settings
+
+
+def gallery_path(ctx: ServiceContext, settings: IdentitySettings) -> Path:
+    """The gallery file: `gallery` (relative to the config file, or to the working
+    directory when given as --gallery), else the state directory's."""
+    if not settings.gallery:
+        return state_dir() / GALLERY_FILE
+    return resolve_path(ctx.config, settings.gallery,
+                        from_command_line=given(ctx.args, IdentitySettings, "gallery"))
 
 
 def rules_of(s: IdentitySettings) -> VoteRules:
-    return VoteRules(every_nth=s.every_nth, needed=s.votes_needed, window=s.vote_window,
-                     recheck_s=s.recheck_s)
+    """The vote's rules; `votes_needed` beyond `vote_window` counts as all of the window."""
+    return VoteRules(every_nth=s.every_nth, needed=min(s.votes_needed, s.vote_window),
+                     window=s.vote_window, recheck_s=s.recheck_s)
 
 
 def followed_box(msg: m.FaceDetections) -> m.FaceBox | None:
@@ -524,7 +531,8 @@ def load_model(path: str | None, ctx: ServiceContext) -> tuple[embedding.Embedde
 
 
 def run(ctx: ServiceContext) -> int:
-    settings, path = settings_from(ctx)  # refuse a bad config before connecting
+    settings = settings_from(ctx)  # refuse a bad config before connecting
+    path = gallery_path(ctx, settings)
     embedder, problem = load_model(settings.model, ctx)
     node = ctx.node()
     service = IdentityService(node, settings, path, embedder, problem)

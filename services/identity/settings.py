@@ -61,7 +61,8 @@ class IdentitySettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True)
     # Three agreeing frames (and no other name) before a name: a wrong name is worse
     # than none; about a third of a second at 30 frames/s.
     votes_needed: Annotated[int, msgspec.Meta(
-        ge=1, le=16, description="answers that must agree on one name", extra={"live": True})
+        ge=1, le=16, description="answers that must agree on one name (at most vote_window: "
+        "a larger value counts as vote_window)", extra={"live": True})
     ] = 3
     vote_window: Annotated[int, msgspec.Meta(
         ge=1, le=16, description="... among the track's last this many answers",
@@ -86,8 +87,4 @@ class IdentitySettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True)
     # `last_seen` changes with every recognition; the file is rewritten at most this often.
     seen_save_s: Annotated[float, msgspec.Meta(
         ge=1.0, le=86400.0, description="seconds between saves of last-seen times")] = 60.0
-
-    def __post_init__(self) -> None:
-        if self.votes_needed > self.vote_window:
-            raise ValueError("votes_needed must not exceed vote_window")
 

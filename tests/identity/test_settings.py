@@ -7,6 +7,7 @@ from pathlib import Path
 import msgspec
 import pytest
 
+from buddybot.identity.service import rules_of
 from buddybot.identity.settings import IdentitySettings, state_dir
 
 
@@ -14,9 +15,9 @@ def test_identity_is_opt_in() -> None:
     assert IdentitySettings().enabled is False
 
 
-def test_more_votes_than_the_window_is_refused() -> None:
-    with pytest.raises(msgspec.ValidationError, match="votes_needed"):
-        msgspec.convert({"votes_needed": 6, "vote_window": 5}, IdentitySettings)
+def test_more_votes_than_the_window_count_as_the_whole_window() -> None:
+    rules = rules_of(msgspec.convert({"votes_needed": 6, "vote_window": 5}, IdentitySettings))
+    assert (rules.needed, rules.window) == (5, 5)
 
 
 def test_retention_is_positive_days_or_none() -> None:
