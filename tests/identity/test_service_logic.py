@@ -5,6 +5,7 @@ at a bounded rate."""
 
 from __future__ import annotations
 
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -180,3 +181,53 @@ def test_last_seen_is_saved_at_a_bounded_rate(tmp_path: Path) -> None:
     service.close()
     saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
     assert saved.people["ada"].last_seen_s > T0 / S + 99
+
+
+def _enrol_while_frames(service: IdentityService, request: m.EnrolRequest,
+                        faces: int = 1) -> m.EnrolReply:
+    """Run an enrolment on a thread while frames with `faces` faces come in."""
+    replies: list[m.EnrolReply] = []
+    worker = threading.Thread(target=lambda: replies.append(service.enrol(request)))
+    worker.start()
+    stamp = T0 + 500 * S
+    while worker.is_alive():
+        stamp += S // 30
+        service.images.put(m.Image(stamp_ns=stamp, frame_id="front", width=8, height=8,
+                                   encoding="bgr8", data=bytes(8 * 8 * 3)))
+        boxes = [m.FaceBox(x0=i * 10.0, y0=0, x1=i * 10.0 + 8, y1=8, score=0.9,
+                           keypoints=KEYPOINTS, followed=i == 0) for i in range(faces)]
+        service._on_faces(m.FaceDetections(stamp_ns=stamp, frame_id="front", width=8,
+                                           height=8, faces=boxes), "camera/front/faces")
+        worker.join(0.01)
+    return replies[0]
+
+
+def test_enrol_stores_embeddings_and_refuses_what_it_must(tmp_path: Path) -> None:
+    _enrolled(tmp_path, ada=1)
+    service, _node = _service(tmp_path)
+    service.prepare()
+    service.embedder.who = 7  # type: ignore[union-attr]
+    for bad in ("bad\x00name", " "):
+        reply = service.enrol(m.EnrolRequest(name=bad))
+        assert not reply.success and "name" in reply.message
+    reply = _enrol_while_frames(service, m.EnrolRequest(name="ada", timeout_s=0.2))
+    assert not reply.success and "already enrolled" in reply.message
+    reply = _enrol_while_frames(service, m.EnrolRequest(name="cy", timeout_s=0.3), faces=2)
+    assert not reply.success and "more than one face" in reply.message
+    reply = _enrol_while_frames(service, m.EnrolRequest(name="cy", samples=3, timeout_s=10))
+    assert reply.success and reply.samples == 3
+    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
+    assert sorted(saved.people) == ["ada", "cy"] and len(saved.people["cy"].embeddings) == 3
+    service.embedder.who = 1  # type: ignore[union-attr]
+    reply = _enrol_while_frames(service, m.EnrolRequest(name="dee", samples=2, timeout_s=10))
+    assert not reply.success and "already enrolled as 'ada'" in reply.message
+
+
+def test_enrol_without_the_model_says_how_to_install_it(tmp_path: Path) -> None:
+    node = FakeNode()
+    service = IdentityService(node, IdentitySettings(), tmp_path / "g.bin",  # type: ignore[arg-type]
+                              None, "not found; install the face identity model with: pip ...")
+    service.prepare()
+    assert node.diagnostics.level == "ERROR" and "install" in node.diagnostics.message
+    reply = service.enrol(m.EnrolRequest(name="ada"))
+    assert not reply.success and "install" in reply.message
