@@ -391,11 +391,15 @@ class IdentityService:
     # -- queries --
 
     def _refusal(self) -> str | None:
-        """Why the gallery must not be written now, or None. Under the lock."""
+        """Why the gallery must not be written now, or None. Under the lock.
+
+        An unusable file is read again first: the user may have moved or repaired it.
+        """
+        if self.gallery is None:
+            self._load_gallery()
         if self.gallery is None:
             return (f"the gallery {self.path} is unusable ({self.gallery_problem}); it is not "
-                    "overwritten: forget --all replaces it with an empty one, or move it away "
-                    "and restart")
+                    "overwritten: forget --all replaces it with an empty one, or move it away")
         return None
 
     def enrol(self, req: m.EnrolRequest) -> m.EnrolReply:
@@ -510,7 +514,7 @@ class IdentityService:
 
     def list_people(self, _req: m.Trigger) -> m.KnownPeople:
         with self._lock:
-            if self.gallery is None:
+            if self._refusal() is not None or self.gallery is None:
                 raise gallery.GalleryError(f"the gallery is unusable: {self.gallery_problem}")
             people = [m.KnownPerson(name=p.name, enrolled_ns=int(p.enrolled_s * 1e9),
                                     last_seen_ns=int(p.last_seen_s * 1e9),

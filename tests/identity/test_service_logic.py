@@ -231,3 +231,16 @@ def test_enrol_without_the_model_says_how_to_install_it(tmp_path: Path) -> None:
     assert node.diagnostics.level == "ERROR" and "install" in node.diagnostics.message
     reply = service.enrol(m.EnrolRequest(name="ada"))
     assert not reply.success and "install" in reply.message
+
+
+def test_a_bad_gallery_moved_away_is_noticed_at_the_next_request(tmp_path: Path) -> None:
+    path = tmp_path / "gallery.bin"
+    path.write_bytes(b"garbage")
+    path.chmod(0o600)
+    service, node = _service(tmp_path)
+    service.prepare()
+    assert node.diagnostics.level == "ERROR"
+    path.rename(tmp_path / "gallery.bad")
+    assert service.list_people(m.Trigger()).people == []
+    assert node.diagnostics.level == "OK"
+    assert (tmp_path / "gallery.bad").read_bytes() == b"garbage"
