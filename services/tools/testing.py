@@ -349,3 +349,27 @@ def http_status(port: int, path: str = "/", *, host: str | None = None,
             keep.append(sock)
     parts = data.split(b" ", 2)
     return int(parts[1]) if len(parts) > 1 and parts[1].isdigit() else 0
+
+
+class RecordingPublisher:
+    """A publisher of a fake node: what is put lands in `out` (shared by its node)."""
+
+    def __init__(self, out: list[Any]) -> None:
+        self.out = out
+
+    def put(self, msg: Any) -> None:
+        self.out.append(msg)
+
+
+class FakeDiagnostics:
+    """The part of `Diagnostics` a service uses: counters, values and its status."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, Any] = {}
+        self.level, self.message = "OK", "running"
+
+    def increment(self, name: str, by: int = 1) -> None:
+        self.values[name] = self.values.get(name, 0) + by
+
+    def set(self, level: str, message: str) -> None:
+        self.level, self.message = level, message
