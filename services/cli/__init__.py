@@ -9,6 +9,7 @@
     buddybot topics | node info NAME        keys seen and their rates; one node
     buddybot param list|get|set|dump|load   live parameters of a node
     buddybot lease list|break [ID]          who holds the eyes and the speaker
+    buddybot people enrol|list|forget       known faces, with consent
     buddybot bag record|play|info FILE      record keys to MCAP, replay, describe
     buddybot doctor [--quick]               is the robot healthy?
     buddybot schemas [--check]              regenerate / check schemas/
@@ -42,7 +43,7 @@ from buddybot.runtime.errors import EXIT_USAGE
 from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
-         "doctor", "param", "lease", "topics", "node", "foxglove", "bag", "app")
+         "doctor", "param", "lease", "people", "topics", "node", "foxglove", "bag", "app")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 
