@@ -36,10 +36,9 @@ from buddybot.runtime.errors import (
     UsageError,
 )
 from buddybot.runtime.service import ServiceContext
+from buddybot.sdk.identity import ENROL_MARGIN_S, checked
 
 HELP = "enrol a face under a name (consent), list the known people, forget them"
-ENROL_MARGIN_S = 5.0
-"""How much longer than its collection time an enrolment's answer may take."""
 NOT_RUNNING = "identity service not running: enable [identity] or `buddybot up --identity`"
 
 
@@ -62,10 +61,9 @@ def request(kind: type[Req], **fields: object) -> Req:
     """A request checked against the contract (name 1-64 characters, samples
     1-16, timeout (0, 60] s): UsageError naming what is wrong."""
     try:
-        return msgspec.convert(fields, kind)
-    except msgspec.ValidationError as exc:
-        reason, _, where = str(exc).partition(" - at `$.")
-        raise UsageError(f"{where.rstrip('`') or 'request'}: {reason}") from None
+        return checked(kind, **fields)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
 
 
 def _ask(ctx: ServiceContext, service: keys.Service, req: m.Message,
