@@ -46,6 +46,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--foxglove", action="store_true",
                         help="also start the Foxglove bridge (`buddybot foxglove`; port "
                         "[foxglove] port)")
+    parser.add_argument("--identity", action="store_true",
+                        help="also start the identity service (`buddybot run identity`: "
+                        "names for enrolled faces; `[identity] enabled = true` does this "
+                        "too)")
     parser.add_argument("--ros2", action="store_true",
                         help="also start the ROS 2 bridge (`buddybot run ros2-bridge`; "
                         "domain and namespace from [ros2]; `[ros2] enabled = true` does "

@@ -38,26 +38,61 @@ def best_match(probe: npt.ArrayLike, names: list[str], vectors: npt.ArrayLike,
                threshold: float = THRESHOLD, margin: float = MARGIN) -> Match:
     """Match a unit `probe` (D,) against `vectors` (N, D), row i enrolled for `names[i]`.
 
-    A name may own several rows. Non-finite scores count as no match.
+    A name may own several rows. Non-finite scores count as no match. For
+    many probes against one gallery, build the `Index` once instead.
     """
-    p = np.asarray(probe, dtype=np.float32).ravel()
-    rows = np.asarray(vectors, dtype=np.float32).reshape(len(names), -1) if names else None
-    if rows is None or rows.shape[0] == 0:
-        return Match(None, None, float("nan"), float("nan"), "gallery is empty")
-    if rows.shape[1] != p.shape[0]:
-        raise ValueError(f"probe has {p.shape[0]} numbers, gallery rows {rows.shape[1]}")
-    scores = np.nan_to_num(rows @ p, nan=-1.0, posinf=-1.0, neginf=-1.0)
-    per_person: dict[str, float] = {}
-    for name, score in zip(names, scores.tolist(), strict=True):
-        per_person[name] = max(score, per_person.get(name, -1.0))
-    ranked = sorted(per_person.items(), key=lambda kv: kv[1], reverse=True)
-    best, score = ranked[0]
-    runner_up = ranked[1][1] if len(ranked) > 1 else -1.0
-    if score < threshold:
-        return Match(None, best, score, runner_up,
-                     f"best score {score:.3f} is below the threshold {threshold:.3f}")
-    if score - runner_up < margin:
-        return Match(None, best, score, runner_up,
-                     f"best score {score:.3f} is within {margin:.3f} of the runner-up "
-                     f"{runner_up:.3f}")
-    return Match(best, best, score, runner_up, "clear match")
+    return Index.build(names, vectors).match(probe, threshold, margin)
+
+
+@dataclass(frozen=True)
+class Index:
+    """A gallery's rows grouped by person, matched with a few NumPy calls.
+
+    One matrix product gives every row's score, `np.maximum.reduceat` each
+    person's best over their rows, and one `argmax` and one `max` the best
+    person and the runner-up: 10,000 people of 16 rows match in a few
+    milliseconds (benchmarks/identity_service.py), where a Python loop over
+    the scores took 14.5 ms for 10,000 people of one row.
+    """
+
+    people: tuple[str, ...]
+    """Each person once, in the order of their first row."""
+    rows: npt.NDArray[np.float32]
+    """(N, D), the rows of one person next to each other."""
+    starts: npt.NDArray[np.intp]
+    """Index in `rows` of each person's first row."""
+
+    @staticmethod
+    def build(names: list[str], vectors: npt.ArrayLike) -> Index:
+        """Group `vectors` (N, D), row i of `names[i]`, by person."""
+        order: dict[str, int] = {}
+        codes = np.fromiter((order.setdefault(n, len(order)) for n in names), np.intp,
+                            count=len(names))
+        flat = np.asarray(vectors, dtype=np.float32)
+        rows = flat.reshape(len(names), -1) if names else np.zeros((0, 0), np.float32)
+        sort = np.argsort(codes, kind="stable")
+        starts = np.searchsorted(codes[sort], np.arange(len(order)))
+        return Index(tuple(order), np.ascontiguousarray(rows[sort]), starts)
+
+    def match(self, probe: npt.ArrayLike, threshold: float = THRESHOLD,
+              margin: float = MARGIN) -> Match:
+        """The answer for one unit `probe` (D,)."""
+        p = np.asarray(probe, dtype=np.float32).ravel()
+        if not self.people:
+            return Match(None, None, float("nan"), float("nan"), "gallery is empty")
+        if self.rows.shape[1] != p.shape[0]:
+            raise ValueError(f"probe has {p.shape[0]} numbers, gallery rows {self.rows.shape[1]}")
+        scores = np.nan_to_num(self.rows @ p, nan=-1.0, posinf=-1.0, neginf=-1.0)
+        per_person = np.maximum.reduceat(scores, self.starts)
+        top = int(np.argmax(per_person))
+        best, score = self.people[top], float(per_person[top])
+        per_person[top] = -np.inf
+        runner_up = float(per_person.max()) if len(per_person) > 1 else -1.0
+        if score < threshold:
+            return Match(None, best, score, runner_up,
+                         f"best score {score:.3f} is below the threshold {threshold:.3f}")
+        if score - runner_up < margin:
+            return Match(None, best, score, runner_up,
+                         f"best score {score:.3f} is within {margin:.3f} of the runner-up "
+                         f"{runner_up:.3f}")
+        return Match(best, best, score, runner_up, "clear match")

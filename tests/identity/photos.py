@@ -110,11 +110,15 @@ def detectors() -> tuple[FaceNet, FaceNet]:
             FaceNet(models.locate("short"), bf.SHORT_RANGE))
 
 
-def keypoints(nets: tuple[FaceNet, FaceNet], bgr: np.ndarray) -> np.ndarray:
-    """The keypoints (6, 2) of the photo's one face, refined as face-detector refines them."""
+def detection(nets: tuple[FaceNet, FaceNet], bgr: np.ndarray) -> bf.Detection:
+    """The photo's one face (box and keypoints), refined as face-detector refines it."""
     full, short = nets
     found = full.detect(bgr)
     if len(found) != 1:
         raise AssertionError(f"expected one face, found {len(found)}")
-    det = short.refine(bgr, found[0]) or found[0]
-    return det.keypoints
+    return short.refine(bgr, found[0]) or found[0]
+
+
+def keypoints(nets: tuple[FaceNet, FaceNet], bgr: np.ndarray) -> np.ndarray:
+    """The keypoints (6, 2) of the photo's one face."""
+    return detection(nets, bgr).keypoints

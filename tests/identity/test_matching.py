@@ -7,6 +7,7 @@ import pytest
 
 from buddybot.identity import matching
 from buddybot.identity.embedding import unit
+from buddybot.identity.matching import Index
 from tests.identity.photos import Photo
 
 
@@ -69,3 +70,35 @@ def test_nobody_is_ever_given_someone_elses_name(
         for one in strangers:  # a gallery of a single other person: no runner-up to help
             alone = matching.best_match(vectors[probe.name], [one.person], [vectors[one.name]])
             assert alone.name is None, (probe.name, one.name, alone)
+
+
+def _loop_match(probe: np.ndarray, names: list[str], rows: np.ndarray, threshold: float,
+                margin: float) -> tuple[str | None, str, float, float]:
+    """The plain Python reference: each person's best row, then best and runner-up."""
+    best_of: dict[str, float] = {}
+    for name, row in zip(names, rows, strict=True):
+        best_of[name] = max(float(row @ probe), best_of.get(name, -1.0))
+    ranked = sorted(best_of.items(), key=lambda kv: kv[1], reverse=True)
+    best, score = ranked[0]
+    runner = ranked[1][1] if len(ranked) > 1 else -1.0
+    accepted = best if score >= threshold and score - runner >= margin else None
+    return accepted, best, score, runner
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_the_vectorised_match_equals_the_loop(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    people = int(rng.integers(1, 40))
+    names = [f"p{int(i)}" for i in rng.integers(0, people, size=int(rng.integers(1, 200)))]
+    rows = rng.normal(size=(len(names), 16)).astype(np.float32)
+    rows /= np.linalg.norm(rows, axis=1, keepdims=True)
+    index = Index.build(names, rows)
+    for _ in range(5):
+        near = rows[int(rng.integers(0, len(names)))] + rng.normal(scale=0.05, size=16)
+        probe = (near / np.linalg.norm(near)).astype(np.float32)
+        threshold, margin = float(rng.uniform(0.3, 0.99)), float(rng.uniform(0.0, 0.1))
+        got = index.match(probe, threshold, margin)
+        want = _loop_match(probe, names, rows, threshold, margin)
+        assert (got.name, got.best) == want[:2]
+        assert got.score == pytest.approx(want[2], abs=1e-5)
+        assert got.runner_up == pytest.approx(want[3], abs=1e-5)

@@ -103,6 +103,15 @@ def test_the_ros2_bridge_starts_with_up_ros2_or_its_enabled_switch() -> None:
     assert [e.name for e in plan_up(ctx).entries] == ["camera"]
 
 
+def test_identity_starts_only_with_up_identity_or_its_enabled_switch() -> None:
+    """Face templates are biometric data: never started by a plain `up`."""
+    assert "identity" not in {e.name for e in plan_up(_ctx()).entries}
+    assert "identity" in {e.name for e in plan_up(_ctx(identity=True)).entries}
+    ctx = _ctx()
+    ctx.config = parse_config("[identity]\nenabled = true\n")
+    assert "identity" in {e.name for e in plan_up(ctx).entries}
+
+
 def test_connect_joins_without_a_router_and_not_with_listen() -> None:
     plan = plan_up(_ctx(connect=["tcp/127.0.0.1:9999"]))
     assert plan.joins and plan.connect == ["tcp/127.0.0.1:9999"]

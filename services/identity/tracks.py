@@ -1,0 +1,51 @@
+"""Which face track the followed face belongs to: pure, one box per frame.
+
+The face detector marks the face the robot follows (`FaceBox.followed`);
+its box moves a little from frame to frame. A box that overlaps the last
+one (IoU at least `min_iou`) continues the track; a box elsewhere (the
+followed face jumped to another person) starts a new track; no followed
+face for `lost_s` ends the track. Track ids count up from 1 and are never
+reused, so a name decided for one track can never stick to the next face.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+Box = tuple[float, float, float, float]
+"""x0, y0, x1, y1 in image pixels."""
+
+
+def iou(a: Box, b: Box) -> float:
+    """Intersection over union of two boxes (0 when either is empty)."""
+    w = min(a[2], b[2]) - max(a[0], b[0])
+    h = min(a[3], b[3]) - max(a[1], b[1])
+    if w <= 0 or h <= 0:
+        return 0.0
+    inter = w * h
+    union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter
+    return inter / union if union > 0 else 0.0
+
+
+@dataclass
+class FaceTracks:
+    """The followed face's track; `update` per frame returns its id (None: no track)."""
+
+    min_iou: float = 0.3
+    lost_s: float = 1.0
+    track: int | None = None
+    box: Box | None = None
+    seen_ns: int = 0
+    last_id: int = 0
+
+    def update(self, box: Box | None, stamp_ns: int) -> int | None:
+        """The track of this frame's followed `box` (None when no face is followed)."""
+        if box is None:
+            if self.track is not None and stamp_ns - self.seen_ns > self.lost_s * 1e9:
+                self.track, self.box = None, None
+            return self.track
+        if self.box is None or self.track is None or iou(self.box, box) < self.min_iou:
+            self.last_id += 1
+            self.track = self.last_id
+        self.box, self.seen_ns = box, stamp_ns
+        return self.track

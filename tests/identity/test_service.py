@@ -1,0 +1,242 @@
+"""`buddybot run identity` behind a real router, fed real photos as the camera and the
+face detector would publish them (the image, then its faces with BlazeFace's keypoints
+found by the project's own detector, same stamp): enrol, a name after the vote, never
+a wrong one, erasure at once, refusals, and a corrupt gallery. Marked `integration`."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.identity import embedding
+from buddybot.identity import gallery as gal
+from buddybot.runtime.node import Node
+from buddybot.tools.testing import Collector, Process, retry_until
+from tests.identity.photos import Photo, detection, detectors
+
+Spawn = Callable[..., Process]
+SERVED = {"identity/enrol", "identity/forget", "identity/list"}
+
+
+@dataclass(frozen=True)
+class Scene:
+    """One photo as the camera's jpeg and the detector's followed face."""
+
+    jpeg: bytes
+    width: int
+    height: int
+    face: m.FaceBox
+
+
+@pytest.fixture(scope="module")
+def scenes(shots: list[Photo]) -> dict[str, Scene]:
+    nets = detectors()
+    out = {}
+    for p in shots:
+        if p.name not in ("obama", "obama2", "obama3", "biden", "grace_hopper"):
+            continue
+        det = detection(nets, p.bgr)
+        ok, data = cv2.imencode(".jpg", p.bgr, [cv2.IMWRITE_JPEG_QUALITY, 95])
+        assert ok
+        h, w = p.bgr.shape[:2]
+        x0, y0, x1, y1 = (float(v) for v in det.box)
+        out[p.name] = Scene(data.tobytes(), w, h, m.FaceBox(
+            x0=max(0.0, x0), y0=max(0.0, y0), x1=x1, y1=y1, score=min(1.0, det.score),
+            keypoints=[m.PixelPoint(x=float(x), y=float(y)) for x, y in det.keypoints],
+            followed=True))
+    return out
+
+
+class Camera:
+    """Publishes the current scene at ~20 frames/s on a thread: image, then its faces."""
+
+    def __init__(self, probe: Node) -> None:
+        self.image_pub = probe.publisher(keys.CAMERA_IMAGE, camera="front")
+        self.faces_pub = probe.publisher(keys.FACES, camera="front")
+        self.scene: Scene | None = None
+        self.faces = 1
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def show(self, scene: Scene | None, faces: int = 1) -> None:
+        self.scene, self.faces = scene, faces
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.05):
+            scene, count = self.scene, self.faces
+            stamp = m.now_ns()
+            if scene is None:
+                self.faces_pub.put(m.FaceDetections(stamp_ns=stamp, frame_id="front",
+                                                    width=640, height=480))
+                continue
+            self.image_pub.put(m.Image(stamp_ns=stamp, frame_id="front", width=scene.width,
+                                       height=scene.height, encoding="jpeg", data=scene.jpeg))
+            other = m.FaceBox(x0=0.0, y0=0.0, x1=10.0, y1=10.0, score=0.9,
+                              keypoints=scene.face.keypoints)
+            self.faces_pub.put(m.FaceDetections(
+                stamp_ns=stamp, frame_id="front", width=scene.width, height=scene.height,
+                faces=[scene.face] + [other] * (count - 1)))
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(5)
+
+
+@pytest.fixture
+def camera(probe: Node) -> Iterator[Camera]:
+    cam = Camera(probe)
+    yield cam
+    cam.close()
+
+
+def _start(spawn: Spawn, probe: Node, tmp_path: Path, gallery: Path, extra: str = "") -> Process:
+    config = tmp_path / "identity.toml"
+    config.write_text(f'[identity]\ngallery = "{gallery}"\nevery_nth = 1\nvotes_needed = 2\n'
+                      f"vote_window = 3\nlost_s = 0.3\n{extra}")
+    proc = spawn("identity", "--config", str(config))
+    retry_until(lambda: any(i.node == "identity" and set(i.services) >= SERVED
+                            and {"camera/front/faces", "camera/front/image"} <= set(
+                                i.subscriptions) for i in probe.node_infos(1.0)),
+                60, 0.2, "identity's queryables and subscriptions")
+    return proc
+
+
+def _enrol(probe: Node, name: str, **fields: object) -> m.EnrolReply:
+    reply: m.EnrolReply = probe.call(keys.IDENTITY_ENROL, m.EnrolRequest(name=name, **fields),
+                                     timeout=60.0)
+    return reply
+
+
+def _embeddings(diag: Collector[m.DiagnosticStatus]) -> int:
+    """Embeddings made so far, by the newest status that counted any (0: none yet)."""
+    counted = [d for d in diag.messages if "embeddings" in d.values]
+    return int(counted[-1].values["embeddings"]) if counted else 0
+
+
+@pytest.mark.integration
+def test_enrol_recognise_never_a_wrong_name_and_forget_at_once(
+        spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
+        tmp_path: Path) -> None:
+    names = Collector[m.FaceName](probe, keys.FACE_NAME, camera="front")
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="identity")
+    gallery = tmp_path / "state" / "gallery.bin"
+    proc = _start(spawn, probe, tmp_path, gallery)
+    names.wait_for(lambda n: n.track is None, 20, "the first, empty, name")
+
+    camera.show(None)
+    refused = _enrol(probe, "Barack", samples=3, timeout_s=1.5)
+    assert not refused.success and "no face" in refused.message, refused
+    camera.show(scenes["obama"], faces=2)
+    refused = _enrol(probe, "Barack", samples=3, timeout_s=1.5)
+    assert not refused.success and "more than one face" in refused.message, refused
+
+    camera.show(scenes["obama"])
+    reply = _enrol(probe, "Barack", samples=3, timeout_s=30.0)
+    assert reply.success and reply.samples == 3, reply
+    assert gallery.stat().st_mode & 0o777 == 0o600
+    again = _enrol(probe, "Barack", samples=1, timeout_s=30.0)
+    assert not again.success and "already enrolled" in again.message
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert [(p.name, p.samples) for p in listed.people] == [("Barack", 3)]
+
+    # Another photo of the same person: the name, once the vote agrees.
+    camera.show(None)
+    names.wait_for(lambda n: n.track is None and names.messages.index(n) > 0, 20, "no face")
+    camera.show(scenes["obama2"])
+    named = names.wait_for(lambda n: n.name == "Barack", 60, "Barack")
+    assert named.track is not None and named.votes >= 2 and named.score >= 0.93
+
+    # Other people: unknown, never Barack.
+    for other in ("biden", "grace_hopper"):
+        camera.show(None)
+        names.wait_for(lambda n: n.track is None and n.stamp_ns > named.stamp_ns, 20, "lost")
+        count = len(names.messages)
+        before = _embeddings(diag)
+        camera.show(scenes[other])
+        retry_until(lambda b=before: _embeddings(diag) >= b + 4, 60, 0.1,  # type: ignore[misc]
+                    f"four embeddings of {other}")
+        later = names.messages[count:]
+        assert later and all(n.name is None for n in later), later
+        assert any(n.track is not None for n in later)
+
+    # Forget: the followed face loses its name at once.
+    camera.show(scenes["obama3"])
+    named = names.wait_for(lambda n: n.name == "Barack" and n.stamp_ns > named.stamp_ns, 60)
+    count = len(names.messages)
+    forgot: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(name="Barack"))
+    assert forgot.success and forgot.forgotten == ["Barack"]
+    cleared = names.wait_for(lambda n: names.messages.index(n) >= count, 5, "name cleared")
+    assert cleared.name is None and cleared.track == named.track
+    assert "forgot Barack" in proc.wait_for_output("forgot Barack")
+    listed = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert listed.people == []
+
+
+@pytest.mark.integration
+def test_a_corrupt_gallery_gives_no_names_and_is_not_overwritten(
+        spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
+        tmp_path: Path) -> None:
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="identity")
+    gallery = tmp_path / "gallery.bin"
+    gallery.write_bytes(b"BUDDYBOT-GALLERY 1\n" + b"\0" * 40)
+    gallery.chmod(0o600)
+    _start(spawn, probe, tmp_path, gallery)
+    status = diag.wait_for(lambda d: d.level == "ERROR", 30, "an ERROR status")
+    assert "truncated or corrupt" in status.message and "no names" in status.message
+
+    camera.show(scenes["obama"])
+    reply = _enrol(probe, "Barack", samples=1, timeout_s=10.0)
+    assert not reply.success and "not overwritten" in reply.message, reply
+    one: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(name="Barack"))
+    assert not one.success and "not overwritten" in one.message
+    with pytest.raises(Exception, match="unusable"):
+        probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert gallery.read_bytes() == b"BUDDYBOT-GALLERY 1\n" + b"\0" * 40
+
+    everybody: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(all=True))
+    assert everybody.success, everybody
+    diag.wait_for(lambda d: d.level == "OK", 30, "OK once replaced")
+    reply = _enrol(probe, "Barack", samples=2, timeout_s=30.0)
+    assert reply.success, reply
+
+
+@pytest.mark.integration
+def test_without_the_model_it_runs_with_no_names_and_says_how_to_install(
+        spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
+        tmp_path: Path) -> None:
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="identity")
+    _start(spawn, probe, tmp_path, tmp_path / "gallery.bin",
+           f'model = "{tmp_path / "missing.dat"}"\n')
+    status = diag.wait_for(lambda d: d.level == "ERROR", 30, "an ERROR status")
+    assert "no face model" in status.message and "pip install" in status.message
+    camera.show(scenes["obama"])
+    reply = _enrol(probe, "Barack", samples=1, timeout_s=5.0)
+    assert not reply.success and "pip install" in reply.message
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert listed.people == []
+
+
+@pytest.mark.integration
+def test_retention_forgets_who_was_not_seen_for_too_long_at_start(
+        spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    path = tmp_path / "gallery.bin"
+    g = gal.Gallery(embedding.MODEL_ID)
+    rng = np.random.default_rng(0)
+    now = m.now_ns() / 1e9
+    for name, days in (("old", 40.0), ("recent", 2.0)):
+        g.enrol(name, [embedding.unit(rng.normal(size=embedding.DIM))], now - days * 86400)
+    gal.save(path, g)
+    proc = _start(spawn, probe, tmp_path, path, "retention_days = 30\n")
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert [p.name for p in listed.people] == ["recent"] and listed.retention_days == 30
+    assert "forgot old: not seen for 30 days" in proc.wait_for_output("forgot old")
+    assert list(gal.load(path, embedding.MODEL_ID).people) == ["recent"]
