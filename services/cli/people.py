@@ -104,10 +104,8 @@ def _enrol(ctx: ServiceContext) -> int:
     print(f"look at the camera, {req.name} (up to {req.timeout_s:g} s)...", file=sys.stderr)
     reply = _ask(ctx, keys.IDENTITY_ENROL, req, req.timeout_s + ENROL_MARGIN_S)
     assert isinstance(reply, m.EnrolReply)
-    text = (f"enrolled {reply.name} ({reply.samples} samples)" if reply.success
-            else f"not enrolled: {reply.message}")
-    if reply.success and reply.message:
-        text += f": {reply.message}"
+    text = ((reply.message or f"enrolled {reply.name} ({reply.samples} samples)")
+            if reply.success else f"not enrolled: {reply.message}")
     _print(ctx, reply, text)
     return _done(reply.success)
 

@@ -39,10 +39,12 @@ the name decided for the followed face's track goes to the person holding
 that face (the tracked person it is fused with, else the untracked person),
 and no other person present keeps it. It stays with them while they are
 present: a face turned away, lost, or re-detected as a new face track that is
-not yet decided keeps the name. It is cleared when the face track that gave
-it is said to have no name (the name was forgotten: erasure reaches the
-state at once), replaced when their face is given another name, and gone
-with them when they leave. A name for a face nobody holds is kept until a
+not yet decided keeps the name, but a new track must confirm it within
+`name_confirm_s` (the name may have been forgotten meanwhile, and only the
+track that gave it would say so). It is cleared when the face track that
+gave it is said to have no name (the name was forgotten: erasure reaches
+the state at once), replaced when their face is given another name, and
+gone with them when they leave. A name for a face nobody holds is kept until a
 face arrives (the two topics race), as long as it is the newest one.
 
 Engagement (ROS4HRI style), re-evaluated on every input and timer:
@@ -263,6 +265,8 @@ class _Track:
     name: str | None = None
     name_track: int | None = None
     """The face track whose name `name` is (None: no name)."""
+    unconfirmed: tuple[int, int] | None = None
+    """(a newer face track of theirs, since when) while it has not confirmed `name`."""
 
     def person(self) -> Person:
         return Person(id=self.id, distance_m=self.distance_m, zone=self.zone,
@@ -271,6 +275,10 @@ class _Track:
                       engagement_since_ns=self.engagement_since_ns,
                       yaw_rad=self.yaw_rad, pitch_rad=self.pitch_rad,
                       name=self.name, bearing_rad=self.bearing_rad)
+
+
+def _unname(person: _Track) -> None:
+    person.name, person.name_track, person.unconfirmed = None, None, None
 
 
 def _ns(seconds: float) -> int:
@@ -395,12 +403,17 @@ class PeopleModel:
         return person if person.arrived_ns <= self._face.stamp_ns else None
 
     def _unname_forgotten(self, given: NameSeen) -> None:
-        """The track that gave a name now has none: the name was taken back."""
+        """The track that gave a name now has none: the name was taken back. A
+        named person's face on a new, undecided track: that track must confirm it."""
         if given.track is None or given.name is not None:
             return
         for person in self._persons.values():
             if person.name_track == given.track:
-                person.name, person.name_track = None, None
+                _unname(person)
+        owner = self._face_owner()
+        if (owner is not None and owner.name is not None and owner.name_track != given.track
+                and (owner.unconfirmed is None or owner.unconfirmed[0] != given.track)):
+            owner.unconfirmed = (given.track, given.stamp_ns)
 
     def _name_face(self) -> None:
         """Give a pending name to the person holding the face, taking it from anyone
@@ -413,8 +426,8 @@ class PeopleModel:
         self._name = None
         for person in self._persons.values():
             if person.name == given.name:
-                person.name, person.name_track = None, None
-        owner.name, owner.name_track = given.name, given.track
+                _unname(person)
+        owner.name, owner.name_track, owner.unconfirmed = given.name, given.track, None
 
     # -- time --
 
@@ -443,6 +456,8 @@ class PeopleModel:
                 due.append(track.engagement_since_ns + _ns(self.s.disengage_hold_s))
             if not track.seen_by:
                 due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
+            if track.unconfirmed is not None:
+                due.append(track.unconfirmed[1] + _ns(self.s.name_confirm_s))
         coast = self._tracker.next_deadline()
         if coast is not None:
             due.append(coast)
@@ -636,6 +651,9 @@ class PeopleModel:
         return out
 
     def _evaluate_one(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
+        if track.unconfirmed is not None and at >= track.unconfirmed[1] + _ns(
+                self.s.name_confirm_s):
+            _unname(track)
         seen = self._seen_by(track, at)
         if seen != track.seen_by:
             if not seen:

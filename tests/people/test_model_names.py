@@ -41,6 +41,19 @@ def test_the_name_sticks_while_the_face_turns_away_and_comes_back_as_a_new_track
     assert names(model) == [(1, "Ada")]
 
 
+def test_a_new_track_that_does_not_confirm_the_name_in_time_drops_it() -> None:
+    """Forgotten while their face was on a new, undecided track: nothing would say
+    so (the track that gave the name is gone), so the new track must confirm it."""
+    model = PeopleModel(SETTINGS)  # name_confirm_s 2 s
+    run([radar(0.0), faces(0.5, 1.0), name(1.0, 7, "Ada"), name(1.6, None, None),
+         faces(3.0, 4.0), name(3.1, 8, None), tick(5.0)], model)
+    assert names(model) == [(1, "Ada")]  # 1.9 s undecided: still theirs
+    run([tick(5.1), faces(5.2, 5.5), name(5.5, 8, None)], model)
+    assert names(model) == [(1, None)]  # dropped at 3.1 + 2.0
+    run([name(5.6, 8, "Ada")], model)
+    assert names(model) == [(1, "Ada")]  # confirmed after all: theirs again
+
+
 def test_a_forgotten_name_is_cleared_at_once() -> None:
     model = PeopleModel(SETTINGS)
     run([radar(0.0), faces(0.5, 2.0), name(1.0, 7, "Ada")], model)
