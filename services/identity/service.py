@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import queue
 import threading
 import time
@@ -52,7 +53,7 @@ from buddybot.identity.vote import Answer, TrackVote, VoteRules
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
-from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
 
@@ -60,6 +61,8 @@ log = logging.getLogger("buddybot.identity")
 
 RETENTION_PERIOD_S = 3600.0
 """How often the retention limit is applied (and once at start)."""
+EMBED_NICE = 10
+"""Nice value of the embedding thread: a name may come a frame later, the gaze may not."""
 TICK_S = 0.25
 """The timer: a lost face's track ends within this of `lost_s`."""
 
@@ -76,8 +79,8 @@ def settings_from(ctx: ServiceContext) -> tuple[IdentitySettings, Path]:
     settings = merge(ctx.config.section(IdentitySettings), ctx.args)
     if not keys.valid_robot_id(settings.camera):
         raise ConfigError(f"[identity] camera: invalid camera name {settings.camera!r}")
-    given = getattr(ctx.args, "gallery", None) is not None
-    path = (resolve_path(ctx.config, settings.gallery, from_command_line=given)
+    path = (resolve_path(ctx.config, settings.gallery,
+                         from_command_line=given(ctx.args, IdentitySettings, "gallery"))
             if settings.gallery else state_dir() / GALLERY_FILE)
     return settings, path
 
@@ -182,11 +185,15 @@ class IdentityService:
                 self.vote.rules = self.rules
             self.tracks.min_iou, self.tracks.lost_s = settings.min_iou, settings.lost_s
 
-    def start(self) -> None:
+    def prepare(self) -> None:
+        """Load the gallery, apply the retention limit, publish "no face" (latched)."""
         with self._lock:
             self._load_gallery()
             self._expire(time.time())
             self._publish(m.now_ns())
+
+    def start(self) -> None:
+        self.prepare()
         self._thread.start()
         self.node.subscribe(keys.CAMERA_IMAGE, self._on_image, camera=self.s.camera)
         self.node.subscribe(keys.FACES, self._on_faces, delivery="queue", queue_size=8,
@@ -197,8 +204,13 @@ class IdentityService:
         self.node.every(TICK_S, self.tick, name="identity-tick")
 
     def close(self) -> None:
-        """Stop the embedding thread (the node's handles close with the node)."""
+        """Stop the embedding thread and save last-seen times not saved yet (the node's
+        handles close with the node)."""
         self._jobs.put(None)  # never blocks: at most one job waits (maxsize 2)
+        with self._lock:
+            if self._seen_dirty:
+                self._seen_dirty = False
+                self._save("last-seen times")
 
     def _load_gallery(self) -> None:
         """Read the gallery file; on any problem: no names, and say why. Under the lock."""
@@ -259,6 +271,10 @@ class IdentityService:
             self._jobs.put_nowait(job)  # never full: a job is made only when none is in flight
 
     def _embed_loop(self) -> None:
+        try:  # Linux: a thread's own nice value; the face detector goes first on a busy CPU
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), EMBED_NICE)
+        except (OSError, AttributeError) as exc:
+            log.debug("embedding thread keeps its priority: %s", exc)
         while (job := self._jobs.get()) is not None:
             try:
                 vector: npt.NDArray[np.float32] | None = self._embed(job.image, job.keypoints)

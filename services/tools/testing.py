@@ -259,3 +259,27 @@ class Collector(Generic[T]):
     def clear(self) -> None:
         with self._cond:
             self.items.clear()
+
+
+class RecordingPublisher:
+    """A publisher of a fake node: what is put lands in `out` (shared by its node)."""
+
+    def __init__(self, out: list[Any]) -> None:
+        self.out = out
+
+    def put(self, msg: Any) -> None:
+        self.out.append(msg)
+
+
+class FakeDiagnostics:
+    """The part of `Diagnostics` a service uses: counters, values and its status."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, Any] = {}
+        self.level, self.message = "OK", "running"
+
+    def increment(self, name: str, by: int = 1) -> None:
+        self.values[name] = self.values.get(name, 0) + by
+
+    def set(self, level: str, message: str) -> None:
+        self.level, self.message = level, message

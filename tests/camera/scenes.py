@@ -40,6 +40,7 @@ from buddybot.camera.facenet import FaceNet
 from buddybot.camera.pipeline import FacePipeline, FaceResult
 from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.sim import compose
+from buddybot.identity.tracks import iou
 
 IPD_M = 0.063
 WIDTH, HEIGHT = 640, 480
@@ -484,16 +485,6 @@ def sequences(kind: str | None = None) -> Iterator[Sequence]:
         for photo_fn in PHOTOS:
             for edge in ("left", "right", "top", "bottom"):
                 yield leave(photo_fn(), edge)
-
-
-def iou(a: Box, b: Box) -> float:
-    """Intersection over union of two boxes."""
-    w = min(a[2], b[2]) - max(a[0], b[0])
-    h = min(a[3], b[3]) - max(a[1], b[1])
-    if w <= 0 or h <= 0:
-        return 0.0
-    inter = w * h
-    return inter / ((a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter)
 
 
 def matches(found: Box, true: Box) -> bool:

@@ -5,12 +5,9 @@ a wrong one, erasure at once, refusals, and a corrupt gallery. Marked `integrati
 
 from __future__ import annotations
 
-import threading
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import numpy as np
 import pytest
 
@@ -20,75 +17,18 @@ from buddybot.identity import embedding
 from buddybot.identity import gallery as gal
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, retry_until
-from tests.identity.photos import Photo, detection, detectors
+from tests.identity.feed import Camera, Scene, scene
+from tests.identity.photos import Photo, detectors
 
 Spawn = Callable[..., Process]
 SERVED = {"identity/enrol", "identity/forget", "identity/list"}
 
 
-@dataclass(frozen=True)
-class Scene:
-    """One photo as the camera's jpeg and the detector's followed face."""
-
-    jpeg: bytes
-    width: int
-    height: int
-    face: m.FaceBox
-
-
 @pytest.fixture(scope="module")
 def scenes(shots: list[Photo]) -> dict[str, Scene]:
     nets = detectors()
-    out = {}
-    for p in shots:
-        if p.name not in ("obama", "obama2", "obama3", "biden", "grace_hopper"):
-            continue
-        det = detection(nets, p.bgr)
-        ok, data = cv2.imencode(".jpg", p.bgr, [cv2.IMWRITE_JPEG_QUALITY, 95])
-        assert ok
-        h, w = p.bgr.shape[:2]
-        x0, y0, x1, y1 = (float(v) for v in det.box)
-        out[p.name] = Scene(data.tobytes(), w, h, m.FaceBox(
-            x0=max(0.0, x0), y0=max(0.0, y0), x1=x1, y1=y1, score=min(1.0, det.score),
-            keypoints=[m.PixelPoint(x=float(x), y=float(y)) for x, y in det.keypoints],
-            followed=True))
-    return out
-
-
-class Camera:
-    """Publishes the current scene at ~20 frames/s on a thread: image, then its faces."""
-
-    def __init__(self, probe: Node) -> None:
-        self.image_pub = probe.publisher(keys.CAMERA_IMAGE, camera="front")
-        self.faces_pub = probe.publisher(keys.FACES, camera="front")
-        self.scene: Scene | None = None
-        self.faces = 1
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-        self._thread.start()
-
-    def show(self, scene: Scene | None, faces: int = 1) -> None:
-        self.scene, self.faces = scene, faces
-
-    def _run(self) -> None:
-        while not self._stop.wait(0.05):
-            scene, count = self.scene, self.faces
-            stamp = m.now_ns()
-            if scene is None:
-                self.faces_pub.put(m.FaceDetections(stamp_ns=stamp, frame_id="front",
-                                                    width=640, height=480))
-                continue
-            self.image_pub.put(m.Image(stamp_ns=stamp, frame_id="front", width=scene.width,
-                                       height=scene.height, encoding="jpeg", data=scene.jpeg))
-            other = m.FaceBox(x0=0.0, y0=0.0, x1=10.0, y1=10.0, score=0.9,
-                              keypoints=scene.face.keypoints)
-            self.faces_pub.put(m.FaceDetections(
-                stamp_ns=stamp, frame_id="front", width=scene.width, height=scene.height,
-                faces=[scene.face] + [other] * (count - 1)))
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(5)
+    return {p.name: scene(nets, p) for p in shots
+            if p.name in ("obama", "obama2", "obama3", "biden", "grace_hopper")}
 
 
 @pytest.fixture

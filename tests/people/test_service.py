@@ -44,7 +44,14 @@ from buddybot.people.service import (
 from buddybot.people.settings import PeopleSettings
 from buddybot.people.zones import Zone
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
+from buddybot.tools.testing import (
+    Collector,
+    FakeDiagnostics,
+    Process,
+    RecordingPublisher,
+    buddybot_argv,
+    retry_until,
+)
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
@@ -168,31 +175,15 @@ def test_the_state_stamp_is_the_newest_data_that_changed_it() -> None:
 # --- the adapter on a fake node ------------------------------------------------------------
 
 
-class _Pub:
-    def __init__(self, out: list[Any]) -> None:
-        self.out = out
-
-    def put(self, msg: Any) -> None:
-        self.out.append(msg)
-
-
-class _Diagnostics:
-    def __init__(self) -> None:
-        self.values: dict[str, Any] = {}
-
-    def increment(self, name: str, by: int = 1) -> None:
-        self.values[name] = self.values.get(name, 0) + by
-
-
 class FakeNode:
     """What `PeopleService` uses of a Node: publishers that record, no Zenoh."""
 
     def __init__(self) -> None:
         self.out: list[Any] = []
-        self.diagnostics = _Diagnostics()
+        self.diagnostics = FakeDiagnostics()
 
-    def publisher(self, _topic: keys.Topic, /, **_params: str) -> _Pub:
-        return _Pub(self.out)
+    def publisher(self, _topic: keys.Topic, /, **_params: str) -> RecordingPublisher:
+        return RecordingPublisher(self.out)
 
 
 def _service(**settings: Any) -> tuple[PeopleService, FakeNode]:
