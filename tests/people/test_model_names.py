@@ -5,11 +5,13 @@ the track that gave it says it has no name (forgotten)."""
 from __future__ import annotations
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
-from buddybot.people.model import NameSeen, PeopleModel
+from buddybot.people.model import Input, NameSeen, PeopleModel, Tick
 
 from .test_model import SETTINGS, faces, ns, radar, radar_out, run, tick
-from .test_model_radar import face_at, walk
+from .test_model_radar import face_at, targets, walk
 
 
 def name(t: float, track: int | None, who: str | None) -> NameSeen:
@@ -109,3 +111,48 @@ def test_with_angle_radars_the_name_goes_to_the_person_holding_the_face() -> Non
 def test_an_empty_name_is_refused(who: str) -> None:
     with pytest.raises(ValueError, match="empty"):
         NameSeen(0, 1, who)
+
+
+NAMES = ("Ada", "Grace", "Alan")
+steps = st.lists(st.tuples(st.sampled_from(["radar", "targets", "face", "name", "unnamed", "lost",
+                                            "gap"]),
+                           st.integers(1, 6)), max_size=40)
+
+
+def timeline(plan: list[tuple[str, int]]) -> list[Input]:
+    """Inputs in stamp order, 0.1 s apart (a gap: k * 0.7 s more)."""
+    out: list[Input] = []
+    t = 0.0
+    for kind, k in plan:
+        t += 0.1 + (0.7 * k if kind == "gap" else 0.0)
+        if kind == "radar":
+            out.append(radar(t, 1.0 + k / 4))
+        elif kind == "targets":  # two people, left and right (angle radars)
+            out.append(targets(t, (2.0, 0.9), (2.0, -0.9)))
+        elif kind == "face":  # on the left or the right one, or straight ahead
+            out.append(face_at(t, 1.9, (0.85, -0.85, 0.0)[k % 3]))
+        elif kind == "name":
+            out.append(name(t, k, NAMES[k % len(NAMES)]))
+        elif kind == "unnamed":
+            out.append(name(t, k, None))
+        elif kind == "lost":
+            out.append(name(t, None, None))
+    return out
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(steps, st.integers(1, 8))
+def test_ticks_change_no_name_and_a_name_is_on_one_person_at_most(
+        plan: list[tuple[str, int]], every: int) -> None:
+    inputs = timeline(plan)
+    plain, ticked = PeopleModel(SETTINGS), PeopleModel(SETTINGS)
+    last = 0
+    for one in inputs:
+        for at in range(last + ns(0.05) * every, one.stamp_ns, ns(0.05) * every):
+            ticked.step(Tick(at))
+        last = one.stamp_ns
+        plain.step(one)
+        ticked.step(one)
+        assert names(plain) == names(ticked)
+        present = [who for _, who in names(plain) if who is not None]
+        assert len(present) == len(set(present))
