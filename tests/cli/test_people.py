@@ -142,3 +142,21 @@ def test_bad_usage_exits_2_before_asking_anyone(args: tuple[str, ...],
     err = capsys.readouterr().err
     assert status == 2, err
     assert "router" not in err
+
+
+class _Terminal:
+    def isatty(self) -> bool:
+        return True
+
+
+@pytest.mark.parametrize(("answer", "status"), [("n", 1), ("", 1)])
+def test_forget_all_asks_on_a_terminal_and_a_no_forgets_nobody(
+        answer: str, status: int, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr("sys.stdin", _Terminal())
+    asked: list[str] = []
+    monkeypatch.setattr("builtins.input", lambda prompt: asked.append(prompt) or answer)
+    # Nothing is asked of any router: the refusal comes first.
+    assert cli.main(["people", "forget", "--all", "--connect", "tcp/127.0.0.1:9"]) == status
+    assert asked == ["forget every enrolled person? [y/N] "]
+    assert "nothing forgotten" in capsys.readouterr().err
