@@ -9,6 +9,7 @@
     buddybot topics | node info NAME        keys seen and their rates; one node
     buddybot param list|get|set|dump|load   live parameters of a node
     buddybot lease list|break [ID]          who holds the eyes and the speaker
+    buddybot people enrol|list|forget       known faces, with consent
     buddybot bag record|play|info FILE      record keys to MCAP, replay, describe
     buddybot doctor [--quick]               is the robot healthy?
     buddybot schemas [--check]              regenerate / check schemas/
@@ -45,7 +46,8 @@ from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
          "reference",
-         "doctor", "param", "lease", "topics", "node", "foxglove", "bag", "app", "secret")
+         "doctor", "param", "lease", "people", "topics", "node", "foxglove", "bag", "app",
+         "secret")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 

@@ -81,7 +81,12 @@ from __future__ import annotations
 import enum
 from dataclasses import dataclass, field
 
-from buddybot.contract.messages import TERMINAL_GOAL_STATES, ExpressionAction, Waiting
+from buddybot.contract.messages import (
+    TERMINAL_GOAL_STATES,
+    ExpressionAction,
+    Waiting,
+    spoken_text,
+)
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
 
@@ -193,6 +198,29 @@ class State:
     last_farewell_at: float | None = None
 
 
+_MAX_SOUND = 256
+"""The longest `PlaySound.sound`."""
+
+
+def greeting_for(settings: ControllerSettings, name: str | None) -> str:
+    """The greeting's sound: the person's own (`greetings`), else `greeting_named`
+    with their name, else `greeting_sound` (also when the named text could not be
+    spoken: a name that makes the `say:` text invalid must not cost the greeting)."""
+    if name is None:
+        return settings.greeting_sound
+    own = settings.greetings.get(name)
+    if own is not None:
+        return own
+    if not settings.greeting_named:
+        return settings.greeting_sound
+    sound = settings.greeting_named.replace("{name}", name)
+    try:
+        spoken_text(sound)
+    except ValueError:
+        return settings.greeting_sound
+    return sound if len(sound) <= _MAX_SOUND else settings.greeting_sound
+
+
 # --- the machine -----------------------------------------------------------------------
 
 
@@ -205,6 +233,8 @@ class Behaviour:
         # inputs
         self._in_range: bool | None = None
         self._person_id: int | None = None
+        self._person_name: str | None = None
+        """The name the people service gives the visit's person now, if any."""
         self._out_since: float | None = None
         self._device_free: bool | None = None
         self._yielded = False  # a lease holds the speaker: no sound of ours starts
@@ -317,11 +347,13 @@ class Behaviour:
 
     # -- events --
 
-    def presence(self, now: float, in_range: bool, person_id: int | None = None) -> list[Command]:
+    def presence(self, now: float, in_range: bool, person_id: int | None = None,
+                 name: str | None = None) -> list[Command]:
         """Someone the radar sees is present (`in_range`), or nobody (latched, on
         change). `person_id`: the people service's id of that person; it names the
         visit's person until another one is in range (kept while they leave and
-        the farewell plays, so a tool sees whom the goodbye is for)."""
+        the farewell plays, so a tool sees whom the goodbye is for). `name`: who
+        that person is, if the people service knows (the greeting uses it)."""
         if self.recovering and self._in_range_at_start is None:
             self._in_range_at_start = in_range  # the first one is the replayed latched value
         if in_range != self._in_range:
@@ -329,6 +361,7 @@ class Behaviour:
         self._in_range = in_range
         if in_range and person_id is not None:
             self._person_id = person_id
+            self._person_name = name
         return self._step(now)
 
     def face(self, now: float, gaze: Gaze, stamp_ns: int | None = None) -> list[Command]:
@@ -535,7 +568,8 @@ class Behaviour:
         self._visit.greeted = True
         self._last_greet = now
         self.counters["greetings"] += 1
-        self._play(now, SoundKind.GREETING, self.s.greeting_sound, out)
+        self._play(now, SoundKind.GREETING,
+                   greeting_for(self.s, self._person_name), out)
 
     def _radar_look(self, now: float, out: list[Command]) -> bool:
         """Look at the radar direction if it is live, no face is visible and it is

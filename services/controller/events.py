@@ -30,10 +30,12 @@ RADAR_SEES: frozenset[m.SeenBy] = frozenset({"RADAR", "BOTH"})
 @dataclass(frozen=True, slots=True)
 class PeopleChanged:
     """What the controller takes from `people/state` (latched): is someone the
-    radar sees present (`in_range`), and the people service's id of that person."""
+    radar sees present (`in_range`), the people service's id of that person and
+    their name, if it knows them."""
 
     in_range: bool
     person_id: int | None = None
+    name: str | None = None
 
 
 def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChanged:
@@ -53,10 +55,9 @@ def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChang
     seen = [p for p in msg.people if p.seen_by in RADAR_SEES]
     if not seen:
         return PeopleChanged(False)
-    if follow is not None and any(p.id == follow for p in seen):
-        return PeopleChanged(True, follow)
-    nearest = min(seen, key=lambda p: (p.distance_m, p.id))
-    return PeopleChanged(True, nearest.id)
+    followed = next((p for p in seen if p.id == follow), None) if follow is not None else None
+    person = followed or min(seen, key=lambda p: (p.distance_m, p.id))
+    return PeopleChanged(True, person.id, person.name)
 
 
 @dataclass(frozen=True, slots=True)

@@ -85,6 +85,16 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
         min_length=1, max_length=64, description="camera whose faces the eyes follow")] = "front"
     camera_to_eyes: CameraToEyes = msgspec.field(default_factory=CameraToEyes)
     greeting_sound: Annotated[str, msgspec.Meta(min_length=1, extra=LIVE)] = "greeting"
+    greeting_named: Annotated[str, msgspec.Meta(
+        max_length=256, extra=LIVE,
+        description="sound for a visitor the people service names, `{name}` replaced by "
+                    "the name (e.g. \"say:Hello {name}\"); empty: `greeting_sound`")] = ""
+    greetings: Annotated[dict[Annotated[str, msgspec.Meta(min_length=1, max_length=64)],
+                              Annotated[str, msgspec.Meta(min_length=1, max_length=256)]],
+                         msgspec.Meta(max_length=10_000, extra=LIVE,
+                                      description="per-person greeting: name -> sound "
+                                                  "(before `greeting_named`)")] = msgspec.field(
+        default_factory=dict)
     farewell_sound: Annotated[str, msgspec.Meta(min_length=1, extra=LIVE)] = "farewell"
     centre_distance_cm: Annotated[float, msgspec.Meta(
         ge=0.0, le=10000.0, extra=LIVE,

@@ -18,7 +18,7 @@ from typing import Any
 
 from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
-from buddybot.dashboard import model, radar_map
+from buddybot.dashboard import identity, model, radar_map
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime.errors import NoReplyError, ServiceError
 from buddybot.runtime.leasing import BROKEN_BY_OPERATOR, LeaseHolder, LeaseRefused, release
@@ -225,8 +225,12 @@ class Bus:
             return self._control(cmd.on)
         if isinstance(cmd, model.BreakLease):
             return self._break(cmd.lease_id)
+        if isinstance(cmd, identity.ListKnown):
+            return self._identity(cmd)
         if self.lease.lease_id is None:
             return False, TAKE_CONTROL
+        if isinstance(cmd, (identity.EnrolFace, identity.ForgetFace)):
+            return self._identity(cmd)
         if isinstance(cmd, model.SetExpression):
             action = m.ExpressionAction[cmd.action]
             return _lease_call(f"expression {action.name}",
@@ -235,6 +239,12 @@ class Bus:
             return _lease_call(f"look {cmd.yaw:+.2f} / {cmd.pitch:+.2f} rad",
                                lambda: self.lease.command(yaw=cmd.yaw, pitch=cmd.pitch))
         return self._audio(cmd)
+
+    def _identity(self, cmd: identity.Request) -> tuple[bool, str]:
+        ok, text, known = identity.run(self.node, cmd)
+        if known is not None:
+            self.mailbox.put("known", known)
+        return ok, text
 
     def _control(self, on: bool) -> tuple[bool, str]:
         if on:

@@ -33,6 +33,7 @@ from urllib.parse import urlsplit
 import msgspec
 
 from buddybot.contract import messages as m
+from buddybot.dashboard import identity
 from buddybot.runtime.limits import BoundedDict, clip
 
 MAX_NODES = 256
@@ -357,7 +358,8 @@ class BreakLease(msgspec.Struct, tag="break", tag_field="op", forbid_unknown_fie
     id: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
 
 
-Command = SetExpression | PlaySound | StopSound | Control | Look | BreakLease
+Command = (SetExpression | PlaySound | StopSound | Control | Look | BreakLease
+           | identity.EnrolFace | identity.ForgetFace | identity.ListKnown)
 _command_decoder: msgspec.json.Decoder[Command] = msgspec.json.Decoder(Command)
 MAX_COMMAND_BYTES = 4096
 
@@ -377,7 +379,8 @@ def parse_command(text: str | bytes) -> Command:
                          '{"op": "expression", "action": "EYE_GRIN"}, '
                          '{"op": "play", "sound": "greeting"}, {"op": "stop"}, '
                          '{"op": "control", "on": true}, {"op": "gaze", "yaw": 0.3, "pitch": 0}'
-                         ' or {"op": "break", "lease_id": "..."})') from None
+                         ', {"op": "break", "lease_id": "..."}, {"op": "enrol", "name": "Ada"}, '
+                         '{"op": "forget", "name": "Ada"} or {"op": "known"})') from None
     if isinstance(cmd, SetExpression) and cmd.action not in m.ExpressionAction.__members__:
         raise BadCommand(f"unknown expression {clip(cmd.action, 64)!r}: one of "
                          f"{', '.join(m.ExpressionAction.__members__)}")

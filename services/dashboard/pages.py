@@ -23,7 +23,7 @@ import msgspec
 from aiohttp import WSMsgType, web
 
 from buddybot.contract import messages as m
-from buddybot.dashboard import login, model, radar_map
+from buddybot.dashboard import identity, login, model, radar_map
 from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime import web_auth
@@ -179,6 +179,9 @@ class Board:
         if slot == "people":
             self.map.people = value
             self._map_dirty = True
+            present = identity.present_view(value)
+            if present != self.state.get("present"):
+                self._send("present", present)
             return True
         if slot == "zones":
             self._live_zones = value

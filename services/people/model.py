@@ -34,6 +34,19 @@ bearing with the last face pitch (0, the camera's level, when the camera
 never saw them: the radar measures no height). At most `MAX_PEOPLE`
 persons.
 
+Names (`NameSeen`, from the identity service's `identity/<camera>/name`):
+the name decided for the followed face's track goes to the person holding
+that face (the tracked person it is fused with, else the untracked person),
+and no other person present keeps it. It stays with them while they are
+present: a face turned away, lost, or re-detected as a new face track that is
+not yet decided keeps the name, but a new track must confirm it within
+`name_confirm_s` (the name may have been forgotten meanwhile, and only the
+track that gave it would say so). It is cleared when the face track that
+gave it is said to have no name (the name was forgotten: erasure reaches
+the state at once), replaced when their face is given another name, and
+gone with them when they leave. A name for a face nobody holds is kept until a
+face arrives (the two topics race), as long as it is the newest one.
+
 Engagement (ROS4HRI style), re-evaluated on every input and timer:
 
     NONE --face in social zone--> ENGAGING --engage_dwell_s--> ENGAGED
@@ -126,7 +139,22 @@ class TargetsSeen:
         _check_sample(self.stamp_ns, 0.0)
 
 
-Input = RadarSeen | FaceSeen | TargetsSeen | Tick
+@dataclass(frozen=True, slots=True)
+class NameSeen:
+    """Who the followed face is (`FaceName`): its face track (None: no face
+    followed) and that track's name (None: unknown, not yet decided, or forgotten)."""
+
+    stamp_ns: int
+    track: int | None
+    name: str | None
+
+    def __post_init__(self) -> None:
+        _check_sample(self.stamp_ns, 0.0)
+        if self.name is not None and not self.name.strip():
+            raise ValueError("name must not be empty")
+
+
+Input = RadarSeen | FaceSeen | TargetsSeen | NameSeen | Tick
 
 # --- persons -----------------------------------------------------------------------------
 
@@ -234,6 +262,11 @@ class _Track:
     radar_xy: tuple[float, float] | None = None
     """Where their track was last (kept after it is dropped, to continue it)."""
     bearing_rad: float | None = None
+    name: str | None = None
+    name_track: int | None = None
+    """The face track whose name `name` is (None: no name)."""
+    unconfirmed: tuple[int, int] | None = None
+    """(a newer face track of theirs, since when) while it has not confirmed `name`."""
 
     def person(self) -> Person:
         return Person(id=self.id, distance_m=self.distance_m, zone=self.zone,
@@ -241,7 +274,11 @@ class _Track:
                       arrived_ns=self.arrived_ns, engagement=self.engagement,
                       engagement_since_ns=self.engagement_since_ns,
                       yaw_rad=self.yaw_rad, pitch_rad=self.pitch_rad,
-                      bearing_rad=self.bearing_rad)
+                      name=self.name, bearing_rad=self.bearing_rad)
+
+
+def _unname(person: _Track) -> None:
+    person.name, person.name_track, person.unconfirmed = None, None, None
 
 
 def _ns(seconds: float) -> int:
@@ -277,6 +314,9 @@ class PeopleModel:
         """Each angle radar's newest report stamp."""
         self._angle_until: int | None = None
         """Angle radars count as reporting until then."""
+        self._name: NameSeen | None = None
+        """The newest `NameSeen` with a name that no face held yet (given at the next face)."""
+        self._name_stamp: int | None = None
         self._last_id = 0
         self.refused = 0
         """Arrivals refused because `MAX_PEOPLE` were present."""
@@ -304,8 +344,12 @@ class PeopleModel:
                 self._face = event
                 self._face_holder = self._holder(event)
                 if self._face_holder is None:
-                    return out + self._sensed(event.stamp_ns, event.distance_m, event)
-                return out + self._face_on(self._persons[self._face_holder], event)
+                    out += self._sensed(event.stamp_ns, event.distance_m, event)
+                    self._name_face()
+                    return out
+                out += self._face_on(self._persons[self._face_holder], event)
+                self._name_face()
+                return out
             case TargetsSeen():
                 last = self._reports.get(event.sensor)
                 if last is not None and event.stamp_ns < last:
@@ -316,6 +360,14 @@ class PeopleModel:
                 started = self._tracker.update(
                     Report(event.stamp_ns, event.sensor, event.targets))
                 return out + self._tracked(event.stamp_ns, started)
+            case NameSeen():
+                if self._name_stamp is not None and event.stamp_ns < self._name_stamp:
+                    return []
+                out = self._advance(event.stamp_ns)
+                self._name, self._name_stamp = event, event.stamp_ns
+                self._unname_forgotten(event)
+                self._name_face()
+                return out
             case _:
                 assert_never(event)
 
@@ -336,6 +388,46 @@ class PeopleModel:
         until = event.stamp_ns + _ns(self.s.radar_timeout_s)
         self._angle_until = until if self._angle_until is None else max(self._angle_until,
                                                                          until)
+
+    # -- names --
+
+    def _face_owner(self) -> _Track | None:
+        """The present person the last face belongs to, if any."""
+        if self._face is None:
+            return None
+        if self._face_holder is not None:
+            return self._persons[self._face_holder]
+        if self._untracked is None:
+            return None
+        person = self._persons[self._untracked]
+        return person if person.arrived_ns <= self._face.stamp_ns else None
+
+    def _unname_forgotten(self, given: NameSeen) -> None:
+        """The track that gave a name now has none: the name was taken back. A
+        named person's face on a new, undecided track: that track must confirm it."""
+        if given.track is None or given.name is not None:
+            return
+        for person in self._persons.values():
+            if person.name_track == given.track:
+                _unname(person)
+        owner = self._face_owner()
+        if (owner is not None and owner.name is not None and owner.name_track != given.track
+                and (owner.unconfirmed is None or owner.unconfirmed[0] != given.track)):
+            owner.unconfirmed = (given.track, given.stamp_ns)
+
+    def _name_face(self) -> None:
+        """Give a pending name to the person holding the face, taking it from anyone
+        else; once given it is no longer pending (a later face of someone else, before
+        the identity service saw the change, must not take it)."""
+        given = self._name
+        owner = self._face_owner()
+        if given is None or given.name is None or given.track is None or owner is None:
+            return
+        self._name = None
+        for person in self._persons.values():
+            if person.name == given.name:
+                _unname(person)
+        owner.name, owner.name_track, owner.unconfirmed = given.name, given.track, None
 
     # -- time --
 
@@ -364,6 +456,8 @@ class PeopleModel:
                 due.append(track.engagement_since_ns + _ns(self.s.disengage_hold_s))
             if not track.seen_by:
                 due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
+            if track.unconfirmed is not None:
+                due.append(track.unconfirmed[1] + _ns(self.s.name_confirm_s))
         coast = self._tracker.next_deadline()
         if coast is not None:
             due.append(coast)
@@ -557,6 +651,9 @@ class PeopleModel:
         return out
 
     def _evaluate_one(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
+        if track.unconfirmed is not None and at >= track.unconfirmed[1] + _ns(
+                self.s.name_confirm_s):
+            _unname(track)
         seen = self._seen_by(track, at)
         if seen != track.seen_by:
             if not seen:

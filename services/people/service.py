@@ -1,7 +1,8 @@
 """`buddybot run people`: the thin adapter between Zenoh and `model.PeopleModel`.
 
 Reads `radar/presence` (latched), `radar/*/targets` (every angle-radar
-report) and `camera/<camera>/face`, turns each message into the model's
+report), `camera/<camera>/face` and `identity/<camera>/name` (latched: the
+identity service's name for the followed face, if it runs), turns each message into the model's
 input with the message's own stamp, and runs a `Tick` every `tick_s` so
 holds and timeouts fire without input. Every event the model returns goes
 out on `people/events` at once, in order; the persons present go out on
@@ -38,6 +39,7 @@ from buddybot.people.model import (
     FaceSeen,
     Input,
     Left,
+    NameSeen,
     PeopleModel,
     Person,
     PersonEvent,
@@ -94,6 +96,10 @@ def face_seen(msg: m.FacePosition) -> FaceSeen:
         raise ValueError(f"face {distance:.0f} m away (limit {MAX_DISTANCE_M:.0f} m)")
     return FaceSeen(stamp_ns=msg.stamp_ns, distance_m=distance,
                     yaw_rad=math.atan2(y, x), pitch_rad=math.atan2(z, math.hypot(x, y)))
+
+
+def name_seen(msg: m.FaceName) -> NameSeen:
+    return NameSeen(stamp_ns=msg.stamp_ns, track=msg.track, name=msg.name)
 
 
 def targets_seen(msg: m.RadarTargets) -> TargetsSeen:
@@ -197,6 +203,7 @@ class PeopleService:
         self.node.subscribe(keys.PRESENCE, self._on_presence)
         self.node.subscribe(keys.RADAR_TARGETS, self._on_targets, device="*")
         self.node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
+        self.node.subscribe(keys.FACE_NAME, self._on_name, camera=self.settings.camera)
         self.node.every(self.settings.tick_s, self.tick, name="people-tick")
 
     def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
@@ -219,6 +226,15 @@ class PeopleService:
             log.debug("ignored face: %s", exc)
             return
         self.step(face)
+
+    def _on_name(self, msg: m.FaceName, _key: str) -> None:
+        try:
+            seen = name_seen(msg)
+        except ValueError as exc:  # a blank name
+            self.node.diagnostics.increment("bad_names")
+            log.debug("ignored face name: %s", exc)
+            return
+        self.step(seen)
 
     def tick(self) -> None:
         self.step(Tick(m.now_ns()))

@@ -27,7 +27,9 @@ from typing import Any
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
+from buddybot.sdk import identity
 from buddybot.sdk.errors import NoService, SdkError, TimedOut
+from buddybot.sdk.identity import KnownPerson
 
 KINDS: tuple[str, ...] = ("ARRIVED", "ZONE_CHANGED", "ENGAGEMENT_CHANGED", "LEFT")
 """Every event kind, in the order a visit goes through them."""
@@ -49,6 +51,7 @@ class Person:
     yaw_rad: float | None = None
     pitch_rad: float | None = None
     name: str | None = None
+    """Who they are, once the identity service recognised them (None: unknown)."""
 
 
 @dataclass(frozen=True)
@@ -244,6 +247,7 @@ class People:
 
     def __init__(self, node: Node, timeout: float) -> None:
         self.timeout = timeout
+        self._node = node
         self._view = PeopleView()
         self._lock = threading.Condition()
         self._streams: list[EventStream] = []
@@ -302,6 +306,28 @@ class People:
 
         threading.Thread(target=run, name="sdk-events", daemon=True).start()
         return stream
+
+    # -- names, with consent (the identity service) --
+
+    def enrol(self, name: str, samples: int = 5, timeout_s: float = 10.0,
+              replace: bool = False) -> int:
+        """Remember the one face in front of the camera now under `name`: only with
+        that person's consent. Takes `samples` frames within `timeout_s`; returns
+        the samples stored. Refused (no face, two faces, `name` enrolled and not
+        `replace`), ValueError (a name empty or over 64 characters), NoService."""
+        return identity.enrol(self._node, name, samples, timeout_s, replace)
+
+    def known(self, timeout: float | None = None) -> tuple[KnownPerson, ...]:
+        """Everybody enrolled (name, enrolled, last seen, samples), by name."""
+        return identity.known(self._node, self.timeout if timeout is None else timeout)
+
+    def forget(self, name: str, timeout: float | None = None) -> None:
+        """Erase `name`'s face templates at once; Refused when nobody has that name."""
+        identity.forget(self._node, self.timeout if timeout is None else timeout, name)
+
+    def forget_all(self, timeout: float | None = None) -> list[str]:
+        """Erase everybody's face templates; the names forgotten."""
+        return identity.forget(self._node, self.timeout if timeout is None else timeout)
 
     def _forget(self, stream: EventStream) -> None:
         with self._lock:

@@ -50,8 +50,9 @@ class Rig:
             out += self._rec(self.b.tick(self.t))
         return out
 
-    def presence(self, in_range: bool, person_id: int | None = None) -> list[Command]:
-        return self._rec(self.b.presence(self.t, in_range, person_id))
+    def presence(self, in_range: bool, person_id: int | None = None,
+                 name: str | None = None) -> list[Command]:
+        return self._rec(self.b.presence(self.t, in_range, person_id, name))
 
     def face(self) -> list[Command]:
         return self._rec(self.b.face(self.t, GAZE, 42))
@@ -134,6 +135,44 @@ def test_face_makes_engaged_and_greets_after_dwell() -> None:
     r.faces(0.3)
     assert r.sounds() == ["greeting"]
     assert r.expressions()[-1] == X.EYE_GRIN
+
+
+@pytest.mark.parametrize(("name", "settings", "sound"), [
+    (None, {"greeting_named": "say:Hello {name}"}, "greeting"),
+    ("Ada", {}, "greeting"),
+    ("Ada", {"greeting_named": "say:Hello {name}"}, "say:Hello Ada"),
+    ("Ada", {"greeting_named": "say:Hello {name}", "greetings": {"Ada": "hello_ada"}},
+     "hello_ada"),
+    ("Grace", {"greeting_named": "say:Hi {name}!", "greetings": {"Ada": "hello_ada"}},
+     "say:Hi Grace!"),
+    ("Grace", {"greeting_named": "hi-{name}"}, "hi-Grace"),
+    ("Bad\x07", {"greeting_named": "say:Hello {name}"}, "greeting"),  # not speakable
+    ("x" * 64, {"greeting_named": "say:" + "y" * 200 + "{name}"}, "greeting"),  # too long
+])
+def test_the_greeting_uses_the_persons_name(name: str | None, settings: dict[str, object],
+                                            sound: str) -> None:
+    r = Rig(greet_dwell_s=0.5, **settings)
+    r.presence(True, 1, name)
+    r.faces(0.7)
+    assert r.sounds() == [sound]
+
+
+def test_the_name_is_the_one_at_greeting_time() -> None:
+    r = Rig(greet_dwell_s=1.0, greeting_named="say:Hello {name}")
+    r.presence(True, 1)
+    r.faces(0.5)
+    r.presence(True, 1, "Ada")  # recognised during the dwell
+    r.faces(0.7)
+    assert r.sounds() == ["say:Hello Ada"]
+
+
+def test_a_name_forgotten_before_the_greeting_is_not_said() -> None:
+    r = Rig(greet_dwell_s=1.0, greeting_named="say:Hello {name}")
+    r.presence(True, 1, "Ada")
+    r.faces(0.5)
+    r.presence(True, 1, None)  # erased: people/state without the name
+    r.faces(0.7)
+    assert r.sounds() == ["greeting"]
 
 
 def test_passer_by_is_not_greeted() -> None:

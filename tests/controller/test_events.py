@@ -147,6 +147,13 @@ def test_the_nearest_person_the_radar_sees_is_the_one_whatever_the_order() -> No
         PeopleChanged(True, 4)
 
 
+def test_the_followed_persons_name_comes_with_them_and_its_change_is_news() -> None:
+    ada = msgspec.structs.replace(person(3, "BOTH"), name="Ada")
+    assert people_changed(people(ada, person(4, "RADAR", 2.0))) == PeopleChanged(True, 3, "Ada")
+    unnamed = people(person(3, "BOTH"))
+    assert people_changed(unnamed, follow=3) == PeopleChanged(True, 3, None)
+
+
 def test_only_a_change_of_who_is_in_range_reaches_the_inbox(
     rig: tuple[Controller, FakeNode, Clock],
 ) -> None:

@@ -505,6 +505,36 @@ def test_the_chain_radar_presence_people_controller(spawn, tmp_path, stimulus, m
     assert proc.alive()
 
 
+@pytest.mark.integration
+def test_a_visitor_the_identity_service_names_is_greeted_by_name(
+        spawn, tmp_path, stimulus, make_audio, watch, probe) -> None:
+    """`identity/front/name` (published here, as the identity service would) -> people
+    -> `people/state` with the name -> controller -> `say:Hello Ada`."""
+    config = tmp_path / "robot.toml"
+    config.write_text(FAST_CONFIG.replace("[controller]\n", "[controller]\n"
+                                          'greeting_named = "say:Hello {name}"\n')
+                      + PEOPLE_CONFIG)
+    expr, _ = watch
+    people_state: Collector[m.PeopleState] = Collector(probe, keys.PEOPLE_STATE)
+    radar = probe.publisher(keys.PRESENCE)
+    names = probe.publisher(keys.FACE_NAME, camera="front")
+    audio = make_audio()
+    spawn("people", "--config", str(config))
+    people_state.wait_for(timeout=20, what="the people service's first state")
+    retry_until(lambda: any(i.node == "people" and keys.FACE_NAME.key(camera="front")
+                            in i.subscriptions for i in probe.node_infos(1.0)),
+                30, 0.2, "people subscribed to the face's name")
+    names.put(m.FaceName(stamp_ns=m.now_ns(), frame_id="front", track=1, name="Ada",
+                         score=0.95, votes=3))  # decided before the face reaches people
+    start_controller(spawn, config, expr)
+    radar.put(m.PresenceDetection(stamp_ns=m.now_ns(), target_state=m.PresenceTarget.STANDING,
+                                  presence_state=m.PresenceState.IN_RANGE, distance_m=1.2))
+    stimulus.watch(True)
+    people_state.wait_for(lambda s: [p.name for p in s.people] == ["Ada"], 20, "Ada named")
+    audio.wait_log(lambda log: "play:say:Hello Ada" in log, what="the greeting by name")
+    assert audio.sounds() == ["say:Hello Ada"]
+
+
 MALFORMED: list[bytes] = [
     b"", b"\xff\xfe garbage", b"{", b"[]", b"null", b'{"stamp_ns": -1}',
     b'{"stamp_ns": 1, "presence_state": 7, "target_state": 0, "distance_m": 1.0}',

@@ -474,3 +474,64 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
     page.wait_for_function("window.dash.map.sensors[0].silent "
                            "&& window.dash.map.sensors[0].targets.length === 0", timeout=15_000)
     assert page.errors == []
+
+
+# --- known people (identity) -----------------------------------------------------------
+
+
+def test_the_operator_remembers_a_face_sees_the_name_and_forgets_it(
+        browser: Any, spawn: Callable[..., Process], probe: Node,
+        node_factory: Callable[..., Node]) -> None:
+    """Router + controller + dashboard + a stand-in for the identity service's
+    queryables: remembering and forgetting need the operator lease; the list and
+    the present person's name follow. The screenshot (docs/images/dashboard-identity.png
+    is a copy of one) shows the panel with Ada enrolled and present."""
+    from ..cli.test_people import FakeIdentity
+
+    identity = FakeIdentity(node_factory("identity"))
+    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    spawn("controller")
+    expressions.wait_for(timeout=30, what="the controller's own expression")
+    port = start_dashboard(spawn)
+    page = open_page(browser, port)
+    page.wait_for_function("window.dash.known && window.dash.known.known", timeout=20_000)
+    assert page.inner_text("#known") == "nobody enrolled"
+    page.wait_for_function("window.dash.leases && window.dash.leases.known", timeout=20_000)
+    assert page.is_disabled("#enrol")
+    # A request sent without control is refused by the server too.
+    page.evaluate("send({op: 'enrol', name: 'Eve'})")
+    page.wait_for_function(
+        "document.getElementById('reply').textContent.startsWith('take control first')",
+        timeout=10_000)
+    assert identity.requests == []
+
+    page.click("label.switch")
+    page.wait_for_function("!document.getElementById('enrol').disabled", timeout=15_000)
+    page.fill("#enrol-name", "Ada")
+    page.click("#enrol")
+    page.wait_for_selector("#known .known-row[data-name='Ada']", timeout=20_000)
+    assert identity.requests[-1] == m.EnrolRequest(name="Ada")
+    assert page.inner_text("#reply") == "remembered Ada (5 samples)"
+
+    # The people service names the person in front: the panel says who is there.
+    stamp = m.now_ns()
+    people = probe.publisher(keys.PEOPLE_STATE)
+    people.put(m.PeopleState(stamp_ns=stamp, people=[m.Person(
+        id=3, distance_m=0.9, zone="PERSONAL", seen_by="BOTH", zone_since_ns=stamp,
+        arrived_ns=stamp, engagement="ENGAGED", engagement_since_ns=stamp, name="Ada")]))
+    page.wait_for_function(
+        "document.getElementById('present-names').textContent.includes('person 3 Ada')",
+        timeout=15_000)
+    page.wait_for_timeout(500)
+    SHOTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(SHOTS / "dashboard-identity.png"), full_page=True)
+    size = page.evaluate("[document.documentElement.scrollWidth, "
+                         "document.documentElement.scrollHeight]")
+    assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+
+    page.click("#known .known-row[data-name='Ada'] button.forget")
+    page.wait_for_function("document.getElementById('known').textContent === 'nobody enrolled'",
+                           timeout=15_000)
+    assert identity.people == {}
+    assert page.inner_text("#reply") == "forgot Ada"
+    assert page.errors == []

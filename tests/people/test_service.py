@@ -254,6 +254,24 @@ def test_radar_targets_make_persons_with_their_bearing() -> None:
     assert state.people[1].bearing_rad == pytest.approx(math.atan2(0.5, 2.0))
     assert state.people[1].yaw_rad == state.people[1].bearing_rad
 
+def test_a_face_name_names_the_person_and_a_forgotten_one_is_cleared_at_once() -> None:
+    service, node = _service()
+    service._on_face(_face(1.0, 0.0, 0.0, T0), "camera/front/face")
+    name = m.FaceName(stamp_ns=T0 + 1, frame_id="camera", track=4, name="Ada", score=0.95,
+                      votes=3)
+    service._on_name(name, "identity/front/name")
+    assert node.out[-1].people[0].name == "Ada"
+    service._on_name(m.FaceName(stamp_ns=T0 + 2, frame_id="camera", track=4),
+                     "identity/front/name")
+    assert node.out[-1].people[0].name is None  # republished at once, without the name
+
+
+def test_a_blank_face_name_is_counted_and_dropped() -> None:
+    service, node = _service()
+    service._on_name(m.FaceName(stamp_ns=T0, frame_id="camera", track=4, name=" "),
+                     "identity/front/name")
+    assert node.out == [] and node.diagnostics.values == {"bad_names": 1}
+
 
 # --- the process -------------------------------------------------------------------------
 
@@ -334,6 +352,27 @@ def test_the_state_is_latched_for_a_late_subscriber(
     person = got.people[0]
     assert (person.id, person.zone, person.seen_by, person.arrived_ns) == (
         1, "SOCIAL", "RADAR", stamp)
+
+
+@pytest.mark.integration
+def test_the_name_of_the_face_reaches_people_state_and_its_erasure_too(
+        spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    _proc, _events, state = _start(spawn, probe, tmp_path)
+    wanted = keys.FACE_NAME.key(camera="front")
+    retry_until(lambda: any(i.node == "people" and wanted in i.subscriptions
+                            for i in probe.node_infos(1.0)),
+                30, 0.2, "the name subscription declared")
+    visitor = Visitor(probe)
+    visitor.presence(True, 1.0)
+    names = probe.publisher(keys.FACE_NAME, camera="front")
+    retry_until(lambda: visitor.face() != 0 and any(
+        p.seen_by == "BOTH" for s in state.messages for p in s.people),
+        30, 0.05, "the face on the person")
+    names.put(m.FaceName(stamp_ns=m.now_ns(), frame_id="camera", track=2, name="Ada",
+                         score=0.95, votes=3))
+    state.wait_for(lambda s: [p.name for p in s.people] == ["Ada"], 20, "the name")
+    names.put(m.FaceName(stamp_ns=m.now_ns(), frame_id="camera", track=2))
+    state.wait_for(lambda s: [p.name for p in s.people] == [None], 20, "the name erased")
 
 
 MALFORMED = [b"\x00\xff not json", b"{}", b'{"stamp_ns": -1}', b"[1, 2, 3]"]

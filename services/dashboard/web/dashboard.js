@@ -13,6 +13,8 @@ const D = {
   counts: { messages: 0, images: 0, frames: 0 },
   presenceSeenAt: {},   // presence text -> Date.now() when first shown (tests measure latency)
   nextId: 1,
+  quiet: new Set(),     // ids of requests whose reply the header does not show
+  known: null,          // the enrolled people (identity/list), as the server last listed them
 };
 window.dash = D;
 
@@ -69,6 +71,7 @@ function showReply(r) { const el = $("reply"); el.textContent = r.text; el.class
 
 const handlers = {
   hello(v) {
+    setTimeout(() => D.quiet.add(send({ op: "known" })), 0);  // the panel shows the answer
     D.hello = v; D.enums = v.enums; D.span = v.history_s;
     D.viewer = v.role === "viewer";  // the server refuses a viewer's presses anyway
     $("control").disabled = D.viewer;
@@ -151,7 +154,9 @@ const handlers = {
   },
   leases(v) { D.leases = v; showControl(); showLeases(); },
   map(v) { D.map = v; showRadarView(); scheduleMap(); },
-  reply(r) { showReply(r); },
+  reply(r) { if (!D.quiet.delete(r.id)) showReply(r); },
+  known(v) { D.known = v; showKnown(); },
+  present(v) { showPresent(v); },
 };
 
 // --- camera ----------------------------------------------------------------------------
@@ -618,6 +623,51 @@ setInterval(() => {
     if (div) put(div.querySelector(".when"), ago(e.t * 1e9));
   }
 }, 1000);
+
+// --- known people (identity) -------------------------------------------------------------
+// Remembering a face and forgetting one act under the operator lease only (the
+// buttons are "needs-control"); the list is asked for when the page connects.
+$("enrol").dataset.title = $("enrol").getAttribute("data-title");
+$("enrol").onclick = () => {
+  const name = $("enrol-name").value.trim();
+  if (!name) { showReply({ ok: false, text: "type their name first" }); return; }
+  showReply({ ok: true, text: `look at the camera, ${name}…` });
+  send({ op: "enrol", name });
+};
+function showKnown() {
+  const v = D.known, box = $("known");
+  box.textContent = "";
+  if (!v.known || !v.people.length) {
+    const div = document.createElement("div");
+    div.className = "none";
+    div.textContent = v.known ? "nobody enrolled" : v.error;
+    box.appendChild(div);
+  }
+  for (const p of v.people) {
+    const div = document.createElement("div");
+    div.className = "known-row"; div.dataset.name = p.name;
+    div.innerHTML = `<b class="name"></b><span class="seen"></span><button class="forget">Forget</button>`;
+    div.querySelector(".name").textContent = p.name;
+    div.querySelector(".seen").textContent = p.last_seen ? "seen " + ago(p.last_seen * 1e9) : "not seen since enrolled";
+    const b = div.querySelector("button");
+    b.dataset.title = `erase ${p.name}'s face templates now (identity/forget)`;
+    b.onclick = () => send({ op: "forget", name: p.name });
+    box.appendChild(div);
+  }
+  showControl();
+}
+function showPresent(people) {
+  const el = $("present-names");
+  el.textContent = "";
+  if (!people.length) { el.textContent = "nobody present"; return; }
+  el.append("present: ");
+  people.forEach((p, i) => {
+    if (i) el.append(", ");
+    const b = document.createElement(p.name ? "b" : "span");
+    b.textContent = `person ${p.id} ` + (p.name || "(not recognised)");
+    el.append(b);
+  });
+}
 
 showControl();
 connect();
