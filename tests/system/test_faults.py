@@ -122,14 +122,23 @@ def test_killed_service_state_is_right_again_within_2s(
         assert proc.alive(), name
 
 
+def _empty_is_valid(request: type[m.Message]) -> bool:
+    try:
+        msgspec.json.decode(b"{}", type=request)
+    except msgspec.ValidationError:
+        return False
+    return True
+
+
 def check_service_answers_garbage(probe: Node, service: keys.Service,
                                   garbage: list[bytes]) -> None:
     """Every request gets exactly the answer `Node.serve` promises: an error reply
     naming the request type for anything that is not a valid request, and a real
     reply only for a valid one. The only valid requests among the garbage are an
-    empty object, and an empty payload (read as `{}`), to an empty-request (Trigger)
-    service; every other request type has a required field. A Trigger service
-    must also refuse an unknown field and an oversized request."""
+    empty object, and an empty payload (read as `{}`), to a service whose request
+    has no required field (Trigger, ForgetRequest: the service itself then says
+    what is missing, in its own reply). Such a service must also refuse an
+    unknown field and an oversized request."""
     oversized = b'{"pad": "' + b"x" * service.max_bytes + b'"}'
     for payload in [*garbage, b'{"unknown_field": 1}', oversized]:
         # One node's service ({node} keys such as params/{node} are served by every
@@ -139,7 +148,7 @@ def check_service_answers_garbage(probe: Node, service: keys.Service,
         what = f"{service.pattern} <- {payload[:40]!r} ({len(payload)} bytes)"
         assert len(replies) == 1, f"{what}: {len(replies)} replies"
         reply = replies[0]
-        valid = service.request is m.Trigger and payload in (b"", b"{}")
+        valid = payload in (b"", b"{}") and _empty_is_valid(service.request)
         if valid:
             assert reply.ok, f"{what}: refused a valid request: {reply.payload!r}"
             msgspec.json.decode(reply.payload, type=service.reply)  # a real reply
@@ -154,7 +163,8 @@ def check_service_answers_garbage(probe: Node, service: keys.Service,
 def test_garbage_on_every_key_kills_nothing(probe: Node, spawn: Spawn, tmp_path: Path) -> None:
     procs = start_robot(spawn, tmp_path, renderer=True)
     procs["radar-bridge"] = start_radar(spawn, "visit")
-    wait_nodes(probe, [*BASE_SERVICES, "camera", "radar-bridge", "eye-renderer"])
+    procs["identity"] = spawn("identity", "--gallery", str(tmp_path / "gallery.bin"))
+    wait_nodes(probe, [*BASE_SERVICES, "camera", "radar-bridge", "eye-renderer", "identity"])
     gaze = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
     gaze.wait_for(timeout=60)
     garbage = [b"", b"\x00\xff\xfe garbage", b"{}", b"[]", b'{"stamp_ns": "x"}', b"\x92\x01",
