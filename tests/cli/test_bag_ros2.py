@@ -12,8 +12,9 @@ from typing import Any
 
 import msgspec
 import pytest
+from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
-from mcap_ros2.reader import read_ros2_messages
+from mcap_ros2.decoder import DecoderFactory
 from mcap_ros2.writer import Writer as Ros2Writer
 from rosbags.rosbag2 import Reader as RosbagsReader
 
@@ -94,23 +95,26 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
     for item in bag.open_recording(path).messages():
         log_times[item.key] = item.log_time_ns
     seen = set()
-    for msg in read_ros2_messages(str(tmp_path / "out" / "out_0.mcap")):
-        entry = rosbag.BY_NAME[msg.channel.topic]
+    with open(tmp_path / "out" / "out_0.mcap", "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == "ros2"
+        decoded = list(reader.iter_decoded_messages())
+    for schema, channel, record, ros in decoded:
+        entry = rosbag.BY_NAME[channel.topic]
         key = next(k for k, (t, _p) in found.items() if t is entry.topic)
         topic, payload = found[key]
         ours = channels.decode(topic, channels.from_json(topic, channels.to_json(topic, payload)))
-        assert msg.schema.encoding == "ros2msg" and msg.channel.message_encoding == "cdr"
-        assert "offered_qos_profiles" in msg.channel.metadata
-        assert msg.log_time_ns == log_times[key]
-        ros = msg.ros_msg
-        if msg.schema.name == types.POINT_STAMPED:
+        assert schema is not None and schema.encoding == "ros2msg"
+        assert channel.message_encoding == "cdr" and "offered_qos_profiles" in channel.metadata
+        assert record.log_time == log_times[key]
+        if schema.name == types.POINT_STAMPED:
             assert (ros.point.x, ros.point.y, ros.point.z) == (ours.point.x, ours.point.y,
                                                               ours.point.z)
             assert ros.header.frame_id == ours.frame_id
             assert ros.header.stamp.sec * 10**9 + ros.header.stamp.nanosec == ours.stamp_ns
-        elif msg.schema.name == types.COMPRESSED_IMAGE:
+        elif schema.name == types.COMPRESSED_IMAGE:
             assert ros.format == "jpeg" and bytes(ros.data) == ours.data
-        elif msg.schema.name == types.BOOL:
+        elif schema.name == types.BOOL:
             assert ros.data is ours.data
         else:
             assert _same(_plain(ros), _expected(ours)), (key, _plain(ros), _expected(ours))
