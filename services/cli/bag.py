@@ -4,6 +4,8 @@
     buddybot bag play visit.mcap [--rate R] [--loop] [--start S] [--keys KEY ...] [--robot ID]
     buddybot bag info visit.mcap [--json]
     buddybot bag recover cut.mcap -o visit.mcap
+    buddybot bag export --ros2 visit.mcap visit_ros2
+    buddybot bag import ros2_visit visit.mcap [--camera NAME]
 
 `record` subscribes to every topic of the catalogue but images (`--images`
 adds the camera frames, JPEG-compressed) or to the KEYs given, and writes
@@ -20,6 +22,12 @@ are published as the services publish them, so late subscribers get them.
 `recover` copies what a recorder killed with SIGKILL, or stopped by a full
 disk, left (every record up to the last complete chunk) into a new,
 finished file, and says how many messages it holds and how much was cut.
+
+`export --ros2` writes a rosbag2 directory (metadata.yaml and one MCAP
+file: ros2msg schemas, CDR messages, the original robot's ROS 2 topic
+names) that `ros2 bag play` and Foxglove read; `import` is the way back,
+from a ROS 2 MCAP file or rosbag2 directory of those topics to a
+recording `play` replays (cli/bag_ros2.py, ros2/rosbag.py).
 
 Exit status: 0 done (or stopped with Ctrl-C), 1 an unreadable file or no
 router, 2 bad usage.
@@ -399,10 +407,49 @@ def recover(ctx: ServiceContext) -> int:
     return 0
 
 
+# --- export / import (ROS 2) ------------------------------------------------------------
+
+
+def _add_export(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--ros2", action="store_true", required=True,
+                        help="write a rosbag2 directory (the one format there is)")
+    parser.add_argument("file", metavar="IN", help="one of our recordings")
+    parser.add_argument("output", metavar="OUT",
+                        help="the rosbag2 directory to write (new or empty): "
+                             "OUT/metadata.yaml and OUT/OUT_0.mcap")
+
+
+def export(ctx: ServiceContext) -> int:
+    from buddybot.cli import bag_ros2  # rosbags and numpy only for this action
+
+    return bag_ros2.export(ctx)
+
+
+def _add_import(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", metavar="IN",
+                        help="a ROS 2 recording: an MCAP file or a rosbag2 directory")
+    parser.add_argument("output", metavar="OUT", help="the recording to write")
+    parser.add_argument("--camera", default="front", metavar="NAME",
+                        help="the camera whose keys /face_position and /raw_image "
+                             "become (default front)")
+
+
+def import_(ctx: ServiceContext) -> int:
+    from buddybot.cli import bag_ros2  # rosbags and numpy only for this action
+
+    if not keys.valid_robot_id(ctx.args.camera):
+        raise UsageError(f"--camera {ctx.args.camera!r}: not a valid name")
+    return bag_ros2.import_(ctx)
+
+
 SUBVERBS = (
     SubVerb("record", "record the robot's keys to an MCAP file", _add_record, record),
     SubVerb("play", "replay an MCAP file on the robot's keys", _add_play, play),
     SubVerb("info", "describe an MCAP file: duration, channels, rates", _add_info, info),
     SubVerb("recover", "copy what a killed recorder left into a finished MCAP file",
             _add_recover, recover),
+    SubVerb("export", "write a recording as a rosbag2 directory (--ros2) for ROS 2 tools",
+            _add_export, export),
+    SubVerb("import", "turn a ROS 2 MCAP recording of the robot's topics into a recording",
+            _add_import, import_),
 )
