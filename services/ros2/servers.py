@@ -235,9 +235,9 @@ class ActionServer:
     def on_status(self, status: m.PlaySoundStatus, _key: str) -> None:
         with self._lock:
             goal = self.goals.update(status)
-            payload = None if goal is None else action.encode_feedback(goal)
-        if goal is None or payload is None:
-            return
+            if goal is None:
+                return
+            payload = action.encode_feedback(goal)
         self._feedback(payload)
         self._publish_status()
         if goal.done:
@@ -293,8 +293,13 @@ class ActionServer:
             self._publish_status()
 
     def close(self) -> None:
-        """Give back the leases of goals still playing (their sounds go on)."""
+        """Give back the leases of goals still playing (their sounds go on); end
+        the waiting get_result queries unanswered (the server is going away)."""
         with self._lock:
             leases = [g.lease_id for g in self.goals.listed() if g.lease_id]
+            waiting = [query for queries in self._waiting.values() for query, _ in queries]
+            self._waiting.clear()
+        for query in waiting:
+            query.finish()
         for lease_id in leases:
             self._release(lease_id)
