@@ -13,7 +13,9 @@ One node, on the robot's router:
   (`wrong_type`), a payload that does not decode is counted (`malformed`),
   and a `/screen_expression` goes to the controller under the bridge's
   `app` lease on `expression` (a refusal is counted, `refused`). The bridge
-  never publishes the robot's keys itself.
+  never publishes the robot's keys itself;
+* it serves the audio services and the `/play_sound` action as ROS 2
+  services (`servers.Servers`, with their `SS` and `MP` tokens).
 
 Off by default: `up` starts it only with `up --ros2` or `[ros2] enabled = true`.
 """
@@ -25,12 +27,13 @@ import itertools
 import os
 import threading
 import time
+from collections.abc import Callable
 from functools import partial
 from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, wire
+from buddybot.ros2 import bridge, convert, servers, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.diagnostics import RateLimitedLog
 from buddybot.runtime.errors import ServiceError
@@ -86,14 +89,17 @@ class Ros2Bridge:
         self.sent: dict[str, int] = {}
         for name in ("malformed", "wrong_type", "refused", "commands", "encode_errors"):
             node.diagnostics.values[name] = 0
+        self.servers = servers.Servers(node, settings, self._token, self._publisher)
+        """The ROS 2 services and the `/play_sound` action (servers.py)."""
 
-    def _token(self, kind: wire.Kind, route: bridge.Route | None = None) -> None:
+    def _token(self, kind: wire.Kind, route: bridge.Route | None = None,
+               qos: wire.Qos = DEFAULT_QOS) -> None:
         extra: dict[str, Any] = {}
         entity = self.node_id
         if route is not None:
             entity = next(self._entities)
             extra = {"name": route.ros_name, "type_name": wire.dds_type_name(route.ros_type),
-                     "type_hash": route.type_hash, "qos": DEFAULT_QOS}
+                     "type_hash": route.type_hash, "qos": qos}
         token = wire.GraphToken(
             domain_id=self.settings.domain_id, session_id=self.node.instance,
             node_id=self.node_id, entity_id=entity, kind=kind, enclave="",
@@ -115,6 +121,13 @@ class Ros2Bridge:
             self.node.subscribe_raw(route.any_type_key, partial(self.on_ros, inc, route),
                                     delivery="queue", remote_only=True)
             self._token("MS", route)  # after the subscriber: a peer seeing it is heard
+        self.servers.start()
+
+    def _publisher(self, route: bridge.Route, qos: wire.Qos) -> Callable[[bytes], None]:
+        """A ROS 2 publisher of the servers (the action's topics), with its token."""
+        publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr"))
+        self._token("MP", route, qos)
+        return publisher.put
 
     def on_ours(self, out: bridge.Outgoing, route: bridge.Route, publisher: RosPublisher,
                 msg: Any, _key: str) -> None:
@@ -172,6 +185,7 @@ class Ros2Bridge:
             self.node.diagnostics.values[f"sent {name}"] = count
 
     def close(self) -> None:
+        self.servers.close()
         try:
             self.lease.release("ros2 bridge stopped")
         except ServiceError as exc:

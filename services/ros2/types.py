@@ -36,6 +36,8 @@ IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 BOOL = "std_msgs/msg/Bool"
 TRIGGER = "std_srvs/srv/Trigger"
+CANCEL_GOAL = "action_msgs/srv/CancelGoal"
+GOAL_STATUS_ARRAY = "action_msgs/msg/GoalStatusArray"
 STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL)
 """Standard ROS 2 messages the bridge uses (shipped by rosbags' Jazzy store)."""
 
@@ -43,6 +45,10 @@ OURS = interfaces.PACKAGE
 
 STANDARD_SERVICES: dict[str, tuple[str, str]] = {
     TRIGGER: ("", "bool success\nstring message\n"),
+    CANCEL_GOAL: ("action_msgs/msg/GoalInfo goal_info\n",
+                  "int8 ERROR_NONE=0\nint8 ERROR_REJECTED=1\nint8 ERROR_UNKNOWN_GOAL_ID=2\n"
+                  "int8 ERROR_GOAL_TERMINATED=3\nint8 return_code\n"
+                  "action_msgs/msg/GoalInfo[] goals_canceling\n"),
 }
 """Standard services the bridge uses: name -> (request, response) `.msg` text."""
 
@@ -60,38 +66,62 @@ def _renamed(types: dict[str, Any], old: str, new: str) -> dict[str, Any]:
     return {new if name == old else name: fix(value) for name, value in types.items()}
 
 
+def _service_msgs(pkg: str, base: str, request: str, response: str) -> dict[str, Any]:
+    """Parse trees of service `base`'s request, response, event and the service
+    struct the hash is taken of, all named `pkg/msg/<base>[_<part>]` (renamed by
+    the caller: rosbags' parser knows only `msg` names)."""
+    msg = f"{pkg}/msg/{base}"
+    parts = {
+        "_Request": request,
+        "_Response": response,
+        "_Event": (f"service_msgs/msg/ServiceEventInfo info\n{msg}_Request[<=1] request\n"
+                   f"{msg}_Response[<=1] response\n"),
+        "": (f"{msg}_Request request_message\n{msg}_Response response_message\n"
+             f"{msg}_Event event_message\n"),
+    }
+    types: dict[str, Any] = {}
+    for suffix, text in parts.items():
+        types.update(get_types_from_msg(text, f"{msg}{suffix}"))
+    return types
+
+
+def _moved(types: dict[str, Any], pkg: str, kind: str) -> dict[str, Any]:
+    """`types` with every `pkg/msg/` name it defines renamed `pkg/<kind>/`."""
+    for name in [n for n in types if n.startswith(f"{pkg}/msg/")]:
+        types = _renamed(types, name, f"{pkg}/{kind}/{name.rsplit('/', 1)[1]}")
+    return types
+
+
 def _service_types(name: str, request: str, response: str) -> dict[str, Any]:
     """Parse trees of service `name` (`pkg/srv/Name`): request, response, event
     and the service struct the hash is taken of."""
     pkg, kind, base = name.split("/")
     assert kind == "srv", name
-    parts = {
-        "Request": request,
-        "Response": response,
-        "Event": (f"service_msgs/msg/ServiceEventInfo info\n{pkg}/msg/{base}_Request[<=1] request\n"
-                  f"{pkg}/msg/{base}_Response[<=1] response\n"),
-        "": (f"{pkg}/msg/{base}_Request request_message\n"
-             f"{pkg}/msg/{base}_Response response_message\n"
-             f"{pkg}/msg/{base}_Event event_message\n"),
-    }
-    types: dict[str, Any] = {}
-    for suffix, text in parts.items():
-        types.update(get_types_from_msg(text, f"{pkg}/msg/{base}{'_' if suffix else ''}{suffix}"))
-    for suffix in parts:
-        tail = f"{base}_{suffix}" if suffix else base
-        types = _renamed(types, f"{pkg}/msg/{tail}", f"{pkg}/srv/{tail}")
-    return types
+    return _moved(_service_msgs(pkg, base, request, response), pkg, "srv")
 
 
-def _action_types(name: str, goal: str, result: str, feedback: str) -> dict[str, Any]:
-    """Parse trees of the goal, result and feedback of action `name` (`pkg/action/Name`)."""
+ACTION_SERVICES = ("SendGoal", "GetResult")
+"""The services rosidl derives from an action (its cancel service is the
+shared action_msgs/srv/CancelGoal)."""
+
+
+def action_types(name: str, goal: str, result: str, feedback: str) -> dict[str, Any]:
+    """Parse trees of action `name` (`pkg/action/Name`): its goal, result and
+    feedback, and what rosidl derives from them: `Name_FeedbackMessage` (the
+    feedback topic's type) and the services `Name_SendGoal` and `Name_GetResult`
+    (REP-2016 hashes each like any service)."""
     pkg, _, base = name.split("/")
+    msg = f"{pkg}/msg/{base}"
+    uuid = "unique_identifier_msgs/msg/UUID goal_id\n"
     types: dict[str, Any] = {}
-    for suffix, text in (("Goal", goal), ("Result", result), ("Feedback", feedback)):
-        types.update(get_types_from_msg(text, f"{pkg}/msg/{base}_{suffix}"))
-    for suffix in ("Goal", "Result", "Feedback"):
-        types = _renamed(types, f"{pkg}/msg/{base}_{suffix}", f"{pkg}/action/{base}_{suffix}")
-    return types
+    for suffix, text in (("Goal", goal), ("Result", result), ("Feedback", feedback),
+                         ("FeedbackMessage", f"{uuid}{msg}_Feedback feedback\n")):
+        types.update(get_types_from_msg(text, f"{msg}_{suffix}"))
+    types.update(_service_msgs(pkg, f"{base}_SendGoal", f"{uuid}{msg}_Goal goal\n",
+                               "bool accepted\nbuiltin_interfaces/msg/Time stamp\n"))
+    types.update(_service_msgs(pkg, f"{base}_GetResult", uuid,
+                               f"int8 status\n{msg}_Result result\n"))
+    return _moved(types, pkg, "action")
 
 
 def _char_as_uint8(desc: Any) -> Any:
@@ -132,7 +162,7 @@ def build_typestore() -> Typestore:
             types.update(_service_types(f"{OURS}/srv/{base}", request, response))
         elif folder == "action":
             goal, result, feedback = _sections(text)
-            types.update(_action_types(f"{OURS}/action/{base}", goal, result, feedback))
+            types.update(action_types(f"{OURS}/action/{base}", goal, result, feedback))
     store.register(types)
     return store
 

@@ -375,3 +375,58 @@ def error_text(payload: bytes) -> str:
         return msgspec.json.decode(payload, type=m.ErrorReply).error
     except (msgspec.DecodeError, msgspec.ValidationError):
         return payload.decode("utf-8", "replace")
+
+
+class RawQuery:
+    """One query to `Node.serve_raw`: its key, payload and attachment as sent.
+
+    Replied to at most once (`reply`, `reply_err`); finished (the querier
+    learns no more replies come) when the handler returns, unless it called
+    `defer()`: then whoever replies later calls `finish()` (a ROS 2 action's
+    result is asked for long before it exists). Thread-safe.
+    """
+
+    def __init__(self, query: zenoh.Query) -> None:
+        self._query = query
+        self.key = str(query.key_expr)
+        payload, attachment = query.payload, query.attachment
+        self.payload = b"" if payload is None else payload.to_bytes()
+        self.attachment = None if attachment is None else attachment.to_bytes()
+        self.deferred = False
+        self._lock = threading.Lock()
+        self._state: Literal["open", "replied", "finished"] = "open"
+
+    def defer(self) -> None:
+        self.deferred = True
+
+    def reply(self, key: str, payload: bytes, *, encoding: str | None = None,
+              attachment: bytes | None = None) -> bool:
+        """Send the one reply; False (nothing sent) when it was sent or finished already."""
+        with self._lock:
+            if self._state != "open":
+                return False
+            self._state = "replied"
+            extra: dict[str, Any] = {}
+            if encoding is not None:
+                extra["encoding"] = zenoh.Encoding(encoding)
+            if attachment is not None:
+                extra["attachment"] = attachment
+            self._query.reply(key, payload, **extra)
+            return True
+
+    def reply_err(self, text: str) -> bool:
+        """An error reply saying `text` (plain UTF-8: the querier may not be ours)."""
+        with self._lock:
+            if self._state != "open":
+                return False
+            self._state = "replied"
+            self._query.reply_err(text.encode())
+            return True
+
+    def finish(self) -> None:
+        """No more replies: the querier's get ends (idempotent)."""
+        with self._lock:
+            if self._state == "finished":
+                return
+            self._state = "finished"
+            self._query.drop()

@@ -65,6 +65,7 @@ from buddybot.runtime.handles import (
     Publisher,
     Queryable,
     RawPublisher,
+    RawQuery,
     RawReply,
     ServiceReply,
     Subscription,
@@ -646,6 +647,55 @@ class Node:
             worker.close()
             raise
         return self._track(Queryable(key, queryable, self._forget, worker=worker, gate=gate))
+
+    def serve_raw(
+        self, key_expr: str, handler: Callable[[RawQuery], None], *, queue_size: int = 16,
+        complete: bool = False,
+    ) -> Queryable:
+        """Answer queries on an absolute key expression (wildcards allowed, catalogue
+        or not) with `handler(query)` on a worker thread, undecoded: for a bridge
+        that speaks another protocol (the ROS 2 services). The handler replies
+        with `query.reply`/`reply_err` or not at all; the query is finished when
+        it returns unless it called `query.defer()`. A query over the queue is
+        refused at once (error reply `busy`); a failing handler is logged and
+        its query finished. `complete`: the queryable answers for every key it
+        matches, so queries that target complete queryables only (rmw_zenoh's
+        clients) reach it."""
+        key_expr = _key_expr(key_expr)
+
+        def answer(query: RawQuery) -> None:
+            try:
+                handler(query)
+            finally:
+                if not query.deferred:
+                    query.finish()
+
+        def on_error(exc: BaseException) -> None:
+            self.diagnostics.increment("callback_errors")
+            self._warn.warning(f"cb:{key_expr}", "query handler for %s failed: %r",
+                               key_expr, exc)
+
+        worker = Worker(f"{self.name}:{key_expr}", answer, False, queue_size, on_error,
+                        label=key_expr)
+        gate = Gate()
+
+        def on_query(query: zenoh.Query) -> None:
+            raw = RawQuery(query)
+            if not worker.offer(raw):
+                self.diagnostics.increment("busy")
+                self._warn.warning(f"busy:{key_expr}", "refused a query on %s: busy",
+                                   key_expr)
+                raw.reply_err("service closing" if not gate.open else
+                              f"busy: {queue_size} requests already waiting")
+                raw.finish()
+
+        try:
+            queryable = self._session.declare_queryable(key_expr, on_query, complete=complete)
+        except BaseException:
+            worker.close()
+            raise
+        return self._track(Queryable(key_expr, queryable, self._forget, worker=worker,
+                                     gate=gate))
 
     @overload
     def call(self, service: keys.Service, request: m.Message, *, timeout: float = ...,

@@ -67,3 +67,36 @@ def test_our_hashes_change_with_our_definitions() -> None:
     other = get_typestore(Stores.ROS2_JAZZY)
     other.register(get_types_from_msg("uint64 stamp_ns\nfloat32 dilation_percentage\n", name))
     assert other.hash_rihs01(name) != types.type_hash(name)
+
+
+ROTATE_ABSOLUTE = {
+    # `ros2 action info /turtle1/rotate_absolute --verbose` on a real ROS 2
+    # installation, as ros2/ros2_documentation prints it (Tutorials,
+    # Beginner-CLI-Tools, Understanding-ROS2-Actions).
+    "turtlesim_msgs/action/RotateAbsolute_SendGoal":
+        "RIHS01_3d5d3cfcbb721f88038eaedcd4af95565360a82b36f1983e3a6c7448d2d18fbe",
+    "turtlesim_msgs/action/RotateAbsolute_GetResult":
+        "RIHS01_f96fd02477be2a47122fca142e960d407b24850c6eac72047872ba764473c4ef",
+    "turtlesim_msgs/action/RotateAbsolute_FeedbackMessage":
+        "RIHS01_bef10993e1ee82b35f99f7e390bac1e6cc64e2a3090536887832e122aa71f1b5",
+    types.CANCEL_GOAL: "RIHS01_573d8b0a534451d7bc2ac8c5ffde8ac14b8593b7001175d0cd6516dcbeb8689a",
+    types.GOAL_STATUS_ARRAY:
+        "RIHS01_6c1684b00f177d37438febe6e709fc4e2b0d4248dca4854946f9ed8b30cda83e",
+}
+
+
+@pytest.mark.parametrize("name", sorted(ROTATE_ABSOLUTE))
+def test_an_actions_derived_types_hash_as_a_real_ros_2_prints_them(name: str) -> None:
+    """turtlesim's RotateAbsolute (goal `float32 theta`, result `float32 delta`,
+    feedback `float32 remaining`): its SendGoal and GetResult services, its
+    FeedbackMessage, and the shared CancelGoal and GoalStatusArray."""
+    store = types.build_typestore()
+    store.register(types.action_types("turtlesim_msgs/action/RotateAbsolute", "float32 theta\n",
+                                      "float32 delta\n", "float32 remaining\n"))
+    assert store.hash_rihs01(name) == ROTATE_ABSOLUTE[name]
+
+
+@pytest.mark.parametrize("suffix", ["SendGoal", "GetResult", "FeedbackMessage"])
+def test_our_actions_derived_types_have_hashes(suffix: str) -> None:
+    assert re.fullmatch(r"RIHS01_[0-9a-f]{64}",
+                        types.type_hash(f"{types.OURS}/action/PlaySound_{suffix}"))

@@ -17,7 +17,8 @@ import zenoh
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import DuplicateNodeError, ServiceError
-from buddybot.runtime.node import Node, RawReply
+from buddybot.runtime.handles import RawQuery
+from buddybot.runtime.node import Node, RawReply, zenoh_config
 from buddybot.tools.testing import (
     Collector,
     Process,
@@ -414,3 +415,48 @@ def test_encoded_values_are_bounded(node_factory: Callable[..., Node]) -> None:
     raw = probe.raw_publisher(key, keys.FACE.encoding)
     retry_until(lambda: raw.put(far) or raw.put(ok) or got.messages, 10, 0.1)
     assert {x.frame_id for x in got.messages} == {"ok"}
+
+
+def test_a_raw_queryable_replies_later_or_never_and_survives_its_handler(
+    node_factory: Callable[..., Node], endpoint: str, request: pytest.FixtureRequest
+) -> None:
+    """`serve_raw`: payload and attachment as sent; a deferred query is answered by
+    another thread; a handler that replies nothing, or fails, still ends the query."""
+    server = node_factory("server")
+    held: list[RawQuery] = []
+    got: list[tuple[str, bytes, bytes | None]] = []
+
+    def handler(query: RawQuery) -> None:
+        got.append((query.key, query.payload, query.attachment))
+        if query.payload == b"later":
+            query.defer()
+            held.append(query)
+        elif query.payload == b"boom":
+            raise RuntimeError("boom")
+        elif query.payload == b"echo":
+            query.reply(query.key, b"echo!", attachment=b"att")
+
+    server.serve_raw("raw/test/*", handler, complete=True)
+    client = node_factory("client", probe=True)
+    retry_until(lambda: client.live_instances(client.key(keys.NODES, node="server")), 10)
+    session = zenoh.open(zenoh_config(connect=[endpoint]))  # a querier that is not a node
+    request.addfinalizer(session.close)
+    replies = list(session.get("raw/test/a", payload=b"echo", attachment=b"in", timeout=10,
+                               target=zenoh.QueryTarget.ALL_COMPLETE))
+    assert [(r.ok.payload.to_bytes(), r.ok.attachment.to_bytes()) for r in replies
+            if r.ok is not None] == [(b"echo!", b"att")]
+    assert got[0] == ("raw/test/a", b"echo", b"in")
+    assert list(session.get("raw/test/b", payload=b"silent", timeout=10)) == []
+    assert list(session.get("raw/test/b", payload=b"boom", timeout=10)) == []
+
+    def answer_later() -> None:
+        retry_until(lambda: held, 10, 0.01, "the deferred query")
+        held[0].reply(held[0].key, b"late")
+        held[0].finish()
+
+    thread = threading.Thread(target=answer_later)
+    thread.start()
+    late = list(session.get("raw/test/c", payload=b"later", timeout=10))
+    thread.join(10)
+    assert [r.ok.payload.to_bytes() for r in late if r.ok is not None] == [b"late"]
+    assert held[0].reply("raw/test/c", b"again") is False  # once only
