@@ -32,6 +32,8 @@ MAX_IMAGE_PAYLOAD = m.MAX_SIDE * m.MAX_SIDE * 3 + 4096
 """Largest image payload taken in (the contract's largest bgr8 frame)."""
 MAX_PAYLOAD = 1 << 20
 """Largest payload of any other type taken in (1 MiB)."""
+JPEG_QUALITY = 80
+"""Quality of a bgr8 frame compressed for a CompressedImage."""
 
 OURS: dict[type[m.Message], str] = {
     cls: f"{types.OURS}/msg/{cls.__name__}" for cls in interfaces.MESSAGES}
@@ -129,6 +131,30 @@ def image_to_ros(image: m.Image) -> tuple[str, bytes]:
     msg = store.types[types.COMPRESSED_IMAGE](
         header=_header(image.stamp_ns, image.frame_id), format="jpeg", data=data)
     return types.COMPRESSED_IMAGE, serialize(msg, types.COMPRESSED_IMAGE)
+
+
+def raw_image_to_ros(image: m.Image) -> bytes:
+    """sensor_msgs/msg/Image of a `bgr8` frame; a JPEG frame is refused (it is
+    not raw: `compressed_image_to_ros`)."""
+    if image.encoding != "bgr8":
+        raise ConvertError(f"a {image.encoding} image is not a raw sensor_msgs/msg/Image")
+    return image_to_ros(image)[1]
+
+
+def compressed_image_to_ros(image: m.Image) -> bytes:
+    """sensor_msgs/msg/CompressedImage (`jpeg`): a JPEG frame as it is, a `bgr8`
+    frame compressed at `JPEG_QUALITY`."""
+    if image.encoding == "jpeg":
+        return image_to_ros(image)[1]
+    try:
+        data = jpeg.from_image(image, JPEG_QUALITY)
+    except jpeg.PixelsError as exc:
+        raise ConvertError(str(exc)) from exc
+    if data is None:
+        raise ConvertError(f"a {image.width}x{image.height} frame did not compress")
+    return image_to_ros(m.Image(stamp_ns=image.stamp_ns, frame_id=image.frame_id,
+                                width=image.width, height=image.height, encoding="jpeg",
+                                data=data))[1]
 
 
 def image_from_ros(payload: bytes | memoryview, ros_type: str) -> m.Image:
