@@ -63,6 +63,16 @@ def started(spawn: Callable[..., Process], peer: zenoh.Session) -> list[wire.Gra
     return retry_until(complete, 30, 0.2, "the bridge's graph tokens")
 
 
+@pytest.fixture
+def controller(spawn: Callable[..., Process], probe: Node) -> Process:
+    """The controller, once its lease services (the bridge's commands) are declared."""
+    proc = spawn("controller")
+    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
+                            for i in probe.node_infos(1.0)),
+                30, 0.2, "the controller's lease services")
+    return proc
+
+
 @pytest.mark.integration
 def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node) -> None:
@@ -115,14 +125,10 @@ def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
 @pytest.mark.integration
 def test_a_ros_2_expression_reaches_the_eyes_and_garbage_is_counted(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
-        spawn: Callable[..., Process]) -> None:
+        controller: Process) -> None:
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
-    spawn("controller")
     expressions.wait_for(timeout=30, what="the controller's own expression")
-    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
-                            for i in probe.node_infos(1.0)),
-                30, 0.2, "the controller's lease services")
 
     encode: Any = their_encoder(bridge.EXPRESSION, schema_of_ours("ScreenExpression"))
     grin = encode({"stamp_ns": 5, "action": int(m.ExpressionAction.EYE_GRIN)})
@@ -223,13 +229,9 @@ def test_a_late_ros_2_subscriber_gets_the_latched_lids(
 @pytest.mark.integration
 def test_a_ros_2_gaze_moves_the_eyes_and_a_flood_is_cut(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
-        spawn: Callable[..., Process]) -> None:
+        controller: Process) -> None:
     control = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
-    spawn("controller")
-    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
-                            for i in probe.node_infos(1.0)),
-                30, 0.2, "the controller's lease services")
     encode: Any = their_encoder(bridge.EYE_CONTROL, schema_of_ours("EyeControl"))
     look = encode({"stamp_ns": 5, "yaw": 0.4, "pitch": -0.2, "target_distance_cm": 80.0})
     gid = bytes(16)
