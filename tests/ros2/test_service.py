@@ -64,6 +64,12 @@ def started(spawn: Callable[..., Process], peer: zenoh.Session) -> list[wire.Gra
 
 
 @pytest.fixture
+def diag(probe: Node) -> Collector[m.DiagnosticStatus]:
+    """The bridge's diagnostics (its counters)."""
+    return Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
+
+
+@pytest.fixture
 def controller(spawn: Callable[..., Process], probe: Node) -> Process:
     """The controller, once its lease services (the bridge's commands) are declared."""
     proc = spawn("controller")
@@ -125,9 +131,9 @@ def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
 @pytest.mark.integration
 def test_a_ros_2_expression_reaches_the_eyes_and_garbage_is_counted(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
-        controller: Process) -> None:
+        controller: Process,
+        diag: Collector[m.DiagnosticStatus]) -> None:
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
-    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
     expressions.wait_for(timeout=30, what="the controller's own expression")
 
     encode: Any = their_encoder(bridge.EXPRESSION, schema_of_ours("ScreenExpression"))
@@ -161,9 +167,9 @@ def subscription_token(peer: zenoh.Session, route: bridge.Route) -> str:
 
 @pytest.mark.integration
 def test_images_flow_only_while_a_ros_2_subscription_is_in_the_graph(
-        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node) -> None:
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
+        diag: Collector[m.DiagnosticStatus]) -> None:
     camera = probe.publisher(keys.CAMERA_IMAGE, camera="front")
-    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
     assert not camera.has_subscribers(), "the bridge reads the frames with nobody watching"
     got: list[bytes] = []
     arrived = threading.Event()
@@ -196,10 +202,10 @@ def test_images_flow_only_while_a_ros_2_subscription_is_in_the_graph(
 
 @pytest.mark.integration
 def test_a_late_ros_2_subscriber_gets_the_latched_lids(
-        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node) -> None:
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
+        diag: Collector[m.DiagnosticStatus]) -> None:
     """Transient local as rmw_zenoh does it: the bridge's advanced publisher keeps
     the last value; a subscriber declared later asks its history."""
-    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
     lids = m.EyeLidControl(stamp_ns=m.now_ns(), eye_id=m.EyeId.LEFT, top_lid_position=40.0,
                            bottom_lid_position=5.0)
     probe.publisher(keys.LIDS).put(lids)
@@ -229,9 +235,9 @@ def test_a_late_ros_2_subscriber_gets_the_latched_lids(
 @pytest.mark.integration
 def test_a_ros_2_gaze_moves_the_eyes_and_a_flood_is_cut(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
-        controller: Process) -> None:
+        controller: Process,
+        diag: Collector[m.DiagnosticStatus]) -> None:
     control = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
-    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
     encode: Any = their_encoder(bridge.EYE_CONTROL, schema_of_ours("EyeControl"))
     look = encode({"stamp_ns": 5, "yaw": 0.4, "pitch": -0.2, "target_distance_cm": 80.0})
     gid = bytes(16)
