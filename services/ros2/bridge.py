@@ -4,12 +4,26 @@ Two tables, the bridge's whole contract with ROS 2:
 
 * `OUTGOING`: a message on one of our keys -> a sample on a ROS 2 topic
   (the seed's names and types): `camera/{camera}/face` -> `/face_position`
-  (geometry_msgs/msg/PointStamped), `radar/presence` -> `/radar_presence`,
-  `eyes/expression` -> `/screen_expression` (buddybot_interfaces),
-  `audio/device_free` -> `/audio_device_is_free` (std_msgs/msg/Bool);
+  (geometry_msgs/msg/PointStamped), the camera's frames -> `/raw_image`
+  (sensor_msgs/msg/Image, or CompressedImage with `[ros2] raw_image =
+  "compressed"`: `outgoing`), the detector's debug JPEG -> `/debug_image`,
+  the radar frames -> `/ld2410_target_frames`, `radar/presence` ->
+  `/radar_presence`, the eye keys -> `/screen_expression`, `/eye_control`,
+  `/eyes_direction_control`, `/pupil_control`, `/eye_lid_control`
+  (buddybot_interfaces), `audio/device_free` -> `/audio_device_is_free`
+  (std_msgs/msg/Bool);
 * `INCOMING`: a sample of a ROS 2 node -> a request to the robot:
-  `/screen_expression` -> the controller (a lease, then `eyes/command`),
-  never our keys directly (the controller alone publishes the eyes).
+  `/screen_expression` and `/eye_control` -> the controller (a lease on
+  `expression` or `gaze`, then `eyes/command`), never our keys directly
+  (the controller alone publishes the eyes).
+
+Each outgoing entry carries the QoS its graph token announces: the latched
+keys (presence, expression, lids, device free) are transient-local with
+depth 1, served to late joiners as rmw_zenoh does (an advanced publisher
+with a cache of that depth); images are best effort, depth 5 (ROS's sensor
+profile); the rest rmw_zenoh's default (reliable, volatile, depth 10).
+Images are `on_demand`: the bridge takes them from the robot only while a
+ROS 2 subscription to the topic is in the graph (service.py).
 
 Topic names live in the settings' namespace and key expressions in their
 domain (`Ros2Settings`); `Route` spells both for one entry, and
@@ -32,6 +46,14 @@ NODE_NAME = "buddybot_bridge"
 """The ROS 2 node name the bridge's graph tokens carry (`ros2 node list`)."""
 EXPRESSION = f"{types.OURS}/msg/ScreenExpression"
 PRESENCE = f"{types.OURS}/msg/PresenceDetection"
+EYE_CONTROL = f"{types.OURS}/msg/EyeControl"
+
+DEFAULT_QOS = wire.Qos(depth=10)
+"""rmw_zenoh's default profile with depth 10 (reliable, volatile, keep last)."""
+LATCHED_QOS = wire.Qos(durability=wire.TRANSIENT_LOCAL, depth=1)
+"""Reliable, transient-local, depth 1: a late ROS 2 subscriber gets the last value."""
+SENSOR_QOS = wire.Qos(reliability=wire.BEST_EFFORT, depth=5)
+"""ROS's sensor-data profile (best effort, volatile, depth 5) for images."""
 
 
 def _ours(message: Any) -> bytes:
@@ -40,37 +62,82 @@ def _ours(message: Any) -> bytes:
 
 @dataclass(frozen=True)
 class Outgoing:
-    """Our topic `topic` published to ROS 2 as `name` (relative to the namespace)."""
+    """Our topic `topic` published to ROS 2 as `name` (relative to the namespace).
+
+    `on_demand`: our key is subscribed only while a ROS 2 subscription to the
+    topic exists (images: large, and the debug image is drawn only while
+    someone subscribes to it)."""
 
     topic: keys.Topic
     name: str
     ros_type: str
     encode: Callable[[Any], bytes]
+    qos: wire.Qos = DEFAULT_QOS
+    on_demand: bool = False
+
+    @property
+    def latched(self) -> bool:
+        return self.qos.durability == wire.TRANSIENT_LOCAL
 
 
 @dataclass(frozen=True)
 class Incoming:
-    """ROS 2 topic `name` (relative to the namespace) taken in as `decode`'s message."""
+    """ROS 2 topic `name` (relative to the namespace) taken in as `decode`'s message,
+    asking the controller for a lease on `resource`. `latest`: only the newest
+    waiting sample matters (a gaze stream), else they are taken in order."""
 
     name: str
     ros_type: str
     decode: Callable[[bytes], m.Message]
+    resource: m.Resource
+    latest: bool = False
 
+
+RAW_IMAGE = Outgoing(keys.CAMERA_IMAGE, "raw_image", types.IMAGE, convert.raw_image_to_ros,
+                     SENSOR_QOS, on_demand=True)
+RAW_IMAGE_COMPRESSED = Outgoing(keys.CAMERA_IMAGE, "raw_image", types.COMPRESSED_IMAGE,
+                                convert.compressed_image_to_ros, SENSOR_QOS, on_demand=True)
+"""`/raw_image` with `[ros2] raw_image = "compressed"`: JPEG, about a tenth of the bytes."""
 
 OUTGOING: tuple[Outgoing, ...] = (
     Outgoing(keys.FACE, "face_position", types.POINT_STAMPED, convert.face_to_ros),
-    Outgoing(keys.PRESENCE, "radar_presence", PRESENCE, _ours),
-    Outgoing(keys.EXPRESSION, "screen_expression", EXPRESSION, _ours),
-    Outgoing(keys.DEVICE_FREE, "audio_device_is_free", types.BOOL, convert.bool_to_ros),
+    RAW_IMAGE,
+    Outgoing(keys.DEBUG_IMAGE, "debug_image", types.COMPRESSED_IMAGE,
+             convert.compressed_image_to_ros, SENSOR_QOS, on_demand=True),
+    Outgoing(keys.RADAR_FRAMES, "ld2410_target_frames",
+             f"{types.OURS}/msg/LD2410TargetDataFrameArray", _ours),
+    Outgoing(keys.PRESENCE, "radar_presence", PRESENCE, _ours, LATCHED_QOS),
+    Outgoing(keys.EXPRESSION, "screen_expression", EXPRESSION, _ours, LATCHED_QOS),
+    Outgoing(keys.EYE_CONTROL, "eye_control", EYE_CONTROL, _ours),
+    Outgoing(keys.EYES_DIRECTION, "eyes_direction_control",
+             f"{types.OURS}/msg/EyesDirection", _ours),
+    Outgoing(keys.PUPIL, "pupil_control", f"{types.OURS}/msg/PupilControl", _ours),
+    Outgoing(keys.LIDS, "eye_lid_control", f"{types.OURS}/msg/EyeLidControl", _ours,
+             LATCHED_QOS),
+    Outgoing(keys.DEVICE_FREE, "audio_device_is_free", types.BOOL, convert.bool_to_ros,
+             LATCHED_QOS),
 )
+"""The default table (`/raw_image` as sensor_msgs/msg/Image); `outgoing` applies the settings."""
+
+
+def outgoing(settings: Ros2Settings) -> tuple[Outgoing, ...]:
+    """`OUTGOING` as the settings ask: `/raw_image` compressed or not."""
+    if settings.raw_image == "compressed":
+        return tuple(RAW_IMAGE_COMPRESSED if o is RAW_IMAGE else o for o in OUTGOING)
+    return OUTGOING
 
 
 def _expression(payload: bytes) -> m.Message:
     return convert.from_ros(payload, m.ScreenExpression)
 
 
+def _eye_control(payload: bytes) -> m.Message:
+    return convert.from_ros(payload, m.EyeControl)
+
+
 INCOMING: tuple[Incoming, ...] = (
-    Incoming("screen_expression", EXPRESSION, _expression),
+    Incoming("screen_expression", EXPRESSION, _expression, "expression"),
+    Incoming("eye_control", EYE_CONTROL, _eye_control, "gaze", latest=True),
 )
 
 

@@ -17,7 +17,8 @@ contract's own checks (ranges, enums, string lengths) through
 
 from __future__ import annotations
 
-from typing import Any, TypeVar
+import functools
+from typing import Any, Literal, TypeVar
 
 import msgspec
 import numpy as np
@@ -32,6 +33,8 @@ MAX_IMAGE_PAYLOAD = m.MAX_SIDE * m.MAX_SIDE * 3 + 4096
 """Largest image payload taken in (the contract's largest bgr8 frame)."""
 MAX_PAYLOAD = 1 << 20
 """Largest payload of any other type taken in (1 MiB)."""
+JPEG_QUALITY = 80
+"""Quality of a bgr8 frame compressed for a CompressedImage."""
 
 OURS: dict[type[m.Message], str] = {
     cls: f"{types.OURS}/msg/{cls.__name__}" for cls in interfaces.MESSAGES}
@@ -131,6 +134,30 @@ def image_to_ros(image: m.Image) -> tuple[str, bytes]:
     return types.COMPRESSED_IMAGE, serialize(msg, types.COMPRESSED_IMAGE)
 
 
+def raw_image_to_ros(image: m.Image) -> bytes:
+    """sensor_msgs/msg/Image of a `bgr8` frame; a JPEG frame is refused (it is
+    not raw: `compressed_image_to_ros`)."""
+    if image.encoding != "bgr8":
+        raise ConvertError(f"a {image.encoding} image is not a raw sensor_msgs/msg/Image")
+    return image_to_ros(image)[1]
+
+
+def compressed_image_to_ros(image: m.Image) -> bytes:
+    """sensor_msgs/msg/CompressedImage (`jpeg`): a JPEG frame as it is, a `bgr8`
+    frame compressed at `JPEG_QUALITY`."""
+    if image.encoding == "jpeg":
+        return image_to_ros(image)[1]
+    try:
+        data = jpeg.from_image(image, JPEG_QUALITY)
+    except jpeg.PixelsError as exc:
+        raise ConvertError(str(exc)) from exc
+    if data is None:
+        raise ConvertError(f"a {image.width}x{image.height} frame did not compress")
+    return image_to_ros(m.Image(stamp_ns=image.stamp_ns, frame_id=image.frame_id,
+                                width=image.width, height=image.height, encoding="jpeg",
+                                data=data))[1]
+
+
 def image_from_ros(payload: bytes | memoryview, ros_type: str) -> m.Image:
     """Our image from a bgr8 sensor_msgs/msg/Image or a JPEG CompressedImage;
     any other encoding or format is refused."""
@@ -170,7 +197,10 @@ def bool_from_ros(payload: bytes | memoryview, stamp_ns: int) -> m.Bool:
 # --- buddybot_interfaces -----------------------------------------------------------
 
 
+@functools.cache
 def _field_types(cls: type[m.Message]) -> dict[str, Any]:
+    """Field name -> msgspec type of `cls`, read once per class (msgspec's
+    inspection costs a millisecond, more than the CDR itself)."""
     info = mi.type_info(cls)
     assert isinstance(info, mi.StructType)
     return {f.name: f.type for f in info.fields}
@@ -193,20 +223,33 @@ _DTYPES = {"uint8": np.uint8, "uint16": np.uint16, "uint32": np.uint32, "uint64"
            "float64": np.float64, "bool": np.bool_}
 
 
+Optional = Literal["", "one", "list"]
+"""How a field holds None on the ROS side: not optional, `X[<=1]`, or its empty list."""
+
+
+@functools.cache
+def _ros_fields(cls: type[m.Message]) -> tuple[tuple[str, str, Optional], ...]:
+    """(name, ROS type, optional kind) of each field of `cls`, worked out once."""
+    fields: list[tuple[str, str, Optional]] = []
+    for name, t in _field_types(cls).items():
+        inner = _optional(t)
+        kind: Optional = "" if inner is None else (
+            "list" if isinstance(_bare(inner), mi.ListType) else "one")
+        fields.append((name, interfaces.ros_field(t, name).ros_type, kind))
+    return tuple(fields)
+
+
 def _to_ros(message: m.Message) -> Any:
     cls = type(message)
-    ros_type = f"{types.OURS}/msg/{cls.__name__}"
     values: dict[str, Any] = {}
-    for name, t in _field_types(cls).items():
+    for name, ros_type, optional in _ros_fields(cls):
         value = getattr(message, name)
-        field = interfaces.ros_field(t, name)
-        inner = _optional(t)
-        if inner is not None and not isinstance(_bare(inner), mi.ListType):
+        if optional == "one":
             value = [] if value is None else [value]
-        elif inner is not None:
+        elif optional == "list":
             value = [] if value is None else value
-        values[name] = _ros_value(value, field.ros_type)
-    return types.typestore().types[ros_type](**values)
+        values[name] = _ros_value(value, ros_type)
+    return types.typestore().types[OURS[cls]](**values)
 
 
 def _ros_value(value: Any, ros_type: str) -> Any:

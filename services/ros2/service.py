@@ -2,18 +2,24 @@
 
 One node, on the robot's router:
 
-* for each entry of `bridge.OUTGOING` it subscribes to our key and
-  republishes every message as CDR on the entry's rmw_zenoh key, with the
-  attachment (sequence number, source timestamp, the publisher's GID);
+* for each entry of `bridge.outgoing(settings)` it subscribes to our key
+  and republishes every message as CDR on the entry's rmw_zenoh key, with
+  the attachment (sequence number, source timestamp, the publisher's GID);
+  a latched entry's publisher keeps its last value for late joiners
+  (transient local), an on-demand entry (images) subscribes to our key only
+  while a ROS 2 subscription to the topic is in the graph (`OnDemand`);
 * it declares the graph's liveliness tokens: one for the ROS 2 node, one
   per publisher, one per subscription, so `ros2 node list` and `ros2 topic
   list` see them;
 * for each entry of `bridge.INCOMING` it subscribes to the topic under any
-  type and hash: a sample of another type or hash is counted
-  (`wrong_type`), a payload that does not decode is counted (`malformed`),
-  and a `/screen_expression` goes to the controller under the bridge's
-  `app` lease on `expression` (a refusal is counted, `refused`). The bridge
-  never publishes the robot's keys itself;
+  type and hash: samples beyond the flood limit are dropped at once
+  (`flooded`), a sample of another type or hash is counted (`wrong_type`),
+  a payload that does not decode is counted (`malformed`), and a
+  `/screen_expression` or `/eye_control` goes to the controller under the
+  bridge's `app` lease on `expression` or `gaze` (a refusal is counted,
+  `refused`). The bridge never publishes the robot's keys itself, and its
+  subscriptions to them only copy (images on a worker), so it never slows
+  them;
 * it serves the audio services and the `/play_sound` action as ROS 2
   services (`servers.Servers`, with their `SS` and `MP` tokens).
 
@@ -37,21 +43,23 @@ from buddybot.ros2 import bridge, convert, servers, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.diagnostics import RateLimitedLog
 from buddybot.runtime.errors import ServiceError
-from buddybot.runtime.handles import RawPublisher
+from buddybot.runtime.handles import RawPublisher, Subscription, Worker
 from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.rates import TokenBucket
 from buddybot.runtime.service import ServiceContext
 
 CALL_TIMEOUT_S = 3.0
-DEFAULT_QOS = wire.Qos(depth=10)
-"""rmw_zenoh's default profile with depth 10 (reliable, volatile, keep last)."""
+QUEUE_SIZE = 64
+"""Samples of one ROS 2 topic waiting for the controller (oldest dropped)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     settings_option(parser, "--domain-id", struct=Ros2Settings, field="domain_id")
     settings_option(parser, "--namespace", struct=Ros2Settings, field="namespace")
+    settings_option(parser, "--raw-image", struct=Ros2Settings, field="raw_image")
 
 
 def settings_from(ctx: ServiceContext) -> Ros2Settings:
@@ -74,26 +82,92 @@ class RosPublisher:
             self.publisher.put(payload, attachment.encode())
 
 
+class OnDemand:
+    """Our key subscribed only while a ROS 2 subscription to its topic is in the
+    graph (their `MS` tokens): images cost the bridge nothing while nobody on
+    the ROS side reads them, and the detector draws its debug image only while
+    this subscription exists. Tokens arrive in Zenoh's thread; the subscription
+    is declared or closed on the worker."""
+
+    def __init__(self, name: str, subscribe: Callable[[], Subscription],
+                 on_error: Callable[[BaseException], None]) -> None:
+        self.readers: set[str] = set()
+        self._subscribe = subscribe
+        self._subscription: Subscription | None = None
+        self._lock = threading.Lock()
+        self._worker = Worker(f"ros2-{name}", self._reconcile, latest=True, maxlen=1,
+                              on_error=on_error)
+
+    def on_token(self, key: str, alive: bool) -> None:
+        with self._lock:
+            if alive:
+                self.readers.add(key)
+            else:
+                self.readers.discard(key)
+        self._worker.submit()
+
+    def _reconcile(self) -> None:
+        with self._lock:
+            wanted = bool(self.readers)
+        if wanted and self._subscription is None:
+            self._subscription = self._subscribe()
+        elif not wanted and self._subscription is not None:
+            self._subscription.close()
+            self._subscription = None
+
+    @property
+    def active(self) -> bool:
+        return self._subscription is not None
+
+    def close(self) -> None:
+        self._worker.close(drop_pending=True)
+
+
+class Inbox:
+    """One ROS 2 subscription's intake: a flood limit checked in Zenoh's thread
+    (a sample over it is dropped before anything else is done with it), then
+    a worker (the lease calls block) fed in order or with the newest only."""
+
+    def __init__(self, inc: bridge.Incoming, settings: Ros2Settings,
+                 handler: Callable[..., None], on_error: Callable[[BaseException], None]
+                 ) -> None:
+        self.bucket = TokenBucket(settings.max_incoming_hz, settings.incoming_burst,
+                                  time.monotonic())
+        self._lock = threading.Lock()
+        self.worker = Worker(f"ros2-in-{inc.name}", handler, latest=inc.latest,
+                             maxlen=QUEUE_SIZE, on_error=on_error)
+
+    def admit(self) -> bool:
+        with self._lock:
+            return self.bucket.take(time.monotonic())
+
+
 class Ros2Bridge:
     """The node side: the tables of `bridge` declared on the bus."""
 
     def __init__(self, node: Node, settings: Ros2Settings) -> None:
         self.node = node
         self.settings = settings
-        self.lease = LeaseHolder(node, ["expression"], "app", CALL_TIMEOUT_S)
+        self.leases = {resource: LeaseHolder(node, [resource], "app", CALL_TIMEOUT_S)
+                       for resource in {inc.resource for inc in bridge.INCOMING}}
+        """One `app` lease per resource, taken at the first sample that needs it:
+        a ROS 2 expression does not take the gaze from face tracking."""
         self._warn = RateLimitedLog(node.log)
         """A flood of bad ROS samples is counted in full but logged once per 5 s."""
         self._entities = itertools.count(1)
         self.node_id = 0
         self._publishers: dict[str, RosPublisher] = {}
+        self.on_demand: dict[str, OnDemand] = {}
+        self._inboxes: list[Inbox] = []
         self.sent: dict[str, int] = {}
-        for name in ("malformed", "wrong_type", "refused", "commands", "encode_errors"):
+        for name in ("malformed", "wrong_type", "flooded", "refused", "commands",
+                     "encode_errors"):
             node.diagnostics.values[name] = 0
         self.servers = servers.Servers(node, settings, self._token, self._publisher)
         """The ROS 2 services and the `/play_sound` action (servers.py)."""
 
     def _token(self, kind: wire.Kind, route: bridge.Route | None = None,
-               qos: wire.Qos = DEFAULT_QOS) -> None:
+               qos: wire.Qos = bridge.DEFAULT_QOS) -> None:
         extra: dict[str, Any] = {}
         entity = self.node_id
         if route is not None:
@@ -106,20 +180,37 @@ class Ros2Bridge:
             namespace=self.settings.namespace, node_name=bridge.NODE_NAME, **extra)
         self.node.declare_token(token.format())
 
+    def _on_error(self, exc: BaseException) -> None:
+        self.node.diagnostics.increment("callback_errors")
+        self._warn.warning("worker", "ROS 2 bridge worker failed: %r", exc)
+
     def start(self) -> None:
         self._token("NN")
         self.node.subscribe(keys.LEASES, self.on_leases, delivery="inline")
-        for out in bridge.OUTGOING:
+        for out in bridge.outgoing(self.settings):
             route = bridge.route(self.settings, out.name, out.ros_type)
-            publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr"))
+            cache = out.qos.depth if out.latched else None
+            publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr",
+                                                             cache=cache))
             self._publishers[route.ros_name] = publisher
-            self.node.subscribe(out.topic, partial(self.on_ours, out, route, publisher),
-                                delivery="inline")
-            self._token("MP", route)
+            subscribe = partial(self.node.subscribe, out.topic,
+                                partial(self.on_ours, out, route, publisher),
+                                delivery="latest" if out.on_demand else "inline")
+            if out.on_demand:
+                demand = OnDemand(out.name, subscribe, self._on_error)
+                self.on_demand[route.ros_name] = demand
+                self.node.watch_tokens(wire.entities_key(
+                    self.settings.domain_id, "MS", route.ros_name,
+                    wire.dds_type_name(route.ros_type), route.type_hash), demand.on_token)
+            else:
+                subscribe()
+            self._token("MP", route, out.qos)
         for inc in bridge.INCOMING:
             route = bridge.route(self.settings, inc.name, inc.ros_type)
-            self.node.subscribe_raw(route.any_type_key, partial(self.on_ros, inc, route),
-                                    delivery="queue", remote_only=True)
+            inbox = Inbox(inc, self.settings, partial(self.on_ros, inc, route), self._on_error)
+            self._inboxes.append(inbox)
+            self.node.subscribe_raw(route.any_type_key, partial(self.on_sample, route, inbox),
+                                    delivery="inline", remote_only=True)
             self._token("MS", route)  # after the subscriber: a peer seeing it is heard
         self.servers.start()
 
@@ -135,18 +226,25 @@ class Ros2Bridge:
             payload = out.encode(msg)
         except (convert.ConvertError, ValueError, TypeError) as exc:
             self.node.diagnostics.increment("encode_errors")
-            self.node.log.warning("%s not sent to %s: %s", type(msg).__name__,
-                                  route.ros_name, clip(exc))
+            self._warn.warning(f"encode:{route.ros_name}", "%s not sent to %s: %s",
+                               type(msg).__name__, route.ros_name, clip(exc))
             return
         publisher.put(payload)
         self.sent[route.ros_name] = self.sent.get(route.ros_name, 0) + 1
 
     def on_leases(self, state: m.Leases, _key: str) -> None:
-        self.lease.forget_unless_in(state)
+        for lease in self.leases.values():
+            lease.forget_unless_in(state)
 
-    def on_ros(self, inc: bridge.Incoming, route: bridge.Route, key: str, payload: bytes,
-               _encoding: str) -> None:
-        """On the subscription's worker (the lease calls block)."""
+    def on_sample(self, route: bridge.Route, inbox: Inbox, key: str, payload: bytes,
+                  _encoding: str) -> None:
+        """In Zenoh's thread: the flood limit and the type check, nothing that waits."""
+        if not inbox.admit():
+            self.node.diagnostics.increment("flooded")
+            self._warn.warning(f"flood:{route.ros_name}", "%s: more than %.0f samples/s "
+                               "from ROS 2, the excess dropped", route.ros_name,
+                               self.settings.max_incoming_hz)
+            return
         try:
             type_name, type_hash = bridge.split_key(key)
         except wire.WireError:
@@ -156,6 +254,10 @@ class Ros2Bridge:
             self._warn.warning("wrong_type", "dropped a sample on %s of another type or "
                                "hash: %s", route.ros_name, clip(key))
             return
+        inbox.worker.submit(payload)
+
+    def on_ros(self, inc: bridge.Incoming, route: bridge.Route, payload: bytes) -> None:
+        """On the topic's worker (the lease calls block)."""
         try:
             msg = inc.decode(payload)
         except convert.ConvertError as exc:
@@ -163,33 +265,47 @@ class Ros2Bridge:
             self._warn.warning("malformed", "dropped a malformed sample on %s: %s",
                                route.ros_name, clip(exc))
             return
-        assert isinstance(msg, m.ScreenExpression)
+        lease = self.leases[inc.resource]
+        what = msg.action.name if isinstance(msg, m.ScreenExpression) else route.ros_name
         try:
-            self.lease.acquire()
-            self.lease.command(expression=msg.action)
+            lease.acquire()
+            if isinstance(msg, m.ScreenExpression):
+                lease.command(expression=msg.action)
+            else:
+                assert isinstance(msg, m.EyeControl)
+                lease.command(yaw=msg.yaw, pitch=msg.pitch,
+                              target_distance_cm=msg.target_distance_cm)
         except LeaseRefused as exc:
             self.node.diagnostics.increment("refused")
-            self._warn.warning("refused", "%s from ROS 2 refused: %s", msg.action.name,
+            self._warn.warning(f"refused:{inc.resource}", "%s from ROS 2 refused: %s", what,
                                clip(exc))
             return
         except ServiceError as exc:
             self.node.diagnostics.increment("refused")
-            self._warn.warning("undelivered", "%s from ROS 2 not delivered: %s",
-                               msg.action.name, clip(exc))
+            self._warn.warning(f"undelivered:{inc.resource}", "%s from ROS 2 not delivered: "
+                               "%s", what, clip(exc))
             return
         self.node.diagnostics.increment("commands")
-        self.node.log.info("expression %s from ROS 2", msg.action.name)
+        if isinstance(msg, m.ScreenExpression):
+            self.node.log.info("expression %s from ROS 2", what)
 
     def update_diagnostics(self) -> None:
         for name, count in self.sent.items():
             self.node.diagnostics.values[f"sent {name}"] = count
+        for name, demand in self.on_demand.items():
+            self.node.diagnostics.values[f"readers {name}"] = len(demand.readers)
 
     def close(self) -> None:
         self.servers.close()
-        try:
-            self.lease.release("ros2 bridge stopped")
-        except ServiceError as exc:
-            self.node.log.info("lease not released at stop: %s", clip(exc))
+        for demand in self.on_demand.values():
+            demand.close()
+        for inbox in self._inboxes:
+            inbox.worker.close(drop_pending=True)
+        for lease in self.leases.values():
+            try:
+                lease.release("ros2 bridge stopped")
+            except ServiceError as exc:
+                self.node.log.info("lease not released at stop: %s", clip(exc))
 
 
 def run(ctx: ServiceContext) -> int:

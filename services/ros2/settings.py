@@ -6,7 +6,7 @@ Off by default: the bridge runs under `up` only with `up --ros2` or
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -27,3 +27,14 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         pattern=NAMESPACE, max_length=200, examples=["/robot1", "/lab/buddy"],
         description="namespace of the bridge's node and topics (`/`: the seed's "
         "/face_position ...)")] = "/"
+    raw_image: Annotated[Literal["raw", "compressed"], msgspec.Meta(
+        description="/raw_image as sensor_msgs/msg/Image (`raw`, bgr8) or as "
+        "sensor_msgs/msg/CompressedImage (`compressed`, JPEG)")] = "raw"
+    # A ROS 2 node is a peer like any other: a flood of samples on one topic is
+    # dropped before decoding, so it never costs the robot more than this.
+    max_incoming_hz: Annotated[float, msgspec.Meta(
+        gt=0, le=1000, description="samples per second taken in per ROS 2 topic "
+        "(more are dropped and counted as `flooded`)")] = 50.0
+    incoming_burst: Annotated[int, msgspec.Meta(
+        ge=1, le=1000, description="samples taken in at once per ROS 2 topic "
+        "before `max_incoming_hz` applies")] = 20

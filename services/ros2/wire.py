@@ -30,6 +30,10 @@ KINDS = ("NN", "MP", "MS", "SS", "SC")
 Kind = Literal["NN", "MP", "MS", "SS", "SC"]
 """Node, message publisher, message subscription, service server, service client."""
 
+RELIABLE, BEST_EFFORT = 1, 2
+TRANSIENT_LOCAL, VOLATILE = 1, 2
+"""rmw's enum numbers, as the QoS chunk of a graph token writes them."""
+
 GID_SIZE = 16
 ATTACHMENT_SIZE = 8 + 8 + 1 + GID_SIZE
 CDR_LE = b"\x00\x01\x00\x00"
@@ -211,6 +215,16 @@ class GraphToken:
                    entity_id=int(chunks[4]), kind=kind,  # type: ignore[arg-type]
                    enclave=unmangle(chunks[6]), namespace=unmangle(chunks[7]),
                    node_name=chunks[8], **extra)  # type: ignore[arg-type]
+
+
+def entities_key(domain_id: int, kind: Kind, name: str, type_name: str, type_hash: str) -> str:
+    """The liveliness key expression matching every `kind` entity (e.g. every
+    subscription, `MS`) on topic `name` with that type and hash, in any session,
+    node, enclave and namespace and with any QoS."""
+    check_name(name)
+    ros_type_name(type_name)
+    check_hash(type_hash)
+    return f"{PREFIX}/{domain_id}/*/*/*/{kind}/*/*/*/{mangle(name)}/{type_name}/{type_hash}/*"
 
 
 @dataclass(frozen=True)

@@ -223,7 +223,7 @@ class RawPublisher(Handle):
     is set once at declaration.
     """
 
-    def __init__(self, key: str, encoding: str, entity: zenoh.Publisher,
+    def __init__(self, key: str, encoding: str, entity: Any,
                  on_close: Callable[[Handle], None]) -> None:
         super().__init__(key, entity, on_close)
         self.encoding = encoding

@@ -219,11 +219,13 @@ class LeaseHolder:
             return True
 
     def command(self, expression: m.ExpressionAction | None = None,
-                yaw: float | None = None, pitch: float | None = None) -> str:
+                yaw: float | None = None, pitch: float | None = None,
+                target_distance_cm: float = 0.0) -> str:
         """Send `eyes/command` with the lease held; the controller's text, or
         LeaseRefused (none held, or the controller refused it)."""
         lease_id = self.lease_id
         if lease_id is None:
             raise LeaseRefused("no lease held")
-        return eyes_command(self.node, m.EyesCommand(lease_id=lease_id, expression=expression,
-                                                     yaw=yaw, pitch=pitch), self.timeout)
+        return eyes_command(self.node, m.EyesCommand(
+            lease_id=lease_id, expression=expression, yaw=yaw, pitch=pitch,
+            target_distance_cm=target_distance_cm), self.timeout)

@@ -299,22 +299,34 @@ class Node:
         nodes matching `name` (every node by default) that exists now, and for
         every one that appears or goes away later (a process that ends, crashes
         or is killed loses its token). Runs in Zenoh's thread: be quick."""
+
+        def on_any(key: str, alive: bool) -> None:
+            found = keys.NODES.match(self.relative(key))
+            if found is not None:
+                on_token(found["node"], found["instance"], alive)
+
+        return self.watch_tokens(self.key(keys.NODES, node=name), on_any)
+
+    def watch_tokens(self, key_expr: str, on_token: Callable[[str, bool], None]
+                     ) -> Subscription:
+        """Call `on_token(key, alive)` for every liveliness token matching the
+        absolute `key_expr` that exists now, and whenever one appears or goes
+        away (its session closed or died). A failing callback is logged, never
+        fatal. Runs in Zenoh's thread: be quick."""
         put = zenoh.SampleKind.PUT
+        key_expr = _key_expr(key_expr)
 
         def on_sample(sample: zenoh.Sample) -> None:
-            found = keys.NODES.match(self.relative(str(sample.key_expr)))
-            if found is None:
-                return
             try:
-                on_token(found["node"], found["instance"], sample.kind == put)
+                on_token(str(sample.key_expr), sample.kind == put)
             except Exception as exc:
-                self._warn.warning(f"watch:{name}", "node watcher for %s failed: %r", name, exc)
+                self._warn.warning(f"watch:{key_expr}", "token watcher for %s failed: %r",
+                                   key_expr, exc)
 
-        key = self.key(keys.NODES, node=name)
         gate = Gate()
         entity = self._session.liveliness().declare_subscriber(
-            key, gate.guard(on_sample), history=True)
-        return self._track(Subscription(key, entity, self._forget, gate=gate))
+            key_expr, gate.guard(on_sample), history=True)
+        return self._track(Subscription(key_expr, entity, self._forget, gate=gate))
 
     def live_instances(self, key: str, timeout: float = 2.0) -> set[str]:
         """Instance ids of the liveliness tokens matching `key` (an absolute
@@ -388,16 +400,29 @@ class Node:
             entity = self._session.declare_publisher(key, **options)
         return self._track(Publisher(topic, key, entity, self._forget))
 
-    def raw_publisher(self, key: str, encoding: str) -> RawPublisher:
+    def raw_publisher(self, key: str, encoding: str, *, cache: int | None = None
+                      ) -> RawPublisher:
         """A publisher of already encoded bytes on an absolute key, which need
         not be in the catalogue (tools: `buddybot pub`). Nothing is validated:
-        the receivers' decoders are the guard."""
+        the receivers' decoders are the guard. `cache`: keep the last `cache`
+        samples for late joiners (an advanced publisher, as latched topics and
+        rmw_zenoh's transient-local publishers are, with publisher detection and
+        a sporadic heartbeat so a missed sample is fetched again)."""
         if "*" in key:
             raise ValueError(f"cannot publish on a wildcard key {key}")
-        entity = self._session.declare_publisher(
-            _key_expr(key), encoding=zenoh.Encoding(encoding),
-            congestion_control=_CONGESTION["drop"], priority=_PRIORITY["data"], express=False,
-        )
+        options: dict[str, Any] = {
+            "encoding": zenoh.Encoding(encoding), "congestion_control": _CONGESTION["drop"],
+            "priority": _PRIORITY["data"], "express": False}
+        entity: Any
+        if cache is None:
+            entity = self._session.declare_publisher(_key_expr(key), **options)
+        else:
+            entity = zenoh.ext.declare_advanced_publisher(
+                self._session, _key_expr(key), cache=zenoh.ext.CacheConfig(max_samples=cache),
+                publisher_detection=True,
+                sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                    heartbeat=None, sporadic_heartbeat=HEARTBEAT_S),
+                **options)
         return self._track(RawPublisher(key, encoding, entity, self._forget))
 
     def subscribe(

@@ -279,7 +279,22 @@ def test_router_access_control_is_default_deny_and_consistent() -> None:
         assert rule["permission"] == "allow", "default deny: only grants are needed"
         assert rule["flows"], f"{rule['id']}: say ingress or egress, not both by omission"
         for key in rule["key_exprs"]:
-            assert key.startswith("buddybot/buddy/"), f"{rule['id']}: {key} leaves the robot"
+            if rule["id"] in ROS2_RULES:
+                assert key in ("0/**", "0/**/@adv/**", "@ros2_lv/0/**"), f"{rule['id']}: {key}"
+            else:
+                assert key.startswith("buddybot/buddy/"), f"{rule['id']}: {key} leaves the robot"
+
+
+ROS2_RULES = ("robot-ros2-write-ask", "robot-ros2-receive")
+"""The only grants outside the robot prefix: rmw_zenoh's keys of ROS domain 0."""
+
+
+def test_only_the_robot_computer_speaks_ros_2() -> None:
+    acl = zenoh_json("router.json5", "access_control")
+    assert isinstance(acl, dict)
+    holders = {tuple(p["subjects"]) for p in acl["policies"]
+               if set(ROS2_RULES) & set(p["rules"])}
+    assert holders == {("robot",)}
 
 
 def test_no_host_may_publish_everywhere() -> None:

@@ -566,3 +566,65 @@ def test_duplicate_service_is_seen_through_the_acl(
     finally:
         if second is not None:
             second.close()
+
+
+# --- the ROS 2 bridge's keys --------------------------------------------------------------
+
+ROS_KEY = "0/face_position/geometry_msgs::msg::dds_::PointStamped_/RIHS01_" + "4c" * 32
+ROS_LATCHED = "0/eye_lid_control/buddybot_interfaces::msg::dds_::EyeLidControl_/RIHS01_" + "1d" * 32
+
+
+def _ros_token(session: zenoh.Session, node: str) -> str:
+    return f"@ros2_lv/0/{session.info.zid()}/0/0/NN/%/%/{node}"
+
+
+def test_ros_2_keys_cross_the_acl_on_the_robot_computer_only(
+    profile: HostProfile, tls_router: TlsRouter
+) -> None:
+    """The bridge (robot certificate) and a ROS 2 node on the robot computer meet
+    through the router: data keys of domain 0, the graph's tokens, and a
+    transient-local value fetched late through the "@adv" grants. The radar
+    board's put and token on the same keys never arrive (after the control)."""
+    sessions: list[zenoh.Session] = []
+    try:
+        bridge = open_client(tls_router.endpoint, profile.zenoh_file("robot"))
+        ros_node = open_client(tls_router.endpoint, profile.zenoh_file("robot"))
+        intruder = open_client(tls_router.endpoint, profile.zenoh_file("radar-board"))
+        sessions += [bridge, ros_node, intruder]
+        samples: list[bytes] = []
+        tokens: list[str] = []
+        ros_node.declare_subscriber("0/**", lambda s: samples.append(s.payload.to_bytes()))
+        ros_node.liveliness().declare_subscriber(
+            "@ros2_lv/0/**", lambda s: tokens.append(str(s.key_expr)), history=True)
+        latched = zenoh.ext.declare_advanced_publisher(
+            bridge, ROS_LATCHED, cache=zenoh.ext.CacheConfig(max_samples=1),
+            publisher_detection=True,
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(heartbeat=None,
+                                                                sporadic_heartbeat=0.5))
+        latched.put(b"lids")
+        intruder_token = intruder.liveliness().declare_token(_ros_token(intruder, "fake"))
+        bridge_token = bridge.liveliness().declare_token(_ros_token(bridge, "buddybot_bridge"))
+
+        def attempt() -> bool:
+            intruder.put(ROS_KEY, b"denied")
+            bridge.put(ROS_KEY, b"allowed")
+            return b"allowed" in samples
+
+        retry_until(attempt, 20, 0.2, what="the bridge's sample at the ROS 2 node")
+        retry_until(lambda: _ros_token(bridge, "buddybot_bridge") in tokens, 20, 0.1,
+                    what="the bridge's graph token")
+        history: list[bytes] = []
+        late = zenoh.ext.declare_advanced_subscriber(
+            ros_node, ROS_LATCHED, lambda s: history.append(s.payload.to_bytes()),
+            history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+        retry_until(lambda: b"lids" in history, 20, 0.1, what="the latched value, late")
+        with pytest.raises(TimeoutError):
+            retry_until(lambda: b"denied" in samples or _ros_token(intruder, "fake") in tokens,
+                        QUIET_S, 0.1, what="the radar board's ROS 2 put or token")
+        late.undeclare()
+        latched.undeclare()
+        intruder_token.undeclare()
+        bridge_token.undeclare()
+    finally:
+        for session in reversed(sessions):
+            session.close()

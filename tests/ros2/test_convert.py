@@ -269,3 +269,53 @@ def test_a_message_without_an_interface_is_refused() -> None:
         convert.to_ros(m.Bool(stamp_ns=1, data=True))
     with pytest.raises(ConvertError, match="Bool"):
         convert.from_ros(b"", m.Bool)
+
+
+@pytest.mark.parametrize("msg", OURS, ids=lambda msg: type(msg).__name__)
+def test_every_one_of_our_types_refuses_short_and_padded_cdr(msg: m.Message) -> None:
+    _, payload = convert.to_ros(msg)
+    for cut in (4, len(payload) // 2, len(payload) - 1):
+        with pytest.raises(ConvertError):
+            convert.from_ros(payload[:cut], type(msg))
+    with pytest.raises(ConvertError):
+        convert.from_ros(payload + bytes(8), type(msg))
+
+
+def test_an_absurd_count_of_radar_frames_is_refused() -> None:
+    """`sensors` claims 4 G, 2 G, then 3 frames where the payload holds 2."""
+    _, payload = convert.to_ros(FRAMES)
+    offset = 4 + 8 + 8  # the CDR header, stamp_ns, device_id
+    assert struct.unpack_from("<I", payload, offset) == (2,)
+    for claimed in (0xFFFF_FFFF, 0x7FFF_FFFF, 3):
+        bad = bytearray(payload)
+        struct.pack_into("<I", bad, offset, claimed)
+        with pytest.raises(ConvertError):
+            convert.from_ros(bytes(bad), m.LD2410TargetDataFrameArray)
+
+
+def test_a_bgr8_frame_becomes_a_compressed_image_they_can_read() -> None:
+    import cv2
+
+    pixels = np.full((6, 10, 3), (10, 200, 30), np.uint8)
+    image = m.Image(stamp_ns=3_000_000_004, frame_id="front", width=10, height=6,
+                    encoding="bgr8", data=pixels.tobytes())
+    payload = convert.compressed_image_to_ros(image)
+    decoded = their_decoder(types.COMPRESSED_IMAGE,
+                            STANDARD[types.COMPRESSED_IMAGE] + DEPENDENCIES)(payload)
+    assert decoded.format == "jpeg" and decoded.header.frame_id == "front"
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == (3, 4)
+    back = cv2.imdecode(np.frombuffer(bytes(decoded.data), np.uint8), cv2.IMREAD_COLOR)
+    assert back.shape == (6, 10, 3)
+    assert np.abs(back.astype(int) - pixels.astype(int)).max() < 16
+    jpeg_image = convert.image_from_ros(payload, types.COMPRESSED_IMAGE)
+    assert convert.compressed_image_to_ros(jpeg_image) == payload  # JPEG passes as it is
+
+
+def test_raw_image_takes_bgr8_only_and_checks_the_pixels() -> None:
+    jpeg_image = m.Image(stamp_ns=1, frame_id="c", width=1, height=1, encoding="jpeg",
+                         data=b"\xff\xd8")
+    with pytest.raises(ConvertError, match="jpeg"):
+        convert.raw_image_to_ros(jpeg_image)
+    short = m.Image(stamp_ns=1, frame_id="c", width=4, height=4, encoding="bgr8", data=bytes(5))
+    with pytest.raises(ConvertError):
+        convert.compressed_image_to_ros(short)

@@ -25,6 +25,9 @@ from .test_convert import DEPENDENCIES, STANDARD, schema_of_ours, their_decoder,
 SETTINGS = Ros2Settings(domain_id=3)
 FACE = bridge.route(SETTINGS, "face_position", types.POINT_STAMPED)
 EXPRESSION = bridge.route(SETTINGS, "screen_expression", bridge.EXPRESSION)
+EYE_CONTROL = bridge.route(SETTINGS, "eye_control", bridge.EYE_CONTROL)
+RAW_IMAGE = bridge.route(SETTINGS, "raw_image", types.IMAGE)
+LIDS = bridge.route(SETTINGS, "eye_lid_control", f"{types.OURS}/msg/EyeLidControl")
 
 
 @pytest.fixture
@@ -55,9 +58,25 @@ def started(spawn: Callable[..., Process], peer: zenoh.Session) -> list[wire.Gra
 
     def complete() -> list[wire.GraphToken] | None:
         tokens = graph(peer)  # the subscription's token is declared last
-        return tokens if any(t.kind == "MS" for t in tokens) else None
+        return tokens if sum(t.kind == "MS" for t in tokens) == 2 else None
 
     return retry_until(complete, 30, 0.2, "the bridge's graph tokens")
+
+
+@pytest.fixture
+def diag(probe: Node) -> Collector[m.DiagnosticStatus]:
+    """The bridge's diagnostics (its counters)."""
+    return Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
+
+
+@pytest.fixture
+def controller(spawn: Callable[..., Process], probe: Node) -> Process:
+    """The controller, once its lease services (the bridge's commands) are declared."""
+    proc = spawn("controller")
+    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
+                            for i in probe.node_infos(1.0)),
+                30, 0.2, "the controller's lease services")
+    return proc
 
 
 @pytest.mark.integration
@@ -65,9 +84,12 @@ def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node) -> None:
     kinds = sorted((t.kind, t.name or "") for t in started  # services: test_servers.py
                    if t.kind != "SS" and "/_action/" not in (t.name or ""))
-    assert kinds == [("MP", "/audio_device_is_free"), ("MP", "/face_position"),
-                     ("MP", "/radar_presence"), ("MP", "/screen_expression"),
-                     ("MS", "/screen_expression"), ("NN", "")]
+    assert kinds == sorted([("NN", ""), ("MS", "/screen_expression"), ("MS", "/eye_control"),
+                            *(("MP", f"/{o.name}") for o in bridge.OUTGOING)])
+    qos = {(t.kind, t.name): t.qos for t in started}
+    assert qos["MP", "/eye_lid_control"] == bridge.LATCHED_QOS
+    assert qos["MP", "/raw_image"] == bridge.SENSOR_QOS
+    assert qos["MS", "/eye_control"] == qos["MP", "/face_position"] == bridge.DEFAULT_QOS
     assert {t.node_name for t in started} == {bridge.NODE_NAME}
     assert len({t.session_id for t in started}) == 1
     face_token = next(t for t in started if t.name == "/face_position")
@@ -110,14 +132,10 @@ def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
 @pytest.mark.integration
 def test_a_ros_2_expression_reaches_the_eyes_and_garbage_is_counted(
         started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
-        spawn: Callable[..., Process]) -> None:
+        controller: Process,
+        diag: Collector[m.DiagnosticStatus]) -> None:
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
-    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
-    spawn("controller")
     expressions.wait_for(timeout=30, what="the controller's own expression")
-    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
-                            for i in probe.node_infos(1.0)),
-                30, 0.2, "the controller's lease services")
 
     encode: Any = their_encoder(bridge.EXPRESSION, schema_of_ours("ScreenExpression"))
     grin = encode({"stamp_ns": 5, "action": int(m.ExpressionAction.EYE_GRIN)})
@@ -137,3 +155,100 @@ def test_a_ros_2_expression_reaches_the_eyes_and_garbage_is_counted(
                          "EYE_GRIN from the ROS 2 peer")
     retry_until(lambda: counter(diag, "commands") >= 1, 30, 0.2, "the command counted")
     assert counter(diag, "malformed") == 1 and counter(diag, "wrong_type") == 1
+
+
+def subscription_token(peer: zenoh.Session, route: bridge.Route) -> str:
+    """The `MS` graph token a ROS 2 node subscribing to `route` would declare."""
+    return wire.GraphToken(
+        domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0, entity_id=1,
+        kind="MS", enclave="", namespace="/", node_name="viewer", name=route.ros_name,
+        type_name=wire.dds_type_name(route.ros_type), type_hash=route.type_hash,
+        qos=bridge.SENSOR_QOS).format()
+
+
+@pytest.mark.integration
+def test_images_flow_only_while_a_ros_2_subscription_is_in_the_graph(
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
+        diag: Collector[m.DiagnosticStatus]) -> None:
+    camera = probe.publisher(keys.CAMERA_IMAGE, camera="front")
+    assert not camera.has_subscribers(), "the bridge reads the frames with nobody watching"
+    got: list[bytes] = []
+    arrived = threading.Event()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        got.append(sample.payload.to_bytes())
+        arrived.set()
+
+    peer.declare_subscriber(RAW_IMAGE.key, on_sample)
+    token = peer.liveliness().declare_token(subscription_token(peer, RAW_IMAGE))
+    pixels = bytes(range(256)) * 3 * 4  # 32 x 24 x 3
+    frame = m.Image(stamp_ns=m.now_ns(), frame_id="front", width=32, height=24, encoding="bgr8",
+                    data=pixels)
+
+    def sent() -> bool:
+        camera.put(frame)
+        return arrived.wait(0.2)
+
+    retry_until(sent, 30, 0.0, "/raw_image at the peer once it subscribed")
+    decoded = their_decoder(types.IMAGE, STANDARD[types.IMAGE] + DEPENDENCIES)(got[0])
+    assert (decoded.width, decoded.height, decoded.encoding, decoded.step) == (32, 24, "bgr8", 96)
+    assert bytes(decoded.data) == pixels
+    retry_until(lambda: counter(diag, "readers /raw_image") == 1, 30, 0.2, "one reader")
+
+    token.undeclare()
+    retry_until(lambda: not camera.has_subscribers(), 30, 0.2,
+                "the bridge's frame subscription closed with the last reader")
+    retry_until(lambda: counter(diag, "readers /raw_image") == 0, 30, 0.2, "no reader")
+
+
+@pytest.mark.integration
+def test_a_late_ros_2_subscriber_gets_the_latched_lids(
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
+        diag: Collector[m.DiagnosticStatus]) -> None:
+    """Transient local as rmw_zenoh does it: the bridge's advanced publisher keeps
+    the last value; a subscriber declared later asks its history."""
+    lids = m.EyeLidControl(stamp_ns=m.now_ns(), eye_id=m.EyeId.LEFT, top_lid_position=40.0,
+                           bottom_lid_position=5.0)
+    probe.publisher(keys.LIDS).put(lids)
+    retry_until(lambda: counter(diag, "sent /eye_lid_control") >= 1, 30, 0.2,
+                "the lids sent to ROS 2")
+
+    got: list[bytes] = []
+    arrived = threading.Event()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        got.append(sample.payload.to_bytes())
+        arrived.set()
+
+    subscriber = zenoh.ext.declare_advanced_subscriber(
+        peer, LIDS.key, on_sample,
+        history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+    try:
+        assert arrived.wait(30), "no history for the late subscriber"
+        decode = their_decoder(LIDS.ros_type, schema_of_ours("EyeLidControl"))
+        first = decode(got[0])
+        assert (first.eye_id, first.top_lid_position, first.bottom_lid_position) == (
+            int(m.EyeId.LEFT), 40.0, 5.0)
+    finally:
+        subscriber.undeclare()
+
+
+@pytest.mark.integration
+def test_a_ros_2_gaze_moves_the_eyes_and_a_flood_is_cut(
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node,
+        controller: Process,
+        diag: Collector[m.DiagnosticStatus]) -> None:
+    control = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
+    encode: Any = their_encoder(bridge.EYE_CONTROL, schema_of_ours("EyeControl"))
+    look = encode({"stamp_ns": 5, "yaw": 0.4, "pitch": -0.2, "target_distance_cm": 80.0})
+    gid = bytes(16)
+    peer.put(EYE_CONTROL.key, look, attachment=wire.Attachment(1, m.now_ns(), gid).encode())
+    seen = control.wait_for(lambda c: c.yaw == 0.4 and c.pitch == -0.2, 30,
+                            "the ROS 2 gaze on eyes/control")
+    assert seen.target_distance_cm == 80.0
+
+    for i in range(2000):  # far beyond the burst and 50/s
+        peer.put(EYE_CONTROL.key, b"\x00\x01\x00\x00flood",
+                 attachment=wire.Attachment(2 + i, m.now_ns(), gid).encode())
+    retry_until(lambda: counter(diag, "flooded") >= 1000, 30, 0.2, "the flood counted")
+    assert counter(diag, "malformed") < 200, "a flooded sample was decoded"

@@ -135,3 +135,33 @@ def test_cdr_encapsulation() -> None:
     for bad in (b"", b"\x00\x01", b"\x00\x07\x00\x00"):
         with pytest.raises(WireError):
             wire.encapsulation(bad)
+
+
+def test_entities_key_matches_every_subscription_of_one_topic_and_type() -> None:
+    import zenoh
+
+    hash_ = "RIHS01_" + "ab" * 32
+    key = wire.entities_key(0, "MS", "/raw_image", "sensor_msgs::msg::dds_::Image_", hash_)
+    expr = zenoh.KeyExpr(key)
+
+    def token(name: str, type_hash: str, kind: wire.Kind = "MS", node: str = "viewer",
+              namespace: str = "/") -> str:
+        return GraphToken(domain_id=0, session_id="8d3f", node_id=2, entity_id=7, kind=kind,
+                          enclave="", namespace=namespace, node_name=node, name=name,
+                          type_name="sensor_msgs::msg::dds_::Image_", type_hash=type_hash,
+                          qos=Qos(reliability=wire.BEST_EFFORT, depth=5)).format()
+
+    assert expr.intersects(zenoh.KeyExpr(token("/raw_image", hash_)))
+    assert expr.intersects(zenoh.KeyExpr(token("/raw_image", hash_, namespace="/lab/a")))
+    assert not expr.intersects(zenoh.KeyExpr(token("/raw_image", hash_, kind="MP")))
+    assert not expr.intersects(zenoh.KeyExpr(token("/debug_image", hash_)))
+    assert not expr.intersects(zenoh.KeyExpr(token("/raw_image", "RIHS01_" + "cd" * 32)))
+    assert not expr.intersects(zenoh.KeyExpr(token("/robot1/raw_image", hash_)))
+    with pytest.raises(WireError):
+        wire.entities_key(0, "MS", "raw_image", "sensor_msgs::msg::dds_::Image_", hash_)
+
+
+def test_a_transient_local_qos_chunk() -> None:
+    qos = Qos(durability=wire.TRANSIENT_LOCAL, depth=1)
+    assert qos.format() == ":1:,1:,:,:,,"
+    assert Qos.parse(":1:,1:,:,:,,") == qos
