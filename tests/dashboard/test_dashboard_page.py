@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import statistics
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -449,16 +450,30 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
         expected = (ou - y * drawn["scale"], ov - x * drawn["scale"])
         assert np.abs(np.array(target["at"]) - expected).max() < 2.0, (target, (x, y))
         assert np.abs(np.array(target["rgba"][:3]) - MAP_COLOURS[0]).max() < 10, target
-    page.wait_for_function(
-        "document.getElementById('map-info').textContent.includes('following person 3')",
-        timeout=10_000)
-    info = page.inner_text("#map-info")
-    assert "3 targets" in info and "camera view 56°" in info, info
-    assert "zones from params/radar-presence" in info, info
-    page.wait_for_function("(window.dash.nodes || []).some((n) => n.name === 'dashboard' "
-                           "&& n.alive)", timeout=20_000)
-    SHOTS.mkdir(parents=True, exist_ok=True)
-    page.screenshot(path=str(SHOTS / "dashboard-map.png"), full_page=True)
+    # The walk goes on while the page is read: stopped, its targets would age
+    # out of the map before a loaded machine gets to the text.
+    walking = threading.Event()
+
+    def walk_on() -> None:
+        while not walking.wait(0.1):
+            report()
+
+    walker = threading.Thread(target=walk_on, daemon=True)
+    walker.start()
+    try:
+        page.wait_for_function(
+            "document.getElementById('map-info').textContent.includes('following person 3')",
+            timeout=10_000)
+        info = page.inner_text("#map-info")
+        assert "3 targets" in info and "camera view 56°" in info, info
+        assert "zones from params/radar-presence" in info, info
+        page.wait_for_function("(window.dash.nodes || []).some((n) => n.name === 'dashboard' "
+                               "&& n.alive)", timeout=20_000)
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SHOTS / "dashboard-map.png"), full_page=True)
+    finally:
+        walking.set()
+        walker.join(5)
     size = page.evaluate("[document.documentElement.scrollWidth, "
                          "document.documentElement.scrollHeight]")
     assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"

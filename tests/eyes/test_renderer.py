@@ -429,7 +429,8 @@ def test_a_page_that_stops_reading_is_dropped(
     assert cut_off(sock)
     sock.close()
     assert health(port)["clients"] == 0
-    assert "page dropped (eye=both): it has not read what was sent" in proc.output()
+    # The counter moves before the log line has crossed the pipe: wait for it.
+    proc.wait_for_output("page dropped (eye=both): it has not read what was sent", 30)
     # The next page is served as usual (a gaze put again until it shows: the
     # bus may still be draining the flood and drop a single one).
     seen = threading.Event()
