@@ -18,6 +18,7 @@ contract's own checks (ranges, enums, string lengths) through
 from __future__ import annotations
 
 import functools
+import struct
 from typing import Any, Literal, TypeVar
 
 import msgspec
@@ -120,18 +121,73 @@ def face_from_ros(payload: bytes | memoryview, confidence: float = 1.0) -> m.Fac
         "confidence": confidence}, types.POINT_STAMPED)
 
 
+class _Cdr:
+    """Little-endian CDR (with its header) written as a list of parts joined once.
+
+    The two image types are written here rather than by rosbags: its
+    serializer allocates and fills a buffer of the whole frame and `serialize`
+    copies it again, 1.2 ms per 640x480 frame, most of the bridge's CPU at 30
+    fps; here the pixels are copied once, by the final join. Alignment counts
+    from the end of the 4-byte encapsulation header, as CDR does
+    (tests/ros2/test_convert.py holds the bytes equal to rosbags')."""
+
+    def __init__(self) -> None:
+        self.parts: list[bytes] = [wire.CDR_LE]
+        self.offset = 0
+
+    def _put(self, part: bytes) -> None:
+        self.parts.append(part)
+        self.offset += len(part)
+
+    def _align(self, size: int) -> None:
+        if pad := -self.offset % size:
+            self._put(bytes(pad))
+
+    def uint8(self, value: int) -> None:
+        self._put(_UINT8.pack(value))
+
+    def uint32(self, value: int) -> None:
+        self._align(4)
+        self._put(_UINT32.pack(value))
+
+    def header(self, stamp_ns: int, frame_id: str) -> None:
+        """std_msgs/msg/Header: stamp (int32 sec, uint32 nanosec), frame_id."""
+        self._align(4)
+        self._put(_TIME.pack(*divmod(stamp_ns, 1_000_000_000)))
+        self.string(frame_id)
+
+    def string(self, value: str) -> None:
+        data = value.encode() + b"\0"
+        self.uint32(len(data))
+        self._put(data)
+
+    def octets(self, data: bytes) -> None:
+        """A `uint8[]`: its length, then the bytes (not copied before `payload`)."""
+        self.uint32(len(data))
+        self._put(data)
+
+    def payload(self) -> bytes:
+        return b"".join(self.parts)
+
+
+_UINT8, _UINT32, _TIME = struct.Struct("<B"), struct.Struct("<I"), struct.Struct("<iI")
+
+
 def image_to_ros(image: m.Image) -> tuple[str, bytes]:
     """(ROS type, payload): sensor_msgs/msg/Image for `bgr8`, CompressedImage for `jpeg`."""
-    store = types.typestore()
-    data = np.frombuffer(image.data, dtype=np.uint8)
+    cdr = _Cdr()
+    cdr.header(image.stamp_ns, image.frame_id)
     if image.encoding == "bgr8":
-        msg = store.types[types.IMAGE](
-            header=_header(image.stamp_ns, image.frame_id), height=image.height,
-            width=image.width, encoding="bgr8", is_bigendian=0, step=image.width * 3, data=data)
-        return types.IMAGE, serialize(msg, types.IMAGE)
-    msg = store.types[types.COMPRESSED_IMAGE](
-        header=_header(image.stamp_ns, image.frame_id), format="jpeg", data=data)
-    return types.COMPRESSED_IMAGE, serialize(msg, types.COMPRESSED_IMAGE)
+        cdr.uint32(image.height)
+        cdr.uint32(image.width)
+        cdr.string("bgr8")
+        cdr.uint8(0)  # is_bigendian
+        cdr.uint32(image.width * 3)  # step
+        cdr.octets(image.data)
+        return types.IMAGE, cdr.payload()
+    cdr.string("jpeg")
+    cdr.octets(image.data)
+    return types.COMPRESSED_IMAGE, cdr.payload()
 
 
 def raw_image_to_ros(image: m.Image) -> bytes:

@@ -29,6 +29,7 @@ Off by default: `up` starts it only with `up --ros2` or `[ros2] enabled = true`.
 from __future__ import annotations
 
 import argparse
+import ctypes
 import itertools
 import os
 import threading
@@ -52,6 +53,10 @@ from buddybot.runtime.rates import TokenBucket
 from buddybot.runtime.service import ServiceContext
 
 CALL_TIMEOUT_S = 3.0
+KEPT_BLOCK = 16 << 20
+"""Blocks up to this size come from the heap rather than their own mapping."""
+KEPT_FREE = 64 << 20
+"""Free memory the heap keeps before it gives any back to the system."""
 QUEUE_SIZE = 64
 """Samples of one ROS 2 topic waiting for the controller (oldest dropped)."""
 
@@ -65,6 +70,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from(ctx: ServiceContext) -> Ros2Settings:
     """`[ros2]` with the command line on top."""
     return merge(ctx.config.section(Ros2Settings), ctx.args)
+
+
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+"""glibc's `mallopt` parameter numbers (malloc.h)."""
+
+
+def keep_freed_frames() -> bool:
+    """Let glibc's heap keep freed camera-sized blocks instead of handing them
+    back to the system: every frame passes through about five ~1 MB buffers
+    (Zenoh's reassembly, the bytes of the sample, the message's pixels, the
+    CDR payload), and by default each is a fresh mapping whose pages the
+    kernel zeroes and faults in one by one; at 30 fps that was half the
+    bridge's CPU with a `/raw_image` reader (docs/ros2.md, Figures). False
+    where the C library is not glibc (nothing changes there)."""
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
+    return bool(mallopt(_M_MMAP_THRESHOLD, KEPT_BLOCK)) and bool(
+        mallopt(_M_TRIM_THRESHOLD, KEPT_FREE))
 
 
 class RosPublisher:
@@ -310,7 +336,10 @@ class Ros2Bridge:
 
 def run(ctx: ServiceContext) -> int:
     settings = settings_from(ctx)
+    kept = keep_freed_frames()
     node = ctx.node()
+    if not kept:
+        node.log.info("not glibc: freed frames go back to the system (more CPU per image)")
     try:
         ros = Ros2Bridge(node, settings)
         ros.start()

@@ -6,6 +6,8 @@ mcap-ros2-support's CDR decoder and encoder (tests/ros2/test_convert.py).
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import threading
 from collections.abc import Callable, Iterator
 from typing import Any
@@ -15,7 +17,7 @@ import zenoh
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, types, wire
+from buddybot.ros2 import bridge, service, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until
@@ -252,3 +254,42 @@ def test_a_ros_2_gaze_moves_the_eyes_and_a_flood_is_cut(
                  attachment=wire.Attachment(2 + i, m.now_ns(), gid).encode())
     retry_until(lambda: counter(diag, "flooded") >= 1000, 30, 0.2, "the flood counted")
     assert counter(diag, "malformed") < 200, "a flooded sample was decoded"
+
+
+MAPPED_BLOCKS = """
+import ctypes, sys
+from buddybot.ros2 import service
+
+class Info(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in (
+        "arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+        "fordblks", "keepcost")]
+
+libc = ctypes.CDLL(None)
+libc.mallinfo2.restype, libc.malloc.restype = Info, ctypes.c_void_p
+libc.malloc.argtypes, libc.free.argtypes = [ctypes.c_size_t], [ctypes.c_void_p]
+if sys.argv[1] == "keep":
+    assert service.keep_freed_frames()
+before = libc.mallinfo2().hblks
+block = libc.malloc(8 << 20)
+print(libc.mallinfo2().hblks - before)
+libc.free(block)
+"""
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize(("mode", "mapped"), [("keep", "0"), ("default", "1")])
+def test_the_heap_keeps_frame_sized_blocks(mode: str, mapped: str) -> None:
+    """With the bridge's heap settings an 8 MiB block (a large frame) comes from
+    glibc's heap, not a mapping of its own (glibc's default, measured too)."""
+    out = subprocess.run([sys.executable, "-c", MAPPED_BLOCKS, mode], capture_output=True,
+                         text=True, timeout=60, check=True)
+    assert out.stdout.strip() == mapped
+
+
+def test_without_glibc_nothing_changes(monkeypatch: pytest.MonkeyPatch) -> None:
+    def no_libc(_name: object) -> object:
+        raise OSError("no C library")
+
+    monkeypatch.setattr(service.ctypes, "CDLL", no_libc)
+    assert not service.keep_freed_frames()
