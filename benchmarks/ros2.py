@@ -15,7 +15,8 @@
    not read the frames), then with one (an `MS` graph token and a
    subscriber on the key: every frame encoded as sensor_msgs/msg/Image).
 3. CDR encode and decode rates of every type of the bridge's tables, in
-   this process (`convert`, rosbags' serializer with our bounds on the way in).
+   this process (`convert`: rosbags' serializer, our own writer for the two image
+   types; our bounds on the way in).
 """
 
 from __future__ import annotations
