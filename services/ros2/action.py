@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from buddybot.contract import messages as m
-from buddybot.ros2 import convert, types, wire
+from buddybot.ros2 import bridge, convert, types
 from buddybot.runtime.limits import BoundedDict
 
 NAME = "play_sound"
@@ -37,9 +37,12 @@ SERVICES = {"send_goal": SEND_GOAL, "cancel_goal": CANCEL_GOAL, "get_result": GE
 TOPICS = {"feedback": FEEDBACK, "status": STATUS}
 """`_action/<part>` -> message type."""
 
-STATUS_QOS = wire.Qos(depth=1)
-"""The status topic: rcl_action's depth 1, but volatile here (rcl_action's is
-transient local): a late client learns a goal's status from the next change."""
+STATUS_QOS = bridge.LATCHED_QOS
+"""The status topic: rcl_action's default status profile (reliable, transient
+local, keep last 1), so a client that starts late gets the last array at once."""
+FEEDBACK_QOS = bridge.DEFAULT_QOS
+"""The feedback topic: rcl_action's default (rmw's default profile: reliable,
+volatile, depth 10); a late client has no use for past progress."""
 
 # action_msgs/msg/GoalStatus
 UNKNOWN, ACCEPTED, EXECUTING, CANCELING, SUCCEEDED, CANCELED, ABORTED = range(7)

@@ -56,6 +56,12 @@ SENSOR_QOS = wire.Qos(reliability=wire.BEST_EFFORT, depth=5)
 """ROS's sensor-data profile (best effort, volatile, depth 5) for images."""
 
 
+def cache(qos: wire.Qos) -> int | None:
+    """Samples a publisher of `qos` keeps for late joiners: its depth when it is
+    transient local (as rmw_zenoh's advanced publishers do), None when volatile."""
+    return qos.depth if qos.durability == wire.TRANSIENT_LOCAL else None
+
+
 def _ours(message: Any) -> bytes:
     return convert.to_ros(message)[1]
 
@@ -77,7 +83,7 @@ class Outgoing:
 
     @property
     def latched(self) -> bool:
-        return self.qos.durability == wire.TRANSIENT_LOCAL
+        return cache(self.qos) is not None
 
 
 @dataclass(frozen=True)

@@ -19,9 +19,10 @@ after it (a client that sees the token is heard):
 takes an `app` lease on `audio` (as the SDK's `bot.play` does, so the
 controller's greeting does not talk over it; no controller, no lease;
 refused, goal rejected), then goes to our action; `audio/play_sound/status`
-becomes the feedback and status topics and, when the goal ends, the answer
-to every waiting `get_result` (and the lease is given back); cancel_goal
-goes to `audio/play_sound/cancel`.
+becomes the feedback topic (volatile) and the status topic (transient
+local, depth 1, as rcl_action's: a client that starts late gets the last
+array) and, when the goal ends, the answer to every waiting `get_result`
+(and the lease is given back); cancel_goal goes to `audio/play_sound/cancel`.
 """
 
 from __future__ import annotations
@@ -146,7 +147,7 @@ class ActionServer:
 
     def start(self) -> None:
         self._feedback = self._publish(self.route("feedback", action.FEEDBACK),
-                                       services.SERVICE_QOS)
+                                       action.FEEDBACK_QOS)
         self._status = self._publish(self.route("status", action.STATUS), action.STATUS_QOS)
         self.node.subscribe(keys.PLAY_SOUND_STATUS, self.on_status, delivery="queue")
         handlers = {"send_goal": self.on_send_goal, "cancel_goal": self.on_cancel,

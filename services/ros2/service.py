@@ -215,9 +215,8 @@ class Ros2Bridge:
         self.node.subscribe(keys.LEASES, self.on_leases, delivery="inline")
         for out in bridge.outgoing(self.settings):
             route = bridge.route(self.settings, out.name, out.ros_type)
-            cache = out.qos.depth if out.latched else None
             publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr",
-                                                             cache=cache))
+                                                             cache=bridge.cache(out.qos)))
             self._publishers[route.ros_name] = publisher
             subscribe = partial(self.node.subscribe, out.topic,
                                 partial(self.on_ours, out, route, publisher),
@@ -241,8 +240,10 @@ class Ros2Bridge:
         self.servers.start()
 
     def _publisher(self, route: bridge.Route, qos: wire.Qos) -> Callable[[bytes], None]:
-        """A ROS 2 publisher of the servers (the action's topics), with its token."""
-        publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr"))
+        """A ROS 2 publisher of the servers (the action's topics), with its token;
+        a transient-local one keeps its last samples for late joiners."""
+        publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr",
+                                                         cache=bridge.cache(qos)))
         self._token("MP", route, qos)
         return publisher.put
 

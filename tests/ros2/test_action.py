@@ -9,7 +9,7 @@ from typing import Any
 import pytest
 
 from buddybot.contract import messages as m
-from buddybot.ros2 import action, convert, interfaces, types, wire
+from buddybot.ros2 import action, bridge, convert, interfaces, types, wire
 
 from .test_convert import SEPARATOR, their_decoder, their_encoder
 
@@ -71,6 +71,15 @@ def test_the_names_and_types_are_rcl_actions() -> None:
     assert wire.dds_type_name(action.CANCEL_GOAL) == "action_msgs::srv::dds_::CancelGoal_"
     for ros_type in (*action.SERVICES.values(), *action.TOPICS.values()):
         assert types.type_hash(ros_type).startswith("RIHS01_")
+
+
+def test_the_topics_qos_is_rcl_actions_default() -> None:
+    """rcl_action's status profile: reliable, transient local, keep last 1 (its
+    `default_qos.h`); feedback: rmw's default (reliable, volatile, depth 10)."""
+    assert action.STATUS_QOS.format() == ":1:,1:,:,:,,"
+    assert bridge.cache(action.STATUS_QOS) == 1
+    assert action.FEEDBACK_QOS.format() == "::,10:,:,:,,"
+    assert bridge.cache(action.FEEDBACK_QOS) is None
 
 
 def test_a_goal_encoded_by_another_implementation() -> None:

@@ -37,6 +37,9 @@ def test_latched_keys_are_transient_local_and_images_on_demand() -> None:
     for out in bridge.OUTGOING:
         if out.latched:
             assert out.qos.format() == ":1:,1:,:,:,,"
+            assert bridge.cache(out.qos) == 1
+        else:
+            assert bridge.cache(out.qos) is None
     images = {o.name for o in bridge.OUTGOING if o.on_demand}
     assert images == {"raw_image", "debug_image"}
     assert {o.qos.format() for o in bridge.OUTGOING if o.on_demand} == {"2::,5:,:,:,,"}

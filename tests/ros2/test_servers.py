@@ -7,6 +7,7 @@ services run for real on the null device (tests/audio)."""
 from __future__ import annotations
 
 import os
+import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -104,8 +105,10 @@ def test_stop_audio_file_stops_a_playing_sound_and_bad_requests_are_counted(
         "/play_audio_file", "/stop_audio_file", "/pause_audio_file", "/resume_audio_file",
         "/play_sound/_action/send_goal", "/play_sound/_action/cancel_goal",
         "/play_sound/_action/get_result"}
-    assert {t.name for t in tokens if t.kind == "MP"} >= {
-        "/play_sound/_action/feedback", "/play_sound/_action/status"}
+    qos = {t.name: t.qos for t in tokens if t.kind == "MP"}
+    assert qos["/play_sound/_action/status"] == action.STATUS_QOS  # transient local, depth 1
+    assert qos["/play_sound/_action/status"].format() == ":1:,1:,:,:,,"
+    assert qos["/play_sound/_action/feedback"].format() == "::,10:,:,:,,"  # volatile
     stop_token = next(t for t in tokens if t.name == "/stop_audio_file")
     assert (stop_token.type_name, stop_token.type_hash) == (
         "std_srvs::srv::dds_::Trigger_", STOP.type_hash)
@@ -186,7 +189,27 @@ def test_a_play_sound_goal_plays_under_an_audio_lease_and_its_result_comes_at_th
     assert (a.tap_samples() == samples).all()
 
 
-def test_a_play_sound_goal_canceled_from_ros_2(
+def late_status(ros: zenoh.Session) -> Any:
+    """The status array a ROS 2 client that starts now gets at once: an advanced
+    subscriber with history, as rmw_zenoh's transient-local subscriptions are."""
+    got: list[bytes] = []
+    arrived = threading.Event()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        got.append(sample.payload.to_bytes())
+        arrived.set()
+
+    subscriber = zenoh.ext.declare_advanced_subscriber(
+        ros, ROUTES["status"].key, on_sample,
+        history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+    try:
+        assert arrived.wait(30), "no status history for the late subscriber"
+        return theirs("GoalStatusArray")(got[0])
+    finally:
+        subscriber.undeclare()
+
+
+def test_a_play_sound_goal_canceled_from_ros_2_and_its_status_kept_for_late_clients(
         sounds: Callable[..., Audio], spawn: Callable[..., Process], ros: zenoh.Session,
         probe: Node, tmp_path: Any) -> None:
     config, _ = beep_config(tmp_path, 20.0)
@@ -204,5 +227,8 @@ def test_a_play_sound_goal_canceled_from_ros_2(
     result = theirs("GetResult_Response")(
         ok(call(ros, ROUTES["get_result"], by_id(uuid), 3, timeout=30), 3))
     assert (result.status, result.result.state) == (action.CANCELED, "CANCELED")
+    latest = late_status(ros)  # declared after the goal ended
+    assert [(bytes(s.goal_info.goal_id.uuid), s.status) for s in latest.status_list] == [
+        (uuid, action.CANCELED)]
     assert theirs("SendGoal_Response")(ok(call(ros, ROUTES["send_goal"], goal_request(
         uuid, "beep"), 4), 4)).accepted is False  # a goal id is used once
