@@ -7,7 +7,6 @@ services run for real on the null device (tests/audio)."""
 from __future__ import annotations
 
 import os
-import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -29,6 +28,7 @@ from tests.audio.conftest import (  # noqa: F401 (fixture)
 
 from .test_action import encoded, theirs
 from .test_convert import their_decoder
+from .test_service import late_sample
 
 pytestmark = pytest.mark.integration
 
@@ -189,26 +189,6 @@ def test_a_play_sound_goal_plays_under_an_audio_lease_and_its_result_comes_at_th
     assert (a.tap_samples() == samples).all()
 
 
-def late_status(ros: zenoh.Session) -> Any:
-    """The status array a ROS 2 client that starts now gets at once: an advanced
-    subscriber with history, as rmw_zenoh's transient-local subscriptions are."""
-    got: list[bytes] = []
-    arrived = threading.Event()
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        got.append(sample.payload.to_bytes())
-        arrived.set()
-
-    subscriber = zenoh.ext.declare_advanced_subscriber(
-        ros, ROUTES["status"].key, on_sample,
-        history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
-    try:
-        assert arrived.wait(30), "no status history for the late subscriber"
-        return theirs("GoalStatusArray")(got[0])
-    finally:
-        subscriber.undeclare()
-
-
 def test_a_play_sound_goal_canceled_from_ros_2_and_its_status_kept_for_late_clients(
         sounds: Callable[..., Audio], spawn: Callable[..., Process], ros: zenoh.Session,
         probe: Node, tmp_path: Any) -> None:
@@ -227,7 +207,7 @@ def test_a_play_sound_goal_canceled_from_ros_2_and_its_status_kept_for_late_clie
     result = theirs("GetResult_Response")(
         ok(call(ros, ROUTES["get_result"], by_id(uuid), 3, timeout=30), 3))
     assert (result.status, result.result.state) == (action.CANCELED, "CANCELED")
-    latest = late_status(ros)  # declared after the goal ended
+    latest = theirs("GoalStatusArray")(late_sample(ros, ROUTES["status"].key))  # after the end
     assert [(bytes(s.goal_info.goal_id.uuid), s.status) for s in latest.status_list] == [
         (uuid, action.CANCELED)]
     assert theirs("SendGoal_Response")(ok(call(ros, ROUTES["send_goal"], goal_request(

@@ -215,6 +215,16 @@ def test_a_late_ros_2_subscriber_gets_the_latched_lids(
     retry_until(lambda: counter(diag, "sent /eye_lid_control") >= 1, 30, 0.2,
                 "the lids sent to ROS 2")
 
+    decode = their_decoder(LIDS.ros_type, schema_of_ours("EyeLidControl"))
+    first = decode(late_sample(peer, LIDS.key))
+    assert (first.eye_id, first.top_lid_position, first.bottom_lid_position) == (
+        int(m.EyeId.LEFT), 40.0, 5.0)
+
+
+def late_sample(session: zenoh.Session, key: str) -> bytes:
+    """The first sample a transient-local ROS 2 subscription declared now gets:
+    an advanced subscriber with history and late-publisher detection, as
+    rmw_zenoh's are."""
     got: list[bytes] = []
     arrived = threading.Event()
 
@@ -223,14 +233,10 @@ def test_a_late_ros_2_subscriber_gets_the_latched_lids(
         arrived.set()
 
     subscriber = zenoh.ext.declare_advanced_subscriber(
-        peer, LIDS.key, on_sample,
-        history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+        session, key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
     try:
-        assert arrived.wait(30), "no history for the late subscriber"
-        decode = their_decoder(LIDS.ros_type, schema_of_ours("EyeLidControl"))
-        first = decode(got[0])
-        assert (first.eye_id, first.top_lid_position, first.bottom_lid_position) == (
-            int(m.EyeId.LEFT), 40.0, 5.0)
+        assert arrived.wait(30), f"no history on {key} for the late subscriber"
+        return got[0]
     finally:
         subscriber.undeclare()
 
