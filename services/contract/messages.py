@@ -605,6 +605,10 @@ Resources = Annotated[list[Resource], msgspec.Meta(min_length=1, max_length=3)]
 LeaseEndReason = Literal["released", "expired", "holder_gone", "preempted", "broken"]
 MAX_LEASE_S = 86400.0
 """Longest lease duration the controller grants (a day); longer is refused."""
+HOLDER_NOT_ALIVE = "holder not alive"
+"""How the controller's refusal of a holder without a live liveliness token
+begins: a program that just started retries on it (its token may not have
+reached the controller yet), and on no other refusal."""
 
 
 class LeaseRequest(Message):

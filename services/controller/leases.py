@@ -12,7 +12,7 @@ the service only publishes. The rule:
 * `builtin` (the controller's own behaviour) is never requestable; a
   duration must be finite, > 0 and <= MAX_LEASE_S (None: until released);
   resources may not repeat; the holder must be alive (its liveliness
-  token, which the caller checks); at most MAX_LEASES leases, at most
+  token, which the caller knows from its watch of `nodes/*/*`); at most MAX_LEASES leases, at most
   MAX_PER_HOLDER per holder instance.
 
 Each lease also has a token bucket for its actions (`allow`), so an app
@@ -64,7 +64,7 @@ class LeaseTable:
         self._ended: collections.deque[m.LeaseEnd] = collections.deque(maxlen=ENDED_KEPT)
         self.counters: dict[str, int] = {
             "leases_granted": 0, "leases_refused": 0, "eyes_commands": 0,
-            "eyes_commands_refused": 0, "rate_limited": 0,
+            "eyes_commands_refused": 0, "rate_limited": 0, "holders_not_alive": 0,
         }
 
     # -- queries --
@@ -217,7 +217,9 @@ class LeaseTable:
         if d is not None and not (math.isfinite(d) and 0 < d <= m.MAX_LEASE_S):
             return f"duration_s {d} must be > 0 and <= {m.MAX_LEASE_S:g} (or none)"
         if not holder_alive:
-            return f"no liveliness token nodes/{req.holder}/{req.instance}"
+            self.counters["holders_not_alive"] += 1
+            return (f"{m.HOLDER_NOT_ALIVE}: no liveliness token "
+                    f"nodes/{req.holder}/{req.instance}")
         return None
 
     def _over_limits(self, req: m.LeaseRequest, lower: list[m.Lease]) -> str | None:

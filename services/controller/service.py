@@ -19,9 +19,11 @@ Threads, and why:
 
 Leases (`leases.LeaseTable` decides, docs/design.md 4.8): `leases/acquire`,
 `leases/release` and `eyes/command` are answered on the node's service
-workers under the same lock, and the liveliness of `nodes/*/*` (Zenoh's
-thread, under the lock, quick) tells which holders are alive and ends the
-leases of one that goes away. While a lease holds a resource the
+workers under the same lock, and the liveliness of `nodes/*/*` (one
+subscriber with history; Zenoh's thread, under the lock, quick) is the one
+view of which holders are alive: a request is answered from it at once (no
+liveliness query per request, so invented holders cannot fill the worker)
+and it ends the leases of a holder that goes away. While a lease holds a resource the
 behaviour's own commands for it are dropped (it keeps its own idea); the
 moment the resource is free again its current expression / gaze is put
 at once. `leases/state` (latched) is put at start and on every change;
@@ -78,6 +80,11 @@ from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
+
+ACQUIRE_QUEUE = 256
+"""Lease requests that may wait for the worker: each is answered in tens of
+microseconds, so a burst of this many waits milliseconds, and a real holder
+asking during a flood is queued behind it rather than refused "busy"."""
 
 SoundCommand = PlaySound | CancelSound
 """The commands the sound thread carries out (blocking audio calls)."""
@@ -164,7 +171,7 @@ class Controller:
         with self._lock:
             self._publish_state(self.clock())  # the first one, even before any input
             self._leases_pub.put(self.leases.snapshot(self.wall_ns()))
-        node.serve(keys.LEASE_ACQUIRE, self.acquire)
+        node.serve(keys.LEASE_ACQUIRE, self.acquire, queue_size=ACQUIRE_QUEUE)
         node.serve(keys.LEASE_RELEASE, self.release)
         node.serve(keys.EYES_COMMAND, self.eyes_command)
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
@@ -244,15 +251,12 @@ class Controller:
     # -- lease services (the node's service workers) --
 
     def acquire(self, req: m.LeaseRequest) -> m.LeaseReply:
+        """Grant or refuse at once: whether the holder is alive is read from the
+        watch of `nodes/*/*` (`on_token`), never asked per request, so a flood
+        of invented holders costs each a set lookup and cannot hold up the
+        worker; a program whose token has not arrived yet retries (leasing.ask)."""
         with self._lock:
             alive = (req.holder, req.instance) in self._alive
-        if not alive:
-            # The token may be on its way still (a program that just started):
-            # ask the router once, outside the lock.
-            alive = self._token_exists(req.holder, req.instance)
-        with self._lock:
-            if alive:
-                self._alive.add((req.holder, req.instance))
             before = self.leases.held()
             decision = self.leases.acquire(req, self.wall_ns(), alive)
             if decision.reply.granted:
@@ -287,16 +291,6 @@ class Controller:
             # would grow the log's table with every invented one.
             self._warn.warning("eyes_refused", "eyes command refused: %s", eyes.reply.message)
         return eyes.reply
-
-    def _token_exists(self, node: str, instance: str) -> bool:
-        if not (keys.valid_robot_id(node) and keys.valid_robot_id(instance)):
-            return False
-        try:
-            found = self.node.live_instances(self.node.key(keys.NODES, node=node), timeout=1.0)
-        except Exception as exc:  # a closing session: no token then
-            log.debug("liveliness query failed: %r", exc)
-            return False
-        return instance in found
 
     def _leases_changed(self, before: list[m.Resource]) -> None:
         """After the table changed (under the lock): put `leases/state`, give the

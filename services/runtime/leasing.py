@@ -5,7 +5,7 @@ docs/design.md section 4.8); a lease holder is a node with a liveliness
 token, so the controller can end the lease when the holder's process goes
 away. This module is the holder's wire side, once for every holder (the
 dashboard, Foxglove, the SDK, `buddybot lease`): the request checked before
-it leaves (`request`), asking (`acquire`), driving the eyes (`eyes_command`),
+it leaves (`request`), asking (`ask`, `acquire`), driving the eyes (`eyes_command`),
 giving back (`release`), and reading from `leases/state` whether a lease
 has ended and why (`ending`). `LeaseHolder` is the one-lease holder of the
 processes that drive the eyes for a person (the dashboard's operator switch,
@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Iterable
+import time
+from collections.abc import Callable, Iterable
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -32,6 +33,9 @@ from buddybot.runtime.node import Node
 CALL_TIMEOUT_S = 3.0
 """How long a lease call may take before it counts as failed (the controller is
 local and answers in milliseconds)."""
+NOT_ALIVE_WAIT_S = 2.0
+"""How long a holder asks again while the controller has not seen its liveliness
+token (it travels there in milliseconds; seconds only under a heavy load)."""
 BROKEN_BY_OPERATOR = "broken by operator"
 """The release reason an operator gives for someone else's lease (the controller
 records it as `broken`)."""
@@ -102,10 +106,31 @@ def request(node: Node, names: Iterable[str], priority: str = "app",
 # --- the calls -----------------------------------------------------------------------------
 
 
+def ask(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S, *,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep) -> m.LeaseReply:
+    """The controller's reply to `req`. The controller knows live holders from
+    its watch of liveliness tokens only, so a program that has just started
+    may ask before its own token reached it: that refusal (HOLDER_NOT_ALIVE,
+    for a request of this node itself, which is alive) is asked again, with
+    a growing pause, for at most NOT_ALIVE_WAIT_S; every other answer at once."""
+    own = (req.holder, req.instance) == (node.name, node.instance)
+    deadline = clock() + min(NOT_ALIVE_WAIT_S, timeout)
+    pause = 0.02
+    while True:
+        reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
+        left = deadline - clock()
+        if (reply.granted or not own or left <= 0
+                or not reply.message.startswith(m.HOLDER_NOT_ALIVE)):
+            return reply
+        sleep(min(pause, left))
+        pause = min(pause * 2, 0.2)
+
+
 def acquire(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S) -> str:
-    """Ask for `req`; the granted lease's id, LeaseRefused with the controller's
-    reason otherwise."""
-    reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
+    """Ask for `req` (`ask`); the granted lease's id, LeaseRefused with the
+    controller's reason otherwise."""
+    reply = ask(node, req, timeout)
     if not reply.granted or not reply.lease_id:
         raise LeaseRefused(reply.message or f"{'+'.join(req.resources)} refused")
     return reply.lease_id

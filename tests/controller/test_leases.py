@@ -88,8 +88,11 @@ def test_other_bad_requests_are_refused_with_the_reason() -> None:
     twice = table.acquire(req("app-a", "gaze", "gaze"), T0, True).reply
     assert not twice.granted and "repeat" in twice.message
     dead = table.acquire(req("app-a", instance="z9"), T0, False).reply
-    assert not dead.granted and dead.message == "no liveliness token nodes/app-a/z9"
+    assert not dead.granted
+    assert dead.message == "holder not alive: no liveliness token nodes/app-a/z9"
+    assert dead.message.startswith(m.HOLDER_NOT_ALIVE)
     assert len(table) == 0 and table.counters["leases_refused"] == 3
+    assert table.counters["holders_not_alive"] == 1
 
 
 def test_a_day_is_the_longest_lease_and_it_expires() -> None:

@@ -20,6 +20,7 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import leasing
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, wait_port
 
@@ -275,7 +276,7 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
 
     # An app's lease appears in the panel; Break ends it "broken".
     app = node_factory("greeter")
-    reply = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+    reply = leasing.ask(app, m.LeaseRequest(
         holder="greeter", instance=app.instance, resources=["expression"], duration_s=60),
         timeout=10)
     assert reply.granted, reply
@@ -300,7 +301,7 @@ def operator_takes_over_an_app(page: Any, endpoint: str) -> None:
     (docs/images/dashboard-operator.png is a copy of one) shows both."""
     app = Node("greeter", connect=[endpoint])
     try:
-        reply = app.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+        reply = leasing.ask(app, m.LeaseRequest(
             holder="greeter", instance=app.instance, resources=["expression", "gaze"],
             duration_s=600), timeout=10)
         assert reply.granted, reply

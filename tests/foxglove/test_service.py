@@ -25,6 +25,7 @@ import pytest
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
 from buddybot.foxglove.service import urls
+from buddybot.runtime import leasing
 from buddybot.runtime.node import Node
 from buddybot.tools import testing as attack
 from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
@@ -256,7 +257,7 @@ def test_a_client_expression_goes_through_an_operator_lease(
             expressions.wait_for(lambda e: e.action == own, 10, "the controller's own again")
 
             wizard = node_factory("wizard")
-            taken = wizard.call(keys.LEASE_ACQUIRE, m.LeaseRequest(
+            taken = leasing.ask(wizard, m.LeaseRequest(
                 holder="wizard", instance=wizard.instance, resources=["expression"],
                 priority="operator"), timeout=10)
             assert taken.granted, taken

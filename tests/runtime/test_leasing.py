@@ -179,3 +179,54 @@ def test_a_lease_gone_from_the_state_is_forgotten_but_not_by_an_older_state() ->
     assert h.forget_unless_in(m.Leases(stamp_ns=m.now_ns()))  # broken elsewhere
     assert h.lease_id is None
     assert h.acquire() != lease_id  # the next press takes a new one
+
+
+class Unseen:
+    """A controller that has not seen this node's token for the first `refusals`
+    requests, on a clock that only the pauses move."""
+
+    name = "app-new"
+    instance = "zid1"
+
+    def __init__(self, refusals: int, message: str = "") -> None:
+        self.refusals = refusals
+        self.message = message or f"{m.HOLDER_NOT_ALIVE}: no liveliness token nodes/app-new/zid1"
+        self.asked = 0
+        self.now = 0.0
+        self.pauses: list[float] = []
+
+    def call(self, service: keys.Service, request: Any, *, timeout: float) -> Any:
+        self.asked += 1
+        if self.asked <= self.refusals:
+            return m.LeaseReply(granted=False, message=self.message)
+        return m.LeaseReply(granted=True, lease_id="L1-x")
+
+    def sleep(self, s: float) -> None:
+        self.pauses.append(s)
+        self.now += s
+
+    def ask(self, holder: str = "app-new") -> m.LeaseReply:
+        req = m.LeaseRequest(holder=holder, instance="zid1", resources=["gaze"])
+        return leasing.ask(self, req, clock=lambda: self.now,  # type: ignore[arg-type]
+                           sleep=self.sleep)
+
+
+def test_a_just_started_holder_asks_again_until_its_token_is_seen() -> None:
+    ctl = Unseen(refusals=3)
+    assert ctl.ask().granted
+    assert ctl.asked == 4 and ctl.pauses == [0.02, 0.04, 0.08]
+
+
+def test_not_alive_is_asked_again_for_a_bounded_time_only() -> None:
+    ctl = Unseen(refusals=10**6)
+    reply = ctl.ask()
+    assert not reply.granted and reply.message.startswith(m.HOLDER_NOT_ALIVE)
+    assert ctl.now == pytest.approx(leasing.NOT_ALIVE_WAIT_S)
+    assert max(ctl.pauses) == 0.2 and ctl.asked < 20
+
+
+def test_other_refusals_and_other_holders_are_answered_at_once() -> None:
+    held = Unseen(refusals=1, message="gaze is held by app-a at priority app (lease L1-x)")
+    assert not held.ask().granted and held.asked == 1 and held.pauses == []
+    other = Unseen(refusals=1)
+    assert not other.ask(holder="ghost").granted and other.asked == 1
