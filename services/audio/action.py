@@ -127,7 +127,7 @@ class ActionServer:
         with self.lock:
             self.device_free = msg.data
             if msg.data:
-                self._publish(self.book.device_free(time.monotonic()))
+                self._publish(self.book.device_free(time.monotonic(), msg.stamp_ns))
 
     def _on_goal(self, req: m.PlaySound) -> m.PlaySoundReply:
         goal_id = new_goal_id()
@@ -223,6 +223,7 @@ class ActionServer:
             return
         with self.lock:
             self.answering = None
+        asked_ns = m.now_ns()
         try:
             reply, replier = self._ask_player(m.PlayAudioFile(path=sound), still_wanted)
         except ServiceError as exc:
@@ -236,7 +237,7 @@ class ActionServer:
                 self._publish(self.book.failed(goal_id, limits.clip(reply.message, TEXT_MAX)))
                 return
             statuses = self.book.started(goal_id, protocol.parse_duration(reply.message),
-                                         time.monotonic())
+                                         time.monotonic(), asked_ns)
             if statuses:
                 self.answering = replier
                 lost = replier is not None and replier not in self.instances

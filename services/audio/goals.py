@@ -41,6 +41,9 @@ class Goal:
     message: str = ""
     duration_s: float | None = None
     started_at: float | None = None
+    asked_ns: int | None = None
+    """When the player was asked to play it (wall clock, ns): a "free" stamped
+    earlier is the player's state from before this goal, not its end."""
     progress: float = 0.0
 
     @property
@@ -143,13 +146,14 @@ class GoalBook:
         return self.active is not None and self.active.goal_id == goal_id and (
             self.active.state == "ACCEPTED")
 
-    def started(self, goal_id: str, duration_s: float | None, now: float
-                ) -> list[m.PlaySoundStatus]:
+    def started(self, goal_id: str, duration_s: float | None, now: float,
+                asked_ns: int | None = None) -> list[m.PlaySoundStatus]:
         """The player confirmed playback: ACCEPTED -> PLAYING."""
         goal = self.active
         if goal is None or goal.goal_id != goal_id or goal.state != "ACCEPTED":
             return []
         goal.state, goal.duration_s, goal.started_at = "PLAYING", duration_s, now
+        goal.asked_ns = asked_ns
         goal.message = "" if duration_s is None else f"{duration_s:.3f} s"
         return [goal.status()]
 
@@ -160,10 +164,14 @@ class GoalBook:
             return []
         return [self._end(goal, "ABORTED", message)]
 
-    def device_free(self, now: float) -> list[m.PlaySoundStatus]:
-        """The player's device became free: the playing goal ended."""
+    def device_free(self, now: float, stamp_ns: int | None = None) -> list[m.PlaySoundStatus]:
+        """The player's device became free: the playing goal ended. A sample
+        stamped before the player was asked (a player that just started sends
+        its latched "free" late) says nothing about this goal."""
         goal = self.active
         if goal is None or goal.state != "PLAYING":
+            return []
+        if stamp_ns is not None and goal.asked_ns is not None and stamp_ns < goal.asked_ns:
             return []
         elapsed = now - (goal.started_at or now)
         if goal.duration_s is not None and elapsed < goal.duration_s - END_TOLERANCE_S:

@@ -130,6 +130,17 @@ def test_device_free_long_before_the_end_means_stopped_from_outside() -> None:
     assert states(b.device_free(now=203.0 - END_TOLERANCE_S / 2)) == [("g2", "SUCCEEDED")]
 
 
+def test_a_free_stamped_before_the_player_was_asked_is_not_the_goals_end() -> None:
+    """A player that just started sends its latched "free" late, after the reply."""
+    b = book()
+    b.request("g1", "greeting", player_present=True)
+    b.started("g1", 3.0, now=100.0, asked_ns=5_000)
+    assert b.device_free(now=100.1, stamp_ns=4_999) == []
+    assert b.active is not None and b.active.state == "PLAYING"
+    out = b.device_free(now=100.2, stamp_ns=5_001)
+    assert states(out) == [("g1", "CANCELED")]
+
+
 def test_free_sample_that_raced_ahead_of_the_reply_still_ends_the_goal() -> None:
     b = book()
     b.request("g1", "greeting", player_present=True)
