@@ -22,13 +22,13 @@ import cv2
 import numpy as np
 
 from buddybot.camera import blazeface as bf
-from buddybot.camera import detections, draw, frames, models
+from buddybot.camera import detections, draw, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.iris import IrisNet
 from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline, FaceResult, Owed
 from buddybot.camera.settings import FaceDetectorSettings
-from buddybot.contract import jpeg, keys
+from buddybot.contract import images, jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.errors import ConfigError
@@ -167,8 +167,8 @@ def run(ctx: ServiceContext) -> int:
     def decode(img: m.Image) -> np.ndarray | None:
         """The frame as BGR, or None when refused (counted and logged)."""
         try:
-            return frames.decode_image(img, settings.max_pixels)
-        except frames.FrameRefused as refused:
+            return images.decode_image(img, settings.max_pixels)
+        except images.FrameRefused as refused:
             diag.increment(refused.reason)
             warn.warning(f"refused:{refused.reason}", "dropped image from %s: %s",
                          clip(img.frame_id, 60), refused.text)

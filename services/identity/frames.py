@@ -3,7 +3,7 @@
 The face detector publishes each frame's faces with the frame's own
 `stamp_ns`, after the frame itself went out; the identity service keeps the
 last few `Image` messages as they came (no decoding: most are never used)
-and decodes only the one a face is embedded from.
+and decodes only the one a face is embedded from (`contract.images`).
 """
 
 from __future__ import annotations
@@ -11,15 +11,7 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 
-import cv2
-import numpy as np
-
-from buddybot.contract import jpeg
 from buddybot.contract import messages as m
-
-
-class BadImage(ValueError):
-    """An image whose bytes do not hold what its header says."""
 
 
 class ImageRing:
@@ -43,25 +35,3 @@ class ImageRing:
         """The image of this stamp, None when it is not (or no longer) here."""
         with self._lock:
             return self._images.get(stamp_ns)
-
-
-def to_bgr(img: m.Image) -> np.ndarray:
-    """HxWx3 uint8 BGR of an `Image`; BadImage when its data and header disagree."""
-    w, h = img.width, img.height
-    if img.encoding == "bgr8":
-        if len(img.data) != w * h * 3:
-            raise BadImage(f"bgr8 {w}x{h} needs {w * h * 3} bytes, got {len(img.data)}")
-        return np.frombuffer(img.data, np.uint8).reshape(h, w, 3)
-    try:  # the JPEG's own header first: it, not the message, sizes the decoded frame
-        header = jpeg.read_header(img.data)
-    except jpeg.JpegError as exc:
-        raise BadImage(f"jpeg {w}x{h}: {exc}") from None
-    if (header.width, header.height) != (w, h):
-        raise BadImage(f"jpeg header says {header.width}x{header.height}, the message {w}x{h}")
-    try:
-        bgr = cv2.imdecode(np.frombuffer(img.data, np.uint8), cv2.IMREAD_COLOR)
-    except cv2.error as exc:
-        raise BadImage(f"jpeg {w}x{h} does not decode: {exc}") from None
-    if bgr is None or bgr.shape != (h, w, 3):
-        raise BadImage(f"jpeg {w}x{h} does not decode to its stated size")
-    return bgr

@@ -42,10 +42,10 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 
-from buddybot.contract import keys
+from buddybot.contract import images, keys
 from buddybot.contract import messages as m
 from buddybot.identity import embedding, gallery
-from buddybot.identity.frames import BadImage, ImageRing, to_bgr
+from buddybot.identity.frames import ImageRing
 from buddybot.identity.matching import Index
 from buddybot.identity.settings import GALLERY_FILE, IdentitySettings, state_dir
 from buddybot.identity.tracks import FaceTracks
@@ -288,7 +288,7 @@ class IdentityService:
         while (job := self._jobs.get()) is not None:
             try:
                 vector: npt.NDArray[np.float32] | None = self._embed(job.image, job.keypoints)
-            except (BadImage, embedding.BadKeypoints, ValueError) as exc:
+            except (images.FrameRefused, embedding.BadKeypoints, ValueError) as exc:
                 self.node.diagnostics.increment("bad_frames")
                 log.debug("frame not embedded: %s", exc)
                 vector = None
@@ -302,7 +302,7 @@ class IdentityService:
     def _embed(self, image: m.Image, keypoints: list[tuple[float, float]]
                ) -> npt.NDArray[np.float32]:
         assert self.embedder is not None
-        bgr = to_bgr(image)
+        bgr = images.decode_image(image, images.DEFAULT_MAX_PIXELS)
         with self._net_lock:
             started = time.perf_counter()
             vector = self.embedder.face(bgr, keypoints)
@@ -436,7 +436,7 @@ class IdentityService:
             return m.EnrolReply(success=False, message=why)
         try:
             vectors = [self._embed(img, kps) for img, kps in frames]
-        except (BadImage, embedding.BadKeypoints, ValueError) as exc:
+        except (images.FrameRefused, embedding.BadKeypoints, ValueError) as exc:
             return m.EnrolReply(success=False, message=f"a frame could not be embedded: {exc}")
         return self._store(name, vectors, req.replace)
 
