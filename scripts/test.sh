@@ -3,13 +3,16 @@
 #
 #   scripts/test.sh            every test: those marked `quiet` alone first, then the
 #                              rest three per CPU core at a time (pytest-xdist)
-#   scripts/test.sh --quick    lint and the pure tests only (no router, process
-#                              or browser: -m "not integration and not browser")
-#   scripts/test.sh ARGS...    extra ARGS go to pytest (after --quick, too)
+#   scripts/test.sh --quick    lint, types and the pure tests only (no router, process,
+#                              browser or neural network: markers integration, browser,
+#                              model), property tests at a tenth of their examples
+#   scripts/test.sh ARGS...    extra ARGS go to pytest (after --quick, too), e.g.
+#                              --hypothesis-profile=nightly for ten times the examples
 #
 # Three workers per core: most tests wait on routers, processes and Chromium,
 # not on the CPU. `-n N` in ARGS sets the number of workers, `-n 0` runs
-# in one process. Every run ends with its 15 slowest tests.
+# in one process. Every run ends with its 15 slowest tests and the wall time
+# of each phase (also when a phase fails).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 quick=false
@@ -17,27 +20,53 @@ if [ "${1:-}" = --quick ]; then
     quick=true
     shift
 fi
-scripts/setup.sh test  # runtime + the `test` extra
-$quick || scripts/test-packages.sh || true
-.venv/bin/ruff check services tests benchmarks
+
+phases=()
+now() { echo "${EPOCHREALTIME/./}"; }  # microseconds
+started=$(now)
+# phase NAME COMMAND...: run it and note its wall time; its status is the phase's.
+phase() {
+    local name=$1 t0 rc=0
+    t0=$(now)
+    shift
+    "$@" || rc=$?
+    phases+=("$(printf '%-8s %7s s%s' "$name" "$(elapsed "$t0")" \
+        "$([ "$rc" = 0 ] || echo "  (status $rc)")")")
+    return "$rc"
+}
+elapsed() {  # seconds since $1, one decimal
+    local tenths=$((($(now) - $1) / 100000))
+    echo "$((tenths / 10)).$((tenths % 10))"
+}
+report() {
+    echo "== wall time per phase ($($quick && echo quick || echo full) run) =="
+    printf '%s\n' "${phases[@]}"
+    printf '%-8s %7s s\n' total "$(elapsed "$started")"
+}
+trap report EXIT
+
+phase setup scripts/setup.sh test  # runtime + the `test` extra
+$quick || phase packages scripts/test-packages.sh || true
+phase ruff .venv/bin/ruff check services tests benchmarks
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
-MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
-.venv/bin/python -m buddybot schemas --check
-.venv/bin/python -m buddybot reference --check
+phase mypy env MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
+checks() {
+    .venv/bin/python -m buddybot schemas --check && .venv/bin/python -m buddybot reference --check
+}
+phase checks checks
 pytest=(.venv/bin/python -m pytest --durations=15)
 if $quick; then
-    exec "${pytest[@]}" -n "$(nproc)" -m "not integration and not browser" "$@"
+    phase pytest "${pytest[@]}" -n "$(nproc)" --hypothesis-profile=quick \
+        -m "not integration and not browser and not model" "$@"
+    exit
 fi
 # Tests that measure frame times (marked `quiet`) run first, alone, while the
 # machine is otherwise idle; then everything else in parallel. Both runs happen
 # whatever the first gives, so one report shows every failure.
 ok() { [ "$1" = 0 ] || [ "$1" = 5 ]; }  # 5: that phase selected no test
-set +e
-"${pytest[@]}" -n 0 --phase quiet "$@"
-quiet=$?
-"${pytest[@]}" -n "$(($(nproc) * 3))" --dist loadgroup --phase rest "$@"
-rest=$?
-set -e
+quiet=0 rest=0
+phase quiet "${pytest[@]}" -n 0 --phase quiet "$@" || quiet=$?
+phase rest "${pytest[@]}" -n "$(($(nproc) * 3))" --dist loadgroup --phase rest "$@" || rest=$?
 if ! ok "$rest"; then exit "$rest"; fi
 if ! ok "$quiet"; then exit "$quiet"; fi
 if [ "$quiet" = 5 ] && [ "$rest" = 5 ]; then exit 5; fi

@@ -23,6 +23,9 @@ import pytest
 
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, Router, run_service, stop_and_report
+from tests import properties
+
+properties.register()
 
 ARTIFACTS = Path(os.environ.get("BUDDYBOT_ARTIFACTS", "test-artifacts"))
 

@@ -354,8 +354,11 @@ class Behaviour:
         visit's person until another one is in range (kept while they leave and
         the farewell plays, so a tool sees whom the goodbye is for). `name`: who
         that person is, if the people service knows (the greeting uses it)."""
-        if self.recovering and self._in_range_at_start is None:
+        if self._recover_until is not None and self._in_range_at_start is None:
             self._in_range_at_start = in_range  # the first one is the replayed latched value
+            # The latched sound status was asked for with this one, and may come just
+            # after it on a busy machine: listen `recover_s` more from here.
+            self._recover_until = max(self._recover_until, now + self.s.recover_s)
         if in_range != self._in_range:
             self._out_since = None if in_range else now
         self._in_range = in_range

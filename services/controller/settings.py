@@ -75,9 +75,10 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
       dropped: a goodbye to an empty room helps nobody.
     * `sound_timeout_s` 30.0: a goal with no final status after this long is
       taken as lost, so a dead audio service cannot block the robot forever.
-    * `recover_s` 0.5: after start-up, listen this long to the latched topics
-      (presence, expression, sound status, device free) before deciding, so
-      a restart neither repeats an expression nor re-greets.
+    * `recover_s` 0.5: after start-up, and again after the first latched
+      presence, listen this long to the latched topics (presence, expression,
+      sound status, device free) before deciding, so a restart neither repeats
+      an expression nor re-greets, even when the latched values come late.
     * `tick_s` 0.05: the decision loop's period for timers.
     """
 
@@ -114,8 +115,9 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     sound_timeout_s: Annotated[float, _s("a sound goal with no final status is lost after "
                                          "this (a dead audio service cannot block)",
                                          positive=True)] = 30.0
-    recover_s: Annotated[float, _s("listen to latched topics this long after start before "
-                                   "deciding (no repeated greeting)", live=False)] = 0.5
+    recover_s: Annotated[float, _s("listen to latched topics this long after start, and "
+                                   "after the first presence, before deciding (no repeated "
+                                   "greeting)", live=False)] = 0.5
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the decision loop's timers")] = 0.05
     call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",

@@ -16,6 +16,7 @@ from buddybot.camera.sim import face_path
 from buddybot.contract import jpeg
 from buddybot.contract import messages as m
 from tests.camera import jpegs
+from tests.properties import examples
 
 DATA = Path(__file__).parents[1] / "camera" / "data"
 REAL = [DATA / "grace_hopper.jpg", face_path()]
@@ -129,7 +130,7 @@ MARKERS = st.sampled_from([b"\xff\xc0", b"\xff\xc2", b"\xff\xc4", b"\xff\xd0", b
                            b"\xff\xda", b"\xff\xe0", b"\xff\xff", b"\xff\x00", b"\x00\x0b"])
 
 
-@settings(max_examples=600, deadline=None)
+@settings(max_examples=examples(600))
 @given(st.lists(st.one_of(MARKERS, st.binary(max_size=12)), max_size=12).map(b"".join))
 def test_fuzzed_headers_raise_only_jpeg_error(body: bytes) -> None:
     """Whatever follows SOI, the reader refuses it with a reason or returns a
@@ -142,7 +143,7 @@ def test_fuzzed_headers_raise_only_jpeg_error(body: bytes) -> None:
     assert header.marker in jpeg.SOF_MARKERS
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=examples(40))
 @given(st.integers(1, 70), st.integers(1, 70), st.integers(1, 100))
 def test_an_encoded_frame_has_its_size_in_its_header(width: int, height: int,
                                                       quality: int) -> None:

@@ -8,6 +8,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from buddybot.contract import keyexpr
+from tests.properties import examples
 
 
 @pytest.mark.parametrize(("a", "b", "hit"), [
@@ -79,13 +80,13 @@ def zenoh_key(text: str) -> zenoh.KeyExpr:
         raise
 
 
-@settings(max_examples=400, deadline=None)
+@settings(max_examples=examples(400))
 @given(EXPRESSIONS, EXPRESSIONS)
 def test_intersection_agrees_with_zenoh(a: str, b: str) -> None:
     assert keyexpr.intersects(a, b) is zenoh_key(a).intersects(zenoh_key(b))
 
 
-@settings(max_examples=800, deadline=None)
+@settings(max_examples=examples(800))
 @given(st.text(alphabet="ab*$/@#", max_size=8))
 def test_validity_agrees_with_zenoh(text: str) -> None:
     assume("$*$*" not in text)  # Zenoh's canonizer panics on some of these

@@ -480,6 +480,20 @@ def test_recovery_recent_sound_means_already_greeted() -> None:
     assert r.sounds() == ["farewell"]
 
 
+def test_recovery_listens_on_after_a_late_latched_presence() -> None:
+    """On a busy machine the latched inputs can come near the end of the recovery:
+    the sound status that follows the presence still counts, so no second greeting."""
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r.at(0.45)
+    r.presence(True)
+    r.at(0.3)  # past the recovery counted from the start, not from the presence
+    assert state(r).waiting == "recovery"
+    r.status("old", "SUCCEEDED", age=2.0)
+    r.faces(3.0)
+    assert r.sounds() == []
+    assert r.expressions() == [X.EYE_AWAKE]
+
+
 def test_recovery_arrival_after_an_empty_room_is_owed_no_farewell() -> None:
     """Nobody there at the restart, a recent sound (the last visit's farewell), and
     the visitor back during the recovery: no greeting within the cooldown, and no

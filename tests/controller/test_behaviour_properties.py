@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import msgspec
-from hypothesis import HealthCheck, event, settings
+from hypothesis import event, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule
 
@@ -33,6 +33,7 @@ from buddybot.controller.behaviour import (
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
+from tests.properties import examples
 
 COOLDOWN = 4.0
 SETTINGS = msgspec.convert(
@@ -278,8 +279,5 @@ class World(RuleBasedStateMachine):
                 owed = what == "restart owing"
 
 
-World.TestCase.settings = settings(
-    max_examples=400, stateful_step_count=60, deadline=None,
-    suppress_health_check=[HealthCheck.too_slow],
-)
+World.TestCase.settings = settings(max_examples=examples(400), stateful_step_count=60)
 TestControllerProperties = World.TestCase

@@ -5,10 +5,11 @@ the track that gave it says it has no name (forgotten)."""
 from __future__ import annotations
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from buddybot.people.model import Input, NameSeen, PeopleModel, Tick
+from tests.properties import examples
 
 from .test_model import SETTINGS, faces, ns, radar, radar_out, run, tick
 from .test_model_radar import face_at, targets, walk
@@ -140,7 +141,7 @@ def timeline(plan: list[tuple[str, int]]) -> list[Input]:
     return out
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(150))
 @given(steps, st.integers(1, 8))
 def test_ticks_change_no_name_and_a_name_is_on_one_person_at_most(
         plan: list[tuple[str, int]], every: int) -> None:

@@ -26,7 +26,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, rule
 
@@ -44,6 +44,7 @@ from buddybot.people.model import (
     ZoneChanged,
 )
 from buddybot.people.zones import Zone, zone_after
+from tests.properties import examples
 
 from .test_model import SETTINGS, ns
 
@@ -206,10 +207,7 @@ class World(RuleBasedStateMachine):
         assert not problems, problems
 
 
-World.TestCase.settings = settings(
-    max_examples=200, stateful_step_count=40, deadline=None,
-    suppress_health_check=[HealthCheck.too_slow],
-)
+World.TestCase.settings = settings(max_examples=examples(200), stateful_step_count=40)
 TestPeopleModelProperties = World.TestCase
 
 
@@ -261,7 +259,7 @@ def run(inputs: list[Input]) -> list[PersonEvent]:
     return [e for i in inputs for e in model.step(i)]
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300))
 @given(timelines())
 def test_a_gap_shorter_than_the_absence_hold_is_the_same_person(
         timeline: tuple[list[Sample], int]) -> None:
@@ -273,7 +271,7 @@ def test_a_gap_shorter_than_the_absence_hold_is_the_same_person(
         list(range(1, long_gaps + 2))
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=examples(300))
 @given(timelines(), st.lists(st.integers(0, ns(40.0)), max_size=30), st.data())
 def test_how_often_ticks_come_changes_no_event(
         timeline: tuple[list[Sample], int], offsets: list[int], data: st.DataObject) -> None:

@@ -18,6 +18,7 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from buddybot.people.tracker import Report, Target, Tracker, TrackerLimits
+from tests.properties import examples
 
 REPORT = 100_000_000  # ns: the LD2450 reports 10 times a second
 A = (1, 0)
@@ -145,7 +146,7 @@ def test_a_target_jittering_within_the_gate_keeps_its_id(
         assert [t.id for t in tracker.tracks()] == [1]
 
 
-@settings(max_examples=200)
+@settings(max_examples=examples(200))
 @given(st.floats(1.0, 4.0), st.floats(0.5, 2.0), st.floats(0.3, 1.5), st.floats(0.3, 1.5),
        st.floats(-0.5, 0.5), st.lists(st.tuples(st.floats(-0.05, 0.05),
                                                 st.floats(-0.05, 0.05)), min_size=80,

@@ -6,10 +6,11 @@ import random
 import struct
 
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from buddybot.radar import ld2410 as p
+from tests.properties import examples
 from tests.radar.rig import check_any_chunking, feed_in_cuts, mutate
 
 # The protocol document's examples (HLK-LD2410 serial protocol, report frames and ACKs).
@@ -389,7 +390,7 @@ def mutated_streams(
     return bytes(out), frames, intact, sorted(cuts), kinds
 
 
-@settings(max_examples=400, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=examples(400))
 @given(mutated_streams())
 def test_mutated_streams_yield_every_intact_frame_and_nothing_unsent(
         case: tuple[bytes, list[p.Report], list[p.Report], list[int], list[str]]) -> None:
@@ -408,7 +409,7 @@ def test_mutated_streams_yield_every_intact_frame_and_nothing_unsent(
     assert all(any(frame == g for g in remaining) for frame in intact)
 
 
-@settings(max_examples=300)
+@settings(max_examples=examples(300))
 @given(st.binary(max_size=3000), st.lists(st.integers(1, 64), max_size=20))
 def test_random_bytes_never_raise_and_never_yield(data: bytes, chunks: list[int]) -> None:
     parser = p.Parser()
@@ -421,7 +422,7 @@ def test_random_bytes_never_raise_and_never_yield(data: bytes, chunks: list[int]
     assert len(parser._buf) <= 6 + p.MAX_COMMAND_LENGTH + 4
 
 
-@settings(max_examples=200)
+@settings(max_examples=examples(200))
 @given(st.lists(reports(), min_size=1, max_size=5))
 def test_encode_then_parse_round_trips(frames: list[p.Report]) -> None:
     assert parse_all(b"".join(p.encode_report(f) for f in frames)) == frames
