@@ -24,6 +24,7 @@ import pytest
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, Router, run_service, stop_and_report
 from tests import properties
+from tests.camera.networks import Networks
 
 properties.register()
 
@@ -36,6 +37,9 @@ INTEGRATION_FIXTURES = frozenset({
     "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
+MODEL_FIXTURES = frozenset({"networks", "embedder"})  # this file, tests/identity/conftest.py
+"""Fixtures that load a real neural network: tests using them are marked `model`
+(automatically, from the fixture closure) and run in the full suite only."""
 TIMING = pytest.mark.xdist_group("timing")
 """For tests that bound delays, gaps or frame times, or that change the host's one
 network stack (namespaces, veth and TAP devices): pytest-xdist (`--dist loadgroup`)
@@ -68,13 +72,18 @@ def missing_markers(item: pytest.Item) -> list[str]:
     return need
 
 
+@pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Keep the tests of this `--phase`, then order them: tests with a router,
-    processes or a browser first, the pure ones after.
+    """Mark the tests that load a network `model`, keep the tests of this `--phase`,
+    then order them: tests with a router, processes or a browser first, the pure
+    ones after.
 
     They take seconds each, the pure ones milliseconds: started first, the slow
     ones overlap on the pytest-xdist workers and the pure ones fill the gaps at
     the end, instead of one worker finishing a long system test alone."""
+    for item in items:
+        if set(getattr(item, "fixturenames", ())) & MODEL_FIXTURES:
+            item.add_marker(pytest.mark.model)
     phase = config.getoption("phase")
     if phase != "all":
         keep = [i for i in items if (i.get_closest_marker("quiet") is not None) == (
@@ -128,6 +137,12 @@ def _processes_need_the_integration_marker(request: pytest.FixtureRequest,
         original(self, *args, **kwargs)
 
     monkeypatch.setattr(subprocess.Popen, "__init__", guarded)
+
+
+@pytest.fixture(scope="session")
+def networks() -> Networks:
+    """The real face networks, each loaded once per test process (xdist worker)."""
+    return Networks()
 
 
 @pytest.fixture

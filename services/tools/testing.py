@@ -9,7 +9,9 @@ the router is `buddybot router` on a free loopback port, services are
 from __future__ import annotations
 
 import base64
+import fcntl
 import os
+import random
 import resource
 import signal
 import socket
@@ -34,11 +36,48 @@ T = TypeVar("T")
 LOOPBACK = "127.0.0.1"
 
 
+PORTS_DIR = Path(tempfile.gettempdir()) / "buddybot-ports"
+"""One lock file per port handed out: processes on one machine (pytest-xdist workers,
+a second test run) never get the same port while the first one lives."""
+_held_ports: dict[int, int] = {}
+_random = random.Random()
+
+
+def _port_range() -> tuple[int, int]:
+    """Ports below the kernel's ephemeral range: no outgoing connection is given one,
+    so a port found free is taken only by someone who asked for it by number."""
+    try:
+        low = int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        low = 32768
+    return 10_000, max(10_001, min(low, 65_536) - 1)
+
+
 def free_port() -> int:
-    """A TCP port on loopback that nothing listens on right now."""
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind((LOOPBACK, 0))
-        return int(sock.getsockname()[1])
+    """A TCP port on loopback that nothing listens on now and that no other process
+    of this machine gets from this function while this one runs (a lock file kept
+    open until the process ends)."""
+    PORTS_DIR.mkdir(exist_ok=True)
+    low, high = _port_range()
+    for _ in range(1000):
+        port = _random.randint(low, high)
+        if port in _held_ports:
+            continue
+        fd = os.open(PORTS_DIR / str(port), os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            os.close(fd)
+            continue
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+            try:
+                sock.bind((LOOPBACK, port))
+            except OSError:
+                os.close(fd)
+                continue
+        _held_ports[port] = fd
+        return port
+    raise RuntimeError(f"no free loopback port in {low}..{high} after 1000 tries")
 
 
 def retry_until(

@@ -510,12 +510,14 @@ def found_count(detections: list[Box], truths: tuple[Box, ...]) -> int:
     return n
 
 
-def service_pipeline(settings: FaceDetectorSettings | None = None) -> FacePipeline:
+def service_pipeline(settings: FaceDetectorSettings | None = None,
+                     net: FaceNet | None = None) -> FacePipeline:
     """`FacePipeline` as `face-detector` builds it from `settings` (default: the service's
     defaults, so the figures follow the default model when it changes): the configured
-    model at its threshold, and the short-range refiner when refinement is on."""
+    model at its threshold (or `net`, that network already loaded), and the short-range
+    refiner when refinement is on."""
     s = settings or FaceDetectorSettings()
-    net = FaceNet(models.locate(s.model), bf.SPECS[s.model], s.min_score)
+    net = net or FaceNet(models.locate(s.model), bf.SPECS[s.model], s.min_score)
     return FacePipeline(net, s, load_refiner(net, s))
 
 

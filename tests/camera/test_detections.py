@@ -9,12 +9,11 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numpy as np
 import pytest
 
 from buddybot.camera import blazeface as bf
-from buddybot.camera import detections, fusion, models
+from buddybot.camera import detections, fusion
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.geometry import DistanceEstimate, Intrinsics, locate
 from buddybot.camera.pipeline import FacePipeline, FaceResult
@@ -22,6 +21,7 @@ from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from tests.camera import scenes
+from tests.camera.networks import Networks
 
 STAMP = 1_700_000_000_000_000_000
 
@@ -53,10 +53,8 @@ def followed(faces: list[bf.Detection], target: bf.Detection,
 
 
 @pytest.fixture(scope="module")
-def nets() -> tuple[FaceNet, FaceNet]:
-    cv2.setNumThreads(1)
-    return (FaceNet(models.locate("full_sparse"), bf.FULL_SPARSE),
-            FaceNet(models.locate("short"), bf.SHORT_RANGE))
+def nets(networks: Networks) -> tuple[FaceNet, FaceNet]:
+    return networks.face("full_sparse"), networks.face("short")
 
 
 def test_a_real_frame_gives_its_face_with_keypoints_distance_and_cues(

@@ -23,6 +23,7 @@ from buddybot.camera.settings import FaceDetectorSettings
 from buddybot.camera.sim import SimCamera
 from buddybot.contract import jpeg
 from tests.camera import scenes
+from tests.camera.networks import Networks
 
 PHOTOS: dict[str, Callable[[], scenes.Photo]] = {
     "astronaut": scenes.astronaut, "grace_hopper": scenes.grace_hopper,
@@ -30,20 +31,19 @@ PHOTOS: dict[str, Callable[[], scenes.Photo]] = {
 
 
 @pytest.fixture(scope="module")
-def full() -> FaceNet:
+def full(networks: Networks) -> FaceNet:
     """The default whole-frame model: sparse full range."""
-    cv2.setNumThreads(1)
-    return FaceNet(models.locate("full_sparse"), bf.FULL_SPARSE)
+    return networks.face("full_sparse")
 
 
 @pytest.fixture(scope="module")
-def dense() -> FaceNet:
-    return FaceNet(models.locate("full"), bf.FULL_RANGE)
+def dense(networks: Networks) -> FaceNet:
+    return networks.face("full")
 
 
 @pytest.fixture(scope="module")
-def short() -> FaceNet:
-    return FaceNet(models.locate("short"), bf.SHORT_RANGE)
+def short(networks: Networks) -> FaceNet:
+    return networks.face("short")
 
 
 def pipeline(full: FaceNet, short: FaceNet | None, **kw: object) -> FacePipeline:

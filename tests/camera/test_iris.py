@@ -22,6 +22,7 @@ from buddybot.camera import fusion, geometry, iris, models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.litert import ModelLoadError
 from tests.camera import scenes
+from tests.camera.networks import Networks
 
 FX = 600.0
 POSITIONS = ((320.0, 240.0, 0), (220.0, 200.0, 1), (420.0, 280.0, 2))
@@ -29,10 +30,8 @@ Nets = tuple[FaceNet, FaceNet, iris.IrisNet]
 
 
 @pytest.fixture(scope="module")
-def nets() -> Nets:
-    cv2.setNumThreads(1)
-    return (FaceNet(models.locate("full"), bf.FULL_RANGE),
-            FaceNet(models.locate("short"), bf.SHORT_RANGE), iris.IrisNet())
+def nets(networks: Networks) -> Nets:
+    return networks.face("full"), networks.face("short"), networks.iris()
 
 
 @dataclass(frozen=True)

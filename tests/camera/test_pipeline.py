@@ -23,19 +23,19 @@ import numpy as np
 import pytest
 
 from buddybot.camera import blazeface as bf
-from buddybot.camera import draw, fusion, models
+from buddybot.camera import draw, fusion
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.gate import TrackGate
 from buddybot.camera.iris import IrisNet
 from buddybot.camera.pipeline import FacePipeline, OwedIris
 from buddybot.camera.settings import FaceDetectorSettings
 from tests.camera import scenes
+from tests.camera.networks import Networks
 
 
 @pytest.fixture(scope="module")
-def nets() -> tuple[FaceNet, FaceNet]:
-    return (FaceNet(models.locate("full_sparse"), bf.FULL_SPARSE),
-            FaceNet(models.locate("short"), bf.SHORT_RANGE))
+def nets(networks: Networks) -> tuple[FaceNet, FaceNet]:
+    return networks.face("full_sparse"), networks.face("short")
 
 
 def unsmoothed(nets: tuple[FaceNet, FaceNet]) -> FacePipeline:
@@ -267,9 +267,8 @@ FX = 600.0
 
 
 @pytest.fixture(scope="module")
-def parts(nets: tuple[FaceNet, FaceNet]) -> tuple[FaceNet, FaceNet, IrisNet]:
-    cv2.setNumThreads(1)
-    return (*nets, IrisNet())
+def parts(nets: tuple[FaceNet, FaceNet], networks: Networks) -> tuple[FaceNet, FaceNet, IrisNet]:
+    return (*nets, networks.iris())
 
 
 def pipeline(parts: tuple[FaceNet, FaceNet, IrisNet], iris: bool = True,

@@ -24,11 +24,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from buddybot.camera import blazeface as bf
-from buddybot.camera import models
 from buddybot.camera.facenet import FaceNet
 from buddybot.camera.settings import FaceDetectorSettings
 from tests.camera import scenes
+from tests.camera.networks import Networks
 
 
 @dataclass(frozen=True)
@@ -81,10 +80,10 @@ def _param(family: str, m: Measured) -> object:
 
 
 @pytest.fixture(scope="module")
-def net() -> FaceNet:
+def net(networks: Networks) -> FaceNet:
     """The whole-frame detector the service runs by default."""
     s = FaceDetectorSettings()
-    return FaceNet(models.locate(s.model), bf.SPECS[s.model], s.min_score)
+    return networks.face(s.model, s.min_score)
 
 
 def test_match_rule() -> None:
@@ -135,7 +134,7 @@ def test_whole_frame_recall(net: FaceNet, family: str) -> None:
 
 
 @pytest.mark.parametrize("kind", [_param(k, m) for k, m in SERVICE.items()])
-def test_service_path_recall(kind: str) -> None:
+def test_service_path_recall(kind: str, networks: Networks) -> None:
     """The service path over sequences (a walk 0.6-4 m and back; faces leaving by each
     edge): frames whose published face is the true face reach the floor, and no frame
     publishes a face anywhere else (there is one person). A fresh pipeline per sequence,
@@ -144,7 +143,8 @@ def test_service_path_recall(kind: str) -> None:
     found = frames = 0
     wrong: list[str] = []
     for seq in scenes.sequences(kind):
-        pipe = scenes.service_pipeline()
+        pipe = scenes.service_pipeline(net=networks.face(FaceDetectorSettings().model,
+                                                         FaceDetectorSettings().min_score))
         for i, (img, true) in enumerate(seq):
             box = scenes.published_box(pipe.process(img, (i + 1) * 33_333_333))
             if box is not None:

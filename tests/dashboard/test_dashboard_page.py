@@ -366,6 +366,16 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
 
 MAP_COLOURS = [(0xff, 0xa6, 0x57), (0x79, 0xc0, 0xff)]
 """The page's first two sensor colours (dashboard.js MAP_COLOURS)."""
+DRAWN = """() => {
+    window.dashMap();
+    const v = window.dash.map, c = document.getElementById('map'), g = c.getContext('2d');
+    const at = (p) => Array.from(g.getImageData(Math.round(p[0]), Math.round(p[1]), 1, 1).data);
+    return {origin: v.origin, scale: v.scale, size: [c.width, c.height],
+            targets: v.sensors[0].targets.map((t) => ({at: t.at, rgba: at(t.at)})),
+            shown: !document.getElementById('map-box').hidden,
+            plots: !document.getElementById('sensors').hidden};
+}"""
+"""The map redrawn now, and each target's place and pixel colour on the canvas."""
 
 
 def radar_targets(points: list[tuple[float, float]], device: int = 4) -> m.RadarTargets:
@@ -413,17 +423,18 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
     people = probe.publisher(keys.PEOPLE_STATE)
     step = 0
 
-    def report() -> None:
+    def report(advance: bool = True) -> None:
+        """The walk's next step, or (advance False) its last one again, freshly stamped."""
         nonlocal step
         now = m.now_ns()
-        pts = walk(step)
+        pts = walk(step if advance else step - 1)
         radar.put(radar_targets(pts))
         x, y = pts[0]
         people.put(m.PeopleState(stamp_ns=now, people=[m.Person(
             id=3, distance_m=math.hypot(x, y), zone="SOCIAL", seen_by="RADAR",
             zone_since_ns=now, arrived_ns=now, engagement="ENGAGED", engagement_since_ns=now,
             yaw_rad=math.atan2(y, x))]))
-        step += 1
+        step += 1 if advance else 0
 
     # Two and a half seconds of walking (trails), until the page has all of it.
     deadline = time.monotonic() + 60
@@ -435,15 +446,26 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
         assert time.monotonic() < deadline, "the page never got the whole map"
         report()
         time.sleep(0.1)
-    page.evaluate("window.dashMap()")
-    drawn = page.evaluate("""() => {
-        const v = window.dash.map, c = document.getElementById('map'), g = c.getContext('2d');
-        const at = (p) => Array.from(g.getImageData(Math.round(p[0]), Math.round(p[1]), 1, 1).data);
-        return {origin: v.origin, scale: v.scale, size: [c.width, c.height],
-                targets: v.sensors[0].targets.map((t) => ({at: t.at, rgba: at(t.at)})),
-                shown: !document.getElementById('map-box').hidden,
-                plots: !document.getElementById('sensors').hidden};
-    }""")
+    # The last step is held (put again, fresh) while the canvas is read: unrefreshed,
+    # its targets would age out of the map on a machine too busy to read it at once.
+    holding = threading.Event()
+
+    def hold() -> None:
+        while not holding.wait(0.1):
+            report(advance=False)
+
+    holder = threading.Thread(target=hold, daemon=True)
+    holder.start()
+    deadline = time.monotonic() + 30
+    try:
+        drawn = page.evaluate(DRAWN)
+        while len(drawn["targets"]) != 3:
+            assert time.monotonic() < deadline, f"the map lost its targets: {drawn}"
+            time.sleep(0.1)
+            drawn = page.evaluate(DRAWN)
+    finally:
+        holding.set()
+        holder.join(5)
     assert drawn["shown"] and not drawn["plots"]
     ou, ov = drawn["origin"]
     for (x, y), target in zip(walk(step - 1), drawn["targets"], strict=True):

@@ -429,8 +429,10 @@ def test_a_page_that_stops_reading_is_dropped(
     assert cut_off(sock)
     sock.close()
     assert health(port)["clients"] == 0
-    # The counter moves before the log line has crossed the pipe: wait for it.
-    proc.wait_for_output("page dropped (eye=both): it has not read what was sent", 30)
+    # The counter moves before the log line has crossed the pipe: wait for it. The
+    # reason is either the stalled sends or, when the page's missing pongs end the
+    # socket first (a busy machine), the data left unsent at its end.
+    proc.wait_for_output("page dropped (eye=both): it ", 30)
     # The next page is served as usual (a gaze put again until it shows: the
     # bus may still be draining the flood and drop a single one).
     seen = threading.Event()
