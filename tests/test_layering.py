@@ -4,7 +4,10 @@
 cli ─────────────────────────────────────────────┐
 supervisor (up, status, router) ──┐              │
 tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, foxglove)
-                                  v              v
+                                  │              │         │ the web surfaces only
+                                  │              │         v
+                                  │              │   web (guard, auth, page_outbox)
+                                  v              v         v
                 runtime (node, handles, config, params, service, ...)
                                   v
                 contract (messages, keys, schemas, describe, channels)
@@ -13,11 +16,15 @@ tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, 
 An area imports only the runtime, the contract and itself, so an area can
 be lifted into its own repository (so can `sdk`, the library for
 programs, which imports the same two layers, and `apps`, which adds the
-sdk and which the sdk never imports); the runtime imports no tool, no
-supervisor and no area, so a service process loads only what it runs. The
-rule is a table (`ALLOWED`), checked statically (every `import` in the
-source, also the ones inside functions) and at run time (what loading the
-runtime really loads), so a lazy import that slips past is caught as well.
+sdk and which the sdk never imports). The areas that serve a web page
+(`WEB_SURFACES`) may also import `web`, the layer beside the runtime that
+every web surface shares (who may connect, login, a page's sends); `web`
+imports only the runtime and the contract. The runtime imports no tool,
+no supervisor, no area and not `web`, so a service process loads only
+what it runs. The rule is a table (`ALLOWED`), checked statically (every
+`import` in the source, also the ones inside functions) and at run time
+(what loading the runtime really loads), so a lazy import that slips past
+is caught as well.
 """
 
 from __future__ import annotations
@@ -35,16 +42,19 @@ from buddybot.runtime import registry
 SERVICES = Path(__file__).resolve().parents[1] / "services"
 AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglove", "people",
          "ros2", "identity")
+WEB_SURFACES = ("dashboard", "eyes", "foxglove")
+"""The areas serving a web page or socket: only they may import `web`."""
 BASE = frozenset({"contract", "runtime"})
 ALLOWED: dict[str, frozenset[str]] = {
     "contract": frozenset({"contract"}),
     "runtime": BASE,
     "tools": BASE | {"tools"},
     "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
-    **{area: BASE | {area} for area in AREAS},
+    "web": BASE | {"web"},  # what every web surface shares (guard, login, page sends)
+    **{area: BASE | {area} | ({"web"} if area in WEB_SURFACES else set()) for area in AREAS},
     "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
     "apps": BASE | {"sdk", "apps"},  # apps and their runner stand on the sdk
-    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", *AREAS},
+    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", "web", *AREAS},  # `secret`
     "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
 }
 """Layer -> the layers its modules may import (a layer is a folder of `services/`)."""
@@ -94,6 +104,15 @@ def test_every_import_follows_the_layers() -> None:
     assert not bad, "\n".join(bad)
 
 
+def test_only_the_layers_using_web_may_import_it() -> None:
+    """`web` is granted to the layers that really use it, no more: a grant
+    nobody uses is a door left open for the next import."""
+    users = {layer_of_path(path, SERVICES) for path in SERVICES.rglob("*.py")
+             if any(layer_of_module(m) == "web" for m in imports_of(path))}
+    granted = {layer for layer, allowed in ALLOWED.items() if "web" in allowed}
+    assert users - {"web"} == granted - {"web"} == {*WEB_SURFACES, "cli"}
+
+
 def test_every_folder_is_a_layer() -> None:
     folders = {p.name for p in SERVICES.iterdir() if (p / "__init__.py").is_file()}
     assert folders == set(ALLOWED) - {""}
@@ -108,7 +127,16 @@ def test_every_folder_is_a_layer() -> None:
     ("dashboard", "buddybot.tools.doctor", False),
     ("eyes", "buddybot.audio.sounds", False),
     ("tools", "buddybot.supervisor.launch", False),
+    ("runtime", "buddybot.web.guard", False),
+    ("contract", "buddybot.web.auth", False),
+    ("radar", "buddybot.web.guard", False),
+    ("identity", "buddybot.web.auth", False),
+    ("sdk", "buddybot.web.page_outbox", False),
+    ("web", "buddybot.dashboard.login", False),
+    ("web", "buddybot.tools.doctor", False),
     ("eyes", "buddybot.runtime.node", True),
+    ("dashboard", "buddybot.web.auth", True),
+    ("web", "buddybot.runtime.endpoints", True),
     ("supervisor", "buddybot.tools.doctor", True),
 ])
 def test_the_checker_catches_a_wrong_import(tmp_path: Path, layer: str, imported: str,

@@ -4,7 +4,7 @@
 would); `rotate` replaces it, ending every session it signed; `revoke`
 empties it: no one of that role logs in until the next `rotate`. The
 running dashboard and Foxglove bridge notice the change at once (they
-re-read the file when it changes). Files: `buddybot.runtime.web_auth`.
+re-read the file when it changes). Files: `buddybot.web.auth`.
 """
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from buddybot.runtime import web_auth
 from buddybot.runtime.service import ServiceContext
+from buddybot.web import auth as web_auth
 
 HELP = "show, rotate or revoke the dashboard/Foxglove secrets"
 USES_CONFIG = False

@@ -1,6 +1,6 @@
 """The dashboard's login beyond loopback: the login page, the session cookie, the gate.
 
-The rules (secrets, signing, roles) are `buddybot.runtime.web_auth`; this
+The rules (secrets, signing, roles) are `buddybot.web.auth`; this
 module is their HTTP side. A page without a valid session is sent to
 `/login` (the page) or refused with 401 (the WebSocket, static files); a
 viewer's session may watch, and `App.command` refuses it every button.
@@ -17,10 +17,10 @@ import time
 
 from aiohttp import web
 
-from buddybot.runtime import web_auth
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import RateLimitedLog
-from buddybot.runtime.web_guard import HostAllowList, origin_allowed, request_port
+from buddybot.web import auth as web_auth
+from buddybot.web.guard import HostAllowList, origin_allowed, request_port
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)
@@ -28,7 +28,7 @@ _warn = RateLimitedLog(log)
 OPERATOR = "operator"
 VIEWER = "viewer"
 PRIORITY = {OPERATOR: 2, VIEWER: 1}
-"""Page-slot priority of a logged-in page (above `web_guard.ANONYMOUS`): an
+"""Page-slot priority of a logged-in page (above `web.guard.ANONYMOUS`): an
 operator can always get a slot, taken from a viewer's or an idle page's."""
 MAX_FORM_BYTES = 4096
 

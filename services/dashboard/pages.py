@@ -26,11 +26,10 @@ from buddybot.contract import messages as m
 from buddybot.dashboard import identity, login, model, radar_map
 from buddybot.dashboard.bus import Bus
 from buddybot.dashboard.settings import DashboardSettings
-from buddybot.runtime import web_auth
 from buddybot.runtime.limits import BoundedDict, clip
 from buddybot.runtime.node import RateLimitedLog
-from buddybot.runtime.page_outbox import PageOutbox
-from buddybot.runtime.web_guard import (
+from buddybot.web import auth as web_auth
+from buddybot.web.guard import (
     ANONYMOUS,
     IDLE_S,
     Guard,
@@ -38,6 +37,7 @@ from buddybot.runtime.web_guard import (
     origin_allowed,
     request_port,
 )
+from buddybot.web.page_outbox import PageOutbox
 
 log = logging.getLogger("buddybot.dashboard")
 _warn = RateLimitedLog(log)

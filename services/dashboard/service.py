@@ -27,7 +27,7 @@ The parts, each in its own module:
   there is no router;
 * a WebSocket from another web site is refused (the page has buttons), a
   request for a name the dashboard is not served at gets 421, and floods
-  are bounded (`runtime/web_guard.py`: header timeout, connection caps,
+  are bounded (`web/guard.py`: header timeout, connection caps,
   accept errors logged at a bounded rate; a listener that stops serving
   sets the diagnostics to ERROR and stops the watchdog's pings);
 * beyond loopback a login (`login.py`: operators press, viewers watch),
@@ -52,7 +52,6 @@ from buddybot.dashboard import login, radar_map
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
-from buddybot.runtime import web_auth
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host, serve_failure
 from buddybot.runtime.errors import ConfigError, ServeError
@@ -60,7 +59,8 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import (
+from buddybot.web import auth as web_auth
+from buddybot.web.guard import (
     AcceptErrorLog,
     Guard,
     GuardedSite,

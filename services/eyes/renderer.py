@@ -14,7 +14,7 @@ tablet or a phone can be an eye:
   the quietest page's slot), and only the server's own origin or listed
   ones may open the socket);
 * only the names it is served at are answered, and floods are bounded
-  (`runtime/web_guard.py`: header timeout, connection caps, accept errors
+  (`web/guard.py`: header timeout, connection caps, accept errors
   at a bounded rate; a listener that stops serving sets the diagnostics to
   ERROR and stops the watchdog's pings);
 * the HTTP server starts before the Zenoh node, so the pages show a calm
@@ -71,10 +71,9 @@ from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
 from buddybot.runtime.node import Node, RateLimitedLog
 from buddybot.runtime.overrides import given, merge, settings_option
-from buddybot.runtime.page_outbox import PageOutbox
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import (
+from buddybot.web.guard import (
     ANONYMOUS,
     IDLE_S,
     AcceptErrorLog,
@@ -86,6 +85,7 @@ from buddybot.runtime.web_guard import (
     origin_allowed,
     request_port,
 )
+from buddybot.web.page_outbox import PageOutbox
 
 log = logging.getLogger("buddybot.eye-renderer")
 _warn = RateLimitedLog(log)

@@ -6,7 +6,7 @@ meets descriptor exhaustion its listener is gone without a word. So the
 SDK listens on loopback at a port of its own choosing, and this gate
 listens where the bridge is configured to serve. For each connection it:
 
-* admits it under the shared caps (`runtime.web_guard.ConnectionTable`;
+* admits it under the shared caps (`web.guard.ConnectionTable`;
   a proxied connection costs three descriptors, counted), the oldest one
   still sending its headers making room for a new one;
 * reads the request headers within `header_timeout_s` (16 KiB at most);
@@ -38,7 +38,7 @@ from buddybot.foxglove.token import RECHECK_S, TokenCheck, given_token
 from buddybot.runtime.endpoints import serve_failure
 from buddybot.runtime.errors import ServeError
 from buddybot.runtime.limits import clip
-from buddybot.runtime.web_guard import (
+from buddybot.web.guard import (
     AcceptErrorLog,
     Conn,
     Guard,

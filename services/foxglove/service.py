@@ -55,7 +55,7 @@ from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
-from buddybot.runtime.web_guard import guard_for
+from buddybot.web.guard import guard_for
 
 __all__ = ["add_arguments", "run", "settings_from"]
 

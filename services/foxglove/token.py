@@ -13,8 +13,8 @@ from __future__ import annotations
 
 from urllib.parse import parse_qs, urlsplit
 
-from buddybot.runtime import web_auth
 from buddybot.runtime.errors import ConfigError
+from buddybot.web import auth as web_auth
 
 RECHECK_S = 1.0
 """How often an open connection's token is compared with the secret again."""

@@ -39,7 +39,7 @@ AllowedHosts = Annotated[list[Annotated[str, msgspec.Meta(
     max_length=64, description="names and addresses the service is also served at, "
     "besides loopback, this machine's hostname and the bind address (a request whose "
     "Host is none of them is refused with 421)")]
-"""A config field: a web surface's extra names (runtime/web_guard.py)."""
+"""A config field: a web surface's extra names (the web layer's `guard.py`)."""
 HeaderTimeout = Annotated[float, msgspec.Meta(
     ge=0.5, le=120.0, description="seconds a client may take to send its request "
     "headers before the connection is cut")]
@@ -53,7 +53,7 @@ MaxPerAddress = Annotated[int, msgspec.Meta(
 class WebSurface(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """The config fields every web surface shares (`[dashboard]`, `[eye_renderer]`,
     `[foxglove]` extend it): the names it is also served at, and its flood
-    limits (runtime/web_guard.py applies them)."""
+    limits (the web layer's `guard.py` applies them)."""
 
     # A request for any other name (a DNS-rebinding site's own) gets 421.
     allowed_hosts: AllowedHosts = msgspec.field(default_factory=list)

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from buddybot.cli import main
-from buddybot.runtime import web_auth
+from buddybot.web import auth as web_auth
 
 
 @pytest.fixture

@@ -17,8 +17,8 @@ from typing import Any
 import aiohttp
 import pytest
 
-from buddybot.runtime import web_auth
 from buddybot.tools.testing import LOOPBACK, Process, buddybot_argv, retry_until
+from buddybot.web import auth as web_auth
 
 from ..conftest import ARTIFACTS
 from .test_service import _next, health, start_dashboard

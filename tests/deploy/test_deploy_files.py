@@ -140,7 +140,7 @@ def test_unit_restarts_on_failure_and_reads_the_one_env_file(path: Path) -> None
 @pytest.mark.parametrize("path", service_units(), ids=lambda p: p.stem)
 def test_unit_sets_its_descriptor_limit(path: Path) -> None:
     """`LimitNOFILE` in every unit: the web surfaces size their connection caps
-    from it (runtime/web_guard.py), and none runs on an unstated default."""
+    from it (web/guard.py), and none runs on an unstated default."""
     limit = unit(path)["Service"].get("LimitNOFILE", "")
     assert limit.isdigit() and int(limit) >= 1024, f"{path.name}: LimitNOFILE={limit!r}"
     web = {"buddybot-dashboard", "buddybot-eye-renderer", "buddybot-foxglove"}

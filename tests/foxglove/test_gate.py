@@ -10,8 +10,8 @@ import pytest
 
 from buddybot.foxglove.gate import Gate, head_fields, sdk_listening
 from buddybot.runtime.errors import ServeError
-from buddybot.runtime.web_guard import Guard, HostAllowList, Limits
 from buddybot.tools.testing import http_status
+from buddybot.web.guard import Guard, HostAllowList, Limits
 
 
 def gate(upstream_port: int) -> Gate:

@@ -16,8 +16,8 @@ import pytest
 import websockets
 
 from buddybot.foxglove.token import given_token
-from buddybot.runtime import web_auth
 from buddybot.tools.testing import Process, buddybot_argv, free_port
+from buddybot.web import auth as web_auth
 
 from .ws_client import FoxgloveClient
 

@@ -1,4 +1,4 @@
-"""A web page's send side (runtime/page_outbox.py): order, the stall cut, a gone page."""
+"""A web page's send side (web/page_outbox.py): order, the stall cut, a gone page."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Any, TypeVar
 
 import pytest
 
-from buddybot.runtime.page_outbox import PageOutbox
+from buddybot.web.page_outbox import PageOutbox
 
 log = logging.getLogger("test.page_outbox")
 R = TypeVar("R")

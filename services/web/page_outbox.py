@@ -1,14 +1,8 @@
 """One connected web page's send side: its outbox, its sender, its stall cut.
 
-The eye renderer and the dashboard serve pages over a WebSocket, each page
-with its own sender task, so a slow page never delays the others or the
-bus. What a page has not been sent yet is kept by the service (newest per
-slot, so it stays bounded however slowly the page reads); this class
-wakes the sender when something is put there and sends it. A page that
-stops reading is found here: a send that does not drain within the stall
-time, or more bytes waiting for it than the service allows. It is then cut
-without a close handshake, which would only queue behind the data the page
-is not reading; the page reconnects by itself.
+The eye renderer and the dashboard give each page its own sender, so a
+slow page never delays the others or the bus; a page that stops reading is
+cut here and reconnects by itself (docs/architecture.md, "The web layer").
 """
 
 from __future__ import annotations
@@ -42,7 +36,7 @@ class PageOutbox(Generic[T]):
         self.cut_off = False
         self.priority = priority
         """Who the page is (0: anonymous); a full server evicts lower ones first
-        (`web_guard.pick_eviction`)."""
+        (`guard.pick_eviction`)."""
         self.joined = time.monotonic()
         self.heard: float | None = None
         """When the page last sent something (`touch`); a reading-only client never does."""

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from buddybot.runtime import web_auth as wa
+from buddybot.web import auth as wa
 
 
 @pytest.mark.parametrize(("host", "mode", "needed"), [

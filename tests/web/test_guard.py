@@ -1,4 +1,4 @@
-"""The web surfaces' shared rules (services/runtime/web_guard.py), pure: the Host
+"""The web surfaces' shared rules (services/web/guard.py), pure: the Host
 allow-list, the one Origin rule, connection caps, page slots, accept-error logging."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from buddybot.runtime.web_guard import (
+from buddybot.web.guard import (
     AcceptErrorLog,
     Conn,
     ConnectionTable,

@@ -1,21 +1,10 @@
 """Who may operate the robot's web surfaces: per-robot secrets, session cookies, tokens.
 
-A surface served on loopback (the default) is only reachable from the robot
-itself and asks for nothing. Served beyond loopback it asks for a secret:
-
-* one secret per role, each a file of its own in the robot's state folder,
-  owner-only (0600), made on first start: `operator` (may watch and press
-  buttons, take the operator lease), `viewer` (may only watch) and
-  `foxglove` (the Foxglove bridge's token);
-* `buddybot secret show|rotate|revoke ROLE` reads, replaces or empties
-  the file; a revoked (empty) file lets no one of that role in until the
-  next `rotate`;
-* a session cookie names its role and expiry and is signed (HMAC-SHA256)
-  with that role's secret, so rotating or revoking a secret ends every
-  session it signed: nothing else is stored.
-
-The state folder: `$BUDDYBOT_STATE_DIR`, else systemd's `$STATE_DIRECTORY`,
-else `$XDG_STATE_HOME/buddybot` (`~/.local/state/buddybot`).
+On loopback a surface asks for nothing; beyond it, for a secret: one per
+role (`operator`, `viewer`, `foxglove`), each an owner-only file in the
+state folder (`state_dir`), and session cookies signed with it, so rotating
+or revoking a secret ends its sessions (docs/dashboard.md, "Opening it
+from a laptop").
 """
 
 from __future__ import annotations
@@ -47,7 +36,8 @@ class SecretError(BuddyBotError):
 
 
 def state_dir(env: Mapping[str, str] | None = None) -> Path:
-    """The robot's state folder (see the module docstring for the order)."""
+    """The robot's state folder: `$BUDDYBOT_STATE_DIR`, else systemd's
+    `$STATE_DIRECTORY`, else `$XDG_STATE_HOME/buddybot` (`~/.local/state/buddybot`)."""
     env = os.environ if env is None else env
     for name in ("BUDDYBOT_STATE_DIR", "STATE_DIRECTORY"):
         value = env.get(name, "").split(":")[0]

@@ -1,32 +1,11 @@
 """Who may reach a web surface, and how many: the rules every HTTP/WebSocket server shares.
 
 The dashboard, the eye renderer and the Foxglove bridge's gate answer only
-at the names they are served at and survive floods. The rules are pure
-(tested without sockets); the asyncio glue at the end applies them to a
-listening socket:
-
-* `HostAllowList`: the names and addresses a service is served at. A
-  request whose `Host` is anything else is refused (421): a web site whose
-  DNS name was pointed at the robot (DNS rebinding) sends its own name;
-* `origin_allowed`: the one WebSocket Origin rule. An Origin passes when it
-  is listed, or when its host is in the allow-list (and, for a server that
-  serves its own page, its port is the one the request came to). It is
-  never compared with the request's own `Host`, which the rebinding site
-  chooses too;
-* `ConnectionTable`: per-address and total connection caps. A connection
-  over a cap first evicts the oldest one that has not finished its request
-  headers (slow headers cost the flood its own slots, never the real user's),
-  else it is refused; the total is kept below the descriptor limit so the
-  listener never meets EMFILE from its own clients;
-* `pick_eviction`: which page gives its slot to a new one (lower priority
-  first, then the idle, then the longest quiet), so reading clients cannot
-  lock the real user out. Priorities are per connection: `ANONYMOUS`
-  today; a login can hand an operator a higher one;
-* `AcceptErrorLog`: the loop's exception handler, so accept errors (EMFILE)
-  are counted and logged at a bounded rate instead of a traceback per retry;
-* `GuardedSite`: an aiohttp site applying the table, the header-read
-  timeout and the Host check; `ListenerWatch`: whether the listener still
-  serves (a dead one takes the service's health down).
+at the names they are served at (`HostAllowList`, `origin_allowed`) and
+survive floods (`ConnectionTable`, `pick_eviction`, `AcceptErrorLog`).
+The rules are pure, tested without sockets; `GuardedSite` and
+`ListenerWatch` apply them to a listening socket. Why each rule is so:
+docs/architecture.md, "The web layer".
 """
 
 from __future__ import annotations
@@ -297,7 +276,7 @@ def pick_eviction(slots: Sequence[Slot], priority: int, now: float,
 
 
 class Occupant(Protocol):
-    """A page holding a slot (`runtime.page_outbox.PageOutbox` is one)."""
+    """A page holding a slot (`web.page_outbox.PageOutbox` is one)."""
 
     priority: int
     joined: float
