@@ -1,19 +1,23 @@
 """Whole-robot benchmark: latencies end to end, CPU and memory of every service.
 
-Starts a router and all nine services (simulated camera at 30 frames/s,
-simulated radar with a visitor who comes and goes) as separate processes,
-then for `--seconds`:
+Starts a router and the services `buddybot up --sim` starts (its launch
+plan, `supervisor.launch.plan_up`: with `--config`, on-request services
+that config enables too), with the same command lines (simulated camera
+at 30 frames/s, simulated radar with a visitor who comes and goes, audio
+on the null backend), as separate processes, then for `--seconds`:
 
 * gaze latency: time from an image's capture (`stamp_ns`, kept by the face,
   eye control and direction) to the `eyes/direction` sample arriving here,
   and to each hop on the way (face position, eye control), so the total
   can be split between the detector, the controller and the eyes;
-* presence latency: time from the radar frame (`stamp_ns` kept by presence
-  and expression) to `eyes/expression` EYE_AWAKE arriving here; entering
-  needs no hold, so this is the pipeline's own latency;
+* presence latency: time from the radar frame that brought someone in range
+  (the stamp `people/state` keeps, as the controller reads it) to the next
+  `eyes/expression` EYE_AWAKE arriving here (the controller stamps its
+  expressions with their own time); entering needs no hold, so this is the
+  pipeline's own latency;
 * CPU (% of one core) and resident memory of each process and in total.
 
-`--dashboard MODE` also starts the dashboard service and asks: does an open
+`--dashboard MODE` asks: does an open
 dashboard page slow the robot? The run is cut into `--windows` pairs of
 windows, the page closed in the first of each pair and open in the second,
 on the same robot, so the machine's drift (other work on a shared
@@ -55,16 +59,19 @@ import psutil
 import results
 from common import percentile
 
+from buddybot import cli
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.controller.events import people_changed
 from buddybot.runtime.node import Node
+from buddybot.runtime.service import resolve
+from buddybot.supervisor.launch import plan_up, service_argv
 from buddybot.tools.testing import (
     Collector,
     Process,
     Router,
     free_port,
     retry_until,
-    run_service,
     wait_port,
 )
 
@@ -134,6 +141,18 @@ class RemotePage:
         self.proc = None
 
 
+def up_sim(config: str | None, eye_port: int, dash_port: int,
+           endpoint: str) -> dict[str, list[str]]:
+    """{service: its command line} of what `buddybot up --sim --no-browser` starts
+    (with `--config`), its pages on the given ports, connected to `endpoint`."""
+    argv = ["up", "--sim", "--no-browser", "--eye-port", str(eye_port),
+            "--dashboard-port", str(dash_port), *(("--config", config) if config else ())]
+    ctx = resolve(cli.build_parser().parse_args(argv), "up")
+    plan = plan_up(ctx)
+    return {e.name: service_argv(e.name, ctx, endpoint, plan.service_args.get(e.name))
+            for e in plan.entries}
+
+
 def windows(total_s: float, pairs: int) -> Iterator[tuple[bool, float]]:
     """(page open?, seconds) for each window: closed, open, closed, open, ..."""
     each = total_s / (2 * pairs)
@@ -164,20 +183,15 @@ def main() -> None:
     log_dir = Path(mkdtemp(prefix="buddybot-bench-"))
     router = Router(log_dir=log_dir)
     eye_port = free_port()
-    services: dict[str, tuple[str, ...]] = {
-        "audio-player": ("--backend", "null"),
-        "audio": (),
-        "eyes": (),
-        "eye-renderer": ("--no-browser", "--port", str(eye_port)),
-        "controller": (),
-        "face-detector": (),
-        "radar-presence": (),
-        "camera": ("--sim", "--fps", str(args.fps)),
-        "radar-bridge": ("--sim", "--sim-scenario", "visit", "--sim-speed", str(args.sim_speed)),
-    }
     dash_port = free_port()
-    if args.dashboard:
-        services["dashboard"] = ("--port", str(dash_port), "--eye-port", str(eye_port))
+    services = up_sim(args.config, eye_port, dash_port, router.endpoint)
+    bench_options: dict[str, tuple[str, ...]] = {
+        "audio-player": ("--backend", "null"),
+        "camera": ("--fps", str(args.fps)),
+        "radar-bridge": ("--sim-scenario", "visit", "--sim-speed", str(args.sim_speed)),
+    }
+    if args.dashboard and "dashboard" not in services:
+        raise SystemExit("--dashboard: the config leaves the dashboard out of `up`")
     procs: dict[str, Process] = {}
     probe = Node("bench-probe", connect=[router.endpoint])
     stack = contextlib.ExitStack()
@@ -187,9 +201,8 @@ def main() -> None:
     side: list[bool | None] = [False if args.dashboard else None]
     cpu_by_side: dict[bool, dict[str, float]] = {False: {}, True: {}}
     try:
-        common = ("--config", args.config) if args.config else ()
-        for name, extra in services.items():
-            procs[name] = run_service(name, router.endpoint, *common, *extra, log_dir=log_dir)
+        for name, argv in services.items():
+            procs[name] = Process([*argv, *bench_options.get(name, ())], name, log_dir)
         retry_until(lambda: set(services) <= set(probe.node_instances()), 90, 0.5,
                     "all nodes up")
         gaze_ms: list[float] = []
@@ -207,9 +220,21 @@ def main() -> None:
                 hops[name].append((time.time_ns() - msg.stamp_ns) / 1e6)
             return on
 
+        arrived: list[int | None] = [None]
+        """The stamp of the people/state that brought someone in range, until the eyes wake."""
+        in_range = [False]
+
+        def on_people(msg: m.PeopleState, _key: str) -> None:
+            now_in_range = people_changed(msg).in_range  # the controller's own reading
+            if now_in_range and not in_range[0]:
+                arrived[0] = msg.stamp_ns
+            in_range[0] = now_in_range
+
         def on_expression(msg: m.ScreenExpression, _key: str) -> None:
-            if msg.action == m.ExpressionAction.EYE_AWAKE:
-                awake_ms.append((time.time_ns() - msg.stamp_ns) / 1e6)
+            stamp = arrived[0]
+            if msg.action == m.ExpressionAction.EYE_AWAKE and stamp is not None:
+                awake_ms.append((time.time_ns() - stamp) / 1e6)
+                arrived[0] = None
 
         Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
         if args.dashboard == "browser":
@@ -223,6 +248,7 @@ def main() -> None:
         probe.subscribe(keys.EYES_DIRECTION, on_direction)
         probe.subscribe(keys.FACE, hop("camera/front/face"), camera="front")
         probe.subscribe(keys.EYE_CONTROL, hop("eyes/control"))
+        probe.subscribe(keys.PEOPLE_STATE, on_people, history=False)
         probe.subscribe(keys.EXPRESSION, on_expression, history=False)
 
         ps = {name: psutil.Process(p.pid) for name, p in procs.items()}
@@ -305,7 +331,7 @@ def main() -> None:
               f"{sum(cpu_by_side[False].get(n, 0.0) for n in robot):>8.1f}"
               f"{sum(cpu_by_side[True].get(n, 0.0) for n in robot):>8.1f}")
     if awake_ms:
-        print(f"presence latency radar frame -> eyes/expression AWAKE: "
+        print(f"presence latency radar frame -> people/state -> eyes/expression AWAKE: "
               f"median {statistics.median(awake_ms):.1f} ms, max {max(awake_ms):.1f} ms, "
               f"n={len(awake_ms)}")
     else:

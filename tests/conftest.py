@@ -22,7 +22,13 @@ from typing import Any
 import pytest
 
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Process, Router, run_service, stop_and_report
+from buddybot.tools.testing import (
+    Process,
+    Router,
+    closed_afterwards,
+    run_service,
+    stop_and_report,
+)
 from tests import properties
 from tests.camera.networks import Networks
 
@@ -166,16 +172,10 @@ def endpoint(router: Router) -> str:
 @pytest.fixture
 def node_factory(endpoint: str) -> Iterator[Callable[..., Node]]:
     """Make in-process nodes connected to the test router; all closed afterwards."""
-    made: list[Node] = []
-
     def make(name: str = "probe", robot: str = "buddy", **kwargs: object) -> Node:
-        node = Node(name, robot=robot, connect=[endpoint], **kwargs)  # type: ignore[arg-type]
-        made.append(node)
-        return node
+        return Node(name, robot=robot, connect=[endpoint], **kwargs)  # type: ignore[arg-type]
 
-    yield make
-    for node in reversed(made):
-        node.close()
+    yield from closed_afterwards(make)
 
 
 @pytest.fixture

@@ -10,9 +10,8 @@ makes the MAC query answer the placeholder MAC.
 
 from __future__ import annotations
 
-import random
 import struct
-from dataclasses import dataclass, field
+from dataclasses import KW_ONLY, dataclass, field
 
 from buddybot.radar import envelope as e
 from buddybot.radar import ld2450 as p
@@ -34,22 +33,11 @@ class SimulatedLD2450(AnswersCommands):
     """Protocol state of one LD2450."""
 
     scenario: AngleScenario
-    seed: int = 1
-    answer_commands: bool = True  # False: a sensor that never ACKs
+    _: KW_ONLY
+    firmware: tuple[int, int, int] = FIRMWARE
     tracking_mode: int = 2  # 1 single, 2 multi (factory)
     zone_filter: p.ZoneFilter = field(default_factory=lambda: p.ZoneFilter(p.ZONE_OFF))
-    baud_index: int = 7
-    bluetooth: bool = True
-    config_mode: bool = False
     mac: bytes = bytes.fromhex("c4f2a1b05e77")
-    firmware: tuple[int, int, int] = FIRMWARE
-    restarts: int = 0
-    factory_resets: int = 0
-    commands: list[int] = field(default_factory=list)
-    _silent_until: float = 0.0
-
-    def __post_init__(self) -> None:
-        self.rng = random.Random(self.seed)
 
     # -- reports --
 
@@ -66,7 +54,7 @@ class SimulatedLD2450(AnswersCommands):
     def report(self, t: float, now: float) -> bytes:
         """The bytes the sensor sends at scenario time `t` (nothing while configuring
         or rebooting)."""
-        if self.config_mode or now < self._silent_until:
+        if self.silent(now):
             return b""
         scene = self.scenario(t, self.rng)
         slots: list[p.Target | None] = [
@@ -96,17 +84,12 @@ class SimulatedLD2450(AnswersCommands):
             self.zone_filter = p.decode_zone_filter(value)
         elif word == p.CMD_QUERY_ZONE_FILTER:
             return p.encode_zone_filter(self.zone_filter)
-        elif word == e.CMD_FACTORY_RESET:
-            self.factory_resets += 1
-            self.tracking_mode = 2
-            self.zone_filter = p.ZoneFilter(p.ZONE_OFF)
-            self.baud_index = 7
-        elif word == e.CMD_RESTART:
-            self.restarts += 1
-            self.config_mode = False
-            self._silent_until = now + 0.5
         elif word == e.CMD_READ_MAC:
             return self.mac if self.bluetooth else bytes.fromhex("080504030201")
         else:
             raise ValueError(f"unknown command 0x{word:04X}")
         return b""
+
+    def _factory_defaults(self) -> None:
+        self.tracking_mode = 2
+        self.zone_filter = p.ZoneFilter(p.ZONE_OFF)

@@ -14,13 +14,12 @@ from __future__ import annotations
 import contextlib
 import logging
 import os
-import random
 import select
 import struct
 import threading
 import time
 import tty
-from dataclasses import dataclass, field, replace
+from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
 
 from buddybot.radar import ld2410 as p
@@ -50,17 +49,13 @@ class SimulatedLD2410(AnswersCommands):
     """Protocol state of one sensor: no I/O, driven by explicit time."""
 
     scenario: Scenario
+    _: KW_ONLY
+    firmware: tuple[int, int, int] = FIRMWARE
     engineering: bool = True
-    seed: int = 1
-    answer_commands: bool = True  # False: a sensor that never ACKs (for error paths)
     params: p.Parameters = field(default_factory=default_parameters)
     resolution_index: int = 0
-    baud_index: int = 7
-    bluetooth: bool = True
     light: bytes = b"\x00\x80\x00\x00"
-    config_mode: bool = False
     mac: bytes = bytes.fromhex("8f27c6d91a3b")
-    firmware: tuple[int, int, int] = FIRMWARE
     # The two bytes after the gate energies; None: a light level and the OUT pin.
     aux_bytes: tuple[int, int] | None = None
     bluetooth_password: str = "HiLink"
@@ -68,20 +63,13 @@ class SimulatedLD2410(AnswersCommands):
     noise_detection_fails: bool = False
     _noise_start: float | None = None
     _noise_end: float = 0.0
-    restarts: int = 0
-    factory_resets: int = 0
-    commands: list[int] = field(default_factory=list)
-    _silent_until: float = 0.0
-
-    def __post_init__(self) -> None:
-        self.rng = random.Random(self.seed)
 
     # -- reports --
 
     def report(self, t: float, now: float) -> bytes:
         """The bytes the sensor sends at scenario time `t` (nothing while configuring
         or rebooting)."""
-        if self.config_mode or now < self._silent_until:
+        if self.silent(now):
             return b""
         target = self._noise_target(now) or self.scenario(t, self.rng)
         frame = p.encode_report(self._report(target))
@@ -149,18 +137,6 @@ class SimulatedLD2410(AnswersCommands):
                 ms[g], ss[g] = moving, still
             self.params = replace(self.params, moving_sensitivity=tuple(ms),
                                   still_sensitivity=tuple(ss))
-        elif word == p.CMD_FACTORY_RESET:
-            self.factory_resets += 1
-            self.params = default_parameters()
-            self.resolution_index = 0
-            self.baud_index = 7
-        elif word == p.CMD_RESTART:
-            # ACKed, then the module reboots: silent for a moment, config
-            # mode left, engineering mode not kept across a restart.
-            self.restarts += 1
-            self.config_mode = False
-            self.engineering = False
-            self._silent_until = now + 0.5
         elif word == p.CMD_READ_MAC:
             return self.mac
         elif word == p.CMD_AUTO_THRESHOLDS:
@@ -195,6 +171,13 @@ class SimulatedLD2410(AnswersCommands):
         else:
             raise ValueError(f"unknown command 0x{word:04X}")
         return b""
+
+    def _factory_defaults(self) -> None:
+        self.params = default_parameters()
+        self.resolution_index = 0
+
+    def _restarted(self) -> None:
+        self.engineering = False  # not kept across a restart
 
 
 def _words(value: bytes, expected: tuple[int, ...]) -> list[int]:

@@ -9,26 +9,49 @@ sensor built with `answer_commands=False` never answers (error paths).
 
 from __future__ import annotations
 
+import random
 import struct
+from dataclasses import KW_ONLY, dataclass, field
 
 from buddybot.radar import envelope as e
 
+FACTORY_BAUD_INDEX = 7
+"""256000 baud, both models' factory setting."""
+RESTART_SILENT_S = 0.5
+"""How long a sensor sends nothing after a restart."""
 
+
+@dataclass
 class AnswersCommands:
-    """Mixin: `handle()` for a simulator with `commands`, `answer_commands`,
-    `config_mode`, `firmware`, `baud_index`, `bluetooth` and its model's
-    `_apply(word, value, now) -> ACK data`. The words both models share and
-    answer alike (end configuration, firmware, baud rate, Bluetooth) are
-    answered here."""
+    """The state and `handle()` both simulators share: the command log, the
+    configuration mode, the shared settings (baud rate, Bluetooth, firmware:
+    each model gives its own default), the restart/factory-reset counters,
+    the reports' random source, and its model's `_apply(word, value, now) ->
+    ACK data`. The words both models share and answer alike (end
+    configuration, firmware, baud rate, Bluetooth, restart, factory reset)
+    are answered here; a model adds to a restart or a factory reset in
+    `_restarted()` and `_factory_defaults()`. Every field is keyword-only."""
 
-    commands: list[int]
-    answer_commands: bool
-    config_mode: bool
+    _: KW_ONLY
     firmware: tuple[int, int, int]
-    baud_index: int
-    bluetooth: bool
+    seed: int = 1
+    answer_commands: bool = True  # False: a sensor that never ACKs (for error paths)
+    baud_index: int = FACTORY_BAUD_INDEX
+    bluetooth: bool = True
+    config_mode: bool = False
+    restarts: int = 0
+    factory_resets: int = 0
+    commands: list[int] = field(default_factory=list)
+    _silent_until: float = 0.0
 
-    def _apply_shared(self, word: int, value: bytes) -> bytes | None:
+    def __post_init__(self) -> None:
+        self.rng = random.Random(self.seed)
+
+    def silent(self, now: float) -> bool:
+        """Whether the sensor sends no reports now: configuring, or rebooting."""
+        return self.config_mode or now < self._silent_until
+
+    def _apply_shared(self, word: int, value: bytes, now: float) -> bytes | None:
         """ACK data of a shared word (None: not one of them)."""
         if word == e.CMD_END_CONFIG:
             self.config_mode = False
@@ -42,9 +65,25 @@ class AnswersCommands:
         elif word == e.CMD_BLUETOOTH:
             (flag,) = struct.unpack("<H", value)
             self.bluetooth = bool(flag)
+        elif word == e.CMD_FACTORY_RESET:
+            self.factory_resets += 1
+            self.baud_index = FACTORY_BAUD_INDEX
+            self._factory_defaults()
+        elif word == e.CMD_RESTART:
+            # ACKed, then the module reboots: silent for a moment, config mode left.
+            self.restarts += 1
+            self.config_mode = False
+            self._silent_until = now + RESTART_SILENT_S
+            self._restarted()
         else:
             return None
         return b""
+
+    def _factory_defaults(self) -> None:
+        """The model's own settings back to the factory's."""
+
+    def _restarted(self) -> None:
+        """What else the model forgets across a restart."""
 
     def _apply(self, word: int, value: bytes, now: float) -> bytes:
         raise NotImplementedError
@@ -61,7 +100,7 @@ class AnswersCommands:
         if not self.config_mode:
             return e.encode_ack(word, 1)
         try:
-            data = self._apply_shared(word, value)
+            data = self._apply_shared(word, value, now)
             if data is None:
                 data = self._apply(word, value, now)
         except (ValueError, struct.error):

@@ -18,10 +18,15 @@ import math
 import threading
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from buddybot.runtime.diagnostics import Diagnostics
 from buddybot.runtime.rates import TokenBucket
 from buddybot.sdk.errors import Refused
+
+if TYPE_CHECKING:
+    from buddybot.runtime.node import Node
+    from buddybot.sdk.leases import LeaseTable
 
 ACTIONS_PER_S = 20.0
 """Default sustained actions per second of one Bot."""
@@ -84,3 +89,22 @@ class ActionLimit:
                           f"actions/s (burst {bucket.burst:g}) from this program")
         if calm and diag.message.startswith(LIMITED):
             diag.set("OK", "running")
+
+
+class Actuator:
+    """What `bot.eyes` and the speaker share: the bot's node, its leases, the
+    timeout of its calls, and its action limit, taken once per action."""
+
+    def __init__(self, node: Node, leases: LeaseTable, timeout: float,
+                 limit: ActionLimit | None = None) -> None:
+        self.node = node
+        self.leases = leases
+        self.timeout = timeout
+        self.limit = limit
+        """The program's action limit: one token per action."""
+        self._lock = threading.Lock()
+
+    def _take(self, what: str) -> None:
+        """Count the action `what` against the limit (Refused over it)."""
+        if self.limit is not None:
+            self.limit.take(what)

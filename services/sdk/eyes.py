@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import asyncio
 import math
-import threading
 import time
 from collections.abc import Generator
 from typing import Any
@@ -25,7 +24,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime import leasing
 from buddybot.runtime.leasing import check_duration
 from buddybot.runtime.node import Node
-from buddybot.sdk.actions import ActionLimit
+from buddybot.sdk.actions import ActionLimit, Actuator
 from buddybot.sdk.errors import Refused, TimedOut
 from buddybot.sdk.leases import Lease, LeaseTable, controller_errors
 from buddybot.sdk.people import Person
@@ -135,18 +134,14 @@ class EyesHandle:
             f"done: {reason})" if reason else "showing)")
 
 
-class Eyes:
-    """Expressions and gaze sent to the controller on `eyes/command`."""
+class Eyes(Actuator):
+    """Expressions and gaze sent to the controller on `eyes/command` (one token
+    of the action limit each; `_lock`: one action at a time picks or takes
+    its lease)."""
 
     def __init__(self, node: Node, leases: LeaseTable, timeout: float,
                  limit: ActionLimit | None = None) -> None:
-        self.node = node
-        self.leases = leases
-        self.timeout = timeout
-        self.limit = limit
-        """The program's action limit: one token per expression or gaze."""
-        self._lock = threading.Lock()
-        """One action at a time picks or takes its lease."""
+        super().__init__(node, leases, timeout, limit)
         self._implicit: dict[str, Lease] = {}
         """The leases the eyes took themselves, by resource."""
 
@@ -175,10 +170,6 @@ class Eyes:
         self._take("look_at")
         return self._command("gaze", f"gaze {gaze[0]:+.2f}/{gaze[1]:+.2f} rad", None,
                              yaw=gaze[0], pitch=gaze[1], target_distance_cm=gaze[2])
-
-    def _take(self, what: str) -> None:
-        if self.limit is not None:
-            self.limit.take(what)
 
     def release(self, timeout: float | None = None) -> None:
         """End the leases the eyes took themselves: the controller resumes."""

@@ -34,7 +34,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
-from buddybot.sdk.actions import ActionLimit
+from buddybot.sdk.actions import ActionLimit, Actuator
 from buddybot.sdk.calls import call
 from buddybot.sdk.errors import NoService, Refused, TimedOut
 from buddybot.sdk.leases import Lease, LeaseTable
@@ -142,17 +142,13 @@ class SoundHandle:
         return f"SoundHandle({self.sound!r}, goal {self.goal_id}, {self.state})"
 
 
-class Speaker:
-    """Goals to `audio/play_sound`, and their statuses routed to the handles."""
+class Speaker(Actuator):
+    """Goals to `audio/play_sound` (one token of the action limit each), and
+    their statuses routed to the handles."""
 
     def __init__(self, node: Node, leases: LeaseTable, timeout: float,
                  limit: ActionLimit | None = None) -> None:
-        self.node = node
-        self.leases = leases
-        self.timeout = timeout
-        self.limit = limit
-        """The program's action limit: one token per sound."""
-        self._lock = threading.Lock()
+        super().__init__(node, leases, timeout, limit)
         self._handles: BoundedDict[str, SoundHandle] = BoundedDict(256)
         self._early: BoundedDict[str, m.PlaySoundStatus] = BoundedDict(64)
         """Statuses that came before their goal's reply (the action publishes
@@ -191,10 +187,6 @@ class Speaker:
             raise
         if state == "ABORTED":
             raise Refused(handle.message)
-
-    def _take(self, what: str) -> None:
-        if self.limit is not None:
-            self.limit.take(what)
 
     def _start(self, sound: str, limit: float) -> SoundHandle:
         lease = self._audio_lease(limit)

@@ -21,10 +21,10 @@ import tempfile
 import threading
 import time
 import wave
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from functools import partial
 from pathlib import Path
-from typing import Any, Generic, TypeVar
+from typing import Any, Generic, Protocol, TypeVar
 
 import numpy as np
 
@@ -34,6 +34,27 @@ from buddybot.runtime.node import Node
 
 T = TypeVar("T")
 LOOPBACK = "127.0.0.1"
+
+
+class Closable(Protocol):
+    def close(self) -> None: ...
+
+
+C = TypeVar("C", bound=Closable)
+
+
+def closed_afterwards(open_one: Callable[..., C]) -> Iterator[Callable[..., C]]:
+    """A fixture's body (`yield from` it): yields a maker calling `open_one`, and
+    closes everything it made, newest first, once the test is over."""
+    made: list[C] = []
+
+    def make(*args: Any, **kwargs: Any) -> C:
+        made.append(one := open_one(*args, **kwargs))
+        return one
+
+    yield make
+    for one in reversed(made):
+        one.close()
 
 
 PORTS_DIR = Path(tempfile.gettempdir()) / "buddybot-ports"

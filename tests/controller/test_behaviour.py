@@ -342,14 +342,20 @@ def test_a_held_speaker_delays_the_greeting_and_says_why() -> None:
     assert r.sounds() == ["greeting"]
 
 
-def test_back_within_cooldown_is_same_visit() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=10.0)
+def greeted_and_farewelled(r: Rig) -> None:
+    """Someone comes, is greeted at once and leaves: both sounds played to their end
+    (a rig without greeting dwell nor absence hold)."""
     r.presence(True)
     gid = r.accept(plays(r.face())[0])
     r.status(gid, "SUCCEEDED")
     r.presence(False)
     fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
     r.status(fid, "SUCCEEDED")
+
+
+def test_back_within_cooldown_is_same_visit() -> None:
+    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=10.0)
+    greeted_and_farewelled(r)
     r.at(3.0)
     r.presence(True)
     r.faces(3.0)
@@ -360,12 +366,7 @@ def test_back_within_cooldown_is_same_visit() -> None:
 
 def test_back_after_cooldown_is_a_new_visit() -> None:
     r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=5.0)
-    r.presence(True)
-    gid = r.accept(plays(r.face())[0])
-    r.status(gid, "SUCCEEDED")
-    r.presence(False)
-    fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
-    r.status(fid, "SUCCEEDED")
+    greeted_and_farewelled(r)
     r.at(6.0)
     r.presence(True)
     r.faces(0.5)

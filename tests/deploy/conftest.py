@@ -30,6 +30,7 @@ from buddybot.tools.testing import (
     LOOPBACK,
     Process,
     buddybot_argv,
+    closed_afterwards,
     free_port,
     stop_and_report,
     wait_port,
@@ -231,17 +232,11 @@ def open_client(endpoint: str, zenoh_file: str | None, timeout_ms: int = 4000) -
 @pytest.fixture
 def host_node(profile: HostProfile, tls_router: TlsRouter) -> Iterator[Callable[..., Node]]:
     """Nodes connected through the TLS router as one of the deploy hosts."""
-    made: list[Node] = []
-
     def make(host: str, name: str) -> Node:
-        node = Node(name, connect=[tls_router.endpoint],
+        return Node(name, connect=[tls_router.endpoint],
                     zenoh_config_file=profile.zenoh_file(host))
-        made.append(node)
-        return node
 
-    yield make
-    for node in reversed(made):
-        node.close()
+    yield from closed_afterwards(make)
 
 
 @pytest.fixture

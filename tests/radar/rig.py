@@ -18,8 +18,9 @@ from hypothesis import strategies as st
 
 from buddybot.contract import messages as m
 from buddybot.radar import envelope, ld2410
+from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.scenarios import NOBODY, Scenario, Target
-from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim import PtySensor, SimulatedLD2410
 from buddybot.tools.testing import LOOPBACK, Collector, retry_until
 
 
@@ -99,6 +100,15 @@ def check_any_chunking(make_parser: Callable[[], Any], stream: bytes,
         assert parser.stats.bad_frames == 0
     parser = make_parser()
     assert [f for b in stream for f in parser.feed(bytes([b]))] == frames
+
+
+def check_noisy_stream(sim: SimulatedLD2410 | SimulatedLD2450,
+                       parser: envelope.FrameParser) -> None:
+    """50 s of a simulator's noisy scenario (500 frames): most reach `parser`
+    whole, some are bad, none breaks it (both models)."""
+    reports = [f for i in range(500) for f in parser.feed(sim.report(i * 0.1, i * 0.1))]
+    assert 400 < len(reports) < 500
+    assert parser.stats.bad_frames > 0
 
 
 MUTATIONS = ["intact", "intact", "truncate", "delete", "insert", "overwrite"]

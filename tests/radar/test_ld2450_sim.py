@@ -9,7 +9,7 @@ from buddybot.radar import ld2450 as p
 from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, Person, Scene
 from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.sim import PtySensor
-from tests.radar.rig import ack_of, cmd, open_port
+from tests.radar.rig import ack_of, check_noisy_stream, cmd, open_port
 
 
 def three(t: float, rng: object) -> Scene:
@@ -75,11 +75,7 @@ def test_silent_sensor_never_answers() -> None:
 
 
 def test_noisy_scenario_stream_is_survivable() -> None:
-    sim = SimulatedLD2450(ANGLE_SCENARIOS["noisy"], seed=5)
-    parser = p.Parser()
-    reports = [f for i in range(500) for f in parser.feed(sim.report(i * 0.1, i * 0.1))]
-    assert 400 < len(reports) < 500
-    assert parser.stats.bad_frames > 0
+    check_noisy_stream(SimulatedLD2450(ANGLE_SCENARIOS["noisy"], seed=5), p.Parser())
 
 
 def test_ld2450_on_a_real_pty_answers_commands_and_reports() -> None:

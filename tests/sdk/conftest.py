@@ -12,22 +12,16 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot
-from buddybot.tools.testing import Collector, Process, retry_until
+from buddybot.tools.testing import Collector, Process, closed_afterwards, retry_until
 
 
 @pytest.fixture
 def bot_factory(endpoint: str) -> Iterator[Callable[..., Bot]]:
-    made: list[Bot] = []
-
     def make(**kwargs: object) -> Bot:
         kwargs.setdefault("timeout", 10.0)
-        bot = Bot.connect(connect=[endpoint], **kwargs)  # type: ignore[arg-type]
-        made.append(bot)
-        return bot
+        return Bot.connect(connect=[endpoint], **kwargs)  # type: ignore[arg-type]
 
-    yield make
-    for bot in reversed(made):
-        bot.close()
+    yield from closed_afterwards(make)
 
 
 def start_people(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> Process:
