@@ -14,7 +14,7 @@ Debian's headless Chromium through Playwright. Prints:
   the page receiving it and to the first frame drawn with the new target
   (the eye starts moving in that frame) (target: median < 20 ms);
 * the same from `eyes/control` through the eyes driver;
-* under attack (issue 11): `--stuck N` WebSocket clients that connect and
+* under attack: `--stuck N` WebSocket clients that connect and
   never read plus an `eyes/control` flood for `--flood S` seconds: how old
   the gaze is that the real page gets, how long `/healthz` takes, the
   renderer's RSS, and how many pages were accepted, refused and dropped.

@@ -15,18 +15,19 @@ there is no smoothing delay on the bus. Between trials the person leaves
 
 `--page` adds `buddybot run eye-renderer --no-browser` and the real eye
 page in Debian's headless Chromium (Playwright), as opened on the robot
-(`/eyes?eye=both`, blinks and saccades on), and times up to the page:
-from the first report's put to the first frame the page draws with its
-eased commanded gaze (`window.eyes.base.yaw`) within `--tolerance-deg` of
-the bearing, the figure issue 25 asks for ("including smoothing"). Also
-printed: the first frame drawn with the new target (`window.eyes.target`,
-bus + WebSocket + one frame), the easing between the two (the page's
-exponential approach, tau 45 ms), and the drawn gaze with the renderer's
-fixational saccade offset added (`window.eyes.cur.yaw`). Each trial is a
-first contact: empty reports until `people/state` has nobody and the page
-looks ahead again, then a new person. Same host, same clock: the page's
-frame times are performance.timeOrigin + now(), the put's time.time()
-plus the offset between the two measured before each trial.
+(`/eyes?eye=both`, blinks and saccades on), and times up to the page: from
+the first report's put to the first frame the page draws with its eased
+commanded gaze (`window.eyes.base.yaw`) within `--tolerance-deg` of the
+bearing, the figure the look-before-see target (docs/controller.md)
+counts, smoothing included. Also printed: the first frame drawn with the
+new target (`window.eyes.target`, bus + WebSocket + one frame), the easing
+between the two (the page's exponential approach, tau 45 ms), and the
+drawn gaze with the renderer's fixational saccade offset added
+(`window.eyes.cur.yaw`). Each trial is a first contact: empty reports
+until `people/state` has nobody and the page looks ahead again, then a new
+person. Same host, same clock: the page's frame times are
+performance.timeOrigin + now(), the put's time.time() plus the offset
+between the two measured before each trial.
 
     .venv/bin/python benchmarks/radar_gaze.py [--count N] [--tolerance-deg D] [--page]
 """

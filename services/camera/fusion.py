@@ -102,7 +102,7 @@ class Cue:
 
 
 def width_cue(fx: float, face_width_m: float, box_px: float) -> Cue:
-    """The seed's cue: a face box `box_px` wide covers `face_width_m` metres."""
+    """The pinhole width cue: a face box `box_px` wide covers `face_width_m` metres."""
     z = fx * face_width_m / box_px if box_px > 0 else math.nan
     return Cue(WIDTH, z, box_px, WIDTH_PRIOR_SD, WIDTH_PX_SD)
 

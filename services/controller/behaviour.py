@@ -40,7 +40,7 @@ still playing first, wait for it to end and the device to be free, then
 PlaySound(farewell); dropped after `farewell_max_delay_s`, or if the
 visitor comes back before it started.
 
-Gaze: every face gives a `Look` at once (the seed's behaviour); when no
+Gaze: every face gives a `Look` at once (the original ROS 2 design's behaviour); when no
 face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
 Look before see: while an angle radar tracks the followed person
 (`radar(now, gaze)`, the direction of their track) and no face is
@@ -72,8 +72,8 @@ process showed the same one: the latched value lived in the dead
 process's publisher cache, and without a new publication an eyes driver
 started later would get nothing.
 
-Setting every timing to 0 and `look_around` to false is the seed's
-controller exactly.
+Setting every timing to 0 and `look_around` to false is the original
+ROS 2 design's controller exactly.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
-"""`buddybot run eye-renderer`: the eyes as a web page (seed eye_display_lld).
+"""`buddybot run eye-renderer`: the eyes as a web page.
 
-The seed's Electron app becomes a small aiohttp server, so any screen, a
-tablet or a phone can be an eye:
+A small aiohttp server rather than a desktop (Electron) app, so any
+screen, a tablet or a phone can be an eye:
 
 * Zenoh subscriptions to direction, pupil, lids and expression (latched
   ones with history, so a restarted renderer shows the current state);

@@ -3,7 +3,7 @@
 Pure logic, driven by explicit timestamps (seconds, monotonic), so every
 timing rule is tested without waiting.
 
-The seed's rule (5.1.4): among the sensors whose target_state is not
+The base rule: among the sensors whose target_state is not
 NO_TARGET take the one with the smallest detection distance; IN_RANGE if
 it is within `range_m`; STANDING if that sensor says STATIONARY only,
 else MOVING; publish on change. What a real LD2410 adds, and the answer:
@@ -95,7 +95,7 @@ class Reading:
 
     @property
     def kind(self) -> PresenceTarget:
-        """STANDING only when the sensor says STATIONARY alone (the seed's rule)."""
+        """STANDING only when the sensor says STATIONARY alone (the base rule)."""
         return (PresenceTarget.STANDING if self.target_state == TargetState.STATIONARY
                 else PresenceTarget.MOVING)
 
@@ -185,7 +185,7 @@ class PresenceTracker:
 
     Both return a Verdict when the published state changes, else None.
 
-    The state starts *unknown* (None), not OUT_OF_RANGE as in the seed: a
+    The state starts *unknown* (None), not OUT_OF_RANGE: a
     presence service that restarts while the robot believes someone is
     there must say OUT_OF_RANGE once nobody is seen, or the latched IN_RANGE
     of its previous life would stand forever. So the first verdict is

@@ -3,7 +3,7 @@
 Two tables, the bridge's whole contract with ROS 2:
 
 * `OUTGOING`: a message on one of our keys -> a sample on a ROS 2 topic
-  (the seed's names and types): `camera/{camera}/face` -> `/face_position`
+  (the original ROS 2 names and types): `camera/{camera}/face` -> `/face_position`
   (geometry_msgs/msg/PointStamped), the camera's frames -> `/raw_image`
   (sensor_msgs/msg/Image, or CompressedImage with `[ros2] raw_image =
   "compressed"`: `outgoing`), the detector's debug JPEG -> `/debug_image`,

@@ -1,7 +1,8 @@
 """The node runtime: one Zenoh session per process, typed pub/sub, queryables.
 
 Everything a service or a tool needs from Zenoh lives here, written once;
-the raw session stays private to this module (issue 16):
+the raw session stays private to this module, so every use of it is one
+of the node's methods or handles:
 
 * every declaration returns a handle (`Subscription`, `Publisher`,
   `RawPublisher`, `Queryable`, `Token`) with an idempotent `close()`, also
@@ -185,7 +186,7 @@ class Node:
             self._owns_session = False
         self._session: zenoh.Session = session
         """The raw session: private. Everything outside this module goes
-        through the node's methods and handles (issue 16)."""
+        through the node's methods and handles."""
         self.instance = str(session.info.zid())
         """This process's identity on the bus (its Zenoh session id)."""
         if unique:
