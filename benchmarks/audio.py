@@ -6,7 +6,7 @@ sound and reads the player's diagnostics, which carry the wall-clock time
 the first sample of each play was handed to the device (same host, same
 clock). Also: goal round trip, player-internal start latency, cancel ->
 device free, and the decode time of the shipped greeting; then the fault
-figures of issue 11: how fast play_file refuses a path outside the sound
+figures: how fast play_file refuses a path outside the sound
 folders, a 30-minute WAV and a 2 GB file, and how much the player's peak
 memory grew; 200 concurrent goals (answers, time until all answered); and
 the time from a router killed with SIGKILL and restarted to the next goal
@@ -211,7 +211,7 @@ def main() -> int:
         print("audio still buffered in the device after a stop: <= 3 periods = 30 ms")
         target = statistics.median(to_first) < 50.0
         print(f"target goal -> first sample < 50 ms: {'met' if target else 'NOT met'}")
-        print("faults (issue 11):")
+        print("faults:")
         fault_figures(node, procs[0].pid, folder)
         burst_figures(node, status)
         routers.append(router_restart_figure(router, node, status, folder))

@@ -2,28 +2,18 @@
 
 Starts a router, `buddybot run eyes` and `buddybot run eye-renderer
 --no-browser` as processes (as in production) and opens the page in
-Debian's headless Chromium through Playwright. Prints:
-
-* for each eye style (`--style glow|eyeball|both`) and page size
-  (`--size`, default 800x480 and 1920x1080): frame time, requestAnimationFrame
-  intervals over a few seconds with the page blinking and saccading by
-  itself (target: 60 fps, p95 < 16.7 ms), the page's own per-frame
-  update+draw cost (the headroom) and Chromium's CPU (all its processes,
-  % of one core);
-* latency from a published `eyes/direction` (stamp_ns = publish time) to
-  the page receiving it and to the first frame drawn with the new target
-  (the eye starts moving in that frame) (target: median < 20 ms);
-* the same from `eyes/control` through the eyes driver;
-* under attack (issue 11): `--stuck N` WebSocket clients that connect and
-  never read plus an `eyes/control` flood for `--flood S` seconds: how old
-  the gaze is that the real page gets, how long `/healthz` takes, the
-  renderer's RSS, and how many pages were accepted, refused and dropped.
-
-Same host, same clock: the page uses performance.timeOrigin + now().
+Debian's headless Chromium through Playwright. Prints, per eye style and
+page size, the frame time (target: 60 fps, p95 < 16.7 ms), the page's own
+update+draw cost and Chromium's CPU; the latency from a published
+`eyes/direction`, and from `eyes/control` through the driver, to the first
+frame drawn with the new target (target: median < 20 ms); and, under
+attack (stuck WebSocket clients and a flood), how old the page's gaze is.
 
     .venv/bin/python benchmarks/eyes.py [--style both] [--size 800x480,1920x1080]
         [--seconds 5] [--count 200] [--stuck 500] [--flood 20]
     .venv/bin/python benchmarks/eyes.py --flood-only      # just the attack
+
+Method in full: docs/eyes.md, 'Method of benchmarks/eyes.py'.
 """
 
 from __future__ import annotations

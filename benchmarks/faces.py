@@ -2,46 +2,16 @@
 
     .venv/bin/python benchmarks/faces.py [--frames 300] [--peer-python /tmp/mp-venv/bin/python]
 
-Peer: Google MediaPipe 0.10.21, the legacy `mp.solutions.face_detection`
-(model_selection=1: full range, which MediaPipe runs with its sparse model;
-0: short range; min_detection_confidence 0.5, its default), the system a
-user would otherwise pick. It cannot live in the repo's virtualenv, so it
-runs in its own, as a child process:
+The peer, Google MediaPipe's legacy face detection, cannot live in the
+repo's virtualenv, so it runs in its own as a child process fed frames over
+a pipe; both sides are pinned to the same core and timed the same way, on
+fresh copies of the same frames, alternating. Sections: speed (whole-frame
+detection and the service path), recall on the hard scenes of
+tests/camera/scenes.py (the source of tests/camera/test_recall.py's
+thresholds), distance accuracy, head turn, jitter, end to end; `--skip`
+leaves any out.
 
-    python3 -m venv /tmp/mp-venv && /tmp/mp-venv/bin/pip install mediapipe==0.10.21
-
-Protocol (the child's stdin/stdout, binary): per request one JSON line
-`{"model": 0|1, "w": W, "h": H}` followed by W*H*3 bytes of BGR; the
-answer is one JSON line `{"ms": t, "boxes": [[x0, y0, x1, y1, score], ...]}`
-with `t` the time of BGR->RGB conversion + `process()` measured inside the
-child (the pipe transfer is not timed; ours is timed the same way, around
-`FaceNet.detect`, which converts BGR itself). Each frame reaches both as a
-fresh copy, as it would arrive: the peer reads it from its pipe, ours is
-encoded and decoded as a camera `Image` message (`arrive`, untimed), so
-neither side is timed on a frame cold from a 276 MB list. Both processes are pinned to
-the same core with one OpenCV thread, and every frame goes to ours and to
-the peer in turn (the order alternating frame by frame), so load from other
-processes on this shared machine hits both alike.
-
-Speed: frames of the simulated camera (a real face photo moving and
-changing size, 30 fps). Whole-frame detection: ours with the sparse and
-the dense full-range model and the short-range model, MediaPipe full and
-short range. Service path: `FacePipeline` as face-detector runs it (default
-settings: crop tracking, refinement, smoothing) on the same frames, in
-order: "image in -> face out" is `process(defer=True)`, the time
-before the face can be published; "work per frame" adds what the service
-does after publishing (the whole-frame pass every `full_every_s`, the iris
-when due). Median and p95 per frame.
-
-Recall: the hard scenes of tests/camera/scenes.py (faces 20-60 px, 25/50%
-outside the frame, two faces, dark, blurred, JPEG q20), recall = true faces
-found / faces present, with the one match rule `scenes.matches`; and the
-service path over sequences (a walk 0.6-4 m, faces leaving by each edge),
-against MediaPipe full range on the same frames. The test thresholds in
-tests/camera/test_recall.py come from these figures.
-
-The other sections (distance accuracy, head turn, jitter, end to end) run
-too; `--skip` leaves any section out.
+Method in full: docs/camera.md, 'Method of benchmarks/faces.py'.
 """
 
 from __future__ import annotations

@@ -2,33 +2,15 @@
 
 Starts `buddybot router`, `buddybot run people`, `buddybot run controller`
 and `buddybot run eyes` on loopback; a probe publishes `RadarTargets` on
-`radar/1/targets` at 10 Hz, as an LD2450 bridge does, for one person standing
-at a bearing outside the camera's view (alternately 40 deg left and right),
-and times from the first report's put to the first `eyes/direction` whose yaw
-is within `--tolerance-deg` of that bearing. The chain: targets -> people
-(tracker, a new person) -> `people/state` -> controller (`RadarGaze`, a
-`Look`) -> `eyes/control` -> eyes driver -> `eyes/direction`: four router
-crossings. The eyes driver passes the direction on at once (the pages'
-motion model animates the saccade on screen, after `eyes/direction`), so
-there is no smoothing delay on the bus. Between trials the person leaves
-(empty reports) and the eyes return to centre (short holds in the config).
-
-`--page` adds `buddybot run eye-renderer --no-browser` and the real eye
-page in Debian's headless Chromium (Playwright), as opened on the robot
-(`/eyes?eye=both`, blinks and saccades on), and times up to the page:
-from the first report's put to the first frame the page draws with its
-eased commanded gaze (`window.eyes.base.yaw`) within `--tolerance-deg` of
-the bearing, the figure issue 25 asks for ("including smoothing"). Also
-printed: the first frame drawn with the new target (`window.eyes.target`,
-bus + WebSocket + one frame), the easing between the two (the page's
-exponential approach, tau 45 ms), and the drawn gaze with the renderer's
-fixational saccade offset added (`window.eyes.cur.yaw`). Each trial is a
-first contact: empty reports until `people/state` has nobody and the page
-looks ahead again, then a new person. Same host, same clock: the page's
-frame times are performance.timeOrigin + now(), the put's time.time()
-plus the offset between the two measured before each trial.
+`radar/1/targets` at 10 Hz for one person at a bearing outside the
+camera's view, and times from the first report's put to the first
+`eyes/direction` within `--tolerance-deg` of that bearing (four router
+crossings). `--page` times up to the real eye page in a headless
+Chromium, the figure the look-before-see target counts, smoothing included.
 
     .venv/bin/python benchmarks/radar_gaze.py [--count N] [--tolerance-deg D] [--page]
+
+Method in full: docs/controller.md, 'Method of benchmarks/radar_gaze.py'.
 """
 
 from __future__ import annotations

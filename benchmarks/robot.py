@@ -1,42 +1,19 @@
 """Whole-robot benchmark: latencies end to end, CPU and memory of every service.
 
-Starts a router and the services `buddybot up --sim` starts (its launch
-plan, `supervisor.launch.plan_up`: with `--config`, on-request services
-that config enables too), with the same command lines (simulated camera
-at 30 frames/s, simulated radar with a visitor who comes and goes, audio
-on the null backend), as separate processes, then for `--seconds`:
-
-* gaze latency: time from an image's capture (`stamp_ns`, kept by the face,
-  eye control and direction) to the `eyes/direction` sample arriving here,
-  and to each hop on the way (face position, eye control), so the total
-  can be split between the detector, the controller and the eyes;
-* presence latency: time from the radar frame that brought someone in range
-  (the stamp `people/state` keeps, as the controller reads it) to the next
-  `eyes/expression` EYE_AWAKE arriving here (the controller stamps its
-  expressions with their own time); entering needs no hold, so this is the
-  pipeline's own latency;
-* CPU (% of one core) and resident memory of each process and in total.
-
-`--dashboard MODE` asks: does an open
-dashboard page slow the robot? The run is cut into `--windows` pairs of
-windows, the page closed in the first of each pair and open in the second,
-on the same robot, so the machine's drift (other work on a shared
-machine changes the latency by more than the page does) falls on both
-sides alike. The gaze latency of each side is pooled and compared; the
-first `SETTLE_S` of each window are left out (a page loading is not its
-steady cost). MODE says who opens the page:
-
-* `remote`: a reader that opens the page's two WebSockets (the dashboard's
-  and the mirrored eye page's) and takes everything they send, drawing
-  nothing (benchmarks/remote_page.py): a page opened on a laptop, as the
-  dashboard is meant to be used, where the robot pays for serving the page
-  but not for the browser drawing it;
-* `browser`: the real page in a headless Chromium (Debian's, through
-  Playwright) on this same machine, which then also shares the robot's
-  cores with the browser drawing it (about a third of a core without a GPU).
+Starts a router and the services `buddybot up --sim` starts (its launch plan,
+with the same command lines: simulated camera at 30 frames/s, simulated radar
+with a visitor who comes and goes) as separate processes, then measures for
+`--seconds` the gaze latency (capture -> `eyes/direction`, split by hop), the
+presence latency (the radar frame that brought someone in range, as
+`people/state` stamps it -> EYE_AWAKE) and the CPU
+and memory of each process. `--dashboard remote|browser` also asks whether
+an open dashboard page slows the robot, in alternating windows with the
+page closed and open.
 
     .venv/bin/python benchmarks/robot.py [--seconds 60] [--fps 30]
         [--dashboard remote|browser] [--windows 4]
+
+Method in full: docs/dashboard.md, 'Method of benchmarks/robot.py'.
 """
 
 from __future__ import annotations

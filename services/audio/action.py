@@ -1,4 +1,4 @@
-"""`buddybot run audio`: the seed's audio_hld, the `audio/play_sound` action server.
+"""`buddybot run audio`: the `audio/play_sound` action server.
 
 Thin adapter around `GoalBook`: a goal (`PlaySound{sound}`) is checked
 against `[audio.sounds]` and the player's liveliness, answered at once

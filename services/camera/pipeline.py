@@ -2,31 +2,23 @@
 
     check -> track or search -> choose -> measure -> geometry -> smooth
 
-* check: the frame becomes HxWx3 uint8 BGR (grey and BGRA converted) or is
-  refused with a reason that is counted (`refused`); never an exception.
-  This is the frame's only conversion: owed work carries the checked frame;
-* track or search: the followed face re-found in its crop (accepted only
-  through `gate.TrackGate`), or a whole-frame search (`facenet.FaceNet`:
-  prepare -> infer -> decode) when there is no track, the gate refused the
-  crop result, or a pass is due and the caller does not defer;
+* check: the frame becomes HxWx3 uint8 BGR or is refused with a counted
+  reason (`refused`), never an exception; its only conversion;
+* track or search: the followed face re-found in its crop (through
+  `gate.TrackGate`), or a whole-frame search (`facenet.FaceNet`) when there
+  is no track, the gate refused, or a pass is due and the caller does not defer;
 * choose: which face is followed (`tracking.TargetTracker`);
 * measure: the chosen face detected again in its crop with the short-range
   model for a precise size and eyes (a tracked face already is that);
 * geometry: distance cues and the 3-D point (`geometry.locate`);
 * smooth: One-Euro filters (`tracking.PointSmoother`).
 
-Owed work (`process(..., defer=True)`, what the detector service does): a
-whole-frame pass that is due while the face was answered from its crop
-(`OwedSearch`), and the iris measurement (`OwedIris`, `iris.IrisNet`: when
-the followed face is big enough and the last measurement is `iris_every_s`
-old; ~6 ms) come back in `FaceResult.owed`, and the caller runs them with
-`run_owed` after publishing, off the gaze's latency path. Without `defer`
-both run inside `process` and nothing is owed. The iris measurement updates
-the person's held iris-to-eye ratio (`fusion.IrisCalibration`), a cue of
-every later frame's geometry.
-
-No Zenoh here (the service wires it to keys), so the whole chain is tested
-on real images in-process: `FacePipeline.process(bgr, stamp_ns)`.
+Owed work (`process(..., defer=True)`): a due whole-frame pass
+(`OwedSearch`) and the iris measurement (`OwedIris`, which updates
+`fusion.IrisCalibration`) come back in `FaceResult.owed`; the caller runs
+them with `run_owed` after publishing, off the gaze's latency path.
+Without `defer` both run inside `process`. No Zenoh here, so the whole
+chain is tested on real images in-process. Details: docs/camera.md.
 """
 
 from __future__ import annotations

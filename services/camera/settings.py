@@ -64,7 +64,7 @@ class FaceDetectorSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=T
         extra={"live": True},
         gt=0.0, le=1.0,
         description="real face width in metres: the main distance cue")] = 0.15
-    """Real width of the face box on an average adult (seed: face width); calibrated for
+    """Real width of the face box on an average adult (the width cue's W); calibrated for
     short-range boxes, which `refine` measures with."""
     fx: Annotated[float, msgspec.Meta(
         gt=0.0, le=1e6,

@@ -7,27 +7,16 @@
     buddybot bag export --ros2 visit.mcap visit_ros2
     buddybot bag import ros2_visit visit.mcap [--camera NAME]
 
-`record` subscribes to every topic of the catalogue but images (`--images`
-adds the camera frames, JPEG-compressed) or to the KEYs given, and writes
-one MCAP channel per concrete key (tools/bag.py says how); the file opens
-in Foxglove. Ctrl-C, SIGTERM or `--duration` end it, and the file is
-always finished (summary and index).
-
-`play` checks the whole file first (a truncated or damaged file is refused,
-exit 1, nothing published), then republishes each message on its key
-(`--robot` moves it to another robot) with its recorded payload, so stamps
-stay as recorded, at the recorded pace divided by `--rate`. Latched keys
-are published as the services publish them, so late subscribers get them.
-
-`recover` copies what a recorder killed with SIGKILL, or stopped by a full
-disk, left (every record up to the last complete chunk) into a new,
-finished file, and says how many messages it holds and how much was cut.
-
-`export --ros2` writes a rosbag2 directory (metadata.yaml and one MCAP
-file: ros2msg schemas, CDR messages, the original robot's ROS 2 topic
-names) that `ros2 bag play` and Foxglove read; `import` is the way back,
-from a ROS 2 MCAP file or rosbag2 directory of those topics to a
-recording `play` replays (cli/bag_ros2.py, ros2/rosbag.py).
+`record` writes one MCAP channel per concrete key of the catalogue's
+topics (images only with `--images`, JPEG) or of the KEYs given, and the
+file is always finished, whatever ends it. `play` checks the whole file
+first (a damaged file is refused, nothing published), then republishes
+each recorded payload on its key (`--robot` moves it to another robot) at
+the recorded pace divided by `--rate`; latched keys are published as the
+services publish them. `recover` copies what a killed recorder or a full
+disk left into a new, finished file. `export --ros2` writes a rosbag2
+directory of the original robot's ROS 2 topics; `import` is the way back
+(cli/bag_ros2.py, ros2/rosbag.py). How: tools/bag.py and docs/recording.md.
 
 Exit status: 0 done (or stopped with Ctrl-C), 1 an unreadable file or no
 router, 2 bad usage.

@@ -125,8 +125,8 @@ class QoS:
     """Delivery policy as data.
 
     Every preset uses congestion control DROP: with BLOCK, one stalled
-    reader made the router hold back every other stream (radar frames
-    stopped for 4-5 s, issue 11). What must not be lost (state) is latched
+    reader makes the router hold back every other stream (radar frames
+    stop for seconds; tests/system/test_stall.py). What must not be lost (state) is latched
     instead: the advanced publisher keeps its last samples and the
     subscribers detect a missed sample (heartbeat) and fetch it again, so
     "state" means "always converges to the newest value", not "blocks".

@@ -45,7 +45,7 @@ def now_ns() -> int:
 
 class Message(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     """Base of every message: unknown fields are refused so a typo such as
-    the seed's `rader_id` is an error, never a silently missing value."""
+    `rader_id` (the original ROS 2 spelling) is an error, never a silently missing value."""
 
 
 # --- radar -----------------------------------------------------------------

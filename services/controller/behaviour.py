@@ -6,74 +6,11 @@ the commands to carry out: `SetExpression`, `Look`, `PlaySound`,
 `CancelSound`. The service feeds it presence (from the people service:
 someone the radar sees, and their person id), faces, audio status,
 device-free flags and service replies, and calls `tick()` periodically so
-timers fire.
+timers fire. `state(now)` reports what the machine believes and what
+holds back the next sound; it changes nothing.
 
-Engagement phases (derived each step from the inputs and timers):
-
-    phase     | when                                          | eyes
-    ----------+-----------------------------------------------+-----------------------------
-    IDLE      | nobody (and drowsy time over)                 | EYE_SLEEP
-    NOTICED   | radar IN_RANGE, no face within face_timeout_s | EYE_AWAKE, then
-              |                                               | EYE_LOOK_RANDOM after
-              |                                               | look_around_after_s
-    ENGAGED   | radar IN_RANGE and a face seen                | EYE_AWAKE (EYE_GRIN while the
-              |                                               | greeting plays)
-    LEAVING   | radar OUT_OF_RANGE for < absence_hold_s       | unchanged (flicker absorbed)
-    DROWSY    | gone for < sleepy_s, or farewell in progress  | EYE_SLEEPY
-
-    transitions
-    IDLE/DROWSY --IN_RANGE--> NOTICED --face--> ENGAGED --no face--> NOTICED
-    NOTICED/ENGAGED --OUT_OF_RANGE--> LEAVING --IN_RANGE--> NOTICED/ENGAGED (same visit)
-    LEAVING --absence_hold_s elapsed--> DROWSY (departure: farewell if greeted)
-    DROWSY --sleepy_s elapsed and no farewell pending/playing--> IDLE
-
-Visits: a visit starts when someone is noticed and ends at the departure.
-Someone noticed again within `regreet_cooldown_s` of the departure
-continues the previous visit (no second greeting, no second farewell).
-
-Greeting: ENGAGED for `greet_dwell_s` (measured from the later of the
-notice and the face appearing), not yet greeted in this visit, no
-greeting within `regreet_cooldown_s`, and no sound busy (our own goal not
-finished, or `audio/device_free` false) -> PlaySound(greeting).
-Farewell: at the departure, if the visit was greeted -> cancel a greeting
-still playing first, wait for it to end and the device to be free, then
-PlaySound(farewell); dropped after `farewell_max_delay_s`, or if the
-visitor comes back before it started.
-
-Gaze: every face gives a `Look` at once (the seed's behaviour); when no
-face came for `gaze_hold_s`, one `Look(None)` returns the eyes to centre.
-Look before see: while an angle radar tracks the followed person
-(`radar(now, gaze)`, the direction of their track) and no face is
-visible, every new radar direction gives a `Look` at once, the eyes do not
-look around, and they do not return to centre; when a face appears the
-face's gaze takes over (the people service gave the face to that person
-only if it lies within its fusion angle of the radar's bearing, so the
-eyes do not jump), and when the face is lost again the radar direction
-comes back at the face timeout. Without angle radars nothing changes.
-
-`state(now)` reports what the machine believes and what holds back the
-next sound (`waiting`: recovery, sound or device busy, greeted, no face
-yet, dwell or cooldown, with the time left for the last two), for the
-service's latched `controller/state`; it changes nothing.
-
-Expressions are emitted only on change, never the same action twice in a
-row. After a start, `recover_s` is spent listening to the latched inputs
-(presence, sound status, device free): a sound still playing blocks new
-sounds, and a sound less than a cooldown old blocks greetings until the
-cooldown ends, so a restarted controller does not greet twice. That sound
-counts as this visit's greeting (a goodbye is owed) only if the visitor
-was in range when the controller started: someone who arrived later came
-after an empty room, so the sound was most likely the farewell of their
-last visit. The status does not say which sound it was, so a visitor who
-came back after a farewell and is still there at the restart may get a
-second goodbye (the property tests state this exception). The first
-expression after the recovery is always published, even if the previous
-process showed the same one: the latched value lived in the dead
-process's publisher cache, and without a new publication an eyes driver
-started later would get nothing.
-
-Setting every timing to 0 and `look_around` to false is the seed's
-controller exactly.
+Phases, visits, greeting, farewell, gaze, look before see and the
+recovery after a restart: docs/controller.md, 'The state machine in detail'.
 """
 
 from __future__ import annotations

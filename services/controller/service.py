@@ -1,39 +1,14 @@
 """`buddybot run controller`: the thin adapter between Zenoh and `behaviour.Behaviour`.
 
-Threads, and why:
+A face is the latency path (camera -> eyes), so it is decided in Zenoh's
+callback thread under the lock that guards the `Behaviour`; every other
+callback only posts an event to the decision thread, which runs `tick()`
+and publishes; one sound thread makes the blocking audio calls. Leases
+(`leases.LeaseTable`) are answered on the node's service workers under
+the same lock, from one liveliness view of the holders. `controller/state`
+is published at start and on change.
 
-* A face is the latency path (camera -> eyes): it is decided in Zenoh's
-  callback thread itself, under the lock that guards the `Behaviour`
-  (the pure code has no locks of its own), and the eye control it gives
-  is put from there. A face takes tens of microseconds, so the callback
-  never blocks for long; handing it to another thread cost a thread wake-up
-  per frame on the way to the eyes.
-* Every other callback only appends an event to the decision thread's
-  inbox. That thread drains the inbox and runs `tick()` every `tick_s`,
-  under the same lock, and publishes expressions and eye control itself
-  (non-blocking puts).
-* One sound thread makes the blocking `audio/play_sound` and cancel
-  calls (a callback must never block: one stuck callback starves every
-  other key of the session) and posts their replies back to the inbox,
-  so gaze keeps flowing while a call waits.
-
-Leases (`leases.LeaseTable` decides, docs/design.md 4.8): `leases/acquire`,
-`leases/release` and `eyes/command` are answered on the node's service
-workers under the same lock, and the liveliness of `nodes/*/*` (one
-subscriber with history; Zenoh's thread, under the lock, quick) is the one
-view of which holders are alive: a request is answered from it at once (no
-liveliness query per request, so invented holders cannot fill the worker)
-and it ends the leases of a holder that goes away. While a lease holds a resource the
-behaviour's own commands for it are dropped (it keeps its own idea); the
-moment the resource is free again its current expression / gaze is put
-at once. `leases/state` (latched) is put at start and on every change;
-expiry is checked on every decision step.
-
-`controller/state` (latched) is published once at start and then whenever
-a field other than the stamp and the `waiting_s` countdown changed: checked
-after every decision step, and after a face once its eye control is out
-(a face changes `face_visible` and the phase at once; the gaze never waits
-for the report). The behaviour's monotonic times become wall-clock ns here.
+Threads, leases and state, and why: docs/controller.md, 'The service in detail'.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ Every timing of the social behaviour lives here with a default chosen for
 the whole-robot demo (a visitor who comes, stays 20-30 s and leaves, a
 face visible the whole time): greet once per visit after a short dwell,
 say goodbye when they go. Setting every timing to 0 and `look_around`
-to false gives the seed's behaviour exactly (eyes follow presence at
+to false gives the original ROS 2 design's behaviour exactly (eyes follow presence at
 once, greeting as soon as radar and face agree). Negative timings are
 refused when the file is read (the `ge=0` constraints).
 """

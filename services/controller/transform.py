@@ -1,7 +1,7 @@
 """Camera -> eyes-centre rigid transform and gaze angles (pure, no ROS/TF2).
 
-The seed used a TF2 static transform from the camera frame to the middle
-between the eyes; the robot's geometry never changes at run time, so one
+A ROS 2 robot uses a TF2 static transform from the camera frame to the
+middle between the eyes; the robot's geometry never changes at run time, so one
 3x3 rotation and a translation computed once are all that is needed.
 
 Conventions (ROS REP 103/105): x forward, y left, z up; the orientation
@@ -10,7 +10,7 @@ about the *fixed* axes, i.e. R = Rz(yaw) @ Ry(pitch) @ Rx(roll). The
 transform maps a point given in the camera frame into the eyes frame:
 `p_eyes = R @ p_cam + t`, with `t` the camera origin in the eyes frame.
 
-Gaze, as the seed and docs/design.md section 4.4 define it: `yaw = atan2(y, x)`
+Gaze, as docs/design.md section 4.4 defines it: `yaw = atan2(y, x)`
 (+ = the robot's left), `pitch = atan2(z, hypot(x, y))` (+ = up), and the
 Euclidean distance in centimetres.
 """

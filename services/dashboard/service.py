@@ -4,37 +4,13 @@ One aiohttp server per robot serves the page (`web/`, no build step) and one
 WebSocket (`/ws`) that streams JSON (and the camera image as binary frames)
 to every connected page. The server is the page's only door to the bus: it
 holds one Node, subscribes to what the page shows, and does the buttons'
-bus work: the operator switch takes an operator lease on the eyes and the
-speaker from the controller (`leases/acquire`), and the expression, gaze
-and sound buttons act under it (`eyes/command`, `audio/play_sound`,
-`audio/stop`); the lease panel breaks anyone's lease (`leases/release`).
-The dashboard never publishes `eyes/expression` itself: the controller is
-its one publisher.
+bus work under an operator lease taken from the controller. The dashboard
+never publishes `eyes/expression` itself: the controller is its one
+publisher. This module holds the options and the order of things (the
+HTTP server starts before the node); `bus.py`, `pages.py`, `model.py` and
+`login.py` hold the parts.
 
-The parts, each in its own module:
-
-* `bus.py`: the node's subscriptions, timers and calls; Zenoh's threads
-  hand the newest value per slot to the event loop (`Mailbox`), so a flood
-  of samples costs the loop a bounded amount of work per turn;
-* `pages.py`: each page's queue and sender (a slow page never delays the
-  others or the bus) and the aiohttp application;
-* `model.py`: the pure rules (history, image rate, node restarts, requests);
-* camera images are subscribed only while a page is connected, at most
-  `max_image_fps` are JPEG-encoded (on the subscription's own worker), and
-  faces, radar, state and gaze go as JSON for the page to draw itself;
-* this module: the options, and the order of things: the HTTP server
-  starts before the node, so the page loads (and says "connecting") while
-  there is no router;
-* a WebSocket from another web site is refused (the page has buttons), a
-  request for a name the dashboard is not served at gets 421, and floods
-  are bounded (`web/guard.py`: header timeout, connection caps,
-  accept errors logged at a bounded rate; a listener that stops serving
-  sets the diagnostics to ERROR and stops the watchdog's pings);
-* beyond loopback a login (`login.py`: operators press, viewers watch),
-  optionally over HTTPS with the deployment's certificate and key.
-
-A port already in use is one line and exit status 1 (`buddybot up`
-restarts it; the port may be free again).
+The parts and their rules: docs/dashboard.md, 'The service's parts'.
 """
 
 from __future__ import annotations

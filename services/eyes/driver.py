@@ -105,7 +105,7 @@ def pupil_from_control(
     control: m.EyeControl, curve: PupilCurve, unknown_percent: float
 ) -> m.PupilControl:
     """Dilation for the control's distance; 0 cm means "distance unknown"
-    (the seed's field is optional) and gives `unknown_percent`."""
+    (the ROS 2 message's field is optional) and gives `unknown_percent`."""
     if control.target_distance_cm <= 0:
         pct = _clamp(unknown_percent, 0.0, 100.0)
     else:
@@ -139,8 +139,8 @@ class EyePair:
 
 A = m.ExpressionAction
 DEFAULT_LIDS: Mapping[m.ExpressionAction, EyePair] = {
-    A.EYE_AWAKE: EyePair.same(0.0, 0.0),        # seed: fully open
-    A.EYE_SLEEP: EyePair.same(50.0, 50.0),      # seed: lids meet in the middle
+    A.EYE_AWAKE: EyePair.same(0.0, 0.0),        # fully open (the ROS 2 design's)
+    A.EYE_SLEEP: EyePair.same(50.0, 50.0),      # lids meet in the middle (ROS 2 design's)
     A.EYE_SLEEPY: EyePair.same(34.0, 8.0),      # heavy top lid, a third of the eye
     A.EYE_GRIN: EyePair.same(0.0, 28.0),        # cheeks push the bottom lid up: crescent
     A.EYE_SAD: EyePair.same(22.0, 4.0),         # top lid lowered; the renderer slants it

@@ -1,4 +1,4 @@
-"""`buddybot run eyes`: the eyes driver service (seed eye_display_hld).
+"""`buddybot run eyes`: the eyes driver service.
 
 A thin adapter around `buddybot.eyes.driver`: `eyes/control` ->
 `eyes/direction` + `eyes/pupil`, `eyes/expression` -> `eyes/lids`

@@ -12,22 +12,13 @@ clock) and the random generator is injected, so the same calls with the
 same seed give the same events (the tests rely on it). An event starts
 `lead_ms` after it is decided, so it reaches every page before it begins.
 
-What it models (human figures, each next to its constant below):
-
-* saccade durations from the main sequence (`saccade_duration_ms`);
-* spontaneous blinks every few seconds (uniformly random between the
-  configured bounds), a blink with every large gaze shift (commanded or
-  self-generated, at least `gaze_blink_deg`), slower blinks when drowsy
-  (EYE_SLEEPY), none while asleep (EYE_SLEEP);
-* fixational saccades: small (a few degrees) jumps around the point looked
-  at, smaller while the robot is following someone;
-* glances, look -> hold -> look back: now and then when nobody is being
-  followed (small), and all the time with EYE_LOOK_RANDOM (large).
-
-Saccade events carry an *offset* added to the commanded direction (the
-page eases toward the commanded direction); each saccade names
-where it starts (`from_yaw`, `from_pitch`) and ends (`yaw`, `pitch`), so a
-page that missed earlier events still draws the same motion.
+It models human figures, each next to its constant below: saccade
+durations from the main sequence; spontaneous, gaze-evoked and drowsy
+blinks (none asleep); fixational saccades, smaller while following
+someone; glances. Saccade events carry an *offset* added to the commanded
+direction and name where they start and end, so a page that missed
+earlier events still draws the same motion. The figures and why:
+docs/eyes.md, 'Eye renderer'.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Which eye goes on which display (docs/design.md section 4.5), pure: display lists in,
 windows out.
 
-Rules, in the seed's words, made exact:
+The original ROS 2 design's rules, made exact:
 
 * no display at all -> error;
 * nothing configured: left eye on display 1, right eye on display 2;

@@ -1,43 +1,16 @@
-"""`buddybot run eye-renderer`: the eyes as a web page (seed eye_display_lld).
+"""`buddybot run eye-renderer`: the eyes as a web page.
 
-The seed's Electron app becomes a small aiohttp server, so any screen, a
-tablet or a phone can be an eye:
+A small aiohttp server rather than a desktop (Electron) app, so any
+screen, a tablet or a phone can be an eye. Zenoh subscriptions to
+direction, pupil, lids and expression feed a WebSocket to every page at
+`/eyes?eye=left|right|both`, newest sample per slot so a flood or a slow
+page never builds a backlog; the HTTP server starts before the Zenoh node
+(a calm "connecting" face without a router); one kiosk Chromium window per
+eye window planned by `placement.py`; one `motion.MotionScheduler` decides
+every blink and saccade once for all pages. Floods are bounded by
+`web/guard.py`.
 
-* Zenoh subscriptions to direction, pupil, lids and expression (latched
-  ones with history, so a restarted renderer shows the current state);
-* the newest sample per slot is handed to the asyncio loop (`Inbox`: a
-  flood coalesces instead of queueing) and pushed over a WebSocket to every
-  page at `/eyes?eye=left|right|both` (`/ws` carries the data; each page
-  gets a greeting with its looks and the whole current state, then updates,
-  coalesced per slot so a slow page never builds a backlog; a page that
-  stops reading is cut, at most `max_pages` are connected (a new one takes
-  the quietest page's slot), and only the server's own origin or listed
-  ones may open the socket);
-* only the names it is served at are answered, and floods are bounded
-  (`web/guard.py`: header timeout, connection caps, accept errors
-  at a bounded rate; a listener that stops serving sets the diagnostics to
-  ERROR and stops the watchdog's pings);
-* the HTTP server starts before the Zenoh node, so the pages show a calm
-  "connecting" face while there is no router, never a browser error;
-* one kiosk Chromium window per eye window planned by `placement.py` from
-  the displays `screeninfo` finds (or `--display` geometries); none with
-  `--no-browser`;
-* its settings on `params/eye-renderer` like every service's, served once
-  the node is open: the looks and the page limits are live (`Hub.apply`,
-  run on the event loop), where it serves and its windows need a restart;
-  its diagnostics say where the pages are (`url`, `listen_host`,
-  `hostname`), which is how `buddybot doctor` finds them on any host;
-* one face, many screens: a single `motion.MotionScheduler`, fed the
-  expression and the commanded direction and woken by a timer on the
-  loop, decides every blink and saccade once; each is sent to every page
-  (`motion`) a little before its start on the server clock, and the newest
-  of each kind stays in the state a (re)connecting page gets. Pages learn
-  the server clock with `ping`/`pong` on the same socket.
-
-No display and no explicit placement: a warning and the pages are only
-served (what `buddybot up --sim` on a headless machine wants). No display
-with an explicit placement, or a placement the displays cannot satisfy:
-exit status 2 with the placement rule's message (docs/design.md section 4.5).
+What it does, point by point: docs/eyes.md, 'The renderer at a glance'.
 """
 
 from __future__ import annotations

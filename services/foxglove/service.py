@@ -3,28 +3,23 @@
 A Foxglove WebSocket server (the `foxglove-sdk` package) fed by one node:
 
 * every catalogue topic but the images is subscribed to all the time;
-  each concrete key becomes a channel named by its full key
-  (`buddybot/buddy/radar/presence`) the first time it is seen, with its
-  JSON Schema, and its messages are sent as JSON (encoded only while a
-  client subscribes to the channel);
+  each concrete key becomes a channel named by its full key the first
+  time it is seen, with its JSON Schema, its messages sent as JSON (encoded
+  only while a client subscribes to the channel);
 * `camera/<cam>/faces` also feeds `.../faces/annotations`
   (`foxglove.ImageAnnotations`), so the Image panel draws the boxes;
-* images are found from the nodes' own reports (`node_info/*`, every few
-  seconds), advertised as `foxglove.CompressedImage`, and subscribed to
-  only while a Foxglove client watches them, at most `max_image_fps`;
-* three Foxglove services: `eyes/expression` sets the expression under
-  the bridge's operator lease on `expression` (taken at the first call,
-  held until `eyes/release`, the bridge stops, or an operator breaks it:
-  the controller publishes `eyes/expression`, never the bridge),
-  `eyes/release` gives the expression back to the robot, and
-  `audio/play_sound` sends the goal to the audio action and returns its reply.
+* images are found from the nodes' own reports (`node_info/*`), advertised
+  as `foxglove.CompressedImage`, and subscribed to only while a client
+  watches them, at most `max_image_fps`;
+* three Foxglove services: `eyes/expression` (under the bridge's operator
+  lease on `expression`; the controller publishes, never the bridge),
+  `eyes/release` and `audio/play_sound`.
 
 Clients reach the SDK's server (on loopback, at a free port) through the
-gate (`gate.py`): names, origins, header timeout and connection caps are
-checked there, and beyond loopback the token (`token.py`). The server
-starts before the node, so a busy port fails at once (one line, exit 1)
-rather than after the router was found. Bad payloads are counted and
-dropped by the node (`malformed` in diagnostics), never shown.
+gate (`gate.py`: names, origins, header timeout, connection caps, and
+beyond loopback the token, `token.py`). The server starts before the node,
+so a busy port fails at once (exit 1). Bad payloads are counted and
+dropped (`malformed`), never shown. Details: docs/foxglove.md.
 """
 
 from __future__ import annotations

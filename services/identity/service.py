@@ -6,26 +6,19 @@ keypoints, stamped like the frame they came from). The followed face's
 boxes make tracks (`tracks.py`); each track embeds one frame in a few, one
 at a time, on this process's embedding thread, and votes (`vote.py`); the
 name goes out on `identity/<cam>/name` (latched) when it changes. The face
-detector never waits for any of this: it is another process, and this one
-only reads what it publishes.
+detector never waits for any of this: it is another process.
 
-Consent: `identity/enrol` takes the one face in front of the camera now
-(refused with no face or more than one), `identity/forget` erases one
-person or everybody at once (a followed face carrying a forgotten name
-turns unknown in the same step), `identity/list` names who is enrolled.
-The gallery stores embeddings, never images (`gallery.py`); logs name the
-action and the person, never an embedding.
+Consent: `identity/enrol` takes the one face in front of the camera now,
+`identity/forget` erases one person or everybody (a followed face carrying
+a forgotten name turns unknown in the same step), `identity/list` names
+who is enrolled. The gallery stores embeddings, never images; logs never
+hold an embedding. A gallery file that cannot be trusted, or a missing
+model, leaves the service running with no names and an ERROR status.
 
-Failing safe: a gallery file that cannot be trusted (corrupt, another
-model, accessible to others, a symlink) or a missing model leaves the
-service running with no names and an ERROR status saying why; enrol and
-forget then refuse to overwrite that file, except `forget --all`, which
-replaces it with an empty gallery.
-
-Threads: faces arrive on a worker (FIFO), images inline (a ring append),
-embeddings on one thread of their own, queries on the node's workers, the
-timer on the node's timer thread; one lock guards tracks, vote, gallery and
-the name publisher.
+Threads: faces on a worker (FIFO), images inline (a ring append),
+embeddings on their own thread, queries on the node's workers, the timer
+on the node's timer thread; one lock guards tracks, vote, gallery and the
+name publisher. Details: docs/identity.md, 'The service'.
 """
 
 from __future__ import annotations

@@ -1,68 +1,19 @@
 """Persons from radar presence and the camera's face: a pure state machine.
 
 Inputs are typed samples with the stamp of their sensor data (`RadarSeen`,
-`FaceSeen`) and `Tick`s that let timers fire; `PeopleModel.step` returns the
+`FaceSeen`, `TargetsSeen` from angle radars, `NameSeen` from the identity
+service) and `Tick`s that let timers fire; `PeopleModel.step` returns the
 `PersonEvent`s they cause and `state()` the persons now present. Nothing
-here knows Zenoh, threads or a clock: time is what the inputs say.
+here knows Zenoh, threads or a clock: time is what the inputs say, so the
+events do not depend on how often `Tick` comes.
 
-Who is there. Without angle radars the LD2410 sees the nearest person and
-the face detector follows one face, so the model holds one *untracked*
-person per visit. The radar is a level (IN_RANGE holds until OUT_OF_RANGE,
-as `radar/presence` is published on change only); the camera sees a person
-while its last face is younger than `face_timeout_s`. A person arrives with
-the first sample that shows someone and leaves once neither sensor has
-shown them for `absence_hold_s`: a flicker shorter than that is the same
-person, a return after it is a new person with a new id.
+One untracked person per visit without angle radars; one tracked person
+per radar track with them, the followed face fused to the track in its
+direction. Names follow the face that was given them; engagement is
+ROS4HRI style. At most `MAX_PEOPLE` persons.
 
-Angle radars (LD2450, `TargetsSeen`): `tracker.Tracker` keeps an id per
-target across reports and sensors, and every track is a *tracked* person
-(seen by RADAR while the track lives). The followed face belongs to the
-tracked person whose bearing is within `fusion_angle_deg` of the face's
-direction and whose distance is within `fusion_distance_m` (the person
-holding it keeps it within twice those, so two people close together do
-not trade it every frame); that person is seen by BOTH, with the camera's
-distance and direction. A face no track matches belongs to the untracked
-person, as without angle radars, and a new track that matches that face
-turns the untracked person into a tracked one (the camera saw them
-first). While an angle radar reported within `radar_timeout_s`,
-`radar/presence` does not show the untracked person (the angle radars
-are the radar then; it keeps the one level the presence service derives
-from them). A new track near where a tracked person lost theirs (within
-twice `track_gate_m`), while that person is still held, continues that
-person. Direction: the face's while the camera sees it, else the track's
-bearing with the last face pitch (0, the camera's level, when the camera
-never saw them: the radar measures no height). At most `MAX_PEOPLE`
-persons.
-
-Names (`NameSeen`, from the identity service's `identity/<camera>/name`):
-the name decided for the followed face's track goes to the person holding
-that face (the tracked person it is fused with, else the untracked person),
-and no other person present keeps it. It stays with them while they are
-present: a face turned away, lost, or re-detected as a new face track that is
-not yet decided keeps the name, but a new track must confirm it within
-`name_confirm_s` (the name may have been forgotten meanwhile, and only the
-track that gave it would say so). It is cleared when the face track that
-gave it is said to have no name (the name was forgotten: erasure reaches
-the state at once), replaced when their face is given another name, and
-gone with them when they leave. A name for a face nobody holds is kept until a
-face arrives (the two topics race), as long as it is the newest one.
-
-Engagement (ROS4HRI style), re-evaluated on every input and timer:
-
-    NONE --face in social zone--> ENGAGING --engage_dwell_s--> ENGAGED
-    ENGAGING --face lost or zone PUBLIC--> NONE
-    ENGAGED --face lost or zone PUBLIC--> DISENGAGING --face back--> ENGAGED
-    DISENGAGING --disengage_hold_s--> NONE
-    any --absence_hold_s with neither sensor--> GONE, then LEFT
-
-Time. Timers fire at their deadline, computed from sensor stamps (the last
-face + `face_timeout_s`, the start of a dwell or hold + its length), and
-before any input stamped later is applied: with inputs in stamp order the
-events, their order and their stamps do not depend on how often `Tick`
-comes. Every event carries the stamp of the sensor data that decided it:
-an input's own stamp, or a timer's deadline. A sample older than the
-previous one of the same sensor is ignored (it would undo newer data); one
-older than a `Tick` already seen is applied as it is, keeping its stamp.
+Rationale: docs/people.md, 'What the model decides, and why', 'Angle
+radars: tracks, fusion with the face', 'Engagement' and 'Names'.
 """
 
 from __future__ import annotations

@@ -4,34 +4,14 @@ An angle radar (LD2450) reports up to three targets per report, each in a
 *slot* the sensor may reassign from one report to the next: the slot is no
 identity. `Tracker` gives every person a track id that lasts while they
 are seen, from the targets' positions alone (the camera's frame, metres,
-as `RadarTarget.position` carries them).
+as `RadarTarget.position` carries them): tracks are predicted to the
+report's time, (track, target) pairs within `gate_m` are taken greedily,
+nearest first, ties broken by id and coordinates (never by slot), one
+track for a person several sensors see, a track dropped after `coast_s`
+unmatched, at most `max_tracks`. Time is the reports' stamps and
+`expire(now_ns)`; nothing reads a clock.
 
-Association, per report: every track's position is predicted to the
-report's time (its last position plus its velocity for the time since,
-the velocity measured between consecutive reports of one sensor, so the
-few centimetres two sensors disagree by never read as motion). The pairs
-(track, target) closer than `gate_m` are taken greedily, nearest first:
-each target feeds one track and each track takes one target per report.
-A target left over starts a new track, while fewer than `max_tracks`
-exist (the others are counted as `refused`). Ties are broken by the
-track's id and the target's coordinates, never by the slot or the list's
-order, so a permutation of a report's targets gives the same ids.
-
-Several sensors: a report is matched against every track, whichever
-sensor saw it before, so one person seen by two sensors whose fields
-overlap is one track (their mounting poses place both targets at the same
-point, within the gate).
-
-A track no report has matched for `coast_s` is dropped (a missed report
-or two, or a person hidden for a moment behind another, keeps the id).
-Time is the reports' stamps and `expire(now_ns)`; nothing reads a clock.
-
-Limits, by construction: two people closer than the gate who swap places
-between two reports, or who stay merged into one target (the sensor
-reports one) for longer than `coast_s`, may swap or lose an id; a person
-who reappears after `coast_s` gets a new track (the people model then
-re-attaches it to the person it lost, see model.py). Two sensors whose
-poses disagree by more than the gate make two tracks of one person.
+Rationale and limits: docs/people.md, 'Angle radars: tracks, fusion with the face'.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ LD2410 reports go to `radar/<device>/frames`; LD2450 reports to
 sensor's `[[radar_bridge.mount]]`. A sensor's model is recognised from its
 first report frames at every connect (`models.py`), unless `models` names it.
 
-The seed's radar_lld, as a thin adapter: one reader thread per sensor
+A thin adapter: one reader thread per sensor
 opens its URL (`/dev/ttyUSB0`, `socket://esp32.local:8881`,
 `rfc2217://...`), feeds the bytes to the pure parser and publishes every
 report frame at once, stamped with its arrival time. A sensor that

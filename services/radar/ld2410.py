@@ -5,7 +5,7 @@ every rule of the protocol is unit-tested without a serial port. Offsets
 and words follow HiLink's HLK-LD2410 serial communication protocol
 document (summarised in docs/radar.md). All multi-byte fields are little-endian.
 
-Why our own parser: the Arduino library the seed used reads distances as
+Why our own parser: the Arduino LD2410 library of the original ROS 2 design reads distances as
 one byte, drops frames containing `0x0A` and swaps moving/still fields.
 Here every distance is 16-bit, bytes are bytes (nothing is line-based),
 and each field is read from its documented offset.

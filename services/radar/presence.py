@@ -3,52 +3,18 @@
 Pure logic, driven by explicit timestamps (seconds, monotonic), so every
 timing rule is tested without waiting.
 
-The seed's rule (5.1.4): among the sensors whose target_state is not
-NO_TARGET take the one with the smallest detection distance; IN_RANGE if
-it is within `range_m`; STANDING if that sensor says STATIONARY only,
-else MOVING; publish on change. What a real LD2410 adds, and the answer:
+The base rule: among the sensors whose target_state is not NO_TARGET take
+the one with the smallest detection distance; IN_RANGE if it is within
+`range_m`; STANDING if that sensor says STATIONARY only, else MOVING;
+publish on change. What a real LD2410 adds, and the answer: hysteresis
+(`exit_margin_m`), an absence hold, a target-kind hold, stale sensors
+excluded and reported, target states 4..6 read as "no target", a bounded
+sensor table that a flood of invented ids cannot churn, LD2450 reports
+read as the same per-sensor readings (`read_targets`), and verdicts
+stamped by the frame that caused them, never the largest stamp seen.
 
-* A person standing near the border makes the distance jitter by tens of
-  cm: entering needs `distance <= range_m`, leaving needs every target
-  beyond `range_m + exit_margin_m` (hysteresis).
-* The sensor drops a present person for a frame or a few (NO_TARGET
-  blips, energy dips): OUT_OF_RANGE is only declared once nobody has been
-  within the exit range for `absence_hold_s`. Entering needs no hold, so
-  the robot reacts within one frame.
-* STATIONARY/BOTH flips every few frames while someone fidgets: a new
-  target kind is published only once it has lasted `target_hold_s`.
-* A sensor that stops sending (unplugged, bridge down) is excluded after
-  `stale_after_s` and reported; its last frame is not taken for "nobody
-  here" nor for "still here". With no fresh sensor at all the verdict is
-  kept (we do not know) and the service reports the outage.
-* An LD2410C measuring background noise sends target states 4..6: fresh
-  data saying "no target" (not silence).
-* Sensor names come from the network: the table keeps at most
-  `max_sensors`, so a flood of invented sensor ids costs bounded memory
-  and time. To make room it forgets, among the sensors not *established*
-  (heard for `ESTABLISHED_S` with at least `ESTABLISHED_FRAMES` frames),
-  the one with the fewest frames, the most recently heard of those
-  first; only when every sensor is established the one heard least
-  recently. So a flood of ids each sent once churns one slot and never
-  pushes out a sensor that was already there (and the person it sees),
-  not even one still becoming established. A sensor whose first frame
-  comes in the middle of such a flood is only tracked once it ends. Once
-  the table has had to evict, a sensor that falls silent before it was
-  established is forgotten (and counted as evicted) after
-  `stale_after_s`, not reported as silent: the ids a flood leaves in the
-  table would otherwise read "15 of 16 sensor(s) silent" until someone
-  restarted the service.
-* Angle radars (LD2450) report targets with a position instead of one
-  distance: `read_targets` keeps those the zones count (zones.py) and
-  makes of them the same per-sensor reading, the nearest counted target's
-  distance, so hysteresis, holds, staleness and the sensor table apply to
-  both models alike, and a mix of them is one table: IN_RANGE when any
-  fresh sensor has someone within range. The kind of an LD2450 target
-  comes from its speed: MOVING when |speed| > `moving_speed_mps`.
-* Stamps: a verdict carries the stamp of the frame that caused it, or of
-  the latest frame for a verdict that time caused. Never the largest
-  stamp ever seen: one frame stamped far in the future would otherwise be
-  the stamp of every later verdict.
+Rationale: docs/radar.md, '`buddybot run radar-presence`', 'Angle radars
+(LD2450) and mixing models' and 'What the network cannot do to it'.
 """
 
 from __future__ import annotations
@@ -95,7 +61,7 @@ class Reading:
 
     @property
     def kind(self) -> PresenceTarget:
-        """STANDING only when the sensor says STATIONARY alone (the seed's rule)."""
+        """STANDING only when the sensor says STATIONARY alone (the base rule)."""
         return (PresenceTarget.STANDING if self.target_state == TargetState.STATIONARY
                 else PresenceTarget.MOVING)
 
@@ -185,7 +151,7 @@ class PresenceTracker:
 
     Both return a Verdict when the published state changes, else None.
 
-    The state starts *unknown* (None), not OUT_OF_RANGE as in the seed: a
+    The state starts *unknown* (None), not OUT_OF_RANGE: a
     presence service that restarts while the robot believes someone is
     there must say OUT_OF_RANGE once nobody is seen, or the latched IN_RANGE
     of its previous life would stand forever. So the first verdict is

@@ -1,6 +1,6 @@
 """`buddybot run radar-presence`: radar reports of every bridge -> `radar/presence` (latched).
 
-The seed's radar_hld as a thin adapter around `presence.PresenceTracker`:
+A thin adapter around `presence.PresenceTracker`:
 LD2410 frames (`radar/*/frames`) and LD2450 targets (`radar/*/targets`)
 arrive from all devices (wildcard subscriptions), each sensor is known as
 "<device>/<radar_id>" whatever its model, a timer drives the hold and staleness

@@ -3,32 +3,25 @@
 Two tables, the bridge's whole contract with ROS 2:
 
 * `OUTGOING`: a message on one of our keys -> a sample on a ROS 2 topic
-  (the seed's names and types): `camera/{camera}/face` -> `/face_position`
-  (geometry_msgs/msg/PointStamped), the camera's frames -> `/raw_image`
-  (sensor_msgs/msg/Image, or CompressedImage with `[ros2] raw_image =
-  "compressed"`: `outgoing`), the detector's debug JPEG -> `/debug_image`,
-  the radar frames -> `/ld2410_target_frames`, `radar/presence` ->
-  `/radar_presence`, the eye keys -> `/screen_expression`, `/eye_control`,
-  `/eyes_direction_control`, `/pupil_control`, `/eye_lid_control`
-  (buddybot_interfaces), `audio/device_free` -> `/audio_device_is_free`
-  (std_msgs/msg/Bool);
+  (the original ROS 2 names and types): `camera/{camera}/face` ->
+  `/face_position` (geometry_msgs/msg/PointStamped), the camera's frames ->
+  `/raw_image` (Image, or CompressedImage with `[ros2] raw_image =
+  "compressed"`: `outgoing`), `/debug_image`, `/ld2410_target_frames`,
+  `/radar_presence`, the eye topics (buddybot_interfaces) and
+  `/audio_device_is_free` (std_msgs/msg/Bool);
 * `INCOMING`: a sample of a ROS 2 node -> a request to the robot:
   `/screen_expression` and `/eye_control` -> the controller (a lease on
   `expression` or `gaze`, then `eyes/command`), never our keys directly
   (the controller alone publishes the eyes).
 
-Each outgoing entry carries the QoS its graph token announces: the latched
-keys (presence, expression, lids, device free) are transient-local with
-depth 1, served to late joiners as rmw_zenoh does (an advanced publisher
-with a cache of that depth); images are best effort, depth 5 (ROS's sensor
-profile); the rest rmw_zenoh's default (reliable, volatile, depth 10).
-Images are `on_demand`: the bridge takes them from the robot only while a
-ROS 2 subscription to the topic is in the graph (service.py).
-
-Topic names live in the settings' namespace and key expressions in their
-domain (`Ros2Settings`); `Route` spells both for one entry, and
-`split_key` reads the type and hash back from a key a peer published on,
-so a sample of the wrong type or hash is told apart and counted.
+Each outgoing entry carries the QoS its graph token announces (latched
+keys transient-local depth 1, images best effort depth 5, the rest
+rmw_zenoh's default); images are `on_demand`, taken from the robot only
+while a ROS 2 subscription to the topic is in the graph (service.py).
+`Route` spells an entry's topic name (in the settings' namespace) and key
+expression (in their domain); `split_key` reads the type and hash back
+from a peer's key, so a sample of the wrong type or hash is counted.
+The whole table and the QoS, why: docs/ros2.md, 'The bridge service'.
 """
 
 from __future__ import annotations

@@ -6,26 +6,20 @@ two, as the layers say).
 
 * `TABLE`: which of our topics becomes which ROS 2 topic, the original
   robot's names and types (`/face_position` geometry_msgs/msg/PointStamped,
-  `/raw_image` sensor_msgs/msg/CompressedImage or Image, ...). Our keys
-  whose topic has no entry (people, leases, diagnostics ...) are skipped.
-  The bridge's own table (`bridge.OUTGOING`) uses the same names and types;
-  a test holds the two together.
-* `message_definition`: the `ros2msg` schema text rosbag2 stores, the type's
-  `.msg` text followed by every dependency under a line of 80 `=` and
-  `MSG: pkg/msg/Name` (rosbag2's docs/message_definition_encoding.md). Our
-  types' text is the generated `.msg` files'; the standard types' text is
-  rebuilt from rosbags' Jazzy store (the fields without their comments).
+  ...); our keys without an entry (people, leases, ...) are skipped. The
+  bridge's `bridge.OUTGOING` uses the same names and types (a test holds
+  the two together).
+* `message_definition`: the `ros2msg` schema text rosbag2 stores (the
+  type's `.msg` text, then every dependency under a line of 80 `=`).
 * `Rosbag2Writer`: a rosbag2 directory (`metadata.yaml` version 9 and one
-  MCAP file, profile `ros2`, CDR, channel metadata `offered_qos_profiles`
-  and `topic_type_hash`, the MCAP `rosbag2` metadata record), so
-  `ros2 bag play DIR` and `ros2 bag play DIR/DIR_0.mcap` both find what
-  they read.
+  MCAP file, profile `ros2`, CDR) that `ros2 bag play DIR` and
+  `ros2 bag play DIR/DIR_0.mcap` both read.
 * `Importer`: one ROS 2 channel at a time, told apart before any message is
-  read: a topic we do not map, a type we do not take on it, a schema whose
-  text defines the type otherwise than we do, or not CDR: skipped, with the
-  reason. Messages then pass `convert`'s checked decoding (size limits,
-  CDR bounds, the contract's ranges); a refused one is counted, never
-  taken.
+  read (a topic we do not map, a type we do not take on it, a schema that
+  defines the type otherwise, or not CDR: skipped, with the reason); its
+  messages pass `convert`'s checked decoding, a refused one counted.
+
+Details: docs/recording.md, 'Recordings for ROS 2 tools'.
 """
 
 from __future__ import annotations

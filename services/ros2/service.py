@@ -8,22 +8,19 @@ One node, on the robot's router:
   a latched entry's publisher keeps its last value for late joiners
   (transient local), an on-demand entry (images) subscribes to our key only
   while a ROS 2 subscription to the topic is in the graph (`OnDemand`);
-* it declares the graph's liveliness tokens: one for the ROS 2 node, one
-  per publisher, one per subscription, so `ros2 node list` and `ros2 topic
-  list` see them;
+* it declares the graph's liveliness tokens (node, publishers,
+  subscriptions), so `ros2 node list` and `ros2 topic list` see them;
 * for each entry of `bridge.INCOMING` it subscribes to the topic under any
-  type and hash: samples beyond the flood limit are dropped at once
-  (`flooded`), a sample of another type or hash is counted (`wrong_type`),
-  a payload that does not decode is counted (`malformed`), and a
-  `/screen_expression` or `/eye_control` goes to the controller under the
-  bridge's `app` lease on `expression` or `gaze` (a refusal is counted,
-  `refused`). The bridge never publishes the robot's keys itself, and its
-  subscriptions to them only copy (images on a worker), so it never slows
-  them;
+  type and hash, counts and drops floods (`flooded`), other types or
+  hashes (`wrong_type`) and undecodable payloads (`malformed`), and takes
+  `/screen_expression` or `/eye_control` to the controller under the
+  bridge's `app` lease (`refused` counted). It never publishes the robot's
+  keys itself, and its subscriptions to them only copy, so it never slows them;
 * it serves the audio services and the `/play_sound` action as ROS 2
   services (`servers.Servers`, with their `SS` and `MP` tokens).
 
 Off by default: `up` starts it only with `up --ros2` or `[ros2] enabled = true`.
+Details: docs/ros2.md, 'The bridge service'.
 """
 
 from __future__ import annotations

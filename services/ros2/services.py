@@ -1,8 +1,8 @@
 """The robot's audio services as ROS 2 services (pure): names, types, CDR both ways.
 
-The seed's player offered `/play_audio_file` (its own request: a path) and
-`/stop_audio_file`, `/pause_audio_file`, `/resume_audio_file`
-(std_srvs/srv/Trigger); ours are `audio/play_file`, `audio/stop`,
+The original ROS 2 design's player offers `/play_audio_file` (its own
+request: a path) and `/stop_audio_file`, `/pause_audio_file`,
+`/resume_audio_file` (std_srvs/srv/Trigger); ours are `audio/play_file`, `audio/stop`,
 `audio/pause` and `audio/resume`, and every one answers a `TriggerReply`
 (success, message), which is both ROS responses field for field. `SERVICES`
 is the table; `request_from_ros` and `reply_to_ros` cross the bridge, the

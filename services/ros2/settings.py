@@ -25,8 +25,8 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         ge=0, le=232, description="ROS_DOMAIN_ID of the ROS 2 graph (0..232)")] = 0
     namespace: Annotated[str, msgspec.Meta(
         pattern=NAMESPACE, max_length=200, examples=["/robot1", "/lab/buddy"],
-        description="namespace of the bridge's node and topics (`/`: the seed's "
-        "/face_position ...)")] = "/"
+        description="namespace of the bridge's node and topics (`/`: the plain "
+        "ROS 2 names, /face_position ...)")] = "/"
     raw_image: Annotated[Literal["raw", "compressed"], msgspec.Meta(
         description="/raw_image as sensor_msgs/msg/Image (`raw`, bgr8) or as "
         "sensor_msgs/msg/CompressedImage (`compressed`, JPEG)")] = "raw"

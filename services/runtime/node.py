@@ -1,37 +1,16 @@
 """The node runtime: one Zenoh session per process, typed pub/sub, queryables.
 
 Everything a service or a tool needs from Zenoh lives here, written once;
-the raw session stays private to this module (issue 16):
+the raw session stays private to this module, so every use of it is one
+of the node's methods or handles. Every declaration returns a handle with
+an idempotent `close()`; tools get a raw side on absolute keys and
+`probe=True` nodes; the session is a client of the router endpoints; a
+liveliness token says the node is alive; nothing uses congestion control
+BLOCK; no sample can freeze or bloat a handler; latched topics are
+recovered by late joiners; slow handlers run on workers, never in Zenoh's
+callback thread.
 
-* every declaration returns a handle (`Subscription`, `Publisher`,
-  `RawPublisher`, `Queryable`, `Token`) with an idempotent `close()`, also
-  a context manager, so one key can be dropped while the node runs;
-* tools get a raw side (`subscribe_raw`, `raw_publisher`, `query`,
-  `call_key`, `node_instances`) on absolute keys, and `probe=True` nodes
-  that declare no token and publish no diagnostics, so looking at the
-  robot does not change what `nodes` reports;
-
-* the session is a *client* of the router endpoints, with multicast
-  scouting off, and it waits for a router that is not up yet (services
-  start in any order) while staying interruptible by Ctrl-C;
-* every key is the catalogue's pattern under `buddybot/<robot>/`;
-* a liveliness token `nodes/<name>/<zid>` says the node is alive (the zid
-  names the process, so a second instance of a name is seen and, for
-  services, refused), and `diagnostics/<name>` says how it is doing;
-* nothing uses congestion control BLOCK (one stalled reader would stall
-  the router): state keys are latched and recovered instead, and a
-  stalled link is closed after 100 ms of blocking;
-* no sample can freeze or bloat a handler: oversized payloads are dropped
-  unread, values are range-checked at decode, and a `stamp_ns` outside
-  the plausible window is replaced by the arrival time (counted);
-* latched topics use zenoh.ext advanced publishers (a one-sample cache)
-  and advanced subscribers (history of late publishers), so a process
-  that starts late or restarts gets the current value at once;
-* typed subscribers decode and validate every sample; a malformed one is
-  dropped, counted and logged at most once per burst, never fatal;
-* slow handlers run on a worker fed by a latest-value slot or a bounded
-  queue, never in Zenoh's callback thread (a stuck callback starves every
-  other key of the session: measured, see docs/core.md).
+Each rule and its why: docs/core.md, 'The node runtime's rules'.
 """
 
 from __future__ import annotations
@@ -185,7 +164,7 @@ class Node:
             self._owns_session = False
         self._session: zenoh.Session = session
         """The raw session: private. Everything outside this module goes
-        through the node's methods and handles (issue 16)."""
+        through the node's methods and handles."""
         self.instance = str(session.info.zid())
         """This process's identity on the bus (its Zenoh session id)."""
         if unique:

@@ -108,10 +108,10 @@ def route_zenoh_log(level: str) -> bool:
     threads in `write(1)` (keepalives, routing, every session's traffic)
     until Python reads again. Non-blocking, a write to a full pipe fails at
     once: Rust's tracing writer reports the failed write on stderr and goes
-    on, so those log lines are lost, never the bus (measured on a router
-    at RUST_LOG=trace whose reader got no GIL for 8 s: with a blocking pipe
-    samples routed through it stopped for 7.9 s; non-blocking, the longest
-    gap was 14 ms and 4583 lines were dropped, each one a line of Rust's
+    on, so those log lines are lost, never the bus (on a router at
+    RUST_LOG=trace whose reader gets no GIL for 8 s, a blocking pipe stops
+    the samples routed through it for 7.9 s; non-blocking, the longest gap
+    is 14 ms and 4583 lines are dropped, each one a line of Rust's
     on stderr, which stays blocking). The reader counts how
     often it finds the pipe full (`zenoh_log_overflows`) and logs
     a warning at most once per `OVERFLOW_LOG_PERIOD_S`. Anything else that

@@ -128,7 +128,7 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
 
 
 def _write_ros2(path: Path, stamp: int) -> dict[str, Any]:
-    """A ROS 2 recording of the seed's topics written by mcap-ros2-support."""
+    """A ROS 2 recording of the bridge's ROS 2 topics written by mcap-ros2-support."""
     values = {
         "/face_position": (types.POINT_STAMPED, {
             "header": {"stamp": {"sec": stamp // 10**9, "nanosec": stamp % 10**9},
@@ -163,8 +163,8 @@ def _write_ros2(path: Path, stamp: int) -> dict[str, Any]:
 def test_import_of_mcap_ros2s_file_plays_with_the_same_values(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     stamp = m.now_ns()
-    _write_ros2(tmp_path / "seed.mcap", stamp)
-    assert run("import", str(tmp_path / "seed.mcap"), str(tmp_path / "ours.mcap"),
+    _write_ros2(tmp_path / "ros2.mcap", stamp)
+    assert run("import", str(tmp_path / "ros2.mcap"), str(tmp_path / "ours.mcap"),
                "--camera", "side") == 0
     err = capsys.readouterr().err
     assert "skipping /tf: no BuddyBot key for this topic" in err
@@ -232,9 +232,9 @@ def test_a_schema_other_than_ours_skips_its_topic(tmp_path: Path,
                                                   capsys: pytest.CaptureFixture[str]) -> None:
     ros_type, payload = convert.to_ros(m.PupilControl(stamp_ns=m.now_ns(),
                                                       dilation_percentage=10))
-    _raw_ros2(tmp_path / "seed.mcap", ros_type, "/pupil_control", payload,
+    _raw_ros2(tmp_path / "ros2.mcap", ros_type, "/pupil_control", payload,
               b"uint64 stamp_ns\nfloat32 dilation_percentage\n")
-    assert run("import", str(tmp_path / "seed.mcap"), str(tmp_path / "o.mcap")) == 0
+    assert run("import", str(tmp_path / "ros2.mcap"), str(tmp_path / "o.mcap")) == 0
     assert ("skipping /pupil_control: a schema that gives buddybot_interfaces/msg/PupilControl "
             "other field types than ours") in capsys.readouterr().err
 

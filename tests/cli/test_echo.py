@@ -31,7 +31,7 @@ def test_echo_prints_latched_value_and_exits_after_count(
     result = bb("echo", "radar/presence", "--connect", endpoint, "--count", "1",
                 "--timeout", "20")
     assert result.returncode == 0, result.stderr
-    # Enum fields by name (issue 13); `--raw` keeps the wire's numbers.
+    # Enum fields by name; `--raw` keeps the wire's numbers.
     assert '"presence_state":"IN_RANGE"' in result.stdout and '"stamp_ns":7' in result.stdout
 
 

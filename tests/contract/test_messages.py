@@ -139,7 +139,8 @@ def test_out_of_range_is_rejected_naming_the_field(msg_type: type, payload: dict
 
 
 def test_contract_field_names() -> None:
-    """The contract's names (docs/design.md section 3; the seed's typos fixed) are exactly these."""
+    """The contract's names (docs/design.md section 3; the original ROS 2 typos fixed) are
+    exactly these."""
     assert m.LD2410TargetDataFrame.__struct_fields__[:7] == (
         "radar_id", "target_state", "movement_distance", "movement_energy",
         "stationary_distance", "stationary_energy", "detection_distance",

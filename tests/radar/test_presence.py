@@ -1,4 +1,4 @@
-"""The presence rule (pure): seed rule, hysteresis, holds, stale sensors; angle-radar
+"""The presence rule (pure): base rule, hysteresis, holds, stale sensors; angle-radar
 (LD2450) reports through the zones, and both models at once."""
 
 from __future__ import annotations

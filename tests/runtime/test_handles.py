@@ -1,7 +1,7 @@
 """Handles: every declaration of a node can be closed on its own, through a real router.
 
 Why: services and tools must stop one subscription, one service or one
-token without closing the node and without a raw Zenoh session (issue 16).
+token without closing the node and without a raw Zenoh session.
 Each test checks the effect on the bus (deliveries, replies, liveliness),
 not only a flag, so a `close()` that forgets to undeclare fails it.
 """

@@ -403,7 +403,7 @@ def test_a_duplicate_service_process_exits_2_naming_the_other(
 
 
 def test_encoded_values_are_bounded(node_factory: Callable[..., Node]) -> None:
-    """A face 1e200 m away is refused at decode (it used to become a `null` distance)."""
+    """A face 1e200 m away is refused at decode, never a `null` distance on the wire."""
     receiver = node_factory("receiver")
     got = Collector[m.FacePosition](receiver, keys.FACE, camera="front")
     probe = node_factory("probe")

@@ -1,4 +1,4 @@
-"""Zenoh's log pipe can never stall Zenoh (issue 13).
+"""Zenoh's log pipe can never stall Zenoh.
 
 Fd 1 is a pipe read by a Python thread (`session.route_zenoh_log`). If that
 thread cannot run (the GIL held elsewhere) while Zenoh floods lines, a

@@ -1,4 +1,4 @@
-"""`buddybot up` cannot be fooled (issue 13): a busy router port, a service that
+"""`buddybot up` cannot be fooled: a busy router port, a service that
 exits 2, a typo in `--only`, joining a router with `--connect`, the port options.
 
 Real processes on a real loopback router; the option rules themselves (which
@@ -255,7 +255,7 @@ def test_a_service_exiting_2_is_reported_once_and_the_rest_runs(tmp_path: Path) 
     with reaped(up):
         up.wait_for_output("face-detector exited with status 2", 120)
         seen_at = up.output().count("[status")
-        # Long enough for the old rule (1 s, 2 s, 4 s backoff) to restart it twice.
+        # Long enough for restarts with backoff (1 s, 2 s, 4 s) to restart it twice.
         retry_until(lambda: up.output().count("[status") >= seen_at + 8, 60, 0.2,
                     "eight more status lines")
         out = up.output()

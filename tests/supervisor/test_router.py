@@ -1,5 +1,5 @@
 """`buddybot router` on a port that is already taken: one line naming the endpoint
-and who holds it, exit 1, no traceback (issue 13)."""
+and who holds it, exit 1, no traceback."""
 
 from __future__ import annotations
 

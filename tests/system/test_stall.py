@@ -1,15 +1,15 @@
-"""A stalled reader must never stall the bus (issue 11, finding 2).
+"""A stalled reader must never stall the bus.
 
 Each service in turn is frozen with SIGSTOP while a burst floods a key it
 reads and an audio goal makes state traffic flow towards it. The sensor
 streams that do not pass through the frozen service (radar frames, camera
 images) must keep arriving at a healthy subscriber without gaps over
-a bound (the stall lasted seconds before), a goal's status must reach a
+a bound, a goal's status must reach a
 healthy subscriber at once, and the frozen service must come back once it is
 resumed.
 
-Before the fix (state keys with congestion control BLOCK, Zenoh's default
-5 s `wait_before_close`) radar frames stopped for 4-5 s here.
+With congestion control BLOCK on state keys and Zenoh's default 5 s
+`wait_before_close`, radar frames stop for 4-5 s here.
 """
 
 from __future__ import annotations

@@ -254,7 +254,7 @@ def test_child_exiting_with_status_two_is_reported_once_and_not_restarted(
         up.wait_for_output("eyes exited with status 2", 120)
         given_up_at = up.output().count("[status")
 
-        # Long enough for the old rule (1 s, then 2 s backoff) to have restarted it twice.
+        # Long enough for restarts with backoff (1 s, then 2 s) to have restarted it twice.
         retry_until(lambda: up.output().count("[status") >= given_up_at + 6, 60, 0.2,
                     "six more status lines")
         out = up.output()
