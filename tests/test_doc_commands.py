@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import functools
 import io
 import os
 import re
@@ -167,6 +168,13 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
         raise ParseFailure(err.getvalue().strip().splitlines()[-1]) from None
 
 
+@functools.cache
+def _cli_parser() -> argparse.ArgumentParser:
+    """The CLI's parser, built once for every command checked (parsing leaves it as is)."""
+    return cli.build_parser()
+
+
+@functools.cache
 def _extension_parser(entry: registry.Entry, prog: str) -> argparse.ArgumentParser:
     """The parser `buddybot.cli._extension` builds for a service or tool."""
     parser = argparse.ArgumentParser(prog=prog, description=entry.help)
@@ -187,12 +195,12 @@ def check_buddybot(argv: list[str], *, full: bool) -> None:
             assert argv[1] in actions.choices, f"no action {argv[1]!r}"  # type: ignore[operator]
         return
     if not full:
-        verbs = next(a for a in cli.build_parser()._actions if a.dest == "verb").choices
+        verbs = next(a for a in _cli_parser()._actions if a.dest == "verb").choices
         assert argv and argv[0] in verbs, f"no verb {argv[:1]}"  # type: ignore[operator]
         if argv[0] == "run" and len(argv) > 1:
             assert registry.service(argv[1]) is not None, f"no service {argv[1]!r}"
         return
-    args = _parse(cli.build_parser(), argv)
+    args = _parse(_cli_parser(), argv)
     if getattr(args, "verb", None) == "run":
         entry = registry.service(args.service)
         assert entry is not None

@@ -21,6 +21,7 @@ flag: this survives sub-parsers and `parents=`, and needs no global state.
 from __future__ import annotations
 
 import argparse
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -103,11 +104,19 @@ def _description(t: mi.Type) -> str:
     return text or _unwrap(_optional_member(outer))[1]
 
 
-def field_info(struct: type[msgspec.Struct], field: str) -> mi.Field:
-    """The inspected field (KeyError naming it when the struct has no such field)."""
+@functools.cache
+def _struct_info(struct: type[msgspec.Struct]) -> mi.StructType:
+    """`msgspec.inspect` of a settings struct, once per process: inspecting evaluates
+    every annotation, tens of ms for the whole config, and a service's parser asks
+    for each of its options."""
     info = mi.type_info(struct)
     assert isinstance(info, mi.StructType)
-    for f in info.fields:
+    return info
+
+
+def field_info(struct: type[msgspec.Struct], field: str) -> mi.Field:
+    """The inspected field (KeyError naming it when the struct has no such field)."""
+    for f in _struct_info(struct).fields:
         if f.name == field:
             return f
     raise KeyError(f"{struct.__name__} has no field {field!r}")
@@ -145,9 +154,7 @@ def describe_range(t: mi.Type) -> str:
 
 def table_of(struct: type[msgspec.Struct]) -> str:
     """The config table a settings struct is read from (its class name when none)."""
-    info = mi.type_info(config_type())
-    assert isinstance(info, mi.StructType)
-    for f in info.fields:
+    for f in _struct_info(config_type()).fields:
         t = _unwrap(f.type)[0]
         if isinstance(t, mi.StructType) and t.cls is struct:
             return str(f.name)
