@@ -104,9 +104,12 @@ def test_enrol_recognise_never_a_wrong_name_and_forget_at_once(
         camera.show(scenes[other])
         retry_until(lambda b=before: _embeddings(diag) >= b + 4, 60, 0.1,  # type: ignore[misc]
                     f"four embeddings of {other}")
+        # The counter (diagnostics) and the names are two streams: on a busy machine
+        # the new track's name may still be on its way.
+        names.wait_for(lambda n, c=count: names.messages.index(n) >= c  # type: ignore[misc]
+                       and n.track is not None, 20, f"the track of {other}")
         later = names.messages[count:]
-        assert later and all(n.name is None for n in later), later
-        assert any(n.track is not None for n in later)
+        assert all(n.name is None for n in later), later
 
     # Forget: the followed face loses its name at once.
     camera.show(scenes["obama3"])
