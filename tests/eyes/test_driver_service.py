@@ -121,17 +121,20 @@ def test_unknown_distance_pupil_and_lids_are_live(spawn: Callable[..., Process],
     pub = probe.publisher(keys.EYE_CONTROL)
     stamp = m.now_ns()
 
-    def pupil_for(stamp_ns: int) -> float:
+    def pupil() -> float:
+        """The pupil for a distance-less control stamped now (an old stamp would be
+        replaced by its arrival time, as implausible, after a slow `param set`)."""
+        stamp_ns = m.now_ns()
         control = m.EyeControl(stamp_ns=stamp_ns, yaw=0.0, pitch=0.0, target_distance_cm=0)
         retry_until(lambda: pub.put(control) or any(p.stamp_ns == stamp_ns
                                                     for p in pupils.messages),
                     20, 0.2, "driver answering")
         return float(pupils.wait_for(lambda p: p.stamp_ns == stamp_ns).dilation_percentage)
 
-    assert pupil_for(stamp) == pytest.approx(50.0)  # the default for "no distance"
+    assert pupil() == pytest.approx(50.0)  # the default for "no distance"
     result = param(endpoint, "set", "eyes", "unknown_distance_percent", "80")
     assert result.returncode == 0, result.stderr
-    assert pupil_for(stamp + 1) == pytest.approx(80.0)
+    assert pupil() == pytest.approx(80.0)
 
     probe.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp, action=A.EYE_SAD))
     lids.wait_for(lambda x: x.eye_id == m.EyeId.BOTH, 20, "lids for EYE_SAD")

@@ -579,17 +579,23 @@ def test_list_shows_every_field_and_restart_only_ones_are_refused(
 
 
 async def hello_after_change(port: int, change: Callable[[], None],
-                             timeout: float = 20.0) -> list[dict[str, Any]]:
+                             timeout: float = 60.0) -> list[dict[str, Any]]:
     """Connect a page, wait for its first hello, make `change`, and collect until a
-    second hello arrives."""
+    second hello arrives. The page reads while `change` runs, as a browser would:
+    a page that stops reading (and so answering pings) is cut by the renderer."""
     got: list[dict[str, Any]] = []
+
+    async def read_until_hello() -> None:
+        while sum(x["topic"] == "hello" for x in got) < 1:
+            got.append(json.loads((await ws.receive()).data))
+
     async with aiohttp.ClientSession() as session, session.ws_connect(
             f"http://127.0.0.1:{port}/ws?eye=both") as ws, asyncio.timeout(timeout):
         first = json.loads((await ws.receive()).data)
         assert first["topic"] == "hello" and first["msg"]["iris_color"] == "#2f7fd0"
+        reader = asyncio.create_task(read_until_hello())
         await asyncio.get_running_loop().run_in_executor(None, change)
-        while sum(x["topic"] == "hello" for x in got) < 1:
-            got.append(json.loads((await ws.receive()).data))
+        await reader
     return [first, *got]
 
 

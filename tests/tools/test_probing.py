@@ -183,9 +183,8 @@ def test_zenoh_error_texts_lose_their_source_locations() -> None:
 
 # --- as processes: no router, wrong router --------------------------------------------
 
-FAST_S = 15.0
-"""A probe that gives up after 1 s must be done well within this (interpreter
-start and Zenoh included), nowhere near "forever"."""
+# A probe that did not give up would run into `bb`'s own timeout (an error); the
+# bound itself is what the probe says it waited, never a wall time measured here.
 
 
 PROBES = [
@@ -201,11 +200,7 @@ PROBES = [
 @pytest.mark.parametrize("verb", PROBES, ids=[p[0] for p in PROBES])
 def test_every_probe_gives_up_on_a_refused_port_saying_why(verb: tuple[str, ...]) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
-    started = time.monotonic()
-    result = bb(*verb, "--connect", endpoint, "--timeout", "1")
-    took = time.monotonic() - started
-    line = one_line_error(result)
-    assert took < FAST_S, f"took {took:.1f} s"
+    line = one_line_error(bb(*verb, "--connect", endpoint, "--timeout", "1"))
     assert endpoint in line and "Connection refused" in line, line
     assert "gave up after 1 s" in line
 
@@ -214,9 +209,7 @@ def test_every_probe_gives_up_on_a_refused_port_saying_why(verb: tuple[str, ...]
 def test_the_default_timeout_bounds_the_connection_too() -> None:
     """`echo` without --timeout runs until stopped, but not without a router."""
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    started = time.monotonic()
     line = one_line_error(bb("echo", "eyes/pupil", "--connect", endpoint))
-    assert time.monotonic() - started < 5 + FAST_S
     assert endpoint in line and "gave up after 5 s" in line
 
 
