@@ -209,7 +209,9 @@ def _add_play(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--keys", nargs="+", action="extend", default=[], metavar="KEY",
                         help="replay only these keys (relative or absolute, wildcards allowed)")
     parser.add_argument("--wait", type=float, default=1.0, metavar="S",
-                        help="wait up to S seconds for subscribers before the first message")
+                        help="wait up to S seconds for subscribers before the first "
+                             "message, and S seconds after the last when latched keys "
+                             "were played (their cache answers late subscribers)")
     options.add_timeout_argument(parser, None,
                                  "here only the connection (a replay lasts its file)")
 
@@ -250,6 +252,10 @@ def play(ctx: ServiceContext) -> int:
                 break
         stopped = " (stopped)" if ctx.stop.is_set() else ""  # closing the node sets it too
         time.sleep(0.1)  # let the last puts leave before the session closes
+        if not stopped and any(p.topic.latched for p in publishers.values()):
+            # The latched values' cache dies with the player: a subscriber whose
+            # history query is still on its way (a busy machine) gets it meanwhile.
+            ctx.stop.wait(max(0.0, args.wait))
     if tty:
         print(file=sys.stderr)
     loops = f" in {stats.loops} loops" if args.loop else ""

@@ -122,7 +122,7 @@ def retry_until(
         time.sleep(interval)
 
 
-def wait_port(port: int, timeout: float = 15.0) -> None:
+def wait_port(port: int, timeout: float = 60.0) -> None:
     def accepting() -> bool:
         with socket.create_connection((LOOPBACK, port), timeout=0.5):
             return True

@@ -118,7 +118,7 @@ def up_sim(tmp_path: Path, apps: list[Path], only: tuple[str, ...] = (),
 def test_greeter_says_the_line_of_the_time_of_day_to_an_arrival(tmp_path: Path) -> None:
     greeter = example("greeter")
     with up_sim(tmp_path, [EXAMPLES / "greeter.py"]) as (up, _probe, _endpoint):
-        said = up.wait_for_output("greeter: person ", 100)
+        said = up.wait_for_output("greeter: person ", 180)
         line = next(x for x in said.splitlines() if "greeter: person " in x)
         hours = [datetime.datetime.now() - datetime.timedelta(minutes=2), datetime.datetime.now()]
         assert any(repr(greeter.line_for(h)) in line for h in hours), line

@@ -423,7 +423,7 @@ def test_a_page_that_stops_reading_is_dropped(
     sock = stuck_page(port)
     flood = Flood(probe, every_topic=True)
     try:
-        retry_until(lambda: health(port)["dropped"] >= 1, 60, 0.2, "stuck page dropped")
+        retry_until(lambda: health(port)["dropped"] >= 1, 180, 0.2, "stuck page dropped")
     finally:
         flood.stop()
     assert cut_off(sock)

@@ -25,13 +25,14 @@ def test_a_port_another_process_holds_is_never_handed_out(
         monkeypatch: pytest.MonkeyPatch) -> None:
     """Another holder of the lock file (here: a second descriptor, as another
     process would hold it) keeps its port; the next one is chosen instead."""
-    taken, other = 20_001, 20_002
+    taken, other = testing.free_port(), testing.free_port()  # free, and ours for now
+    for port in (taken, other):  # let them go, then hold `taken` as another process would
+        os.close(testing._held_ports.pop(port))
     held = os.open(testing.PORTS_DIR / str(taken), os.O_RDWR | os.O_CREAT, 0o666)
     try:
         fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
         choices = iter([taken, taken, other])
         monkeypatch.setattr(testing._random, "randint", lambda a, b: next(choices))
-        monkeypatch.setattr(testing, "_held_ports", {})
         assert testing.free_port() == other
     finally:
         os.close(held)
