@@ -111,14 +111,22 @@ def test_beyond_loopback_only_a_login_gets_in_and_only_an_operator_presses(
             ws = await http.ws_connect(f"ws://{LOOPBACK}:{port}/ws", origin=base,
                                        headers={"Cookie": f"{web_auth.COOKIE}={operator}"})
             await _next(ws, "hello")
-            done = subprocess.run(buddybot_argv("secret", "revoke"), capture_output=True,
-                                  text=True, timeout=60, env={**os.environ, **env}, check=False)
-            assert done.returncode == 0, done.stderr
-            async with asyncio.timeout(15):
+
+            async def until_closed() -> None:
+                """Read as a page does, also while the revoke runs: a page that stops
+                reading (and answering pings) is cut for that instead (1006)."""
                 while not ws.closed:
                     msg = await ws.receive()
                     if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED):
                         break
+
+            reader = asyncio.create_task(until_closed())
+            done = await asyncio.get_running_loop().run_in_executor(None, lambda: subprocess.run(
+                buddybot_argv("secret", "revoke"), capture_output=True, text=True, timeout=60,
+                env={**os.environ, **env}, check=False))
+            assert done.returncode == 0, done.stderr
+            async with asyncio.timeout(60):
+                await reader
             assert ws.close_code == 4401
             async with http.get(f"{base}/", allow_redirects=False,
                                 headers={"Cookie": f"{web_auth.COOKIE}={operator}"}) as resp:
