@@ -30,19 +30,21 @@ from __future__ import annotations
 # and the registry's tools bring their own parser (`buddybot run camera
 # --help` lists the camera's options). Every path ends in one place,
 # `buddybot.runtime.service.run_main`, which maps errors to exit statuses.
+#
+# Only what the command line names is imported: `buddybot run SERVICE` and
+# `buddybot router` build that one verb's parser, so a service starts without
+# loading every verb (the bag's MCAP reader, the sdk, the web login, ...).
 import argparse
 import importlib
-import importlib.metadata
 import os
-import platform
 import sys
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from types import ModuleType
+from typing import Any
 
 from buddybot import __version__
 from buddybot.runtime import registry
 from buddybot.runtime.errors import EXIT_USAGE
-from buddybot.runtime.service import add_common_arguments, run_main
 
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
          "reference",
@@ -58,6 +60,9 @@ def verb_module(name: str) -> ModuleType:
 def version_line() -> str:
     """`buddybot --version`: also the Python and Zenoh versions, the two a bug
     report needs first (read from package metadata: nothing is imported)."""
+    import importlib.metadata  # slow to load: only when the version is asked for
+    import platform
+
     try:
         zenoh = importlib.metadata.version("eclipse-zenoh")
     except importlib.metadata.PackageNotFoundError:
@@ -79,32 +84,65 @@ def complete() -> None:
     argcomplete.autocomplete(build_parser())
 
 
-def build_parser() -> argparse.ArgumentParser:
+class _VersionAction(argparse._VersionAction):
+    """argparse's `--version`, its line made only when asked for (`version_line`
+    reads package metadata, too slow for every start of a service)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: Any, option_string: str | None = None) -> None:
+        self.version = version_line()
+        super().__call__(parser, namespace, values, option_string)
+
+
+def named_verbs(argv: Sequence[str]) -> Collection[str] | None:
+    """The verbs whose parsers `argv` needs (`build_parser(verbs=...)`), None for all.
+
+    A first word naming a verb needs that verb alone: argparse hands everything
+    after it to that verb's parser. `--version` (or an abbreviation of it) first
+    needs none: it prints and exits before any verb is looked at. Anything else
+    (`--help`, no verb, an unknown one) shows the whole list, so builds it all."""
+    first = argv[0] if argv else ""
+    if first in VERBS or first == "run":
+        return (first,)
+    if len(first) > 2 and "--version".startswith(first):
+        return ()
+    return None
+
+
+def build_parser(verbs: Collection[str] | None = None) -> argparse.ArgumentParser:
+    """The `buddybot` parser with every verb, or only `verbs` (their modules alone
+    are imported; the command line must name one of them, see `named_verbs`)."""
     parser = argparse.ArgumentParser(
         prog="buddybot", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--version", action="version", version=version_line())
-    verbs = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
-    for name in VERBS:
+    parser.add_argument("--version", action=_VersionAction)
+    subparsers = parser.add_subparsers(dest="verb", metavar="VERB", required=True)
+    wanted = {*VERBS, "run", *(t.name for t in registry.TOOLS)} if verbs is None else {*verbs}
+    for name in (n for n in VERBS if n in wanted):
         module = verb_module(name)
-        sub = verbs.add_parser(name, help=module.HELP, description=module.HELP)
+        sub = subparsers.add_parser(name, help=module.HELP, description=module.HELP)
         if getattr(module, "USES_CONFIG", True):
+            from buddybot.runtime.service import add_common_arguments  # not for `--version`
+
             add_common_arguments(sub)
         module.add_arguments(sub)
         sub.set_defaults(module=module)
 
-    run = verbs.add_parser(
-        "run", help="run one service", description="Run one service as this process. "
-        "`buddybot run SERVICE --help` lists its options.\n\nservices:\n" + "\n".join(
-            f"  {e.name:<16}{e.help}" for e in registry.SERVICES),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    run.add_argument("service", choices=[e.name for e in registry.SERVICES], metavar="SERVICE")
-    run.add_argument("service_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+    if "run" in wanted:
+        run = subparsers.add_parser(
+            "run", help="run one service", description="Run one service as this process. "
+            "`buddybot run SERVICE --help` lists its options.\n\nservices:\n" + "\n".join(
+                f"  {e.name:<16}{e.help}" for e in registry.SERVICES),
+            formatter_class=argparse.RawDescriptionHelpFormatter,
+        )
+        run.add_argument("service", choices=[e.name for e in registry.SERVICES],
+                         metavar="SERVICE")
+        run.add_argument("service_args", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
 
     for tool in registry.TOOLS:  # their own parser sees everything, `--help` included
-        sub = verbs.add_parser(tool.name, help=tool.help, add_help=False)
-        sub.add_argument("tool_args", nargs=argparse.REMAINDER)
+        if tool.name in wanted:
+            sub = subparsers.add_parser(tool.name, help=tool.help, add_help=False)
+            sub.add_argument("tool_args", nargs=argparse.REMAINDER)
     return parser
 
 
@@ -113,6 +151,8 @@ def _extension(entry: registry.Entry, prog: str, argv: list[str]) -> int:
     if not entry.exists():
         print(f"{prog}: not installed", file=sys.stderr)
         return EXIT_USAGE
+    from buddybot.runtime.service import add_common_arguments, run_main
+
     module = entry.load()
     parser = argparse.ArgumentParser(prog=prog, description=entry.help)
     add_common_arguments(parser)
@@ -126,11 +166,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     tool = next((t for t in registry.TOOLS if argv and argv[0] == t.name), None)
     if tool is not None:
         return _extension(tool, f"buddybot {tool.name}", argv[1:])
-    args = build_parser().parse_args(argv)
+    args = build_parser(named_verbs(argv)).parse_args(argv)
     if args.verb == "run":
         entry = registry.service(args.service)
         assert entry is not None  # argparse checked the choice
         return _extension(entry, f"buddybot run {entry.name}", args.service_args)
+    from buddybot.runtime.service import run_main
+
     module = args.module
     return run_main(args.verb, args, module.main,
                     uses_config=getattr(module, "USES_CONFIG", True))

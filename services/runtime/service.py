@@ -13,7 +13,6 @@ does one whose `alive_checks` fail (a web surface whose listener is gone).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import os
 import sys
@@ -119,6 +118,8 @@ class ServiceContext:
         """`node()` for a service whose asyncio loop must keep running meanwhile
         (a web server serving pages before the router is found): opened in a
         thread; None when the service is stopped before a router answered."""
+        import asyncio  # only the web services need it: not loaded for the others
+
         def opener() -> Node | None:
             try:
                 return self.node()

@@ -11,7 +11,6 @@ from buddybot.runtime import endpoints
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import zenoh_config
 from buddybot.runtime.sdnotify import Notifier
-from buddybot.tools import doctor
 
 log = logging.getLogger("buddybot.router")
 
@@ -30,6 +29,8 @@ def busy_port(listen: list[str], base_file: str | None = None) -> str | None:
     for endpoint in listen:
         if not endpoints.accepting(endpoint):
             continue
+        from buddybot.tools import doctor  # only for a taken port: slow to load
+
         zlog = logging.getLogger("zenoh")
         level = zlog.level
         zlog.setLevel(logging.ERROR)  # the probe's own connection noise: not for this line

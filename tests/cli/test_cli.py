@@ -126,3 +126,54 @@ def test_run_help_lists_every_service() -> None:
 def test_unknown_service_is_refused() -> None:
     result = bb("run", "teleporter")
     assert result.returncode == 2 and "invalid choice" in result.stderr
+
+
+@pytest.mark.parametrize(("argv", "verbs"), [
+    (["router", "--listen", "tcp/127.0.0.1:1"], ("router",)),
+    (["run", "controller", "--help"], ("run",)),
+    (["--version"], ()),
+    (["--vers"], ()),
+    (["--help"], None),
+    (["-h", "router"], None),
+    ([], None),
+    (["teleport"], None),
+    (["radar", "info"], None),  # a tool: never parsed by this parser
+])
+def test_the_first_word_names_the_verbs_to_build(argv: list[str],
+                                                  verbs: tuple[str, ...] | None) -> None:
+    assert cli.named_verbs(argv) == verbs
+
+
+@pytest.mark.parametrize("argv", [
+    ["router", "--listen", "tcp/127.0.0.1:1", "--robot", "r2"],
+    ["run", "camera", "--device", "2"],
+    ["bag", "info", "f.mcap", "--json"],
+    ["param", "set", "eyes", "x", "1"],
+    ["doctor", "--quick"],
+])
+def test_one_verb_parses_as_the_whole_parser_does(argv: list[str]) -> None:
+    whole = vars(cli.build_parser().parse_args(argv))
+    alone = vars(cli.build_parser(cli.named_verbs(argv)).parse_args(argv))
+    assert alone == whole
+
+
+def modules_after_parsing(argv: list[str]) -> set[str]:
+    """The `buddybot.*` modules a fresh interpreter holds after parsing `argv` the
+    way `buddybot` does."""
+    probe = ("import sys\nfrom buddybot import cli\n"
+             f"cli.build_parser(cli.named_verbs({argv!r})).parse_args({argv!r})\n"
+             "print(' '.join(m for m in sys.modules if m.startswith('buddybot.')))")
+    return set(subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                              check=True, timeout=60).stdout.split())
+
+
+@pytest.mark.integration
+def test_a_verb_loads_no_other_verb() -> None:
+    """A router or a service starts without importing every verb (the bag's MCAP
+    reader, the sdk, the web login, ...): on a Raspberry Pi that is seconds."""
+    loaded = modules_after_parsing(["router", "--listen", "tcp/127.0.0.1:1"])
+    assert "buddybot.cli.router" in loaded  # the probe really parsed
+    assert {n for n in loaded if n.startswith("buddybot.cli.")} == {"buddybot.cli.router"}
+    assert not {n for n in loaded if n.startswith(("buddybot.tools.", "buddybot.sdk"))}
+    run = modules_after_parsing(["run", "controller"])
+    assert not {n for n in run if n.startswith(("buddybot.cli.", "buddybot.tools."))}
