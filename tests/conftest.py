@@ -23,6 +23,7 @@ import pytest
 
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import (
+    InProcessRouter,
     Process,
     Router,
     closed_afterwards,
@@ -39,7 +40,7 @@ ARTIFACTS = Path(os.environ.get("BUDDYBOT_ARTIFACTS", "test-artifacts"))
 # Fixtures that start a router or processes (what the others build on; a test's
 # fixture closure contains these whenever it uses anything derived from them).
 INTEGRATION_FIXTURES = frozenset({
-    "router", "endpoint", "node_factory", "probe", "spawn",  # this file
+    "router", "router_process", "endpoint", "node_factory", "probe", "spawn",  # this file
     "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
@@ -157,15 +158,25 @@ def log_dir(tmp_path: Path) -> Path:
 
 
 @pytest.fixture
-def router(log_dir: Path) -> Iterator[Router]:
-    """A `buddybot router` process on a free loopback port, stopped afterwards."""
+def router() -> Iterator[InProcessRouter]:
+    """A Zenoh router in this test process on a free loopback port, closed afterwards
+    (its port closed too). The services under test are processes all the same."""
+    local = InProcessRouter()
+    yield local
+    local.stop()
+
+
+@pytest.fixture
+def router_process(log_dir: Path) -> Iterator[Router]:
+    """A `buddybot router` process on a free loopback port, stopped afterwards: for
+    a test that kills or restarts its router, or reads its log."""
     proc = Router(log_dir=log_dir)
     yield proc
     proc.stop()
 
 
 @pytest.fixture
-def endpoint(router: Router) -> str:
+def endpoint(router: InProcessRouter) -> str:
     return router.endpoint
 
 

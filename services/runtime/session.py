@@ -321,6 +321,21 @@ def zenoh_config(
     return config
 
 
+def open_router(listen: list[str], base_file: str | None = None, *,
+                settle_s: float | None = None) -> zenoh.Session:
+    """A Zenoh session in router mode listening on `listen`: what `buddybot router`
+    serves, and what tests open in their own process. zenoh.ZError when Zenoh
+    cannot open an endpoint.
+
+    `settle_s`: how long opening waits once listening (Zenoh's `scouting/delay`,
+    0.5 s unless `base_file` says otherwise); a router with nothing to find
+    (a test's) need not wait at all."""
+    config = zenoh_config(mode="router", listen=listen, base_file=base_file)
+    if settle_s is not None:
+        config.insert_json5("scouting/delay", str(max(0, round(settle_s * 1000))))
+    return zenoh.open(config)
+
+
 def open_session(
     config: zenoh.Config, stop: threading.Event, what: str = "router"
 ) -> zenoh.Session | None:

@@ -9,8 +9,8 @@ import zenoh
 
 from buddybot.runtime import endpoints
 from buddybot.runtime.errors import ServiceError
-from buddybot.runtime.node import zenoh_config
 from buddybot.runtime.sdnotify import Notifier
+from buddybot.runtime.session import open_router
 
 log = logging.getLogger("buddybot.router")
 
@@ -66,9 +66,8 @@ def run_router(
     busy = busy_port(listen, base_file)
     if busy:
         raise ServiceError(busy)
-    config = zenoh_config(mode="router", listen=listen, base_file=base_file)
     try:
-        session = zenoh.open(config)
+        session = open_router(listen, base_file)
     except zenoh.ZError as exc:
         reason = _reason(exc)
         if "in use" in reason:

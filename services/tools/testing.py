@@ -2,8 +2,9 @@
 
 Shipped inside the package (as dimos does) so benchmarks and other
 projects' integration tests can use them too. Nothing here mocks Zenoh:
-the router is `buddybot router` on a free loopback port, services are
-`buddybot run ...` processes, and probes are real sessions.
+the router is `buddybot router` on a free loopback port (or the same Zenoh
+router opened in the test's own process), services are `buddybot run ...`
+processes, and probes are real sessions.
 """
 
 from __future__ import annotations
@@ -30,7 +31,9 @@ import numpy as np
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime import endpoints
 from buddybot.runtime.node import Node
+from buddybot.runtime.session import open_router
 
 T = TypeVar("T")
 LOOPBACK = "127.0.0.1"
@@ -273,6 +276,24 @@ class Router(Process):
         super().__init__(buddybot_argv("router", "--listen", self.endpoint, *extra),
                          f"router-{self.port}", log_dir)
         wait_port(self.port)
+
+
+class InProcessRouter:
+    """The Zenoh router `buddybot router` serves, opened in this process on a free
+    loopback port: what most tests need, without starting (and paying for) one
+    more Python process each. A test that kills, restarts or reads the log of
+    its router needs a `Router` process instead."""
+
+    def __init__(self, port: int | None = None) -> None:
+        self.port = port or free_port()
+        self.endpoint = f"tcp/{LOOPBACK}:{self.port}"
+        self._session = open_router([self.endpoint], settle_s=0)  # nothing to scout
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Close the router and wait until its port accepts no more connections."""
+        self._session.close()
+        retry_until(lambda: not endpoints.accepting(self.endpoint), timeout,
+                    what=f"router port {self.port} closed")
 
 
 def run_service(service: str, endpoint: str, *args: str, robot: str = "buddy",

@@ -23,7 +23,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node
 from buddybot.tools import bag, bag_recover, mcap_records
-from buddybot.tools.testing import Process, Router, buddybot_argv, retry_until
+from buddybot.tools.testing import InProcessRouter, Process, buddybot_argv, retry_until
 from tests.tools.mcap_bomb import write_bomb
 from tests.tools.test_bag import concrete_key, samples, write_recording
 
@@ -98,7 +98,7 @@ class RawCollector:
 
 
 @pytest.fixture
-def bag_process(router: Router, log_dir: Path) -> Iterator[Callable[..., Process]]:
+def bag_process(router: InProcessRouter, log_dir: Path) -> Iterator[Callable[..., Process]]:
     """Start `buddybot bag ARGS...` against the test router; every one started is
     stopped when the test ends, also when it fails half-way."""
     started: list[Process] = []
@@ -114,7 +114,8 @@ def bag_process(router: Router, log_dir: Path) -> Iterator[Callable[..., Process
         proc.stop()
 
 
-def run_bag(router: Router, *args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
+def run_bag(router: InProcessRouter, *args: str, timeout: float = 60
+            ) -> subprocess.CompletedProcess[str]:
     return subprocess.run(buddybot_argv("bag", *args, "--connect", router.endpoint),
                           capture_output=True, text=True, timeout=timeout)
 
@@ -138,7 +139,7 @@ def wait_recording(node: Node, key: str) -> None:
 
 
 @pytest.mark.integration
-def test_record_info_play_round_trip(router: Router, quiet: Node, tmp_path: Path,
+def test_record_info_play_round_trip(router: InProcessRouter, quiet: Node, tmp_path: Path,
                                      bag_process: Callable[..., Process]) -> None:
     """Every topic published once is recorded, described and replayed byte for byte
     (images as decodable JPEG with --images)."""
@@ -212,7 +213,7 @@ def test_sigterm_finishes_the_file(quiet: Node, tmp_path: Path,
 
 
 @pytest.mark.integration
-def test_record_refuses_an_unknown_key(router: Router, tmp_path: Path) -> None:
+def test_record_refuses_an_unknown_key(router: InProcessRouter, tmp_path: Path) -> None:
     result = run_bag(router, "record", "-o", str(tmp_path / "x.mcap"), "radar/nope")
     assert result.returncode == 2
     assert result.stderr.strip().splitlines()[-1] == (
@@ -233,7 +234,7 @@ def pupil_recording(path: Path, n: int = 21, step_s: float = 0.1, robot: str = "
 
 @pytest.mark.integration
 @pytest.mark.parametrize("damage", ["truncated", "flipped"])
-def test_a_damaged_file_publishes_nothing(router: Router, quiet: Node, tmp_path: Path,
+def test_a_damaged_file_publishes_nothing(router: InProcessRouter, quiet: Node, tmp_path: Path,
                                           damage: str) -> None:
     good = tmp_path / "good.mcap"
     key = pupil_recording(good)
@@ -263,7 +264,7 @@ def span(times: list[float]) -> float:
 
 
 @pytest.mark.integration
-def test_rate_start_and_robot(router: Router, quiet: Node, tmp_path: Path) -> None:
+def test_rate_start_and_robot(router: InProcessRouter, quiet: Node, tmp_path: Path) -> None:
     path = tmp_path / "pupil.mcap"
     key = pupil_recording(path)  # 2.0 s
     received = RawCollector(quiet)
@@ -422,7 +423,7 @@ def test_a_recording_killed_with_sigkill_is_recovered_to_its_last_chunk(
 
 @pytest.mark.integration
 def test_a_full_disk_ends_with_an_exact_summary_and_a_recoverable_file(
-        router: Router, quiet: Node, tmp_path: Path) -> None:
+        router: InProcessRouter, quiet: Node, tmp_path: Path) -> None:
     """The disk is made full with RLIMIT_FSIZE in the recorder (EFBIG, SIGXFSZ
     ignored): the summary said "0.0 MB" and the file was unusable before."""
     out = tmp_path / "full.mcap"
@@ -464,7 +465,7 @@ def test_a_full_disk_ends_with_an_exact_summary_and_a_recoverable_file(
 
 @pytest.mark.integration
 def test_a_recorded_robot_id_of_thousands_of_characters_is_not_used(
-        router: Router, tmp_path: Path) -> None:
+        router: InProcessRouter, tmp_path: Path) -> None:
     """The file's metadata names the player's robot; an invalid one was a traceback."""
     path = tmp_path / "long-robot.mcap"
     key = concrete_key(keys.PUPIL)

@@ -209,37 +209,35 @@ def test_apps_are_supervised_crashed_restarted_unloadable_left_down(tmp_path: Pa
 
 
 @pytest.mark.integration
-def test_busy_port_refused_in_one_line_and_nothing_started(tmp_path: Path) -> None:
-    router = Router(log_dir=tmp_path)
-    try:
-        t0 = time.monotonic()
-        up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", router.endpoint),
-                     "up-busy", tmp_path)
-        with reaped(up):
-            started: set[int] = set()
+def test_busy_port_refused_in_one_line_and_nothing_started(router_process: Router,
+                                                          tmp_path: Path) -> None:
+    router = router_process
+    t0 = time.monotonic()
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", router.endpoint),
+                 "up-busy", tmp_path)
+    with reaped(up):
+        started: set[int] = set()
 
-            def exited() -> bool:
-                started.update(p.pid for p in _children(up))
-                return not up.alive()
+        def exited() -> bool:
+            started.update(p.pid for p in _children(up))
+            return not up.alive()
 
-            retry_until(exited, 30, 0.02, "up refusing")
-            elapsed = time.monotonic() - t0
-        out = up.output()
-        assert up.proc.returncode == 1, out
-        refusals = [x for x in out.splitlines() if "already in use" in x]
-        assert len(refusals) == 1, out
-        assert refusals[0].startswith(f"buddybot up: {router.endpoint} is already in use: "
-                                      "a Zenoh router answers there")
-        assert "Nothing started" in refusals[0]
-        assert "Traceback" not in out and "starting router" not in out
-        assert not any(line.startswith("[") for line in out.splitlines()), out
-        # The only children `up` ever had were its own Zenoh probe helpers, if any:
-        # never a `buddybot router` or `buddybot run`.
-        assert not started, started
-        assert elapsed < 20, f"refusal took {elapsed:.1f} s"
-        assert router.alive()
-    finally:
-        router.stop()
+        retry_until(exited, 30, 0.02, "up refusing")
+        elapsed = time.monotonic() - t0
+    out = up.output()
+    assert up.proc.returncode == 1, out
+    refusals = [x for x in out.splitlines() if "already in use" in x]
+    assert len(refusals) == 1, out
+    assert refusals[0].startswith(f"buddybot up: {router.endpoint} is already in use: "
+                                  "a Zenoh router answers there")
+    assert "Nothing started" in refusals[0]
+    assert "Traceback" not in out and "starting router" not in out
+    assert not any(line.startswith("[") for line in out.splitlines()), out
+    # The only children `up` ever had were its own Zenoh probe helpers, if any:
+    # never a `buddybot router` or `buddybot run`.
+    assert not started, started
+    assert elapsed < 20, f"refusal took {elapsed:.1f} s"
+    assert router.alive()
 
 
 @pytest.mark.integration
@@ -281,23 +279,20 @@ def test_only_with_a_typo_exits_2_naming_it(tmp_path: Path) -> None:
 
 
 @pytest.mark.integration
-def test_connect_joins_a_running_router_without_starting_one(tmp_path: Path) -> None:
-    router = Router(log_dir=tmp_path)
-    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--connect", router.endpoint,
+def test_connect_joins_a_running_router_without_starting_one(endpoint: str, tmp_path: Path
+                                                              ) -> None:
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--connect", endpoint,
                                "--only", "radar-presence", "--status-period", "1"),
                  "up-join", tmp_path)
-    try:
-        with reaped(up):
-            up.wait_for_output("nodes 1/1", 120)
-            out = up.output()
-            assert f"joining the router at {router.endpoint}" in out
-            assert "[router" not in out
-            cmdlines = [" ".join(c.cmdline()) for c in _children(up)]
-            assert not any(" router" in c for c in cmdlines), cmdlines
-            with Node("probe", connect=[router.endpoint], probe=True) as probe:
-                assert "radar-presence" in probe.node_instances(timeout=5)
-    finally:
-        router.stop()
+    with reaped(up):
+        up.wait_for_output("nodes 1/1", 120)
+        out = up.output()
+        assert f"joining the router at {endpoint}" in out
+        assert "[router" not in out
+        cmdlines = [" ".join(c.cmdline()) for c in _children(up)]
+        assert not any(" router" in c for c in cmdlines), cmdlines
+        with Node("probe", connect=[endpoint], probe=True) as probe:
+            assert "radar-presence" in probe.node_instances(timeout=5)
 
 
 @pytest.mark.integration

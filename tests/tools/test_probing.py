@@ -28,6 +28,7 @@ from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import probing
 from buddybot.tools.testing import (
+    InProcessRouter,
     Process,
     Router,
     buddybot_argv,
@@ -214,7 +215,7 @@ def test_the_default_timeout_bounds_the_connection_too() -> None:
 
 
 @pytest.mark.integration
-def test_tls_to_a_tcp_router_is_named_as_a_protocol_problem(router: Router) -> None:
+def test_tls_to_a_tcp_router_is_named_as_a_protocol_problem(router: InProcessRouter) -> None:
     endpoint = f"tls/127.0.0.1:{router.port}"
     line = one_line_error(bb("nodes", "--connect", endpoint, "--timeout", "1"))
     assert endpoint in line and "no Zenoh session follows" in line and "wrong protocol" in line
