@@ -40,9 +40,10 @@ from buddybot.camera import frames as frames_mod  # noqa: E402
 from buddybot.camera import models  # noqa: E402
 from buddybot.camera.facenet import FaceNet  # noqa: E402
 from buddybot.camera.settings import FaceDetectorSettings  # noqa: E402
-from buddybot.camera.sim import SimCamera  # noqa: E402
+from buddybot.camera.world_view import WorldCamera  # noqa: E402
 from buddybot.contract import keys  # noqa: E402
 from buddybot.contract import messages as m  # noqa: E402
+from buddybot.sim import scenario, views, world  # noqa: E402
 from tests.camera import scenes  # noqa: E402
 
 PEER_SCRIPT = textwrap.dedent('''
@@ -156,8 +157,9 @@ def arrive(frame: np.ndarray) -> np.ndarray:
 
 def speed(args: argparse.Namespace, peer: MediaPipePeer | None) -> None:
     """Whole-frame detection and the service path, frame by frame interleaved with the peer."""
-    cam = SimCamera(640, 480)
-    frames = [cam.frame(i / 30.0) for i in range(args.frames)]
+    cam = WorldCamera(views.Lens(600.0, 600.0, 320.0, 240.0, 640, 480))
+    visit = world.World(scenario.load("visit"))  # walking in, staying, walking away
+    frames = [cam.frame(visit.at(i / 30.0 % 29.0)) for i in range(args.frames)]
     ours: dict[str, FaceNet] = {m: net_for(m) for m in ("full_sparse", "full", "short")}
     pipe = scenes.service_pipeline()
     times: dict[str, list[float]] = {k: [] for k in

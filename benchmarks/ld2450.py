@@ -33,8 +33,8 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar import ld2450 as p
 from buddybot.radar.convert import report_to_targets
-from buddybot.radar.ld2450_scenarios import Person, Scene
 from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim_scene import Person, Scene
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Router, retry_until, run_service
 

@@ -36,8 +36,8 @@ from buddybot.contract import messages as m
 from buddybot.radar import ld2410 as p
 from buddybot.radar.convert import report_to_frame
 from buddybot.radar.presence import PresenceTracker, Reading
-from buddybot.radar.scenarios import NOBODY, Target
 from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim_scene import NOBODY, Target
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Router, retry_until, run_service
 

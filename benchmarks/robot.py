@@ -164,8 +164,9 @@ def main() -> None:
     services = up_sim(args.config, eye_port, dash_port, router.endpoint)
     bench_options: dict[str, tuple[str, ...]] = {
         "audio-player": ("--backend", "null"),
-        "camera": ("--fps", str(args.fps)),
-        "radar-bridge": ("--sim-scenario", "visit", "--sim-speed", str(args.sim_speed)),
+        "camera": ("--fps", str(args.fps), "--sim-speed", str(args.sim_speed)),
+        "radar-bridge": ("--sim-speed", str(args.sim_speed)),
+        "sim": ("--sim-speed", str(args.sim_speed)),
     }
     if args.dashboard and "dashboard" not in services:
         raise SystemExit("--dashboard: the config leaves the dashboard out of `up`")

@@ -4,9 +4,10 @@
 cli ─────────────────────────────────────────────┐
 supervisor (up, status, router) ──┐              │
 tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, foxglove)
-                                  │              │         │ the web surfaces only
+                                  │              │         │ web surfaces / sim sensors
                                   │              │         v
                                   │              │   web (guard, auth, page_outbox)
+                                  │              │   sim (the simulated world, scenarios)
                                   v              v         v
                 runtime (node, handles, config, params, service, ...)
                                   v
@@ -19,7 +20,10 @@ programs, which imports the same two layers, and `apps`, which adds the
 sdk and which the sdk never imports). The areas that serve a web page
 (`WEB_SURFACES`) may also import `web`, the layer beside the runtime that
 every web surface shares (who may connect, login, a page's sends); `web`
-imports only the runtime and the contract. The runtime imports no tool,
+imports only the runtime and the contract. `sim`, the simulated world,
+sits beside it: the areas that render or draw that world (`SIM_SENSORS`)
+and `up` (which gives every simulated sensor one world) may import it.
+The runtime imports no tool,
 no supervisor, no area and not `web`, so a service process loads only
 what it runs. The rule is a table (`ALLOWED`), checked statically (every
 `import` in the source, also the ones inside functions) and at run time
@@ -44,17 +48,21 @@ AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglov
          "ros2", "identity")
 WEB_SURFACES = ("dashboard", "eyes", "foxglove")
 """The areas serving a web page or socket: only they may import `web`."""
+SIM_SENSORS = ("radar", "camera", "dashboard")
+"""The areas that render or draw the simulated world: only they may import `sim`."""
 BASE = frozenset({"contract", "runtime"})
 ALLOWED: dict[str, frozenset[str]] = {
     "contract": frozenset({"contract"}),
     "runtime": BASE,
     "tools": BASE | {"tools"},
-    "supervisor": BASE | {"supervisor", "tools"},  # `up` runs doctor's quick checks
+    "supervisor": BASE | {"supervisor", "tools", "sim"},  # `up`: doctor, the world's start
     "web": BASE | {"web"},  # what every web surface shares (guard, login, page sends)
-    **{area: BASE | {area} | ({"web"} if area in WEB_SURFACES else set()) for area in AREAS},
+    "sim": BASE | {"sim"},  # the simulated world, its scenarios and its truth service
+    **{area: BASE | {area} | ({"web"} if area in WEB_SURFACES else set())
+       | ({"sim"} if area in SIM_SENSORS else set()) for area in AREAS},
     "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
     "apps": BASE | {"sdk", "apps"},  # apps and their runner stand on the sdk
-    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", "web", *AREAS},  # `secret`
+    "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", "web", "sim", *AREAS},
     "": frozenset({"cli"}),  # buddybot/__init__.py, __main__.py
 }
 """Layer -> the layers its modules may import (a layer is a folder of `services/`)."""
@@ -183,10 +191,12 @@ def test_loading_the_runtime_loads_only_the_runtime_and_the_contract() -> None:
 @pytest.mark.integration
 def test_reading_a_config_loads_only_the_settings_modules() -> None:
     out = loaded_after("from buddybot.runtime.config import load_config\nload_config(None)")
-    loaded = {name for name in out if layer_of_module(name) in AREAS}
+    layers = (*AREAS, "sim")
+    loaded = {name for name in out if layer_of_module(name) in layers}
     tables = {e.settings.partition(":")[0] for e in registry.SERVICES if e.settings}
     assert tables and tables <= loaded
-    assert {n for n in loaded if not n.endswith((".settings", *(f".{a}" for a in AREAS)))} == set()
+    assert {n for n in loaded if not n.endswith((".settings", *(f".{a}" for a in layers)))} \
+        == set()
 
 
 def test_node_is_the_only_door_to_zenoh() -> None:

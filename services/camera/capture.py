@@ -18,8 +18,15 @@ import cv2
 import numpy as np
 
 from buddybot.camera import frames
-from buddybot.camera.settings import DEFAULT_FPS, CameraSettings
-from buddybot.camera.sources import FrameSource, SourceSpec, make_source, parse_source
+from buddybot.camera.geometry import Intrinsics
+from buddybot.camera.settings import DEFAULT_FPS, CameraSettings, FaceDetectorSettings
+from buddybot.camera.sources import (
+    FrameSource,
+    SimSource,
+    SourceSpec,
+    make_source,
+    parse_source,
+)
 from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
 from buddybot.runtime.backoff import Backoff
@@ -31,6 +38,8 @@ from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.rates import RateCounter
 from buddybot.runtime.service import ServiceContext
+from buddybot.sim.options import add_world_arguments, world_from
+from buddybot.sim.views import Lens
 
 MESSAGE_OVERHEAD = 256
 """Bytes of an Image message besides data and frame_id (MessagePack field names, numbers)."""
@@ -51,6 +60,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     option("--encoding", "encoding")
     option("--jpeg-quality", "jpeg_quality")
     option("--loop", "loop", action=argparse.BooleanOptionalAction)
+    add_world_arguments(parser)
 
 
 def settings_from(ctx: ServiceContext) -> CameraSettings:
@@ -206,6 +216,18 @@ class Capture:
             self.diag.values["fps"] = round(fps, 1)
 
 
+def sim_source(ctx: ServiceContext, settings: CameraSettings) -> SimSource:
+    """The simulated world of `[sim]`, filmed through the lens the detector measures with."""
+    world, clock, _ = world_from(ctx)
+    width, height = settings.width or 640, settings.height or 480
+    d = ctx.config.section(FaceDetectorSettings)
+    try:
+        k = Intrinsics.resolve(width, height, d.fx, d.fy, d.cx, d.cy, d.hfov_deg)
+    except ValueError as exc:
+        raise ConfigError(f"face_detector: {exc}") from None
+    return SimSource(world, clock, Lens(k.fx, k.fy, k.cx, k.cy, width, height))
+
+
 def run(ctx: ServiceContext) -> int:
     settings = settings_from(ctx)
     try:
@@ -217,7 +239,8 @@ def run(ctx: ServiceContext) -> int:
             ctx.config, spec.target,
             from_command_line=given(ctx.args, CameraSettings, "source"))))
     cv2.setNumThreads(1)
-    source = make_source(spec, settings.width, settings.height)
+    source = sim_source(ctx, settings) if spec.kind == "sim" else \
+        make_source(spec, settings.width, settings.height)
     node = ctx.node()
     LiveSettings(settings).serve(node)  # readable and dumpable; every field needs a restart
     try:

@@ -25,7 +25,8 @@ class CameraSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         description="device index, video file, URL or image-sequence pattern such as "
         "frames/%04d.png; empty = simulation under `up`")] = ""
     sim: Annotated[bool, msgspec.Meta(
-        description="simulated camera: a face photo moving over a background")] = False
+        description="simulated camera: films the simulated world of [sim] (real face "
+        "photos where its people are)")] = False
     fps: Annotated[float, msgspec.Meta(
         gt=0.0, le=1000.0,
         description="frames per second of files, sequences and the simulation")] | None = None

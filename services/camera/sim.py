@@ -1,16 +1,12 @@
-"""Simulated camera: a real face photo gliding over a background, for `--sim`.
+"""Drawing helpers of the simulated camera: the room behind the people, pasting a photo.
 
-The photo is a crop of `skimage.data.astronaut` (Eileen Collins, NASA,
-public domain) saved in `data/` so the simulation needs no scikit-image
-at run time. The face moves left/right and up/down on slow, incommensurate
-sine paths and changes size (as if walking nearer and further), so the
-real detector runs on it and the eyes visibly follow. Frames are a pure
-function of time: tests can ask for the frame at any `t`.
+`world_view.WorldCamera` films the simulated world with these. The photo
+in `data/` is a crop of `skimage.data.astronaut` (Eileen Collins, NASA,
+public domain), the tests' reference face.
 """
 
 from __future__ import annotations
 
-import math
 from importlib import resources
 from pathlib import Path
 
@@ -24,7 +20,7 @@ def face_path() -> Path:
     return Path(str(resources.files("buddybot.camera") / "data" / FACE_FILE))
 
 
-def _background(width: int, height: int) -> np.ndarray:
+def background(width: int, height: int) -> np.ndarray:
     """A calm room-like backdrop: a vertical gradient, a 'window' and a 'shelf'."""
     ramp = np.linspace(0.0, 1.0, height, dtype=np.float32)[:, None]
     top = np.array([200, 190, 170], np.float32)
@@ -38,31 +34,12 @@ def _background(width: int, height: int) -> np.ndarray:
     return img
 
 
-class SimCamera:
-    """Frames of the simulated scene; `frame(t)` for t in seconds."""
-
-    def __init__(self, width: int = 640, height: int = 480, face: Path | None = None) -> None:
-        self.width, self.height = width, height
-        sprite = cv2.imread(str(face or face_path()), cv2.IMREAD_COLOR)
-        if sprite is None:
-            raise FileNotFoundError(f"simulated camera: cannot read {face or face_path()}")
-        self._sprite = sprite
-        h, w = sprite.shape[:2]
-        mask = np.zeros((h, w), np.float32)
-        cv2.ellipse(mask, (w // 2, h // 2), (int(w * 0.47), int(h * 0.48)), 0, 0, 360, 1.0, -1)
-        self._mask = cv2.GaussianBlur(mask, (0, 0), max(w, h) * 0.03)
-        self._background = _background(width, height)
-
-    def placement(self, t: float) -> tuple[float, float, float]:
-        """(centre x, centre y, sprite height) in pixels at time t."""
-        cx = self.width / 2 + self.width * 0.28 * math.sin(2 * math.pi * t / 7.0)
-        cy = self.height / 2 + self.height * 0.12 * math.sin(2 * math.pi * t / 4.3)
-        size = self.height * (0.5 + 0.15 * math.sin(2 * math.pi * t / 11.0))
-        return cx, cy, size
-
-    def frame(self, t: float) -> np.ndarray:
-        cx, cy, size = self.placement(t)
-        return compose(self._background, self._sprite, self._mask, cx, cy, size)
+def oval_mask(sprite: np.ndarray) -> np.ndarray:
+    """A soft oval alpha mask the size of `sprite`: a face photo without its corners."""
+    h, w = sprite.shape[:2]
+    mask = np.zeros((h, w), np.float32)
+    cv2.ellipse(mask, (w // 2, h // 2), (int(w * 0.47), int(h * 0.48)), 0, 0, 360, 1.0, -1)
+    return cv2.GaussianBlur(mask, (0, 0), max(w, h) * 0.03)
 
 
 def compose(background: np.ndarray, sprite: np.ndarray, mask: np.ndarray | None,

@@ -10,14 +10,16 @@ and are paced at an fps); devices, URLs and the simulation are *live*.
 from __future__ import annotations
 
 import re
-import time
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
 import cv2
 import numpy as np
 
-from buddybot.camera.sim import SimCamera
+from buddybot.camera.world_view import WorldCamera
+from buddybot.sim.clock import SimClock
+from buddybot.sim.views import Lens
+from buddybot.sim.world import World
 
 Kind = Literal["device", "url", "sequence", "file", "sim"]
 _PATTERN = re.compile(r"%0?\d*d")
@@ -111,18 +113,18 @@ class CvSource:
 
 
 class SimSource:
-    """The simulated scene as a live source; time is the wall clock since open."""
+    """The simulated world as a live source, filmed at the shared scenario clock."""
 
-    def __init__(self, width: int | None = None, height: int | None = None) -> None:
-        self._cam = SimCamera(width or 640, height or 480)
-        self._t0 = time.monotonic()
+    def __init__(self, world: World, clock: SimClock, lens: Lens) -> None:
+        self._cam = WorldCamera(lens)
+        self._world = world
+        self._clock = clock
 
     def open(self) -> bool:
-        self._t0 = time.monotonic()
         return True
 
     def read(self) -> np.ndarray | None:
-        return self._cam.frame(time.monotonic() - self._t0)
+        return self._cam.frame(self._world.at(self._clock.now()))
 
     def native_fps(self) -> float | None:
         return None
@@ -132,6 +134,7 @@ class SimSource:
 
 
 def make_source(spec: SourceSpec, width: int | None, height: int | None) -> FrameSource:
+    """A camera or file source (the simulation is made with `SimSource`, from the world)."""
     if spec.kind == "sim":
-        return SimSource(width, height)
+        raise ValueError("the simulated camera needs its world: use SimSource")
     return CvSource(spec, width, height)

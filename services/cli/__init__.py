@@ -18,6 +18,7 @@
     buddybot foxglove [--port P]            every key live in the Foxglove app
     buddybot app run|new|list               apps: run one, start one, list them
     buddybot secret show|rotate|revoke      the dashboard/Foxglove login secrets
+    buddybot sim list|check                 the simulated world's scenarios
 
 Exit status: 0 success, 1 failure at run time, 2 bad usage or config.
 """
@@ -49,7 +50,7 @@ from buddybot.runtime.errors import EXIT_USAGE
 VERBS = ("up", "router", "echo", "hz", "pub", "call", "nodes", "keys", "config", "schemas",
          "reference",
          "doctor", "param", "lease", "people", "topics", "node", "foxglove", "bag", "app",
-         "secret")
+         "secret", "sim")
 """Verb modules of this package, in the order `buddybot --help` lists them."""
 
 

@@ -27,6 +27,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
             action.help = ("join the router at ENDPOINT (repeatable) instead of starting "
                            "one; nothing starts if none answers there")
     parser.add_argument("--sim", action="store_true", help="simulated radar and camera")
+    parser.add_argument("--scenario", metavar="NAME|FILE",
+                        help="the simulated world: a built-in scenario (`buddybot sim list`) or "
+                        "a scenario file (default [sim] scenario, else visit)")
+    parser.add_argument("--seed", type=int, metavar="N",
+                        help="makes the simulated world repeatable (default [sim] seed, else 0)")
     parser.add_argument("--no-browser", action="store_true", help="serve the eye pages only")
     parser.add_argument("--listen", action="append", metavar="ENDPOINT",
                         help="where the router listens (default: the config's [zenoh] connect "

@@ -282,6 +282,11 @@ PEOPLE_EVENTS = Topic(
 """Not latched, so STREAM and not STATE (which is always latched): a late joiner must
 not take an old ARRIVED for a new one. An event lost under congestion is not
 fetched again; `people/state` (latched) is what converges."""
+SIM_WORLD = Topic(
+    "sim/world", "the simulated world's truth: every person, where, seen by which sensor",
+    type=m.SimWorld, qos=STREAM,
+)
+"""Only while simulating (`up --sim`); a real robot has no such key."""
 FACE_NAME = Topic(
     "identity/{camera}/name", "who the followed face is (per track, after a vote); on change",
     type=m.FaceName, qos=STATE, latched=True,
@@ -355,7 +360,7 @@ NODE_INFO = Service(
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, RADAR_TARGETS, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION,
     EYE_CONTROL, EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
-    FACE_NAME, LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS,
+    FACE_NAME, LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS, SIM_WORLD,
 )
 SERVICES: tuple[Service, ...] = (
     IDENTITY_ENROL, IDENTITY_FORGET, IDENTITY_LIST,

@@ -513,6 +513,51 @@ class PersonEvent(Message):
     engagement: Engagement
 
 
+# --- simulation --------------------------------------------------------------
+
+MetresPerSecond = Annotated[float, msgspec.Meta(ge=-100.0, le=100.0, description="m/s")]
+
+
+class SimPerson(Message):
+    """One person of the simulated world as they really are (the truth to compare with)."""
+
+    id: Annotated[int, msgspec.Meta(ge=1, description="the person's place in the scenario")]
+    face: Annotated[str, msgspec.Meta(max_length=64)]
+    position: Point
+    """Their eyes, robot frame (m; z above the camera)."""
+    vx_mps: MetresPerSecond
+    vy_mps: MetresPerSecond
+    facing_rad: Yaw
+    """Where their face points (rad, 0 = the robot's forward, + = its left)."""
+    distance_m: Metres
+    bearing_rad: Yaw
+    in_radar: bool
+    """Inside the field of a presence radar at the camera (LD2410: 6 m, +-60 degrees)."""
+    in_camera: bool
+    """Their face is in the image, turned to the camera and not hidden by someone nearer."""
+    name: Annotated[str, msgspec.Meta(max_length=64)] | None = None
+
+
+class SimClutter(Message):
+    """Something a radar sees that is not a person."""
+
+    kind: Literal["fan", "ghost"]
+    position: Point
+
+
+class SimWorld(Message):
+    """The simulated world now: who is really there, for tools, tests and the dashboard."""
+
+    stamp_ns: StampNs
+    scenario: Annotated[str, msgspec.Meta(max_length=256)]
+    t_s: Annotated[float, msgspec.Meta(ge=0.0, description="scenario time, s")]
+    lap: Annotated[int, msgspec.Meta(ge=0, description="how often a looping scenario restarted")]
+    people: Annotated[list[SimPerson], msgspec.Meta(max_length=MAX_PEOPLE)] = msgspec.field(
+        default_factory=list)
+    clutter: Annotated[list[SimClutter], msgspec.Meta(max_length=MAX_PEOPLE)] = msgspec.field(
+        default_factory=list)
+
+
 # --- identity ----------------------------------------------------------------
 
 PersonName = Annotated[str, msgspec.Meta(

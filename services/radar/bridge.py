@@ -41,12 +41,11 @@ from buddybot.radar import ld2410, ld2450
 from buddybot.radar.client import LD2410Client, RadarError
 from buddybot.radar.convert import report_to_frame, report_to_targets
 from buddybot.radar.ld2410 import ProtocolError, Report
-from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS
-from buddybot.radar.models import AUTO, LD2450, MODELS, Frame, Sniffer, describe
+from buddybot.radar.models import AUTO, MODELS, Frame, Sniffer, describe
 from buddybot.radar.mounting import IDENTITY, Mount
-from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.radar.urls import url_problem
+from buddybot.radar.world_view import world_script
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.errors import ConfigError, UsageError
 from buddybot.runtime.limits import clip
@@ -54,6 +53,7 @@ from buddybot.runtime.node import Node, RateLimitedLog
 from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.sim.options import add_world_arguments, world_from
 
 FIRMWARE_TIMEOUT_S = 0.5  # per ACK, two attempts: a mute sensor costs 1 s per connect
 NOISE_STATES = {
@@ -355,9 +355,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                     action=argparse.BooleanOptionalAction)
     settings_option(parser, "--sim-model", struct=option, field="sim_model",
                     choices=list(MODELS))
-    settings_option(parser, "--sim-scenario", struct=option, field="sim_scenario",
-                    choices=sorted(set(SCENARIOS) | set(ANGLE_SCENARIOS)))
-    settings_option(parser, "--sim-speed", struct=option, field="sim_speed")
+    add_world_arguments(parser)
 
 
 @dataclass(frozen=True)
@@ -367,8 +365,7 @@ class BridgeOptions:
     urls: list[str]
     device_id: int
     baudrate: int
-    sim_scenario: str | None  # None: no simulated sensor
-    sim_speed: float
+    sim: bool  # a simulated sensor of the world in `[sim]`, last
     sim_model: str = "LD2410"
     models: list[str] = field(default_factory=list)  # per sensor (the sim last)
     mounts: list[Mount] = field(default_factory=list)  # per sensor (the sim last)
@@ -377,7 +374,7 @@ class BridgeOptions:
 def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> RadarBridgeSettings:
     """`[radar_bridge]` with the command line on top: what the bridge runs with.
 
-    Ranges (`--baudrate 0`, `--sim-speed 0`) are refused by `merge` naming
+    Ranges (`--baudrate 0`) are refused by `merge` naming
     the flag, and so is a network URL that can never open (`urls.py`: a
     `socket://` without its port would otherwise be retried forever). One
     rule is more than a field set: with the simulated sensor on
@@ -395,10 +392,6 @@ def merged_settings(args: argparse.Namespace, cfg: RadarBridgeSettings) -> Radar
     if s.sim_model not in MODELS:
         raise ConfigError(f"radar_bridge.sim_model: unknown {s.sim_model!r}; one of "
                           f"{list(MODELS)}")
-    scenarios = ANGLE_SCENARIOS if s.sim_model == LD2450 else SCENARIOS
-    if s.sim and s.sim_scenario not in scenarios:
-        raise ConfigError(f"radar_bridge.sim_scenario: {s.sim_scenario!r} is not an "
-                          f"{s.sim_model} scenario; one of {sorted(scenarios)}")
     per_sensor(s)
     return s
 
@@ -447,8 +440,7 @@ def settings_from(ctx: ServiceContext) -> RadarBridgeSettings:
 def options_from(s: RadarBridgeSettings) -> BridgeOptions:
     """What to open: the sensors, plus the simulated one when `sim` is on."""
     models, mounts = per_sensor(s)
-    return BridgeOptions(list(s.sensors), s.device_id, s.baudrate,
-                         s.sim_scenario if s.sim else None, s.sim_speed, s.sim_model,
+    return BridgeOptions(list(s.sensors), s.device_id, s.baudrate, s.sim, s.sim_model,
                          models, mounts)
 
 
@@ -464,9 +456,10 @@ def run(ctx: ServiceContext) -> int:
     opts = options_from(cfg)
     urls = list(opts.urls)
     sims: list[PtySensor] = []
-    if opts.sim_scenario is not None:
-        sims.append(PtySensor(opts.sim_scenario, speed=opts.sim_speed,
-                              model=opts.sim_model).start())
+    if opts.sim:
+        world, clock, _ = world_from(ctx)
+        script = world_script(world, opts.sim_model, opts.mounts[-1])
+        sims.append(PtySensor(script, model=opts.sim_model, clock=clock.now).start())
         urls.append(sims[-1].path)
     if not urls:
         raise UsageError("no sensor: give --sensor URL (repeatable) or --sim")

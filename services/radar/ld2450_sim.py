@@ -15,8 +15,8 @@ from dataclasses import KW_ONLY, dataclass, field
 
 from buddybot.radar import envelope as e
 from buddybot.radar import ld2450 as p
-from buddybot.radar.ld2450_scenarios import AngleScenario, Person
 from buddybot.radar.sim_commands import AnswersCommands
+from buddybot.radar.sim_scene import AngleScript, Person
 
 FIRMWARE = (0x0000, 0x0202, 0x23090617)  # type, major (2.02), minor: V2.02.23090617
 RESOLUTION_MM = 320
@@ -32,7 +32,7 @@ def _inside(zone: p.Zone, person: Person) -> bool:
 class SimulatedLD2450(AnswersCommands):
     """Protocol state of one LD2450."""
 
-    scenario: AngleScenario
+    scenario: AngleScript
     _: KW_ONLY
     firmware: tuple[int, int, int] = FIRMWARE
     tracking_mode: int = 2  # 1 single, 2 multi (factory)

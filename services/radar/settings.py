@@ -94,19 +94,11 @@ class RadarBridgeSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tr
                     "mirror_x": False}]])] = msgspec.field(
         default_factory=list)
     sim: Annotated[bool, msgspec.Meta(
-        description="add a built-in simulated sensor on a pseudo-terminal (configured "
-        "sensors are then left alone unless given with --sensor)")] = False
+        description="add a simulated sensor on a pseudo-terminal, seeing the simulated "
+        "world of [sim] (configured sensors are then left alone unless given with "
+        "--sensor)")] = False
     sim_model: Annotated[str, msgspec.Meta(
         description="the simulated sensor's model: \"LD2410\" or \"LD2450\"")] = "LD2410"
-    sim_scenario: Annotated[str, msgspec.Meta(
-        min_length=1,
-        description="what the simulated sensor sees (a name in "
-        "buddybot.radar.scenarios.SCENARIOS, or for an LD2450 in "
-        "buddybot.radar.ld2450_scenarios.ANGLE_SCENARIOS)")] = "visit"
-    sim_speed: Annotated[float, msgspec.Meta(
-        gt=0.0, le=1000.0,
-        description="scenario time scale (x wall time): 0 would freeze the visitor, "
-        "a negative speed would run the script backwards")] = 1.0
     reconnect_initial_s: Annotated[float, msgspec.Meta(
         gt=0.0, le=3600.0,
         description="seconds before the first reopen of a failed port; doubles up to "

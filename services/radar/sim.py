@@ -19,15 +19,15 @@ import struct
 import threading
 import time
 import tty
+from collections.abc import Callable
 from dataclasses import KW_ONLY, dataclass, field, replace
 from pathlib import Path
 
 from buddybot.radar import ld2410 as p
 from buddybot.radar import ld2450
-from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, AngleScenario
 from buddybot.radar.ld2450_sim import SimulatedLD2450
-from buddybot.radar.scenarios import SCENARIOS, Scenario, Target
 from buddybot.radar.sim_commands import AnswersCommands
+from buddybot.radar.sim_scene import AngleScript, Script, Target
 
 log = logging.getLogger("buddybot.radar.sim")
 
@@ -48,7 +48,7 @@ def default_parameters() -> p.Parameters:
 class SimulatedLD2410(AnswersCommands):
     """Protocol state of one sensor: no I/O, driven by explicit time."""
 
-    scenario: Scenario
+    scenario: Script
     _: KW_ONLY
     firmware: tuple[int, int, int] = FIRMWARE
     engineering: bool = True
@@ -193,42 +193,40 @@ def _words(value: bytes, expected: tuple[int, ...]) -> list[int]:
     return out
 
 
-def scenario_names(model: str) -> list[str]:
-    """The scenarios the simulated `model` knows."""
-    return sorted(ANGLE_SCENARIOS if model == "LD2450" else SCENARIOS)
-
-
 class PtySensor:
     """A simulated sensor on a pty; `path` (a symlink if `link` is given) is its port.
 
-    `model` chooses the brain: "LD2410" (scenarios.py, `engineering`,
-    `firmware`, `aux_bytes` apply) or "LD2450" (ld2450_scenarios.py).
+    `model` chooses the brain: "LD2410" (`script` gives a `Target`;
+    `engineering`, `firmware`, `aux_bytes` apply) or "LD2450" (`script` gives
+    a `Scene`). The script is asked at the scenario time `clock()` gives:
+    by default the seconds since the sensor was made, times `speed`; the
+    simulated world passes its shared clock (`world_view.world_sensor`).
     """
 
-    def __init__(self, scenario: str | Scenario | AngleScenario = "visit", *,
+    def __init__(self, script: Script | AngleScript, *,
                  link: Path | None = None, speed: float = 1.0, engineering: bool = True,
                  seed: int = 1, answer_commands: bool = True,
                  firmware: tuple[int, int, int] | None = None,
-                 aux_bytes: tuple[int, int] | None = None, model: str = "LD2410") -> None:
+                 aux_bytes: tuple[int, int] | None = None, model: str = "LD2410",
+                 clock: Callable[[], float] | None = None) -> None:
         if model not in MODELS:
             raise ValueError(f"unknown model {model!r}; one of {MODELS}")
         self.model = model
         self.sim: SimulatedLD2410 | SimulatedLD2450
         self._parser: p.Parser | ld2450.Parser
         if model == "LD2450":
-            angle = ANGLE_SCENARIOS[scenario] if isinstance(scenario, str) else scenario
-            self.sim = SimulatedLD2450(angle, seed=seed,  # type: ignore[arg-type]
+            self.sim = SimulatedLD2450(script, seed=seed,  # type: ignore[arg-type]
                                        answer_commands=answer_commands)
             if firmware is not None:
                 self.sim.firmware = firmware
             self._parser = ld2450.Parser()
         else:
-            fn = SCENARIOS[scenario] if isinstance(scenario, str) else scenario
-            self.sim = SimulatedLD2410(fn, engineering=engineering,  # type: ignore[arg-type]
+            self.sim = SimulatedLD2410(script, engineering=engineering,  # type: ignore[arg-type]
                                        seed=seed, answer_commands=answer_commands,
                                        firmware=firmware or FIRMWARE, aux_bytes=aux_bytes)
             self._parser = p.Parser()
         self.speed = speed
+        self._clock = clock
         self.link = link
         self.frames_sent = 0
         self.frames_dropped = 0
@@ -247,6 +245,8 @@ class PtySensor:
         return str(self.link) if self.link else self._slave_name
 
     def scenario_time(self) -> float:
+        if self._clock is not None:
+            return self._clock()
         return (time.monotonic() - self._t0) * self.speed
 
     # -- lifetime --

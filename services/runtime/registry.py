@@ -39,6 +39,8 @@ class Entry:
     `enabled = true`), never by default."""
     up_flag: str | None = None
     """The `up` option that asks for an on-request service (`--foxglove`)."""
+    simulation: bool = False
+    """Started by `up` only when a sensor is simulated (the world's truth)."""
 
     def exists(self) -> bool:
         """Whether the module is present in this installation."""
@@ -96,6 +98,9 @@ SERVICES: tuple[Entry, ...] = (
           doctor="buddybot.audio.doctor:PLAYER"),
     Entry("dashboard", "buddybot.dashboard.service", "live web page of what the robot perceives",
           "dashboard", "buddybot.dashboard.settings:DashboardSettings"),
+    Entry("sim", "buddybot.sim.service",
+          "the simulated world's truth on sim/world (started by up while simulating)",
+          "sim", "buddybot.sim.settings:SimSettings", simulation=True),
     Entry("foxglove", "buddybot.foxglove.service",
           "Foxglove WebSocket bridge: every key live in the Foxglove app",
           "foxglove", "buddybot.foxglove.settings:FoxgloveSettings", on_request=True,

@@ -43,6 +43,8 @@ from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.supervised import SUPERVISOR_ENV
+from buddybot.sim.scenario import ScenarioError, load
+from buddybot.sim.settings import SimSettings
 from buddybot.supervisor.status import StatusMonitor
 from buddybot.tools import doctor
 
@@ -286,14 +288,50 @@ def requested(ctx: ServiceContext) -> list[registry.Entry]:
     return chosen
 
 
+SIM_LEAD_S = 2.0
+"""The simulated world starts this long after `up` plans it: its sensors are starting."""
+
+
+def simulated(name: str, ctx: ServiceContext) -> bool:
+    """Whether `up` runs this sensor service on the simulated world: asked (`--sim`,
+    the table's `sim`) or no hardware configured."""
+    config = ctx.config
+    if name == "radar-bridge":
+        table = config.radar_bridge
+        return bool(ctx.args.sim or table.sim or not table.sensors)
+    if name == "camera":
+        return bool(ctx.args.sim or config.camera.sim or not config.camera.source)
+    return False
+
+
+def world_args(ctx: ServiceContext) -> list[str]:
+    """The options that give every simulated sensor the same world and start.
+
+    The scenario is loaded here, so a bad one stops `up` (exit 2) before
+    anything starts, with the file's line and key."""
+    settings = ctx.config.section(SimSettings)
+    scenario = getattr(ctx.args, "scenario", None) or settings.scenario
+    seed = getattr(ctx.args, "seed", None)
+    try:
+        load(scenario)
+    except ScenarioError as exc:
+        raise UsageError(f"--scenario: {exc}") from None
+    argv = ["--scenario", scenario, "--sim-start",
+            f"{(settings.start or time.time() + SIM_LEAD_S):.3f}"]
+    return argv + (["--seed", str(seed)] if seed is not None else [])
+
+
 def plan_up(ctx: ServiceContext) -> UpPlan:
     """Validate the options of `up` into a plan (UsageError: exit 2, nothing started)."""
     args = ctx.args
-    entries = select_services(getattr(args, "only", None), list(registry.SERVICES),
-                              registry.available_services())
+    only = getattr(args, "only", None)
+    entries = select_services(only, list(registry.SERVICES), registry.available_services())
     for entry in requested(ctx):
         if not any(e.name == entry.name for e in entries):
             entries.append(entry)
+    sensors = [e.name for e in entries if simulated(e.name, ctx)]
+    if not sensors:  # a robot with its hardware: no simulated world, no truth
+        entries = [e for e in entries if not e.simulation or (only and e.name in only)]
     joined = getattr(args, "connect", None)
     if joined and args.listen:
         raise UsageError("--connect joins a running router, --listen starts one: not both")
@@ -310,6 +348,10 @@ def plan_up(ctx: ServiceContext) -> UpPlan:
         extra["dashboard"] = ["--eye-port", str(args.eye_port)]
     if getattr(args, "dashboard_port", None) is not None:
         extra.setdefault("dashboard", []).extend(["--port", str(args.dashboard_port)])
+    if sensors or any(e.simulation for e in entries):
+        world = world_args(ctx)
+        for name in [*sensors, *(e.name for e in entries if e.simulation)]:
+            extra.setdefault(name, []).extend(world)
     zenoh = ctx.config.zenoh
     return UpPlan(entries, listen, connect, zenoh.config_file, zenoh.router_config_file
                   or zenoh.config_file, extra, plan_apps(ctx.config))
@@ -321,10 +363,7 @@ def service_argv(name: str, ctx: ServiceContext, connect: str | list[str],
     args = ctx.args
     argv = [sys.executable, "-m", "buddybot", "run", name]
     argv += _child_options(ctx, [connect] if isinstance(connect, str) else connect)
-    sim = args.sim
-    if name == "radar-bridge" and (sim or not ctx.config.radar_bridge.sensors):
-        argv.append("--sim")
-    if name == "camera" and (sim or not ctx.config.camera.source):
+    if simulated(name, ctx):
         argv.append("--sim")
     if name == "eye-renderer" and args.no_browser:
         argv.append("--no-browser")

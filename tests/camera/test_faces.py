@@ -20,7 +20,6 @@ from buddybot.camera.facenet import FaceNet
 from buddybot.camera.litert import ModelLoadError
 from buddybot.camera.pipeline import FacePipeline, OwedSearch
 from buddybot.camera.settings import FaceDetectorSettings
-from buddybot.camera.sim import SimCamera
 from buddybot.contract import jpeg
 from tests.camera import scenes
 from tests.camera.networks import Networks
@@ -166,18 +165,6 @@ def test_crop_tracking_follows_a_moving_face_like_the_whole_frame(full: FaceNet,
         truth = scenes.truth(placed)
         assert abs(a.point[1] - truth[1]) < 0.05 and abs(a.point[0] - truth[0]) < 0.12
     assert tracking.tracked >= 10 and whole.tracked == 0
-
-
-def test_simulated_camera_shows_a_detectable_moving_face(full: FaceNet) -> None:
-    cam = SimCamera()
-    seen = []
-    for i in range(40):
-        faces = full.detect(cam.frame(i * 0.37))
-        if faces:
-            seen.append(faces[0].centre)
-    assert len(seen) >= 36
-    xs, ys = [c[0] for c in seen], [c[1] for c in seen]
-    assert max(xs) - min(xs) > 200 and max(ys) - min(ys) > 50
 
 
 def test_debug_rendering_draws_on_a_copy(full: FaceNet, short: FaceNet) -> None:

@@ -19,15 +19,15 @@ from hypothesis import strategies as st
 from buddybot.contract import messages as m
 from buddybot.radar import envelope, ld2410
 from buddybot.radar.ld2450_sim import SimulatedLD2450
-from buddybot.radar.scenarios import NOBODY, Scenario, Target
 from buddybot.radar.sim import PtySensor, SimulatedLD2410
+from buddybot.radar.sim_scene import NOBODY, Script, Target
 from buddybot.tools.testing import LOOPBACK, Collector, retry_until
 
 
 class Gated:
     """A scenario that shows nobody until `go()`, then plays `inner` from its start."""
 
-    def __init__(self, inner: Scenario) -> None:
+    def __init__(self, inner: Script) -> None:
         self.inner = inner
         self.started: float | None = None
         self.sensor: PtySensor | None = None

@@ -18,9 +18,9 @@ from buddybot.contract import messages as m
 from buddybot.radar import bridge
 from buddybot.radar import ld2410 as p
 from buddybot.radar import ld2450 as p2
-from buddybot.radar.scenarios import Target
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim_scene import Target
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, retry_until
@@ -37,25 +37,20 @@ def parse(*argv: str) -> argparse.Namespace:
 
 
 def test_flags_not_given_take_the_config() -> None:
-    cfg = RadarBridgeSettings(sensors=["/dev/ttyUSB1"], device_id=3, baudrate=115200,
-                              sim_speed=2.5)
+    cfg = RadarBridgeSettings(sensors=["/dev/ttyUSB1"], device_id=3, baudrate=115200)
     opts = bridge.resolve_options(parse(), cfg)
-    assert (opts.urls, opts.device_id, opts.baudrate, opts.sim_scenario) == (
-        ["/dev/ttyUSB1"], 3, 115200, None)
+    assert (opts.urls, opts.device_id, opts.baudrate, opts.sim) == (
+        ["/dev/ttyUSB1"], 3, 115200, False)
 
 
 def test_given_flags_win_over_the_config() -> None:
-    cfg = RadarBridgeSettings(device_id=3, baudrate=115200, sim_speed=2.5)
-    opts = bridge.resolve_options(
-        parse("--sim", "--sim-speed", "0.5", "--device-id", "0", "--baudrate", "9600"), cfg)
+    cfg = RadarBridgeSettings(device_id=3, baudrate=115200)
+    opts = bridge.resolve_options(parse("--sim", "--device-id", "0", "--baudrate", "9600"), cfg)
     # device_id 0 is a real id: it must not fall back to the config's 3.
-    assert (opts.device_id, opts.baudrate, opts.sim_scenario, opts.sim_speed) == (
-        0, 9600, "visit", 0.5)
+    assert (opts.device_id, opts.baudrate, opts.sim) == (0, 9600, True)
 
 
 @pytest.mark.parametrize(("argv", "flag"), [
-    (("--sim", "--sim-speed", "0"), "--sim-speed"),   # would freeze the scenario
-    (("--sim", "--sim-speed", "-1"), "--sim-speed"),
     (("--sensor", "/dev/ttyUSB0", "--baudrate", "0"), "--baudrate"),
     (("--sensor", "/dev/ttyUSB0", "--device-id", "-1"), "--device-id"),
 ])

@@ -13,11 +13,11 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.sim import PtySensor
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import LOOPBACK, Collector, Process
 from tests.radar.rig import Gated, diag_value, wait_more_frames
+from tests.radar.scripts import LD2410_SCRIPTS
 
 pytestmark = pytest.mark.integration
 
@@ -28,7 +28,7 @@ Spawn = Callable[..., Process]
 def test_approach_and_leave_gives_one_visit(sensors: Callable[..., PtySensor], spawn: Spawn,
                                             probe: Node,
                                             node_factory: Callable[..., Node]) -> None:
-    script = Gated(SCENARIOS["walk-in"])
+    script = Gated(LD2410_SCRIPTS["walk-in"])
     sensor = sensors(script, speed=2.0)
     presence = Collector(probe, keys.PRESENCE)
     frames = Collector(probe, keys.RADAR_FRAMES)
@@ -98,7 +98,7 @@ def test_bad_command_line_values_are_clear_errors() -> None:
     ("[radar_presence]\nrange = 2.0\n", "range"),
     ("[radar_presence]\nmax_sensors = 0\n", "max_sensors"),
     ("[radar_bridge]\nquery_firmware = 'maybe'\n", "query_firmware"),
-    ("[radar_bridge]\nsim_scenario = 'party'\nsim = true\n", "party"),
+    ("[sim]\nscenario = 'party'\n[radar_bridge]\nsim = true\n", "party"),
 ])
 def test_bad_config_is_a_clear_error(tmp_path: Path, toml: str, needle: str) -> None:
     config = tmp_path / "bad.toml"

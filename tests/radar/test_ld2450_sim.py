@@ -6,10 +6,11 @@ import time
 
 from buddybot.radar import envelope as e
 from buddybot.radar import ld2450 as p
-from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, Person, Scene
 from buddybot.radar.ld2450_sim import SimulatedLD2450
 from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim_scene import Person, Scene
 from tests.radar.rig import ack_of, check_noisy_stream, cmd, open_port
+from tests.radar.scripts import LD2450_SCRIPTS
 
 
 def three(t: float, rng: object) -> Scene:
@@ -75,11 +76,11 @@ def test_silent_sensor_never_answers() -> None:
 
 
 def test_noisy_scenario_stream_is_survivable() -> None:
-    check_noisy_stream(SimulatedLD2450(ANGLE_SCENARIOS["noisy"], seed=5), p.Parser())
+    check_noisy_stream(SimulatedLD2450(LD2450_SCRIPTS["noisy"], seed=5), p.Parser())
 
 
 def test_ld2450_on_a_real_pty_answers_commands_and_reports() -> None:
-    with PtySensor("three-people", model="LD2450", speed=1.0) as sensor:
+    with PtySensor(LD2450_SCRIPTS["three-people"], model="LD2450", speed=1.0) as sensor:
         port = open_port(sensor.path)
         try:
             parser = p.Parser()

@@ -17,9 +17,9 @@ from buddybot.radar.presence import (
     Verdict,
     read_targets,
 )
-from buddybot.radar.scenarios import SCENARIOS
 from buddybot.radar.settings import RadarPresenceSettings, RadarZone
 from tests.radar.rig import radar_target
+from tests.radar.scripts import LD2410_SCRIPTS as SCENARIOS
 
 IN, OUT = PresenceState.IN_RANGE, PresenceState.OUT_OF_RANGE
 MOVING, STANDING = PresenceTarget.MOVING, PresenceTarget.STANDING

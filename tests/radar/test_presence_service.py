@@ -17,8 +17,8 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.radar.scenarios import NOBODY, Target
 from buddybot.radar.sim import PtySensor
+from buddybot.radar.sim_scene import NOBODY, Target
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 from tests.radar.rig import radar_target, standing

@@ -9,9 +9,10 @@ import pytest
 import serial
 
 from buddybot.radar import ld2410 as p
-from buddybot.radar.scenarios import SCENARIOS, Target
 from buddybot.radar.sim import PtySensor, SimulatedLD2410
+from buddybot.radar.sim_scene import Target
 from tests.radar.rig import ack_of, check_noisy_stream, cmd, open_port
+from tests.radar.scripts import LD2410_SCRIPTS as SCENARIOS
 
 
 def test_sim_needs_configuration_mode_and_answers_like_the_protocol() -> None:

@@ -11,6 +11,7 @@ import pytest
 
 from buddybot.radar import ld2410 as p
 from buddybot.radar.sim import PtySensor, default_parameters
+from tests.radar.scripts import LD2410_SCRIPTS, LD2450_SCRIPTS
 
 
 def radar(*args: str) -> subprocess.CompletedProcess[str]:
@@ -81,7 +82,7 @@ def test_tool_errors_are_clear(sensor: PtySensor, tmp_path: Path) -> None:
 
 @pytest.mark.integration
 def test_tool_reports_a_sensor_that_does_not_ack(tmp_path: Path) -> None:
-    with PtySensor("nobody", link=tmp_path / "mute", answer_commands=False) as mute:
+    with PtySensor(LD2410_SCRIPTS["nobody"], link=tmp_path / "mute", answer_commands=False) as mute:
         out = radar("info", "--port", mute.path, "--timeout", "0.3")
     assert out.returncode == 1
     assert "no ACK for 'enable configuration'" in out.stderr
@@ -149,7 +150,8 @@ def test_tool_bluetooth_password_and_permissions(sensor: PtySensor) -> None:
 
 @pytest.fixture
 def angle_sensor(tmp_path: Path):  # type: ignore[no-untyped-def]
-    with PtySensor("three-people", link=tmp_path / "ttyLD2450", model="LD2450") as sim:
+    with PtySensor(LD2450_SCRIPTS["three-people"], link=tmp_path / "ttyLD2450",
+                   model="LD2450") as sim:
         yield sim
 
 

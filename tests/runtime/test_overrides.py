@@ -339,6 +339,8 @@ def test_every_flag_reaches_the_struct_the_service_runs_with(
         module, ctx = run_with(service, tmp_path, toml_for((table, field.name), config_value),
                                argv)
         settings = module.settings_from(ctx)
+        if type(settings) is not _cls:  # a shared table's option (`[sim]`): merged alike
+            settings = overrides.merge(ctx.config.section(_cls), ctx.args)
         got = getattr(settings, field.name)
         assert msgspec.to_builtins(got) == msgspec.to_builtins(expected), argv
         assert overrides.given(ctx.args, type(settings), field.name)
@@ -359,7 +361,8 @@ def test_a_flag_out_of_range_is_refused_naming_flag_range_and_value(
     argv = [a for item in items for a in (action.option_strings[0], str(item))]
     module, ctx = run_with(service, tmp_path, "", argv)
     with pytest.raises(ConfigError) as refused:
-        module.settings_from(ctx)
+        if type(module.settings_from(ctx)) is not _cls:  # a shared table's option (`[sim]`)
+            overrides.merge(ctx.config.section(_cls), ctx.args)
     text = str(refused.value)
     assert action.option_strings[0] in text and f"{table}.{field.name}" in text
     assert repr(items[0] if not isinstance(bad, list) else bad) in text
@@ -405,6 +408,7 @@ def test_the_logic_holds_the_merged_values(tmp_path: Path) -> None:
     """Where the logic is built by a pure function, it holds the merged values."""
     from buddybot.controller.behaviour import Behaviour
     from buddybot.radar import bridge, presence_service
+    from buddybot.sim.options import world_from
 
     _m, ctx = run_with("radar-presence", tmp_path, "[radar_presence]\nrange_m = 3.0\n",
                        ["--exit-margin-m", "0", "--max-sensors", "4"])
@@ -417,8 +421,9 @@ def test_the_logic_holds_the_merged_values(tmp_path: Path) -> None:
                        ["--sim", "--sim-speed", "2.5", "--device-id", "0"])
     opts = bridge.options_from(bridge.settings_from(ctx))
     # --sim leaves configured hardware alone: only the simulated sensor.
-    assert (opts.urls, opts.sim_scenario, opts.sim_speed, opts.device_id) == (
-        [], "visit", 2.5, 0)
+    assert (opts.urls, opts.sim, opts.device_id) == ([], True, 0)
+    world, clock, _ = world_from(ctx)  # the simulated world it renders
+    assert (world.scenario.name, clock.speed) == ("visit", 2.5)
 
     module, ctx = run_with("eyes", tmp_path, "", ["--unknown-distance-percent", "0"])
     assert module.build(ctx)[1] == 0.0

@@ -75,10 +75,48 @@ def test_eye_port_goes_to_the_eye_renderer_and_the_dashboard_frame() -> None:
     plan = plan_up(_ctx(eye_port=18080, dashboard_port=18090))
     assert plan.service_args["eye-renderer"] == ["--port", "18080"]
     assert plan.service_args["dashboard"] == ["--eye-port", "18080", "--port", "18090"]
-    assert set(plan.service_args) == {"eye-renderer", "dashboard"}
+    assert set(plan.service_args) == {"eye-renderer", "dashboard", *WORLD_USERS}
     argv = service_argv("eye-renderer", _ctx(), plan.connect,
                         plan.service_args["eye-renderer"])
     assert argv[-2:] == ["--port", "18080"] and "--no-browser" in argv
+
+
+WORLD_USERS = {"radar-bridge", "camera", "sim"}
+"""The simulated sensors and the service publishing the world's truth."""
+
+
+def test_every_simulated_sensor_gets_the_same_world_and_start() -> None:
+    plan = plan_up(_ctx(scenario="two_people", seed=7))
+    assert {e.name for e in plan.entries} >= WORLD_USERS
+    worlds = {tuple(plan.service_args[name]) for name in WORLD_USERS}
+    assert len(worlds) == 1
+    (world,) = worlds
+    assert world[:2] == ("--scenario", "two_people") and world[-2:] == ("--seed", "7")
+    start = float(world[world.index("--sim-start") + 1])
+    assert time.time() < start < time.time() + 10  # a moment from now: sensors are starting
+    argv = service_argv("camera", _ctx(), plan.connect, plan.service_args["camera"])
+    assert "--sim" in argv and "two_people" in argv
+
+
+def test_a_robot_with_its_hardware_has_no_simulated_world() -> None:
+    config = parse_config("[radar_bridge]\nsensors = ['/dev/ttyUSB0']\n"
+                          "[camera]\nsource = '0'\n")
+    ctx = _ctx(sim=False)
+    ctx.config = config
+    plan = plan_up(ctx)
+    assert "sim" not in {e.name for e in plan.entries}
+    assert not set(plan.service_args) & WORLD_USERS
+    assert "--sim" not in service_argv("radar-bridge", ctx, plan.connect)
+
+
+def test_a_bad_scenario_stops_up_before_anything_starts(tmp_path: Path) -> None:
+    bad = tmp_path / "party.toml"
+    bad.write_text('description = "x"\nlength_s = 5\n[[person]]\nface = "nobody"\n'
+                   'path = [{ t = 0, x = 1, y = 0 }]\n')
+    with pytest.raises(UsageError, match=r"party.toml, line 4, key 'person\[0\].face'"):
+        plan_up(_ctx(scenario=str(bad)))
+    with pytest.raises(UsageError, match="no such scenario"):
+        plan_up(_ctx(scenario="party"))
 
 
 def test_on_request_services_start_only_when_asked() -> None:

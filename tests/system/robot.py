@@ -87,7 +87,18 @@ def wait_nodes(probe: Node, names: list[str], robot: str = "buddy",
     retry_until(all_up, timeout, 0.3, f"nodes {names} up")
 
 
+SCENARIOS = Path(__file__).resolve().parents[1] / "sim" / "scenarios"
+"""The tests' own scenario files (`walk_in`: one short visit)."""
+
+
+def scenario_arg(name: str) -> str:
+    """A built-in scenario name, or the path of the tests' scenario of that name."""
+    own = SCENARIOS / f"{name}.toml"
+    return str(own) if own.exists() else name
+
+
 def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",
                 speed: float = 1.0) -> Process:
-    return spawn("radar-bridge", "--sim", "--sim-scenario", scenario, "--sim-speed", str(speed),
-                 robot=robot)
+    """The bridge with its simulated LD2410 seeing `scenario`, started now."""
+    return spawn("radar-bridge", "--sim", "--scenario", scenario_arg(scenario),
+                 "--sim-speed", str(speed), robot=robot)

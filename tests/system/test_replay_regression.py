@@ -74,7 +74,7 @@ def test_a_recorded_visit_replays_into_the_same_decisions(
                                                keys.CAMERA_IMAGE.key(camera="unseen")),
                                  keys.CAMERA_IMAGE.encoding) as unseen:
             retry_until(unseen.has_subscribers, 30, 0.1, "the recorder subscribed")
-        live["radar-bridge"] = start_radar(spawn, "walk-in")
+        live["radar-bridge"] = start_radar(spawn, "walk_in")
         wait_visit_done(live_expression, live_status, "live")
         recorder.send_signal(signal.SIGTERM)
         assert recorder.proc.wait(60) == 0, recorder.output()

@@ -58,7 +58,7 @@ def test_visit_wakes_follows_greets_says_goodbye_and_sleeps(
     status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)
     procs = start_robot(spawn, tmp_path)
     wait_nodes(probe, [*BASE_SERVICES, "camera"])
-    procs["radar-bridge"] = start_radar(spawn, "walk-in")
+    procs["radar-bridge"] = start_radar(spawn, "walk_in")
 
     # Eyes wake (and the lids open) when the visitor comes within range.
     expression.wait_for(lambda e: e.action == A.EYE_AWAKE, 60, "EYE_AWAKE")

@@ -7,7 +7,8 @@ import random
 import pytest
 
 from buddybot.radar import ld2450 as p
-from buddybot.radar.ld2450_scenarios import ANGLE_SCENARIOS, crossing, three_people
+from tests.radar.scripts import LD2450_SCRIPTS as ANGLE_SCENARIOS
+from tests.radar.scripts import crossing, three_people
 
 
 def test_crossing_goes_from_the_robots_left_to_its_right_approaching_then_leaving() -> None:

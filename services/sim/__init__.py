@@ -1,0 +1,1 @@
+"""The simulated world: people on scripted paths that every simulated sensor sees."""
