@@ -21,7 +21,7 @@ sdk and which the sdk never imports). The areas that serve a web page
 (`WEB_SURFACES`) may also import `web`, the layer beside the runtime that
 every web surface shares (who may connect, login, a page's sends); `web`
 imports only the runtime and the contract. `sim`, the simulated world,
-sits beside it: the areas that render or draw that world (`SIM_SENSORS`)
+sits beside it: the areas that render that world (`SIM_SENSORS`)
 and `up` (which gives every simulated sensor one world) may import it.
 The runtime imports no tool,
 no supervisor, no area and not `web`, so a service process loads only
@@ -48,8 +48,8 @@ AREAS = ("radar", "camera", "controller", "eyes", "audio", "dashboard", "foxglov
          "ros2", "identity")
 WEB_SURFACES = ("dashboard", "eyes", "foxglove")
 """The areas serving a web page or socket: only they may import `web`."""
-SIM_SENSORS = ("radar", "camera", "dashboard")
-"""The areas that render or draw the simulated world: only they may import `sim`."""
+SIM_SENSORS = ("radar", "camera")
+"""The areas that render the simulated world (its sensors): only they may import `sim`."""
 BASE = frozenset({"contract", "runtime"})
 ALLOWED: dict[str, frozenset[str]] = {
     "contract": frozenset({"contract"}),

@@ -129,6 +129,7 @@ class Bus:
         node.subscribe(keys.PUPIL, latest("pupil"))
         node.subscribe(keys.LIDS, latest("lids"))
         node.subscribe(keys.DIAGNOSTICS, on_diag, node="*")
+        node.subscribe(keys.SIM_WORLD, latest("truth"))  # only while simulating
         node.watch_node("*", lambda _instances: self._nodes_wanted.set())
         node.every(0.1, self._refresh_nodes, name="nodes")
         node.every(self.s.params_period_s, self.refresh_params, name="params")

@@ -176,6 +176,10 @@ class Board:
             self.map.add(value, now)
             self._map_dirty = True
             return True
+        if slot == "truth":
+            self.map.set_truth(value, now)
+            self._map_dirty = True
+            return True
         if slot == "people":
             self.map.people = value
             self._map_dirty = True

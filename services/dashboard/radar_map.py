@@ -6,7 +6,9 @@ view and the followed person, as canvas primitives for the page to paint.
 seconds, the presence zones, the camera's field of view, `people/state`
 and whom the controller follows (`controller/state` person_id). `scene`
 turns it into what the page paints, in canvas pixels
-(`map_geometry.fit_view` chooses the view). No Zenoh, threads or clocks:
+(`map_geometry.fit_view` chooses the view). While the robot is simulated it
+also draws the simulated world's truth (`sim/world`) beside what the robot
+perceives. No Zenoh, threads or clocks:
 the caller passes its clock (the dashboard's arrival time, so a sender
 with a skewed clock still ages out on time).
 
@@ -147,10 +149,19 @@ class RadarMap:
         self.fov_from = ""
         self.people: m.PeopleState | None = None
         self.controller: m.ControllerState | None = None
+        self.truth: m.SimWorld | None = None
+        self.truth_s = -math.inf
 
     def __bool__(self) -> bool:
-        """Whether an angle radar was ever heard (the page shows the map only then)."""
-        return bool(self._sensors)
+        """Whether an angle radar or a simulated world was heard (the page shows the map
+        only then)."""
+        return bool(self._sensors) or self.truth is not None
+
+    def set_truth(self, msg: m.SimWorld, now_s: float) -> None:
+        self.truth, self.truth_s = msg, now_s
+
+    def _fresh_truth(self, now_s: float) -> m.SimWorld | None:
+        return self.truth if now_s - self.truth_s <= STALE_S else None
 
     def add(self, msg: m.RadarTargets, now_s: float) -> None:
         key = f"{msg.device_id}/{msg.radar_id}"
@@ -196,12 +207,16 @@ class RadarMap:
         for person in (self.people.people if self.people else []):
             if person.yaw_rad is not None:
                 pts.append(geo.bearing_point(person.yaw_rad, person.distance_m))
+        truth = self._fresh_truth(now_s)
+        if truth is not None:
+            pts += [(p.position.x, p.position.y) for p in truth.people]
+            pts += [(c.position.x, c.position.y) for c in truth.clutter]
         return pts
 
     def scene(self, now_s: float, size: tuple[int, int] = MAP_SIZE) -> dict[str, Any] | None:
         """What the page paints now (canvas pixels), or None before any angle radar."""
         self._trim(now_s)
-        if not self._sensors:
+        if not self:
             return None
         view = geo.fit_view(size[0], size[1], self._world_points(now_s))
         px = _px(view)
@@ -235,6 +250,7 @@ class RadarMap:
             "rings": [{"m": r, "px": round(r * view.scale, 1)} for r in geo.rings(view)],
             "sensors": sensors, "zones": zones, "zones_from": self.zones_from, "fov": fov,
             "people": people, "trail_s": self.trail_s,
+            "truth": _truth(self._fresh_truth(now_s), view),
         }
 
 
@@ -275,6 +291,23 @@ def _person(p: m.Person, view: geo.MapView, followed: bool) -> dict[str, Any]:
             "distance_m": round(p.distance_m, 2), "seen_by": p.seen_by,
             "yaw_deg": None if p.yaw_rad is None else round(math.degrees(p.yaw_rad), 1),
             "name": p.name}
+
+
+def _truth(world: m.SimWorld | None, view: geo.MapView) -> dict[str, Any] | None:
+    """The simulated world's people and clutter where they really are, each person
+    with a short arrow where they face and which sensors should see them."""
+    if world is None:
+        return None
+    at = _px(view)
+    people = [{
+        "id": p.id, "name": p.name, "at": at(p.position.x, p.position.y),
+        "facing": at(p.position.x + 0.35 * math.cos(p.facing_rad),
+                     p.position.y + 0.35 * math.sin(p.facing_rad)),
+        "in_radar": p.in_radar, "in_camera": p.in_camera,
+    } for p in world.people]
+    clutter = [{"kind": c.kind, "at": at(c.position.x, c.position.y)} for c in world.clutter]
+    return {"scenario": world.scenario, "t_s": round(world.t_s, 1), "people": people,
+            "clutter": clutter}
 
 
 # --- where the zones and the field of view come from ------------------------------------

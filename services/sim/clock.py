@@ -2,7 +2,7 @@
 
 Each simulated sensor runs in its own process (maybe on its own host);
 they agree on what the world looks like because they agree on the
-scenario, the seed and the wall-clock start, not because they talk.
+scenario, the random seed and the wall-clock start, not because they talk.
 """
 
 from __future__ import annotations

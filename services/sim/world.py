@@ -2,9 +2,9 @@
 
 `World(scenario, seed).at(t)` is a function of the scenario time only, so
 every simulated sensor (in whatever process, on whatever host) that knows
-the scenario, the seed and the start time sees the same people. People
+the scenario, the random seed and the start time sees the same people. People
 walk straight lines between their waypoints; while they stand they sway
-a little (a few centimetres, a smooth function of time and the seed), as
+a little (a few centimetres, a smooth function of time and the random seed), as
 real people do and as a radar's still-target energy needs.
 """
 

@@ -199,3 +199,31 @@ def test_params_replies_and_the_config_tables_are_read_by_name() -> None:
     bare = rm.Configured.read(SimpleNamespace(radar_presence=SimpleNamespace(),
                                               camera=SimpleNamespace(width=None)))
     assert bare == rm.Configured()
+
+
+def world(t_s: float, *people: tuple[int, float, float, float]) -> m.SimWorld:
+    """A simulated world's truth: (id, x, y, facing) per person, a fan at (1.5, 0.8)."""
+    return m.SimWorld(stamp_ns=1, scenario="visit", t_s=t_s, lap=0, people=[
+        m.SimPerson(id=i, face="collins", position=m.Point(x=x, y=y, z=0.2), vx_mps=0.0,
+                    vy_mps=0.0, facing_rad=f, distance_m=math.hypot(x, y),
+                    bearing_rad=math.atan2(y, x), in_radar=True, in_camera=i == 1,
+                    name="Eileen" if i == 1 else None) for i, x, y, f in people],
+        clutter=[m.SimClutter(kind="fan", position=m.Point(x=1.5, y=0.8, z=0.0))])
+
+
+def test_the_simulated_truth_is_drawn_where_people_really_are_and_fades_when_silent() -> None:
+    rmap = rm.RadarMap()
+    rmap.set_truth(world(12.0, (1, 1.0, 0.1, math.pi), (2, 3.0, -1.0, 0.0)), 10.0)
+    assert rmap  # a map with no angle radar: the truth alone
+    scene = rmap.scene(10.2)
+    assert scene is not None and scene["sensors"] == []
+    view = view_of(scene)
+    truth = scene["truth"]
+    assert truth["scenario"] == "visit" and truth["t_s"] == 12.0
+    first, second = truth["people"]
+    assert first["at"] == pytest.approx(list(view.to_canvas(1.0, 0.1)), abs=0.1)
+    assert (first["name"], first["in_camera"], second["in_camera"]) == ("Eileen", True, False)
+    assert first["facing"][1] > first["at"][1]  # facing the robot: the arrow points down
+    assert truth["clutter"][0]["at"] == pytest.approx(list(view.to_canvas(1.5, 0.8)), abs=0.1)
+    later = rmap.scene(10.0 + rm.STALE_S + 0.5)
+    assert later is not None and later["truth"] is None

@@ -275,6 +275,7 @@ function showPresenceAge() {
 // two tabs switch between them.
 const MAP_COLOURS = ["#ffa657", "#79c0ff", "#d2a8ff", "#f778ba", "#56d4dd", "#e3b341"];
 const FOLLOWED = "#3fb950";
+const TRUTH = "#f0f3f6";
 const RADAR_TITLES = {
   distance: 'Radar <span class="dim">distance over time and gate energies per sensor</span>',
   map: 'Radar map <span class="dim">from above, forward up</span>',
@@ -381,6 +382,27 @@ function drawMap() {
       g.fillStyle = "#e3e6ea"; g.fillText(`${fmt(t.distance_m, 1)} m`, u + 30, w + 8);
     }
   }
+  // The simulated world's truth (only while simulating): white diamonds where the
+  // people really are, an arrow where they face; clutter as a small cross.
+  if (v.truth) {
+    g.lineWidth = 2.5; g.strokeStyle = TRUTH; g.fillStyle = TRUTH;
+    for (const p of v.truth.people) {
+      const [u, w] = p.at;
+      g.setLineDash(p.in_camera ? [] : [5, 5]);
+      g.beginPath(); g.moveTo(u, w - 16); g.lineTo(u + 16, w); g.lineTo(u, w + 16); g.lineTo(u - 16, w);
+      g.closePath(); g.stroke(); g.setLineDash([]);
+      g.beginPath(); g.moveTo(u, w); g.lineTo(p.facing[0], p.facing[1]); g.stroke();
+      const seen = [p.in_radar ? "radar" : "", p.in_camera ? "camera" : ""].filter(Boolean);
+      g.fillText(`truth ${p.id}${p.name ? " " + p.name : ""}${seen.length ? "" : " (unseen)"}`,
+        u + 20, w + 28);
+    }
+    for (const c of v.truth.clutter) {
+      const [u, w] = c.at;
+      g.beginPath(); g.moveTo(u - 10, w - 10); g.lineTo(u + 10, w + 10);
+      g.moveTo(u + 10, w - 10); g.lineTo(u - 10, w + 10); g.stroke();
+      g.fillText(c.kind, u + 14, w + 8);
+    }
+  }
   // The robot: a wedge pointing forward (up).
   g.fillStyle = "#a371f7";
   g.beginPath(); g.moveTo(ou, ov - 22); g.lineTo(ou + 16, ov + 14); g.lineTo(ou - 16, ov + 14); g.closePath(); g.fill();
@@ -390,6 +412,11 @@ function drawMap() {
     g.fillStyle = MAP_COLOURS[s.index % MAP_COLOURS.length];
     g.fillText(`● radar ${s.key}${s.silent ? " (silent)" : ""}`, 12, H - 14 - 30 * (v.sensors.length - 1 - i));
   });
+  if (v.truth) {
+    g.fillStyle = TRUTH;
+    g.fillText(`◇ simulated truth: ${v.truth.scenario} at ${fmt(v.truth.t_s, 0)} s`, 12,
+      H - 14 - 30 * v.sensors.length);
+  }
   const n = v.sensors.reduce((k, s) => k + s.targets.length, 0);
   const followed = v.people.find((p) => p.followed);
   const parts = [`${n} target${n === 1 ? "" : "s"}, trails ${fmt(v.trail_s, 0)} s`];
