@@ -35,10 +35,14 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.radar import ld2410 as p
 from buddybot.radar.convert import report_to_frame
+from buddybot.radar.mounting import Mount
 from buddybot.radar.presence import PresenceTracker, Reading
 from buddybot.radar.sim import PtySensor
 from buddybot.radar.sim_scene import NOBODY, Target
+from buddybot.radar.world_view import world_script
 from buddybot.runtime.node import Node
+from buddybot.sim.scenario import load
+from buddybot.sim.world import World
 from buddybot.tools.testing import Collector, Router, retry_until, run_service
 
 
@@ -166,7 +170,9 @@ def bench_latency(router: Router, events: int, folder: Path) -> None:
 
 
 def bench_cpu(router: Router, seconds: float, folder: Path) -> None:
-    sensors = [PtySensor("visit", link=folder / f"ttyCpu{i}", seed=i).start() for i in range(2)]
+    visit = World(load("visit"))
+    sensors = [PtySensor(world_script(visit, "LD2410", Mount()), link=folder / f"ttyCpu{i}",
+                         seed=i).start() for i in range(2)]
     bridge = run_service("radar-bridge", router.endpoint, "--sensor", sensors[0].path,
                          "--sensor", sensors[1].path)
     presence = run_service("radar-presence", router.endpoint)

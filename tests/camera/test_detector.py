@@ -27,6 +27,7 @@ from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
 from tests.camera import jpegs, scenes
 from tests.camera.jpegs import bgr_of
+from tests.sim import SCENARIOS
 
 pytestmark = pytest.mark.integration
 
@@ -78,11 +79,12 @@ def peak_rss(pid: int) -> int:
 def test_simulated_camera_to_face_position(probe: Node, spawn: Spawn) -> None:
     images = Collector(probe, keys.CAMERA_IMAGE, camera="front")
     faces = Collector(probe, keys.FACE, camera="front")
-    spawn("camera", "--sim")
+    # A person walking from side to side 1.2 m away, facing the camera.
+    spawn("camera", "--sim", "--scenario", str(SCENARIOS / "side_to_side.toml"))
     spawn("face-detector")
     face = faces.wait_for(timeout=60, what="a face position from the simulated camera")
     assert face.frame_id == "camera_front"
-    assert 0.3 < face.point.x < 3.0 and 0.5 < face.confidence <= 1.0
+    assert 1.0 < face.point.x < 1.4 and 0.5 < face.confidence <= 1.0
     # The probe's copy of an image may arrive after the face derived from it.
     first = images.wait_for(timeout=30, what="an image from the simulated camera")
     assert (first.width, first.height, first.encoding) == (640, 480, "bgr8")

@@ -26,7 +26,8 @@ from tests.deploy.conftest import DEPLOY, HOSTS, INSTALLED_CERTS, SYSTEMD_DIR, Z
 
 INSTALLED_BIN = "/opt/buddybot/.venv/bin/buddybot"
 ENV_FILE = "/etc/buddybot/env"
-SERVICE_NAMES = [e.name for e in registry.SERVICES]
+SERVICE_NAMES = [e.name for e in registry.SERVICES if not e.simulation]
+"""The services of a deployed robot (the simulated world's `sim` runs only under `up`)."""
 
 
 def unit(path: Path) -> configparser.ConfigParser:

@@ -8,10 +8,11 @@ import pytest
 
 from buddybot.sim import faces, scenario
 from buddybot.sim.scenario import ScenarioError
+from tests.sim import SCENARIOS
 
 ISSUE_NAMES = {"visit", "passer_by", "two_people", "out_of_view", "return", "dark", "crowd",
                "ghost"}
-HERE = Path(__file__).parent / "scenarios"
+HERE = SCENARIOS
 GOOD = '''description = "one person"
 length_s = 10
 

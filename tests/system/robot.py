@@ -17,6 +17,7 @@ import numpy as np
 from buddybot.camera.sim import compose, face_path
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, free_port, retry_until, write_tone
+from tests.sim import SCENARIOS
 
 Spawn = Callable[..., Process]
 
@@ -85,10 +86,6 @@ def wait_nodes(probe: Node, names: list[str], robot: str = "buddy",
         return all(f"{robot}/{name}" in live for name in names)
 
     retry_until(all_up, timeout, 0.3, f"nodes {names} up")
-
-
-SCENARIOS = Path(__file__).resolve().parents[1] / "sim" / "scenarios"
-"""The tests' own scenario files (`walk_in`: one short visit)."""
 
 
 def scenario_arg(name: str) -> str:

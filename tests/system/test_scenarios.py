@@ -74,7 +74,8 @@ def test_a_visit_is_greeted_once_followed_said_goodbye_to_and_the_eyes_sleep(
         retry_until(lambda: sounds(state.messages)[-1:] == ["farewell"], 60, 0.2, "goodbye")
         during = [s for s in state.messages if s.stamp_ns >= arrived.stamp_ns]
         assert sounds(during) == ["greeting", "farewell"], sounds(during)
-        retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP, 60, 0.2, "asleep")
+        retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP,
+                    60, 0.2, "asleep")
         # The gaze was on the visitor: to the robot's left, where they stood.
         looked = [d.yaw for d in gaze.messages if arrived.stamp_ns < d.stamp_ns < gone.stamp_ns]
         assert looked and sum(y > 0 for y in looked) > 0.8 * len(looked), looked[-20:]
@@ -87,3 +88,32 @@ def test_someone_walking_past_is_never_greeted(tmp_path: Path) -> None:
         first = truth.wait_for(lambda w: any(p.in_radar for p in w.people), 120, "a passer-by")
         truth.wait_for(lambda w: w.lap >= first.lap + 2, 120, "two more walks past")
         assert "greeting" not in sounds(state.messages), state.messages[-5:]
+
+
+def test_in_the_dark_the_radar_alone_wakes_the_eyes_and_nobody_is_greeted(
+        tmp_path: Path) -> None:
+    with robot_on(tmp_path, "dark") as probe:
+        truth = Collector[m.SimWorld](probe, keys.SIM_WORLD)
+        state = Collector[m.ControllerState](probe, keys.CONTROLLER_STATE)
+        faces = Collector[m.FacePosition](probe, keys.FACE, camera="front")
+        near = truth.wait_for(lambda w: any(p.distance_m < 1.2 for p in w.people), 120,
+                              "the visitor close")
+        assert not any(p.in_camera for p in near.people)  # the camera is covered
+        retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_AWAKE,
+                    60, 0.2, "awake for a person only the radar sees")
+        truth.wait_for(lambda w: w.lap > near.lap and w.t_s > 2, 120, "the next lap")
+        assert "greeting" not in sounds(state.messages)
+        assert faces.messages == []
+
+
+def test_a_crowd_of_five_keeps_every_service_up_and_the_people_bounded(
+        tmp_path: Path) -> None:
+    with robot_on(tmp_path, "crowd") as probe:
+        truth = Collector[m.SimWorld](probe, keys.SIM_WORLD)
+        people = Collector[m.PeopleState](probe, keys.PEOPLE_STATE)
+        five = truth.wait_for(lambda w: len(w.people) == 5, 120, "five people")
+        truth.wait_for(lambda w: w.lap > five.lap, 120, "a whole lap of the crowd")
+        assert people.messages and max(len(s.people) for s in people.messages) <= 5
+        live = probe.node_instances()
+        expected = {e.name for e in available_services() if not e.on_request}
+        assert expected <= {key.split("/")[-1] for key in live}, sorted(live)
