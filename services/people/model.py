@@ -18,6 +18,7 @@ radars: tracks, fusion with the face', 'Engagement' and 'Names'.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import math
 from dataclasses import dataclass
@@ -206,6 +207,10 @@ class _Track:
     """When `seen_by` became NONE (meaningful only then)."""
     engagement: Engagement
     engagement_since_ns: int
+    attending: bool
+    attending_since_ns: int
+    """Whether they attend (face seen, social zone or nearer), and since when: the
+    engagement's dwell and look-away count from it."""
     yaw_rad: float | None
     pitch_rad: float | None
     track_id: int | None = None
@@ -269,6 +274,8 @@ class PeopleModel:
         """The newest `NameSeen` with a name that no face held yet (given at the next face)."""
         self._name_stamp: int | None = None
         self._last_id = 0
+        self._stamps: dict[int, int] = {}
+        """Each present person's newest event stamp."""
         self.refused = 0
         """Arrivals refused because `MAX_PEOPLE` were present."""
 
@@ -277,7 +284,20 @@ class PeopleModel:
         return tuple(self._persons[i].person() for i in sorted(self._persons))
 
     def step(self, event: Input) -> list[PersonEvent]:
-        """Apply one input; the events it causes, in order."""
+        """Apply one input; the events it causes, in order, each person's stamps never
+        going back (an input stamped before a hold's end may follow the hold's event)."""
+        out = []
+        for e in self._step(event):
+            last = self._stamps.get(e.person_id, e.stamp_ns)
+            if e.stamp_ns < last:
+                e = dataclasses.replace(e, stamp_ns=last)
+            self._stamps[e.person_id] = e.stamp_ns
+            if isinstance(e, Left):
+                del self._stamps[e.person_id]
+            out.append(e)
+        return out
+
+    def _step(self, event: Input) -> list[PersonEvent]:
         match event:
             case Tick():
                 return self._advance(event.now_ns)
@@ -402,9 +422,15 @@ class PeopleModel:
             if Sensor.CAMERA in track.seen_by and self._face is not None:
                 due.append(self._face.stamp_ns + _ns(self.s.face_timeout_s))
             if track.engagement is Engagement.ENGAGING:
-                due.append(track.engagement_since_ns + _ns(self.s.engage_dwell_s))
+                due.append(track.engagement_since_ns + _ns(self.s.engage_dwell_s) if
+                           track.attending else
+                           track.attending_since_ns + _ns(self.s.look_away_s))
+            elif track.engagement is Engagement.ENGAGED and not track.attending:
+                due.append(track.attending_since_ns + _ns(self.s.look_away_s))
             elif track.engagement is Engagement.DISENGAGING:
-                due.append(track.engagement_since_ns + _ns(self.s.disengage_hold_s))
+                due.append(track.attending_since_ns + _ns(self.s.engage_dwell_s)
+                           if track.attending else
+                           track.engagement_since_ns + _ns(self.s.disengage_hold_s))
             if not track.seen_by:
                 due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
             if track.unconfirmed is not None:
@@ -578,7 +604,8 @@ class PeopleModel:
             id=self._last_id, arrived_ns=stamp, distance_m=distance_m,
             zone=zone_of(distance_m, self.s), zone_since_ns=stamp, seen_by=seen,
             lost_since_ns=stamp, engagement=Engagement.NONE, engagement_since_ns=stamp,
-            yaw_rad=None, pitch_rad=None, track_id=track_id)
+            attending=False, attending_since_ns=stamp, yaw_rad=None, pitch_rad=None,
+            track_id=track_id)
         self._persons[track.id] = track
         return track
 
@@ -617,26 +644,32 @@ class PeopleModel:
         return self._engage(track, at, stamp)
 
     def _engage(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
+        """The engagement machine (docs/people.md): each way has a hold, so a face
+        missed for a moment or a glance back changes nothing."""
         attending = Sensor.CAMERA in track.seen_by and track.zone <= Zone.SOCIAL
+        if attending != track.attending:
+            track.attending, track.attending_since_ns = attending, stamp
         out: list[PersonEvent] = []
         while True:
             was, since = track.engagement, track.engagement_since_ns
             new, when = was, stamp
+            back = track.attending_since_ns + _ns(self.s.engage_dwell_s)
+            away = track.attending_since_ns + _ns(self.s.look_away_s)
             if was is Engagement.NONE and attending:
                 new = Engagement.ENGAGING
             elif was is Engagement.ENGAGING:
                 dwelt = since + _ns(self.s.engage_dwell_s)
-                if not attending:
-                    new = Engagement.NONE
-                elif at >= dwelt:
+                if not attending and at >= away:
+                    new, when = Engagement.NONE, max(stamp, away)
+                elif attending and at >= dwelt:
                     new, when = Engagement.ENGAGED, max(stamp, dwelt)
-            elif was is Engagement.ENGAGED and not attending:
-                new = Engagement.DISENGAGING
+            elif was is Engagement.ENGAGED and not attending and at >= away:
+                new, when = Engagement.DISENGAGING, max(stamp, away)
             elif was is Engagement.DISENGAGING:
                 held = since + _ns(self.s.disengage_hold_s)
-                if attending:
-                    new = Engagement.ENGAGED
-                elif at >= held:
+                if attending and at >= back:
+                    new, when = Engagement.ENGAGED, max(stamp, back)
+                elif not attending and at >= held:
                     new, when = Engagement.NONE, max(stamp, held)
             if new is was:
                 return out

@@ -49,6 +49,8 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         extra={"live": True})] = 0.5
     # A glance in passing lasts under a second (the controller greets after as long).
     engage_dwell_s: Hold = 1.0
+    # A face missed for a moment (a blink of the detector, a nod) is not looking away.
+    look_away_s: Hold = 1.0
     # A look at a phone or a step back for a moment keeps the engagement.
     disengage_hold_s: Hold = 2.0
     # Out of view for a moment is the same visit; below the simulated ~10 s between visits.

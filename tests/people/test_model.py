@@ -7,6 +7,8 @@ from collections.abc import Iterable, Iterator
 
 import msgspec
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from buddybot.people.model import (
     Arrived,
@@ -24,10 +26,12 @@ from buddybot.people.model import (
 )
 from buddybot.people.settings import PeopleSettings
 from buddybot.people.zones import Zone
+from tests.properties import examples
 
 SETTINGS = PeopleSettings(
     intimate_limit_m=0.45, personal_limit_m=1.2, social_limit_m=3.6, zone_margin_m=0.1,
-    face_timeout_s=0.5, engage_dwell_s=1.0, disengage_hold_s=2.0, absence_hold_s=3.0)
+    face_timeout_s=0.5, engage_dwell_s=1.0, look_away_s=1.0, disengage_hold_s=2.0,
+    absence_hold_s=3.0)
 
 Row = tuple[float, int, str, str]
 """(seconds, person id, kind, what): a readable event."""
@@ -99,7 +103,7 @@ SCENARIOS: dict[str, tuple[list[Input | Iterable[Input]], list[Row]]] = {
     "a glance shorter than the dwell engages nobody": (
         [radar(0.0), faces(0.5, 1.0), tick(5.0)],
         [(0.0, 1, "arrived", "SOCIAL"), (0.5, 1, "engagement", "NONE->ENGAGING"),
-         (1.5, 1, "engagement", "ENGAGING->NONE")]),
+         (2.5, 1, "engagement", "ENGAGING->NONE")]),
     "a face only beyond the social zone engages nobody": (
         [radar(0.0, 2.0), faces(0.5, 4.0, 4.5), tick(6.0)],
         [(0.0, 1, "arrived", "SOCIAL"), (0.5, 1, "zone", "SOCIAL->PUBLIC")]),
@@ -112,26 +116,33 @@ SCENARIOS: dict[str, tuple[list[Input | Iterable[Input]], list[Row]]] = {
     "a jump crosses every limit by the margin": (
         [face(0.0, 0.3), face(0.1, 3.65), face(0.2, 3.75)],
         [(0.0, 1, "arrived", "INTIMATE"), (0.0, 1, "engagement", "NONE->ENGAGING"),
-         (0.1, 1, "zone", "INTIMATE->SOCIAL"), (0.2, 1, "zone", "SOCIAL->PUBLIC"),
-         (0.2, 1, "engagement", "ENGAGING->NONE")]),
+         (0.1, 1, "zone", "INTIMATE->SOCIAL"), (0.2, 1, "zone", "SOCIAL->PUBLIC")]),
     "a face missed for less than face_timeout_s changes nothing": (
         [radar(0.0), faces(0.5, 2.0), faces(2.45, 4.0), tick(4.2)],
         [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE]),
-    "a face lost briefly: disengaging, then engaged again": (
-        [radar(0.0), faces(0.5, 2.0), faces(3.5, 5.0), tick(5.2)],
+    "a face lost for less than look_away_s changes nothing": (
+        [radar(0.0), faces(0.5, 2.0), faces(3.4, 5.0), tick(5.2)],
+        [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE]),
+    "looking away: disengaging, then engaged again after the dwell": (
+        [radar(0.0), faces(0.5, 2.0), faces(4.0, 6.0), tick(6.2)],
         [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE,
-         (2.5, 1, "engagement", "ENGAGED->DISENGAGING"),
-         (3.5, 1, "engagement", "DISENGAGING->ENGAGED")]),
+         (3.5, 1, "engagement", "ENGAGED->DISENGAGING"),
+         (5.0, 1, "engagement", "DISENGAGING->ENGAGED")]),
+    "a glance back shorter than the dwell does not re-engage": (
+        [radar(0.0), faces(0.5, 2.0), faces(4.0, 4.5), tick(10.0)],
+        [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE,
+         (3.5, 1, "engagement", "ENGAGED->DISENGAGING"),
+         (5.5, 1, "engagement", "DISENGAGING->NONE")]),
     "a face lost for disengage_hold_s ends the engagement": (
         [radar(0.0), faces(0.5, 2.0), tick(10.0)],
         [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE,
-         (2.5, 1, "engagement", "ENGAGED->DISENGAGING"),
-         (4.5, 1, "engagement", "DISENGAGING->NONE")]),
+         (3.5, 1, "engagement", "ENGAGED->DISENGAGING"),
+         (5.5, 1, "engagement", "DISENGAGING->NONE")]),
     "stepping out of the social zone disengages": (
-        [radar(0.0), faces(0.5, 2.0, 2.0), faces(2.1, 5.0, 3.8)],
+        [radar(0.0), faces(0.5, 2.0, 2.0), faces(2.1, 5.0, 3.8), tick(6.0)],
         [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE, (2.1, 1, "zone", "SOCIAL->PUBLIC"),
-         (2.1, 1, "engagement", "ENGAGED->DISENGAGING"),
-         (4.1, 1, "engagement", "DISENGAGING->NONE")]),
+         (3.1, 1, "engagement", "ENGAGED->DISENGAGING"),
+         (5.1, 1, "engagement", "DISENGAGING->NONE")]),
     "radar lost briefly: the same person": (
         [radar(0.0), radar_out(2.0), radar(4.5), tick(10.0)],
         [(0.0, 1, "arrived", "SOCIAL")]),
@@ -139,7 +150,7 @@ SCENARIOS: dict[str, tuple[list[Input | Iterable[Input]], list[Row]]] = {
         [radar(0.0), radar_out(1.0), faces(2.0, 2.5), radar(5.5), radar_out(6.0),
          faces(8.0, 8.0), tick(8.4)],
         [(0.0, 1, "arrived", "SOCIAL"), (2.0, 1, "engagement", "NONE->ENGAGING"),
-         (3.0, 1, "engagement", "ENGAGING->NONE"), (8.0, 1, "engagement", "NONE->ENGAGING")]),
+         (4.0, 1, "engagement", "ENGAGING->NONE"), (8.0, 1, "engagement", "NONE->ENGAGING")]),
     "leave": (
         [radar(0.0), radar_out(2.0), tick(20.0)],
         [(0.0, 1, "arrived", "SOCIAL"), (5.0, 1, "engagement", "NONE->GONE"),
@@ -147,8 +158,8 @@ SCENARIOS: dict[str, tuple[list[Input | Iterable[Input]], list[Row]]] = {
     "an engaged person leaves: disengaging, none, gone": (
         [radar(0.0), faces(0.5, 2.0), radar_out(3.0), tick(20.0)],
         [(0.0, 1, "arrived", "SOCIAL"), *ENGAGE,
-         (2.5, 1, "engagement", "ENGAGED->DISENGAGING"),
-         (4.5, 1, "engagement", "DISENGAGING->NONE"),
+         (3.5, 1, "engagement", "ENGAGED->DISENGAGING"),
+         (5.5, 1, "engagement", "DISENGAGING->NONE"),
          (6.0, 1, "engagement", "NONE->GONE"), (6.0, 1, "left", "")]),
     "a return after absence_hold_s is a new person": (
         [radar(0.0), radar_out(1.0), radar(3.9), radar_out(4.5), tick(20.0), radar(30.0),
@@ -185,7 +196,7 @@ def test_absence_hold_s_is_the_limit_of_one_visit() -> None:
 def test_leaving_while_disengaging_goes_straight_to_gone() -> None:
     m = PeopleModel(msgspec.structs.replace(SETTINGS, disengage_hold_s=10.0))
     assert run([radar(0.0), faces(0.5, 2.0), radar_out(2.2), tick(5.4), tick(5.5)], m) == [
-        (0.0, 1, "arrived", "SOCIAL"), *ENGAGE, (2.5, 1, "engagement", "ENGAGED->DISENGAGING"),
+        (0.0, 1, "arrived", "SOCIAL"), *ENGAGE, (3.5, 1, "engagement", "ENGAGED->DISENGAGING"),
         (5.5, 1, "engagement", "DISENGAGING->GONE"), (5.5, 1, "left", "")]
 
 
@@ -247,3 +258,30 @@ def test_a_face_older_than_face_timeout_s_shows_nobody() -> None:
 def test_a_sample_outside_its_range_is_refused(bad: object) -> None:
     with pytest.raises(ValueError):
         bad()  # type: ignore[operator]
+
+
+@settings(max_examples=examples(100))
+@given(st.lists(st.floats(0.1, 1.4), min_size=60, max_size=200))
+def test_a_person_standing_still_while_the_face_is_missed_now_and_then_engages_once(
+        gaps: list[float]) -> None:
+    """Faces missed for up to 1.4 s (the face times out after 0.5 s, the look-away
+    hold is 1 s) over a minute or more: one engagement, never undone."""
+    inputs: list[Input] = [radar(0.0, 1.0)]
+    t = 0.5
+    for gap in gaps:
+        inputs.append(face(t, 1.0))
+        t += gap
+    rows = [r for r in run([*inputs, tick(t)]) if r[2] == "engagement"]
+    assert [what for _t, _id, _kind, what in rows] == ["NONE->ENGAGING", "ENGAGING->ENGAGED"]
+    assert rows[0][0] == 0.5
+
+
+def test_each_persons_stamps_never_go_back_even_when_a_hold_ends_after_the_input() -> None:
+    """A face stamped before the look-away deadline arrives after a tick past it."""
+    model = PeopleModel(SETTINGS)
+    events = [e for item in [radar(0.0), faces(0.5, 2.0), tick(3.6), face(3.55), face(3.7),
+                             tick(10.0)]
+              for one in ([item] if isinstance(item, Input) else item)
+              for e in model.step(one)]
+    stamps = [e.stamp_ns for e in events if e.person_id == 1]
+    assert stamps == sorted(stamps), [row(e) for e in events]
