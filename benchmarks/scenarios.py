@@ -10,7 +10,9 @@ scenario:
 - radar (LD2450 scenarios): each target's error against the nearest person;
 - timing: from a person coming within 2 m (truth) to the people service's
   `ARRIVED`, from their leaving to `LEFT`, and to the start of the farewell
-  (the median over the visits seen), and how many greetings the visits got.
+  (the median over the visits seen), how many greetings the visits got, and
+  how many engagement changes each person made (median; a calm visit makes
+  about five: ENGAGING, ENGAGED, DISENGAGING, NONE, GONE).
 
 `out_of_view` runs with a simulated LD2450 (it needs a bearing radar), the
 rest with the default LD2410.
@@ -40,7 +42,9 @@ from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port
 
 RANGE_M = 2.0
 """The presence radar's default range: within it a person is "there"."""
-DEFAULT = ("visit", "passer_by", "two_people", "out_of_view", "return", "dark", "crowd")
+DEFAULT = ("visit", "passer_by", "two_people", "out_of_view", "return", "dark", "crowd",
+           "ghost")
+MAX_S = 240.0
 LD2450_SCENARIOS = {"out_of_view"}
 
 
@@ -170,30 +174,37 @@ def row(name: str, rec: Record) -> list[str]:
     arrived = [e.stamp_ns for e in rec.events if e.kind == "ARRIVED"]
     left = [e.stamp_ns for e in rec.events if e.kind == "LEFT"]
     farewells = sound_starts(rec.states, "farewell")
+    changes: dict[int, int] = {}
+    for e in rec.events:
+        if e.kind == "ENGAGEMENT_CHANGED":
+            changes[e.person_id] = changes.get(e.person_id, 0) + 1
     return [name, str(len(rec.faces)), spread(dist, "%"), spread(bearing, "deg"),
             spread(radar, "m") if radar else "-",
             med([after(arrived, s, 10) for s in enter]),
             med([after(left, s) for s in leave]), med([after(farewells, s) for s in leave]),
-            f"{len(sound_starts(rec.states, 'greeting'))} / {len(enter)}"]
+            f"{len(sound_starts(rec.states, 'greeting'))} / {len(enter)}",
+            med([float(n) for n in changes.values()])]
 
 
 HEAD = ["scenario", "faces", "face distance err (median / p95)", "face bearing err",
         "radar target err", "in range -> ARRIVED s", "left -> LEFT s", "left -> farewell s",
-        "greetings / visits"]
+        "greetings / visits", "engagement changes per person"]
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scenario", action="append", choices=scenarios.builtin_names())
     parser.add_argument("--laps", type=float, default=1.5,
-                        help="how long each scenario runs, in its own lengths (max 150 s)")
+                        help="how long a looping scenario runs, in its own lengths (one that "
+                        "runs once: to its end and 15 s more; at most 240 s)")
     args = parser.parse_args(argv)
     chosen = args.scenario or list(DEFAULT)
     rows = []
     with tempfile.TemporaryDirectory(prefix="buddybot-scenarios-") as tmp:
         for name in chosen:
-            length = scenarios.load(name).spec.length_s
-            seconds = min(150.0, max(30.0, length * args.laps))
+            spec = scenarios.load(name).spec
+            seconds = min(MAX_S, max(30.0, spec.length_s * args.laps) if spec.loop
+                          else spec.length_s + 15.0)
             rec = run(name, seconds, Path(tmp))
             rows.append(row(name, rec))
             print(f"{name}: {seconds:.0f} s, {len(rec.truth)} truth samples", flush=True)
