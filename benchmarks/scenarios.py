@@ -128,11 +128,13 @@ def target_errors(rec: Record) -> list[float]:
 
 
 def crossings(rec: Record) -> tuple[list[int], list[int]]:
-    """Stamps where someone comes within range and where the last one leaves it (truth)."""
+    """Stamps where someone comes within range and where the last one leaves it (truth;
+    leaving needs 0.1 m past the range, so a person standing on it counts once)."""
     enter, leave = [], []
     inside = False
     for world in rec.truth:
-        now = any(p.in_radar and p.distance_m < RANGE_M for p in world.people)
+        limit = RANGE_M + (0.1 if inside else 0.0)
+        now = any(p.in_radar and p.distance_m < limit for p in world.people)
         if now and not inside:
             enter.append(world.stamp_ns)
         if inside and not now:
@@ -145,6 +147,13 @@ def after(stamps: list[int], since: int, limit_s: float = 30.0) -> float | None:
     """Seconds from `since` to the first stamp after it (within `limit_s`)."""
     later = [s for s in stamps if since <= s <= since + limit_s * 1e9]
     return (min(later) - since) / 1e9 if later else None
+
+
+def nearest(stamps: list[int], since: int, limit_s: float = 10.0) -> float | None:
+    """Seconds from `since` to the nearest stamp within `limit_s` either way (negative:
+    before it; the camera sees a visitor from 4 m, before they are within range)."""
+    near = [s for s in stamps if abs(s - since) <= limit_s * 1e9]
+    return (min(near, key=lambda s: abs(s - since)) - since) / 1e9 if near else None
 
 
 def sound_starts(states: list[m.ControllerState], sound: str) -> list[int]:
@@ -180,7 +189,7 @@ def row(name: str, rec: Record) -> list[str]:
             changes[e.person_id] = changes.get(e.person_id, 0) + 1
     return [name, str(len(rec.faces)), spread(dist, "%"), spread(bearing, "deg"),
             spread(radar, "m") if radar else "-",
-            med([after(arrived, s, 10) for s in enter]),
+            med([nearest(arrived, s) for s in enter]),
             med([after(left, s) for s in leave]), med([after(farewells, s) for s in leave]),
             f"{len(sound_starts(rec.states, 'greeting'))} / {len(enter)}",
             med([float(n) for n in changes.values()])]
