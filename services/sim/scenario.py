@@ -19,6 +19,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from buddybot.runtime import nesting
 from buddybot.sim import faces
 
 MAX_PEOPLE = 8
@@ -124,7 +125,10 @@ def load(name_or_path: str) -> Scenario:
 def parse(text: str, source: str = "<scenario>", name: str = "scenario") -> Scenario:
     """Decode and check TOML text (see `load`)."""
     try:
+        nesting.check_depth(text, toml=True)  # tomllib recurses on nesting
         raw = tomllib.loads(text)
+    except nesting.TooDeep as exc:
+        raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{source}: not valid TOML: {exc}") from None
     try:

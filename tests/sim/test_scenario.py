@@ -75,7 +75,8 @@ def test_too_many_people_are_refused() -> None:
         scenario.parse(text, "crowded.toml")
 
 
-@pytest.mark.parametrize("text", ["not toml = = 1", "", "length_s = 'soon'", "\x00"])
+@pytest.mark.parametrize("text", ["not toml = = 1", "", "length_s = 'soon'", "\x00",
+                                  "x = " + "[" * 5000 + "]" * 5000])
 def test_not_a_scenario_is_one_clear_error(text: str) -> None:
     with pytest.raises(ScenarioError, match=r"^bad\.toml"):
         scenario.parse(text, "bad.toml")
