@@ -5,11 +5,12 @@ controller` on loopback (the controller reads the person from
 `people/state`, so an arrival crosses radar/presence -> people -> controller
 -> eyes/expression), then a probe node publishes IN_RANGE on
 `radar/presence` and times it until `eyes/expression` EYE_AWAKE comes
-back; OUT_OF_RANGE and EYE_SLEEP in between reset the robot. The
-controller's holds are 0 (`absence_hold_s`, `sleepy_s`) so the cycle is
-quick; entering needs no hold, so the figure is the pipeline's own
-latency: the people service's step, the controller's decision thread and
-four router crossings. A loopback baseline (probe -> router -> probe) is
+back; OUT_OF_RANGE and EYE_SLEEP in between reset the robot. The holds
+are 0 (the people service's `absence_hold_s`, the controller's
+`farewell_delay_s` and `sleepy_s`) so the cycle is quick; entering
+needs no hold, so the figure is the pipeline's own latency: the people
+service's step, the controller's decision thread and four router
+crossings. A loopback baseline (probe -> router -> probe) is
 printed next to it.
 
     .venv/bin/python benchmarks/presence.py [--count N]
@@ -30,8 +31,10 @@ from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, retry_until
 
 CONFIG = """
-[controller]
+[people]
 absence_hold_s = 0.0
+[controller]
+farewell_delay_s = 0.0
 sleepy_s = 0.0
 recover_s = 0.2
 """

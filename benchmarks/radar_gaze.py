@@ -38,7 +38,7 @@ absence_hold_s = 0.1
 track_coast_s = 0.25
 radar_timeout_s = 0.5
 [controller]
-absence_hold_s = 0.0
+farewell_delay_s = 0.0
 sleepy_s = 0.0
 gaze_hold_s = 0.1
 recover_s = 0.2

@@ -4,7 +4,7 @@ Nothing here knows Zenoh or threads. Every method takes the current time
 `now` (seconds on any monotonic clock; tests pass a fake one) and returns
 the commands to carry out: `SetExpression`, `Look`, `PlaySound`,
 `CancelSound`. The service feeds it presence (from the people service:
-someone the radar sees, and their person id), faces, audio status,
+a person shown, held or gone, and their person id), faces, audio status,
 device-free flags and service replies, and calls `tick()` periodically so
 timers fire. `state(now)` reports what the machine believes and what
 holds back the next sound; it changes nothing.
@@ -169,10 +169,13 @@ class Behaviour:
         self._recover_until: float | None = now + settings.recover_s
         # inputs
         self._in_range: bool | None = None
+        self._held = False
+        """The people service still has the person (shown by a sensor or held)."""
         self._person_id: int | None = None
         self._person_name: str | None = None
         """The name the people service gives the visit's person now, if any."""
-        self._out_since: float | None = None
+        self._gone_since: float | None = None
+        """When the people service last stopped having anyone present."""
         self._device_free: bool | None = None
         self._yielded = False  # a lease holds the speaker: no sound of ours starts
         self._last_face: float | None = None
@@ -285,20 +288,25 @@ class Behaviour:
     # -- events --
 
     def presence(self, now: float, in_range: bool, person_id: int | None = None,
-                 name: str | None = None) -> list[Command]:
-        """Someone the radar sees is present (`in_range`), or nobody (latched, on
-        change). `person_id`: the people service's id of that person; it names the
-        visit's person until another one is in range (kept while they leave and
-        the farewell plays, so a tool sees whom the goodbye is for). `name`: who
-        that person is, if the people service knows (the greeting uses it)."""
+                 name: str | None = None, held: bool = False) -> list[Command]:
+        """A person a sensor shows now is present (`in_range`), or nobody is shown
+        (latched, on change); `held`: someone is still there though nobody is
+        shown (the people service holds them: LEAVING, no timer of ours). Gone
+        (neither): the departure comes
+        `farewell_delay_s` later. `person_id`: the people service's id of the
+        person; it names the visit's person until another one is in range (kept
+        while they leave and the farewell plays, so a tool sees whom the goodbye
+        is for). `name`: who that person is, if the people service knows (the
+        greeting uses it)."""
         if self._recover_until is not None and self._in_range_at_start is None:
             self._in_range_at_start = in_range  # the first one is the replayed latched value
             # The latched sound status was asked for with this one, and may come just
             # after it on a busy machine: listen `recover_s` more from here.
             self._recover_until = max(self._recover_until, now + self.s.recover_s)
-        if in_range != self._in_range:
-            self._out_since = None if in_range else now
-        self._in_range = in_range
+        held = in_range or held
+        if held != self._held or self._in_range is None:
+            self._gone_since = None if held else now
+        self._in_range, self._held = in_range, held
         if in_range and person_id is not None:
             self._person_id = person_id
             self._person_name = name
@@ -450,9 +458,9 @@ class Behaviour:
                 # Back before the goodbye could start: the visit goes on.
                 self._farewell_since = None
                 self._visit.farewell_done = False
-        elif self._present and not self._in_range:
-            since = self._out_since if self._out_since is not None else now
-            if now - since >= self.s.absence_hold_s:
+        elif self._present and not self._held:
+            since = self._gone_since if self._gone_since is not None else now
+            if now - since >= self.s.farewell_delay_s:
                 self._present = False
                 self._departed_at = now
                 if self._visit.greeted and not self._visit.farewell_done:

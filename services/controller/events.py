@@ -23,41 +23,38 @@ from dataclasses import dataclass
 from buddybot.contract import messages as m
 from buddybot.controller.transform import Gaze
 
-RADAR_SEES: frozenset[m.SeenBy] = frozenset({"RADAR", "BOTH"})
-"""The `seen_by` values of a person the radar shows now."""
-
 
 @dataclass(frozen=True, slots=True)
 class PeopleChanged:
-    """What the controller takes from `people/state` (latched): is someone the
-    radar sees present (`in_range`), the people service's id of that person and
-    their name, if it knows them."""
+    """What the controller takes from `people/state` (latched): whether a person a
+    sensor shows now is present (`in_range`), or only one the people service
+    holds though no sensor shows them (`held`), the people service's id of the
+    person followed and their name, if it knows them."""
 
     in_range: bool
     person_id: int | None = None
     name: str | None = None
+    held: bool = False
 
 
 def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChanged:
-    """The controller's presence from the people service's state.
+    """The controller's presence from the people service's persons, taken as they
+    are: the people service alone decides who is there and for how long a
+    person nobody sees any more is held (its `absence_hold_s`), so the controller
+    adds no hold of its own (docs/design.md 4.3).
 
-    `in_range` = a person present whom the radar sees now (`seen_by` RADAR or
-    BOTH): the level of `radar/presence`, one hop later, so the controller's
-    holds (`absence_hold_s`, the greeting dwell, drowsy) keep their meaning. A
-    person held by the people service after the radar lost them (`seen_by` NONE,
-    or CAMERA only) is not in range: the controller's shorter absence hold
-    decides the departure (docs/design.md 4.3). With several such
-    persons the nearest is the one (the lowest id on a tie), so the choice does
-    not depend on the list's order; `follow`, the person followed so far, stays
-    the one while the radar sees them (angle radars show several persons: the
-    eyes do not hop to whoever steps nearer).
+    The person followed is `follow` while present and shown by a sensor (angle
+    radars show several persons: the eyes do not hop to whoever steps nearer),
+    else the nearest shown (the lowest id on a tie), else, while everyone is
+    held, the one followed or the nearest held.
     """
-    seen = [p for p in msg.people if p.seen_by in RADAR_SEES]
-    if not seen:
+    if not msg.people:
         return PeopleChanged(False)
-    followed = next((p for p in seen if p.id == follow), None) if follow is not None else None
-    person = followed or min(seen, key=lambda p: (p.distance_m, p.id))
-    return PeopleChanged(True, person.id, person.name)
+    shown = [p for p in msg.people if p.seen_by != "NONE"]
+    pool = shown or msg.people
+    followed = next((p for p in pool if p.id == follow), None) if follow is not None else None
+    person = followed or min(pool, key=lambda p: (p.distance_m, p.id))
+    return PeopleChanged(bool(shown), person.id, person.name, held=not shown)
 
 
 @dataclass(frozen=True, slots=True)

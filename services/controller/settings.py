@@ -52,10 +52,10 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
 
     Timings, all in seconds (why each default):
 
-    * `absence_hold_s` 0.5: radar OUT_OF_RANGE must last this long before the
-      visitor counts as gone; a dropout never closes the eyes or triggers a
-      farewell (the radar presence service already holds absence 3 s, so
-      this stays short to keep the goodbye within earshot).
+    * `farewell_delay_s` 0.0: the departure (and the farewell, if greeted)
+      comes this long after the people service says the person left; how long
+      a person nobody sees is held is the people service's `absence_hold_s`
+      alone, so this adds no hold of its own by default.
     * `face_timeout_s` 0.5: a face older than this is "not seen" (a few
       frames at any usable camera rate).
     * `gaze_hold_s` 1.0: after the last face the eyes keep looking where it
@@ -101,8 +101,9 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
         ge=0.0, le=10000.0, extra=LIVE,
         description="cm: gaze distance sent when the eyes return to centre")] = 100.0
     look_around: Annotated[bool, msgspec.Meta(extra=LIVE)] = True
-    absence_hold_s: Annotated[float, _s("radar absence lasts this long before the visitor "
-                                        "is gone (a dropout is no farewell)")] = 0.5
+    farewell_delay_s: Annotated[float, _s("the departure (farewell if greeted) comes this "
+                                          "long after the people service says the "
+                                          "person left")] = 0.0
     face_timeout_s: Annotated[float, _s("a face older than this is not seen")] = 0.5
     gaze_hold_s: Annotated[float, _s("eyes keep looking where the last face was")] = 1.0
     look_around_after_s: Annotated[float, _s("in range with no face this long: search")] = 2.0

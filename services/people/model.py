@@ -218,6 +218,8 @@ class _Track:
     radar_xy: tuple[float, float] | None = None
     """Where their track was last (kept after it is dropped, to continue it)."""
     bearing_rad: float | None = None
+    radar_last_ns: int | None = None
+    """When their radar track last matched a report (None: no track yet)."""
     name: str | None = None
     name_track: int | None = None
     """The face track whose name `name` is (None: no name)."""
@@ -259,6 +261,8 @@ class PeopleModel:
         self._now: int | None = None
         """The newest time seen (stamps and ticks); it never goes back."""
         self._radar: RadarSeen | None = None
+        self._radar_lost_ns: int | None = None
+        """The stamp of the last OUT_OF_RANGE after IN_RANGE: the absence's first frame."""
         self._face: FaceSeen | None = None
         self._face_holder: int | None = None
         """The tracked person the face belongs to; None: the untracked person."""
@@ -280,7 +284,8 @@ class PeopleModel:
         """Arrivals refused because `MAX_PEOPLE` were present."""
 
     def state(self) -> tuple[Person, ...]:
-        """The persons present now (seen, or missed for less than `absence_hold_s`), by id."""
+        """The persons present now (seen, or last shown by a sensor less than
+        `absence_hold_s` ago), by id."""
         return tuple(self._persons[i].person() for i in sorted(self._persons))
 
     def step(self, event: Input) -> list[PersonEvent]:
@@ -305,6 +310,8 @@ class PeopleModel:
                 if self._radar is not None and event.stamp_ns < self._radar.stamp_ns:
                     return []
                 out = self._advance(event.stamp_ns)
+                if self._radar is not None and self._radar.in_range and not event.in_range:
+                    self._radar_lost_ns = event.stamp_ns
                 self._radar = event
                 return out + self._sensed(event.stamp_ns,
                                           event.distance_m if event.in_range else None, None)
@@ -552,6 +559,7 @@ class PeopleModel:
             if now is None:
                 continue
             person.radar_xy, person.bearing_rad = (now.x_m, now.y_m), now.bearing_rad
+            person.radar_last_ns = now.last_ns
             if Sensor.CAMERA in self._seen_by(person, at):
                 continue
             out += self._move(person, stamp, now.distance_m)
@@ -635,13 +643,29 @@ class PeopleModel:
         seen = self._seen_by(track, at)
         if seen != track.seen_by:
             if not seen:
-                track.lost_since_ns = stamp
+                track.lost_since_ns = self._last_shown(track, stamp)
             track.seen_by = seen
         if not seen:
             gone_at = track.lost_since_ns + _ns(self.s.absence_hold_s)
             if at >= gone_at:
                 return self._leave(track, max(stamp, gone_at))
         return self._engage(track, at, stamp)
+
+    def _last_shown(self, track: _Track, stamp: int) -> int:
+        """When the sensors that showed `track` until now last showed them (never
+        after `stamp`): the absence hold counts from there, so a sensor's own
+        delay in saying "gone" (radar presence's hold, whose OUT_OF_RANGE carries
+        the absence's first frame; the face timeout; a track's coast) overlaps
+        the hold instead of adding to it."""
+        shown: list[int] = []
+        if self._face is not None and self._face_owner() is track:
+            shown.append(self._face.stamp_ns)
+        if track.track_id is not None:
+            if track.radar_last_ns is not None:
+                shown.append(track.radar_last_ns)
+        elif self._radar_lost_ns is not None and self._radar_lost_ns >= track.arrived_ns:
+            shown.append(self._radar_lost_ns)
+        return min(stamp, max(shown, default=stamp))
 
     def _engage(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
         """The engagement machine (docs/people.md): each way has a hold, so a face

@@ -53,8 +53,12 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     look_away_s: Hold = 1.0
     # A look at a phone or a step back for a moment keeps the engagement.
     disengage_hold_s: Hold = 2.0
-    # Out of view for a moment is the same visit; below the simulated ~10 s between visits.
-    absence_hold_s: Hold = 5.0
+    # The one time from leaving to LEFT (the controller's farewell follows it), counted
+    # from the sensors' last sighting; as long as radar presence's own absence hold,
+    # which it overlaps, so a visitor is still within earshot of the goodbye.
+    absence_hold_s: Annotated[Hold, msgspec.Meta(
+        description="seconds: seen by no sensor this long after their last sighting, a "
+        "person has left (the one time from leaving to LEFT)")] = 3.0
     # The identity service names a face track in about half a second; a face back as a
     # new track that has not confirmed the name by then may carry a forgotten one.
     name_confirm_s: Annotated[float, msgspec.Meta(

@@ -11,7 +11,9 @@ publish on change. What a real LD2410 adds, and the answer: hysteresis
 excluded and reported, target states 4..6 read as "no target", a bounded
 sensor table that a flood of invented ids cannot churn, LD2450 reports
 read as the same per-sensor readings (`read_targets`), and verdicts
-stamped by the frame that caused them, never the largest stamp seen.
+stamped by the frame that caused them, never the largest stamp seen
+(OUT_OF_RANGE: the first frame of the absence, which the hold only
+confirms, so a consumer's own hold counts from the same moment).
 
 Rationale: docs/radar.md, '`buddybot run radar-presence`', 'Angle radars
 (LD2450) and mixing models' and 'What the network cannot do to it'.
@@ -167,6 +169,8 @@ class PresenceTracker:
     target: PresenceTarget = PresenceTarget.MOVING
     _sensors: BoundedDict[str, _Sensor] = field(init=False)
     _absent_since: float | None = None
+    _absent_stamp: int = 0
+    """The stamp of the first frame of the absence (OUT_OF_RANGE's stamp)."""
     _pending_target: PresenceTarget | None = None
     _pending_since: float = 0.0
     _last_stamp: int = 0
@@ -289,13 +293,13 @@ class PresenceTracker:
         if self.presence == PresenceState.OUT_OF_RANGE:
             return None
         if self._absent_since is None:
-            self._absent_since = now_s
+            self._absent_since, self._absent_stamp = now_s, stamp_ns
         if now_s - self._absent_since >= rules.absence_hold_s:
             self.presence = PresenceState.OUT_OF_RANGE
             self._absent_since = None
             if nearest is None:
                 self._distance_m = 0.0
-            return self._verdict(stamp_ns)
+            return self._verdict(self._absent_stamp)
         return None
 
     def _track_target(self, kind: PresenceTarget, now_s: float, stamp: int) -> Verdict | None:

@@ -22,7 +22,7 @@ from buddybot.tools.testing import visitor
 
 FAST_CONFIG = """
 [controller]
-absence_hold_s = 0.8
+farewell_delay_s = 0.8
 face_timeout_s = 0.5
 gaze_hold_s = 0.6
 look_around_after_s = 1.5

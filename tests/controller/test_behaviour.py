@@ -176,7 +176,7 @@ def test_a_name_forgotten_before_the_greeting_is_not_said() -> None:
 
 
 def test_passer_by_is_not_greeted() -> None:
-    r = Rig(greet_dwell_s=1.5, absence_hold_s=0.5)
+    r = Rig(greet_dwell_s=1.5, farewell_delay_s=0.5)
     r.presence(True)
     r.faces(0.8)
     r.presence(False)
@@ -206,7 +206,7 @@ def test_grin_while_greeting_then_awake() -> None:
 
 
 def test_leave_after_greeting_plays_farewell_then_sleepy_then_sleep() -> None:
-    r = Rig(greet_dwell_s=0.5, absence_hold_s=1.0, sleepy_s=2.0)
+    r = Rig(greet_dwell_s=0.5, farewell_delay_s=1.0, sleepy_s=2.0)
     r.presence(True)
     r.faces(1.0)
     gid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
@@ -237,7 +237,7 @@ def test_no_farewell_without_greeting() -> None:
 
 
 def test_radar_flicker_is_absorbed() -> None:
-    r = Rig(greet_dwell_s=0.5, absence_hold_s=1.0)
+    r = Rig(greet_dwell_s=0.5, farewell_delay_s=1.0)
     r.presence(True)
     r.faces(1.0)
     gid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
@@ -253,7 +253,7 @@ def test_radar_flicker_is_absorbed() -> None:
 
 
 def test_quick_walk_away_cancels_greeting_then_farewell() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.5)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.5)
     r.presence(True)
     cmd = plays(r.face())[0]
     gid = r.accept(cmd)
@@ -272,7 +272,7 @@ def test_quick_walk_away_cancels_greeting_then_farewell() -> None:
 
 
 def test_cancel_waits_for_goal_id_when_reply_is_late() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.0)
     r.presence(True)
     cmd = plays(r.face())[0]
     r.presence(False)
@@ -291,7 +291,7 @@ def test_status_before_reply_is_not_lost() -> None:
 
 
 def test_refused_greeting_means_no_farewell_and_no_retry_within_cooldown() -> None:
-    r = Rig(greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r = Rig(greet_dwell_s=0.0, regreet_cooldown_s=10.0, farewell_delay_s=0.0)
     r.presence(True)
     cmd = plays(r.face())[0]
     r._rec(r.b.sound_reply(r.t, cmd.request, False))
@@ -317,7 +317,7 @@ def test_busy_device_delays_greeting() -> None:
 @pytest.mark.parametrize(("blocked_s", "played"), [(1.0, True), (3.0, False)])
 def test_a_farewell_waits_for_the_speaker_then_plays_or_is_dropped(
         blocker: str, blocked_s: float, played: bool) -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, farewell_max_delay_s=2.0)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.0, farewell_max_delay_s=2.0)
     r.presence(True)
     gid = r.accept(plays(r.face())[0])
     r.status(gid, "SUCCEEDED")
@@ -354,7 +354,7 @@ def greeted_and_farewelled(r: Rig) -> None:
 
 
 def test_back_within_cooldown_is_same_visit() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=10.0)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.0, regreet_cooldown_s=10.0)
     greeted_and_farewelled(r)
     r.at(3.0)
     r.presence(True)
@@ -365,7 +365,7 @@ def test_back_within_cooldown_is_same_visit() -> None:
 
 
 def test_back_after_cooldown_is_a_new_visit() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0, regreet_cooldown_s=5.0)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.0, regreet_cooldown_s=5.0)
     greeted_and_farewelled(r)
     r.at(6.0)
     r.presence(True)
@@ -374,7 +374,7 @@ def test_back_after_cooldown_is_a_new_visit() -> None:
 
 
 def test_coming_back_before_the_farewell_started_cancels_it() -> None:
-    r = Rig(greet_dwell_s=0.0, absence_hold_s=0.0)
+    r = Rig(greet_dwell_s=0.0, farewell_delay_s=0.0)
     r.presence(True)
     gid = r.accept(plays(r.face())[0])
     r.status(gid, "PLAYING")
@@ -441,7 +441,7 @@ def test_lost_sound_is_forgotten_after_timeout() -> None:
 
 
 def test_seed_mode_all_timings_zero() -> None:
-    zero = {k: 0.0 for k in ("absence_hold_s", "face_timeout_s", "gaze_hold_s",
+    zero = {k: 0.0 for k in ("farewell_delay_s", "face_timeout_s", "gaze_hold_s",
                              "look_around_after_s", "greet_dwell_s", "regreet_cooldown_s",
                              "sleepy_s")}
     r = Rig(look_around=False, **zero)
@@ -471,7 +471,7 @@ def test_recovery_waits_then_publishes_the_current_state_once() -> None:
 
 
 def test_recovery_recent_sound_means_already_greeted() -> None:
-    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, farewell_delay_s=0.0)
     r.presence(True)
     r.status("old", "SUCCEEDED", age=2.0)
     r.faces(3.0)
@@ -484,7 +484,7 @@ def test_recovery_recent_sound_means_already_greeted() -> None:
 def test_recovery_listens_on_after_a_late_latched_presence() -> None:
     """On a busy machine the latched inputs can come near the end of the recovery:
     the sound status that follows the presence still counts, so no second greeting."""
-    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, farewell_delay_s=0.0)
     r.at(0.45)
     r.presence(True)
     r.at(0.3)  # past the recovery counted from the start, not from the presence
@@ -500,7 +500,7 @@ def test_recovery_arrival_after_an_empty_room_is_owed_no_farewell() -> None:
     the visitor back during the recovery: no greeting within the cooldown, and no
     second goodbye (found by the property test once its farewell invariant held
     across restarts)."""
-    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, absence_hold_s=0.0)
+    r = Rig(recover_s=0.5, greet_dwell_s=0.0, regreet_cooldown_s=10.0, farewell_delay_s=0.0)
     r.presence(False)
     r.status("old", "SUCCEEDED", age=2.0)
     r.at(0.1)
@@ -531,7 +531,7 @@ def test_recovery_playing_sound_blocks_until_it_ends() -> None:
     assert r.sounds() == []  # treated as this visit's greeting
 
 
-@pytest.mark.parametrize("field", ["absence_hold_s", "greet_dwell_s", "sleepy_s"])
+@pytest.mark.parametrize("field", ["farewell_delay_s", "greet_dwell_s", "sleepy_s"])
 def test_negative_timings_are_refused(field: str) -> None:
     with pytest.raises(msgspec.ValidationError):
         msgspec.convert({field: -1.0}, ControllerSettings)
@@ -566,7 +566,7 @@ def greet(r: Rig) -> str:
 def test_the_person_of_the_visit_is_named_until_the_visit_is_over() -> None:
     """The person id is the one the radar showed last: through the greeting, while
     they leave and while the farewell plays; nobody's once the robot sleeps."""
-    r = Rig(greet_dwell_s=0.5, absence_hold_s=0.5, sleepy_s=1.0)
+    r = Rig(greet_dwell_s=0.5, farewell_delay_s=0.5, sleepy_s=1.0)
     assert state(r).person_id is None
     r.presence(True, person_id=3)
     assert (state(r).phase, state(r).person_id) == (Phase.NOTICED, 3)
@@ -649,7 +649,7 @@ def test_greeted_waits_until_the_farewell() -> None:
 
 
 def test_an_owed_farewell_waits_for_our_greeting_then_the_device() -> None:
-    r = Rig(greet_dwell_s=0.5, absence_hold_s=0.5, greeting_sound="hello")
+    r = Rig(greet_dwell_s=0.5, farewell_delay_s=0.5, greeting_sound="hello")
     gid = greet(r)  # still playing when the visitor leaves
     r.presence(False)
     r.at(0.6)
@@ -670,7 +670,7 @@ def test_an_owed_farewell_waits_for_our_greeting_then_the_device() -> None:
 
 
 def test_a_new_visitor_waits_while_the_last_farewell_plays() -> None:
-    r = Rig(greet_dwell_s=0.5, absence_hold_s=0.5, regreet_cooldown_s=0.0)
+    r = Rig(greet_dwell_s=0.5, farewell_delay_s=0.5, regreet_cooldown_s=0.0)
     gid = greet(r)
     r.status(gid, "SUCCEEDED")
     r.presence(False)
@@ -709,7 +709,7 @@ def test_a_sound_just_before_a_restart_holds_the_greeting_for_the_cooldown() -> 
 
 
 def test_a_leaving_visitor_is_not_waited_for() -> None:
-    r = Rig(greet_dwell_s=5.0, absence_hold_s=1.0)
+    r = Rig(greet_dwell_s=5.0, farewell_delay_s=1.0)
     r.presence(True)
     r.faces(0.5)
     r.presence(False)
@@ -722,7 +722,7 @@ def test_a_leaving_visitor_is_not_waited_for() -> None:
 
 
 def test_visits_count_and_a_quick_return_continues_the_visit() -> None:
-    r = Rig(absence_hold_s=0.5, regreet_cooldown_s=3.0)
+    r = Rig(farewell_delay_s=0.5, regreet_cooldown_s=3.0)
     r.presence(True)
     assert state(r).visit == 1
     r.presence(False)

@@ -38,7 +38,7 @@ from tests.properties import examples
 COOLDOWN = 4.0
 SETTINGS = msgspec.convert(
     {
-        "absence_hold_s": 0.5, "face_timeout_s": 0.3, "gaze_hold_s": 0.5,
+        "farewell_delay_s": 0.5, "face_timeout_s": 0.3, "gaze_hold_s": 0.5,
         "look_around_after_s": 1.0, "greet_dwell_s": 0.5, "regreet_cooldown_s": COOLDOWN,
         "sleepy_s": 1.0, "farewell_max_delay_s": 2.0, "sound_timeout_s": 6.0, "recover_s": 0.3,
     },

@@ -31,7 +31,7 @@ A = m.ExpressionAction
 
 @pytest.fixture
 def rig() -> tuple[Controller, FakeNode, Clock]:
-    settings = msgspec.convert({"recover_s": 0.0, "greet_dwell_s": 0.0, "absence_hold_s": 0.0,
+    settings = msgspec.convert({"recover_s": 0.0, "greet_dwell_s": 0.0, "farewell_delay_s": 0.0,
                                 "sleepy_s": 0.0}, ControllerSettings)
     node, clock = FakeNode(), Clock()
     return Controller(node, settings, clock=clock), node, clock  # type: ignore[arg-type]
@@ -126,10 +126,13 @@ def people(*persons: m.Person) -> m.PeopleState:
     return m.PeopleState(stamp_ns=5, people=list(persons))
 
 
-@pytest.mark.parametrize(("seen_by", "in_range"), [
-    ("RADAR", True), ("BOTH", True), ("CAMERA", False), ("NONE", False)])
-def test_in_range_is_a_person_the_radar_sees(seen_by: m.SeenBy, in_range: bool) -> None:
-    expected = PeopleChanged(True, 7) if in_range else PeopleChanged(False)
+@pytest.mark.parametrize(("seen_by", "expected"), [
+    ("RADAR", PeopleChanged(True, 7)), ("BOTH", PeopleChanged(True, 7)),
+    ("CAMERA", PeopleChanged(True, 7)), ("NONE", PeopleChanged(False, 7, held=True))])
+def test_a_person_present_is_in_range_while_shown_and_held_while_missed(
+        seen_by: m.SeenBy, expected: PeopleChanged) -> None:
+    """The people service's persons as they are: shown by either sensor is in range,
+    missed (`seen_by` NONE, held by the people service) is held, not gone."""
     assert people_changed(people(person(7, seen_by))) == expected
 
 
@@ -137,14 +140,18 @@ def test_nobody_present_is_out_of_range() -> None:
     assert people_changed(people()) == PeopleChanged(False, None)
 
 
-def test_the_nearest_person_the_radar_sees_is_the_one_whatever_the_order() -> None:
-    near, far = person(3, "RADAR", 0.8), person(2, "BOTH", 2.5)
-    camera_only = person(9, "CAMERA", 0.3)  # nearer, but the radar does not see them
-    for order in ((near, far, camera_only), (camera_only, far, near)):
+def test_the_nearest_person_shown_is_the_one_whatever_the_order() -> None:
+    near, far = person(3, "CAMERA", 0.8), person(2, "BOTH", 2.5)
+    missed = person(9, "NONE", 0.3)  # nearer, but held: no sensor shows them now
+    for order in ((near, far, missed), (missed, far, near)):
         assert people_changed(people(*order)) == PeopleChanged(True, 3)
     tie = (person(5, "RADAR", 1.0), person(4, "RADAR", 1.0))
     assert people_changed(people(*tie)) == people_changed(people(*reversed(tie))) == \
         PeopleChanged(True, 4)
+    # Everyone held: the one followed, else the nearest.
+    held = (person(5, "NONE", 2.0), person(6, "NONE", 1.0))
+    assert people_changed(people(*held)) == PeopleChanged(False, 6, held=True)
+    assert people_changed(people(*held), follow=5) == PeopleChanged(False, 5, held=True)
 
 
 def test_the_followed_persons_name_comes_with_them_and_its_change_is_news() -> None:
@@ -158,12 +165,13 @@ def test_only_a_change_of_who_is_in_range_reaches_the_inbox(
     rig: tuple[Controller, FakeNode, Clock],
 ) -> None:
     """people/state changes with every face frame (distance, direction): the same
-    presence again posts nothing; another person, or the radar losing them, does."""
+    presence again posts nothing; another person, the sensors losing them (held),
+    or their leaving does."""
     controller, _node, _clock = rig
     for distance in (1.0, 1.1, 1.2):
         controller._on_people(visitor(True, person_id=1, distance_m=distance), "k")
     controller._on_people(visitor(True, person_id=2), "k")
-    controller._on_people(visitor(False, person_id=2), "k")
-    controller._on_people(people(), "k")  # then gone: still out of range
+    controller._on_people(visitor(False, person_id=2, held=True), "k")
+    controller._on_people(people(), "k")  # then gone
     assert drain(controller) == [PeopleChanged(True, 1), PeopleChanged(True, 2),
-                                 PeopleChanged(False)]
+                                 PeopleChanged(False, 2, held=True), PeopleChanged(False)]

@@ -225,7 +225,7 @@ def test_approach_greet_follow_leave_farewell() -> None:
 
 
 def test_passer_by_is_not_greeted() -> None:
-    s = Scene(greet_dwell_s=3.0, absence_hold_s=0.3, sleepy_s=0.3)
+    s = Scene(greet_dwell_s=3.0, farewell_delay_s=0.3, sleepy_s=0.3)
     s.presence(True)
     s.watch(True)
     s.run(1.0)
@@ -238,7 +238,7 @@ def test_passer_by_is_not_greeted() -> None:
 
 
 def test_radar_flicker_neither_flaps_the_eyes_nor_regreets() -> None:
-    s = Scene(durations={"greeting": 0.3}, greet_dwell_s=0.3, absence_hold_s=2.0,
+    s = Scene(durations={"greeting": 0.3}, greet_dwell_s=0.3, farewell_delay_s=2.0,
               sleepy_s=0.3)
     s.presence(True)
     s.watch(True)

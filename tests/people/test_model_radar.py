@@ -54,10 +54,11 @@ def test_crossing_people_keep_their_ids_then_leave() -> None:
     model = PeopleModel(SETTINGS)
     rows = run([walk(0.0, 4.0, [(2.0, -2.0, 0.0, 1.0), (2.6, 2.0, 0.0, -1.0)]),
                 targets(4.1), tick(10.0)], model)
-    # Coast 1 s after the last report with them (4.0), then the 3 s absence hold.
+    # The 3 s absence hold from the last report with them (4.0): the track's 1 s
+    # coast overlaps it.
     assert rows == [(0.0, 1, "arrived", "SOCIAL"), (0.0, 2, "arrived", "SOCIAL"),
-                    (8.0, 1, "engagement", "NONE->GONE"), (8.0, 1, "left", ""),
-                    (8.0, 2, "engagement", "NONE->GONE"), (8.0, 2, "left", "")]
+                    (7.0, 1, "engagement", "NONE->GONE"), (7.0, 1, "left", ""),
+                    (7.0, 2, "engagement", "NONE->GONE"), (7.0, 2, "left", "")]
 
 
 def test_crossing_people_end_on_the_other_side() -> None:

@@ -54,7 +54,7 @@ def test_required_live_fields_are_marked() -> None:
     live = {
         RadarPresenceSettings: ["range_m", "exit_margin_m", "absence_hold_s", "target_hold_s",
                                 "moving_speed_mps", "zones"],
-        ControllerSettings: ["greet_dwell_s", "regreet_cooldown_s", "absence_hold_s"],
+        ControllerSettings: ["greet_dwell_s", "regreet_cooldown_s", "farewell_delay_s"],
         EyesSettings: ["pupil_curve", "lids", "unknown_distance_percent"],
         AudioPlayerSettings: ["volume"],
         FaceDetectorSettings: ["min_score", "smoothing", "full_every_s", "face_width_m"],

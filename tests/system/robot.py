@@ -8,6 +8,7 @@ its page without a browser.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -66,13 +67,15 @@ def write_config(folder: Path) -> Path:
 
 
 def start_robot(spawn: Spawn, tmp_path: Path, *, robot: str = "buddy", fps: int = 15,
-                renderer: bool = False,
+                renderer: bool = False, camera: bool = True,
                 services: dict[str, tuple[str, ...]] | None = None) -> dict[str, Process]:
-    """Start every service but the radar bridge (see `start_radar`)."""
+    """Start every service but the radar bridge (see `start_radar`); the camera
+    plays a face sequence unless `camera` is false (see `start_world`)."""
     chosen = dict(BASE_SERVICES if services is None else services)
     config = write_config(tmp_path / "config")
-    pattern = write_face_sequence(tmp_path / "frames")
-    chosen["camera"] = ("--source", pattern, "--fps", str(fps), "--loop")
+    if camera:
+        pattern = write_face_sequence(tmp_path / "frames")
+        chosen["camera"] = ("--source", pattern, "--fps", str(fps), "--loop")
     if renderer:
         chosen["eye-renderer"] = ("--no-browser", "--port", str(free_port()))
     return {name: spawn(name, "--config", str(config), *args, robot=robot)
@@ -92,6 +95,18 @@ def scenario_arg(name: str) -> str:
     """A built-in scenario name, or the path of the tests' scenario of that name."""
     own = SCENARIOS / f"{name}.toml"
     return str(own) if own.exists() else name
+
+
+def start_world(spawn: Spawn, scenario: str, config: Path, robot: str = "buddy",
+                fps: int = 15, lead_s: float = 3.0) -> dict[str, Process]:
+    """The radar bridge's simulated LD2410 and the camera filming one simulated
+    world, from one wall-clock start `lead_s` ahead (as `up --sim` starts them),
+    so the person the radar sees is the face the camera shows."""
+    start = f"{time.time() + lead_s:.3f}"
+    world = ("--sim", "--scenario", scenario_arg(scenario), "--sim-start", start)
+    return {"radar-bridge": spawn("radar-bridge", *world, robot=robot),
+            "camera": spawn("camera", "--config", str(config), *world, "--fps", str(fps),
+                            robot=robot)}
 
 
 def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",

@@ -1,7 +1,7 @@
 """Regression from a recording: a simulated visit, recorded, replayed into fresh services.
 
-Live run: the robot (every service, the camera playing a face sequence, the
-simulated LD2410 playing one visitor) on router A, recorded with
+Live run: the robot (every service, the camera and the simulated LD2410
+seeing one simulated visitor) on router A, recorded with
 `buddybot bag record --images`. Replay: the recording's sensor keys only
 (radar frames and camera images) played on router B into fresh
 radar-presence, people, face-detector, controller, eyes, audio and audio-player
@@ -31,7 +31,7 @@ from buddybot.tools.testing import (
     stop_and_report,
 )
 
-from .robot import BASE_SERVICES, Spawn, start_radar, start_robot, wait_nodes, write_config
+from .robot import BASE_SERVICES, Spawn, start_robot, start_world, wait_nodes, write_config
 from .test_visit import sounds_played
 
 pytestmark = pytest.mark.integration  # two routers and the robot's processes
@@ -63,8 +63,8 @@ def test_a_recorded_visit_replays_into_the_same_decisions(
     # --- live: the whole simulated robot, recorded -------------------------------
     live_expression = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
     live_status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)
-    live = start_robot(spawn, tmp_path / "live")
-    wait_nodes(probe, [*BASE_SERVICES, "camera"])
+    live = start_robot(spawn, tmp_path / "live", camera=False)
+    wait_nodes(probe, list(BASE_SERVICES))
     recorder = Process(buddybot_argv("bag", "record", "-o", str(recording), "--images",
                                      "--connect", endpoint), "bag-record", log_dir)
     try:
@@ -74,7 +74,7 @@ def test_a_recorded_visit_replays_into_the_same_decisions(
                                                keys.CAMERA_IMAGE.key(camera="unseen")),
                                  keys.CAMERA_IMAGE.encoding) as unseen:
             retry_until(unseen.has_subscribers, 30, 0.1, "the recorder subscribed")
-        live["radar-bridge"] = start_radar(spawn, "walk_in")
+        live |= start_world(spawn, "walk_in", tmp_path / "live" / "config" / "robot.toml")
         wait_visit_done(live_expression, live_status, "live")
         recorder.send_signal(signal.SIGTERM)
         assert recorder.proc.wait(60) == 0, recorder.output()

@@ -9,9 +9,13 @@ what really happened, so each check is against the truth, not a script.
 
 from __future__ import annotations
 
+import bisect
+import threading
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -58,11 +62,105 @@ def sounds(states: list[m.ControllerState]) -> list[str]:
     return out
 
 
+class Arrivals:
+    """Every message of one topic with when it arrived (monotonic s): what was in
+    effect at an instant, whatever the publishers' stamps say."""
+
+    def __init__(self, node: Node, topic: keys.Topic) -> None:
+        self.at: list[float] = []
+        self.messages: list[Any] = []
+        self._lock = threading.Lock()
+        node.subscribe(topic, self._on)
+
+    def _on(self, msg: Any, _key: str) -> None:
+        with self._lock:
+            self.at.append(time.monotonic())
+            self.messages.append(msg)
+
+    def in_effect(self, t: float) -> Any | None:
+        with self._lock:
+            i = bisect.bisect_right(self.at, t)
+            return self.messages[i - 1] if i else None
+
+
+NEAR: frozenset[m.Zone] = frozenset({"INTIMATE", "PERSONAL", "SOCIAL"})
+ASLEEP: frozenset[m.EngagementPhase] = frozenset({"idle", "drowsy"})
+
+
+def one_truth_problems(people: Arrivals, state: Arrivals, events: list[m.PersonEvent],
+                       truth: list[m.SimWorld], since_ns: int, until_ns: int,
+                       hop_s: float = 1.0) -> list[str]:
+    """What breaks "one truth about who is there" between two stamps:
+    - the robot asleep (controller phase idle or drowsy) `hop_s` after `people/state`
+      showed a person in the social zone or nearer who was still there then;
+    - more than one engagement change per 10 s while everyone in the world stands;
+    - a greeting not within a person's visit in `people/events`, a farewell not
+      within `hop_s` of a person's LEFT."""
+    problems: list[str] = []
+    for at, msg in zip(list(people.at), list(people.messages), strict=True):
+        if not since_ns <= msg.stamp_ns <= until_ns:
+            continue
+        near = {p.id for p in msg.people if p.zone in NEAR}
+        later = people.in_effect(at + hop_s)
+        still = near & {p.id for p in later.people} if later is not None else set()
+        now = state.in_effect(at + hop_s)
+        if still and now is not None and now.phase in ASLEEP:
+            problems.append(f"asleep ({now.phase}) with persons {sorted(still)} present")
+    standing = [w.stamp_ns for w in truth if w.people and since_ns <= w.stamp_ns <= until_ns
+                and all(abs(p.vx_mps) + abs(p.vy_mps) < 1e-3 for p in w.people)]
+    if standing:
+        start, end = standing[0] + 2 * 10**9, standing[-1]  # settled: 2 s after stopping
+        for pid in sorted({e.person_id for e in events}):
+            changes = [e for e in events if e.person_id == pid and start <= e.stamp_ns <= end
+                       and e.kind == "ENGAGEMENT_CHANGED" and e.engagement != "GONE"]
+            if len(changes) > max(1, (end - start) // 10**10):
+                problems.append(f"person {pid}: {len(changes)} engagement changes in "
+                                f"{(end - start) / 1e9:.0f} s of standing: "
+                                f"{[e.engagement for e in changes]}")
+    # A person whose ARRIVED came before the subscription was there from the start.
+    visits = {e.person_id: (0, 2**63) for e in events}
+    for e in events:
+        start, end = visits[e.person_id]
+        if e.kind == "ARRIVED":
+            visits[e.person_id] = (e.stamp_ns, end)
+        elif e.kind == "LEFT":
+            visits[e.person_id] = (start, e.stamp_ns)
+    left = [end for _start, end in visits.values() if end < 2**63]
+    finals = [s for s in state.messages if since_ns <= s.stamp_ns <= until_ns]
+    for t in sorted({s.last_greeting_ns for s in finals if s.last_greeting_ns}):
+        if t >= since_ns and not any(a <= t <= b for a, b in visits.values()):
+            problems.append(f"greeting at {t} outside every visit {visits}")
+    for t in sorted({s.last_farewell_ns for s in finals if s.last_farewell_ns}):
+        if t < since_ns:
+            continue
+        if not any(gone <= t <= gone + hop_s * 1e9 for gone in left):
+            problems.append(f"farewell at {t} not just after a LEFT {left}")
+    return problems
+
+
+class Watch:
+    """The world's truth, the people service's persons and events and the
+    controller's state, from the start of a test."""
+
+    def __init__(self, probe: Node) -> None:
+        self.truth = Collector[m.SimWorld](probe, keys.SIM_WORLD)
+        self.state = Collector[m.ControllerState](probe, keys.CONTROLLER_STATE)
+        self.people = Arrivals(probe, keys.PEOPLE_STATE)
+        self.states = Arrivals(probe, keys.CONTROLLER_STATE)
+        self.events = Collector[m.PersonEvent](probe, keys.PEOPLE_EVENTS)
+
+    def one_truth_problems(self, since_ns: int) -> list[str]:
+        """`one_truth_problems` from `since_ns` to the controller's last state."""
+        return one_truth_problems(self.people, self.states, self.events.messages,
+                                  self.truth.messages, since_ns,
+                                  self.state.messages[-1].stamp_ns)
+
+
 def test_a_visit_is_greeted_once_followed_said_goodbye_to_and_the_eyes_sleep(
         tmp_path: Path) -> None:
     with robot_on(tmp_path, "visit") as probe:
-        truth = Collector[m.SimWorld](probe, keys.SIM_WORLD)
-        state = Collector[m.ControllerState](probe, keys.CONTROLLER_STATE)
+        watch = Watch(probe)
+        truth, state = watch.truth, watch.state
         gaze = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
         # From the next time nobody is there to the end of the visit after it.
         empty = truth.wait_for(lambda w: not w.people, 120, "nobody in the world")
@@ -79,6 +177,29 @@ def test_a_visit_is_greeted_once_followed_said_goodbye_to_and_the_eyes_sleep(
         # The gaze was on the visitor: to the robot's left, where they stood.
         looked = [d.yaw for d in gaze.messages if arrived.stamp_ns < d.stamp_ns < gone.stamp_ns]
         assert looked and sum(y > 0 for y in looked) > 0.8 * len(looked), looked[-20:]
+        # One truth: the controller follows the people service's persons, holds nothing.
+        assert watch.one_truth_problems(empty.stamp_ns) == []
+
+
+def test_two_people_one_truth_and_one_goodbye_each_visit(tmp_path: Path) -> None:
+    """Two visitors overlapping: the robot stays awake while either is there, its
+    engagement does not flap while they stand, and each sound belongs to a visit
+    the people service saw."""
+    with robot_on(tmp_path, "two_people") as probe:
+        watch = Watch(probe)
+        truth, state = watch.truth, watch.state
+        empty = truth.wait_for(lambda w: not w.people, 120, "nobody in the world")
+        lap = empty.lap + (1 if empty.t_s > 30 else 0)
+        truth.wait_for(lambda w: w.lap == lap and len(w.people) == 2, 120, "both there")
+        truth.wait_for(lambda w: w.lap == lap and w.t_s > 40 and not w.people, 120,
+                       "both gone")
+        retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP,
+                    60, 0.2, "asleep")
+        # The loop leaves 7 s between visits: the next may be the same visit (back
+        # within `regreet_cooldown_s`), greeted in the lap before.
+        assert "greeting" in sounds(state.messages), sounds(state.messages)
+        assert sounds(state.messages)[-1] == "farewell", sounds(state.messages)
+        assert watch.one_truth_problems(empty.stamp_ns) == []
 
 
 def test_someone_walking_past_is_never_greeted(tmp_path: Path) -> None:

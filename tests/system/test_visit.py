@@ -1,8 +1,8 @@
 """A full simulated visit through a real router, every service its own process.
 
-The simulated LD2410 (behind a pty) plays a visitor who walks in from 4 m,
-stands at 1 m and leaves; the camera plays an image sequence of a real
-face photo, first on the camera's left then on its right. The robot must
+The simulated LD2410 (behind a pty) and the camera see one simulated
+visitor (a real face photo) who walks in from 4 m, stands at 1 m on the
+robot's left, then on its right, and leaves. The robot must
 wake its eyes, look the right way, greet on the null audio device, say
 goodbye once the visitor has gone, and go back to sleep.
 """
@@ -24,8 +24,8 @@ from .robot import (
     FAREWELL_S,
     GREETING_S,
     Spawn,
-    start_radar,
     start_robot,
+    start_world,
     wait_nodes,
 )
 
@@ -56,9 +56,9 @@ def test_visit_wakes_follows_greets_says_goodbye_and_sleeps(
     faces = Collector[m.FacePosition](probe, keys.FACE, camera="front")
     direction = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
     status = Collector[m.PlaySoundStatus](probe, keys.PLAY_SOUND_STATUS)
-    procs = start_robot(spawn, tmp_path)
-    wait_nodes(probe, [*BASE_SERVICES, "camera"])
-    procs["radar-bridge"] = start_radar(spawn, "walk_in")
+    procs = start_robot(spawn, tmp_path, camera=False)
+    wait_nodes(probe, list(BASE_SERVICES))
+    procs |= start_world(spawn, "left_right", tmp_path / "config" / "robot.toml")
 
     # Eyes wake (and the lids open) when the visitor comes within range.
     expression.wait_for(lambda e: e.action == A.EYE_AWAKE, 60, "EYE_AWAKE")
