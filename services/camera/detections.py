@@ -172,6 +172,8 @@ def to_message(result: FaceResult, stamp_ns: int, frame_id: str, width: int,
     return m.FaceDetections(
         stamp_ns=max(stamp_ns, 0), frame_id=frame_id[:FRAME_ID_MAX],
         width=min(max(width, 1), SIDE_MAX), height=min(max(height, 1), SIDE_MAX),
-        faces=_boxes(result, others or []), tracked=result.tracked, distance_m=distance,
+        faces=_boxes(result, others or []), tracked=result.tracked,
+        track=result.track if result.target is not None and result.track else None,
+        distance_m=distance,
         cues=cues,
     )

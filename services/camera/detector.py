@@ -116,7 +116,18 @@ def build(ctx: ServiceContext) -> tuple[FaceDetectorSettings, FacePipeline]:
     settings = settings_from(ctx)
     cv2.setNumThreads(settings.threads)
     net, refiner = load_nets(ctx, settings)
-    return settings, FacePipeline(net, settings, refiner, irises=load_irises(settings))
+    return settings, FacePipeline(net, settings, refiner, irises=load_irises(settings),
+                                  first_track=first_track(time.time()))
+
+
+TRACKS_PER_S = 100
+"""More new persons per second than a camera has frames: track ids counted from
+`TRACKS_PER_S` x the start time never meet those of an earlier run."""
+
+
+def first_track(now_s: float) -> int:
+    """The first track id of a detector started at `now_s` (wall clock, s)."""
+    return max(1, int(now_s * TRACKS_PER_S))
 
 
 def load_irises(s: FaceDetectorSettings) -> IrisNet | None:
@@ -197,6 +208,7 @@ def run(ctx: ServiceContext) -> int:
             face_pub.put(m.FacePosition(
                 stamp_ns=stamp_ns, frame_id=img.frame_id, point=m.Point(x=x, y=y, z=z),
                 confidence=min(max(result.target.score, 0.0), 1.0),
+                track=result.track or None,
             ))
             diag.increment("faces")
         diag.values["latency_ms"] = round((m.now_ns() - stamp_ns) / 1e6, 1)

@@ -88,6 +88,8 @@ class FaceResult:
     """True when the face came from the crop track (no whole-frame pass this frame)."""
     refused: str | None = None
     """Why the frame was not processed ("bad_frames", "too_large"), else None."""
+    track: int | None = None
+    """The followed person's track: a new id whenever another person is followed."""
     owed: tuple[Owed, ...] = ()
     """Work put off until after publishing (`process(defer=True)`): for `run_owed`."""
 
@@ -99,8 +101,11 @@ class FacePipeline:
 
     def __init__(self, net: FaceNet, settings: FaceDetectorSettings,
                  refiner: FaceNet | None = None, gate: TrackGate | None = None,
-                 irises: IrisNet | None = None) -> None:
+                 irises: IrisNet | None = None, first_track: int = 1) -> None:
         self.net = net
+        self.track = first_track - 1
+        """The followed person's track id (the next one is this + 1); the service
+        starts it from the wall clock, so ids are not reused after a restart."""
         self.refiner = refiner
         self.irises = irises
         self.iris_schedule = IrisSchedule(settings.iris_every_s, settings.iris_min_px)
@@ -262,6 +267,7 @@ class FacePipeline:
             new_person = new_person or self._jumped
         self._last, self._last_t = measured, t
         if new_person:  # what the iris said was about somebody else
+            self.track += 1
             self.iris_schedule.reset()
             self.iris_held.reset()
         where = self._geometry(bgr, measured)
@@ -272,7 +278,7 @@ class FacePipeline:
             else:
                 self._iris(bgr, measured, t)
         return FaceResult(faces, target, where.estimate, point, where.point, measured,
-                          tracked=tracked is not None, owed=tuple(owed))
+                          tracked=tracked is not None, track=self.track, owed=tuple(owed))
 
     def run_owed(self, owed: Sequence[Owed]) -> list[bf.Detection] | None:
         """Run the work a deferred `process` owed, in order; the faces of the

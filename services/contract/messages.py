@@ -182,6 +182,11 @@ class Point(Message):
     z: Coordinate
 
 
+FaceTrack = Annotated[int, msgspec.Meta(
+    ge=1, description="the face detector's id of the person it follows: a new one whenever "
+                      "it follows another person, never reused (also across restarts)")]
+
+
 class FacePosition(Message):
     """The tracked face centre relative to the camera, in metres."""
 
@@ -189,6 +194,9 @@ class FacePosition(Message):
     frame_id: FrameId
     point: Point
     confidence: Unit
+    track: FaceTrack | None = None
+    """Whose face this is, as the detector follows them (None: a source without ids):
+    a name given to one track never belongs to the next."""
 
 
 Pixel = Annotated[float, msgspec.Meta(ge=-100000.0, le=100000.0, description="image pixels")]
@@ -244,6 +252,8 @@ class FaceDetections(Message):
         default_factory=list)
     tracked: bool = False
     """The followed face was re-found in its crop (no whole-frame pass this frame)."""
+    track: FaceTrack | None = None
+    """The followed face's track, as on `camera/{camera}/face` (None: no followed face)."""
     distance_m: Metres | None = None
     """The followed face's fused distance (before smoothing), None without one."""
     cues: Annotated[list[DistanceCue], msgspec.Meta(max_length=8)] = msgspec.field(

@@ -254,7 +254,7 @@ class IdentityService:
             self._frame_id, self._faces_ns = msg.frame_id, msg.stamp_ns
             if self.enrolment is not None:
                 self.enrolment.offer(msg, self.images.get(msg.stamp_ns))
-            track = self.tracks.update(box, msg.stamp_ns)
+            track = self.tracks.update(box, msg.stamp_ns, msg.track if face else None)
             if track is None:
                 self.vote = None
             elif self.vote is None or self.vote.track != track:

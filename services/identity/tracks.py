@@ -1,11 +1,14 @@
 """Which face track the followed face belongs to: pure, one box per frame.
 
-The face detector marks the face the robot follows (`FaceBox.followed`);
-its box moves a little from frame to frame. A box that overlaps the last
-one (IoU at least `min_iou`) continues the track; a box elsewhere (the
-followed face jumped to another person) starts a new track; no followed
-face for `lost_s` ends the track. Track ids count up from 1 and are never
-reused, so a name decided for one track can never stick to the next face.
+The face detector marks the face the robot follows (`FaceBox.followed`)
+and gives it its track id (`FaceDetections.track`): a new id whenever it
+follows another person. That id is the track, so a name is decided for
+the same track the people service sees on `camera/{camera}/face`. A
+source without ids gets tracks of its own: a box that overlaps the last
+one (IoU at least `min_iou`) continues the track, a box elsewhere starts
+a new one. Either way no followed face for `lost_s` ends the track, and
+ids are never reused, so a name decided for one track can never stick to
+the next face.
 """
 
 from __future__ import annotations
@@ -38,13 +41,16 @@ class FaceTracks:
     seen_ns: int = 0
     last_id: int = 0
 
-    def update(self, box: Box | None, stamp_ns: int) -> int | None:
-        """The track of this frame's followed `box` (None when no face is followed)."""
+    def update(self, box: Box | None, stamp_ns: int, given: int | None = None) -> int | None:
+        """The track of this frame's followed `box` (None when no face is followed);
+        `given`: the detector's track id of it, used as the track when present."""
         if box is None:
             if self.track is not None and stamp_ns - self.seen_ns > self.lost_s * 1e9:
                 self.track, self.box = None, None
             return self.track
-        if self.box is None or self.track is None or iou(self.box, box) < self.min_iou:
+        if given is not None:
+            self.track = given
+        elif self.box is None or self.track is None or iou(self.box, box) < self.min_iou:
             self.last_id += 1
             self.track = self.last_id
         self.box, self.seen_ns = box, stamp_ns

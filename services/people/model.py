@@ -64,6 +64,9 @@ class FaceSeen:
     """+ = the robot's left."""
     pitch_rad: float
     """+ = up."""
+    track: int | None = None
+    """The detector's track of the face (None: a source without ids): a name is
+    only ever on the face of the track that was given it."""
 
     def __post_init__(self) -> None:
         _check_sample(self.stamp_ns, self.distance_m)
@@ -223,8 +226,6 @@ class _Track:
     name: str | None = None
     name_track: int | None = None
     """The face track whose name `name` is (None: no name)."""
-    unconfirmed: tuple[int, int] | None = None
-    """(a newer face track of theirs, since when) while it has not confirmed `name`."""
 
     def person(self) -> Person:
         return Person(id=self.id, distance_m=self.distance_m, zone=self.zone,
@@ -236,7 +237,7 @@ class _Track:
 
 
 def _unname(person: _Track) -> None:
-    person.name, person.name_track, person.unconfirmed = None, None, None
+    person.name, person.name_track = None, None
 
 
 def _ns(seconds: float) -> int:
@@ -323,9 +324,9 @@ class PeopleModel:
                 self._face_holder = self._holder(event)
                 if self._face_holder is None:
                     out += self._sensed(event.stamp_ns, event.distance_m, event)
-                    self._name_face()
-                    return out
-                out += self._face_on(self._persons[self._face_holder], event)
+                else:
+                    out += self._face_on(self._persons[self._face_holder], event)
+                self._unname_other_face(event)
                 self._name_face()
                 return out
             case TargetsSeen():
@@ -381,31 +382,45 @@ class PeopleModel:
         return person if person.arrived_ns <= self._face.stamp_ns else None
 
     def _unname_forgotten(self, given: NameSeen) -> None:
-        """The track that gave a name now has none: the name was taken back. A
-        named person's face on a new, undecided track: that track must confirm it."""
+        """The track that gave a name now has none: the name was taken back. The
+        face holder's name from an older track is withdrawn too: their face is on
+        a newer, undecided track (ids count up), which may be someone else."""
         if given.track is None or given.name is not None:
             return
         for person in self._persons.values():
             if person.name_track == given.track:
                 _unname(person)
         owner = self._face_owner()
-        if (owner is not None and owner.name is not None and owner.name_track != given.track
-                and (owner.unconfirmed is None or owner.unconfirmed[0] != given.track)):
-            owner.unconfirmed = (given.track, given.stamp_ns)
+        if (owner is not None and owner.name_track is not None
+                and owner.name_track < given.track):
+            _unname(owner)
+
+    def _unname_other_face(self, face: FaceSeen) -> None:
+        """A face of another track than the one its holder's name came from: the
+        detector follows someone else now, so the name goes at once, before the
+        identity service has seen the new face (a wrong name is worse than none)."""
+        owner = self._face_owner()
+        if (face.track is not None and owner is not None and owner.name is not None
+                and owner.name_track != face.track):
+            _unname(owner)
 
     def _name_face(self) -> None:
-        """Give a pending name to the person holding the face, taking it from anyone
-        else; once given it is no longer pending (a later face of someone else, before
-        the identity service saw the change, must not take it)."""
+        """Give a pending name to the person holding the face, if the face is of the
+        track the name was given (or the face has no track id), taking it from
+        anyone else; once given it is no longer pending (a later face of someone
+        else, before the identity service saw the change, must not take it)."""
         given = self._name
         owner = self._face_owner()
         if given is None or given.name is None or given.track is None or owner is None:
             return
+        assert self._face is not None  # an owner holds the face
+        if self._face.track is not None and self._face.track != given.track:
+            return  # a name of another face: kept until its face comes, or replaced
         self._name = None
         for person in self._persons.values():
             if person.name == given.name:
                 _unname(person)
-        owner.name, owner.name_track, owner.unconfirmed = given.name, given.track, None
+        owner.name, owner.name_track = given.name, given.track
 
     # -- time --
 
@@ -440,8 +455,6 @@ class PeopleModel:
                            track.engagement_since_ns + _ns(self.s.disengage_hold_s))
             if not track.seen_by:
                 due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
-            if track.unconfirmed is not None:
-                due.append(track.unconfirmed[1] + _ns(self.s.name_confirm_s))
         coast = self._tracker.next_deadline()
         if coast is not None:
             due.append(coast)
@@ -637,9 +650,6 @@ class PeopleModel:
         return out
 
     def _evaluate_one(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
-        if track.unconfirmed is not None and at >= track.unconfirmed[1] + _ns(
-                self.s.name_confirm_s):
-            _unname(track)
         seen = self._seen_by(track, at)
         if seen != track.seen_by:
             if not seen:

@@ -95,7 +95,8 @@ def face_seen(msg: m.FacePosition) -> FaceSeen:
     if distance > MAX_DISTANCE_M:
         raise ValueError(f"face {distance:.0f} m away (limit {MAX_DISTANCE_M:.0f} m)")
     return FaceSeen(stamp_ns=msg.stamp_ns, distance_m=distance,
-                    yaw_rad=math.atan2(y, x), pitch_rad=math.atan2(z, math.hypot(x, y)))
+                    yaw_rad=math.atan2(y, x), pitch_rad=math.atan2(z, math.hypot(x, y)),
+                    track=msg.track)
 
 
 def name_seen(msg: m.FaceName) -> NameSeen:

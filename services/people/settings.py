@@ -59,11 +59,6 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     absence_hold_s: Annotated[Hold, msgspec.Meta(
         description="seconds: seen by no sensor this long after their last sighting, a "
         "person has left (the one time from leaving to LEFT)")] = 3.0
-    # The identity service names a face track in about half a second; a face back as a
-    # new track that has not confirmed the name by then may carry a forgotten one.
-    name_confirm_s: Annotated[float, msgspec.Meta(
-        gt=0.0, le=60.0, description="seconds: a named person's face back as a new track "
-        "keeps the name this long unless that track confirms it", extra={"live": True})] = 2.0
     # Angle radars (LD2450): a brisk walk moves 0.15 m between two reports (10/s) and
     # a target jitters by ~0.1 m; two people side by side stand ~0.6 m apart.
     track_gate_m: Annotated[float, msgspec.Meta(

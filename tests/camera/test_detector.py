@@ -20,6 +20,7 @@ import psutil
 import pytest
 
 from buddybot.camera import models
+from buddybot.camera.detector import first_track
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.limits import stamp_plausible
@@ -372,27 +373,37 @@ def test_bgr8_length_and_jpeg_header_mismatches_are_counted(probe: Node, spawn: 
 def test_a_face_jump_is_never_published_at_a_wrong_distance(probe: Node, spawn: Spawn) -> None:
     """The jump of test_pipeline.py through a running detector (crop tracking and smoothing
     as in service): a face 90 px wide at the upper left (1.0 m), then 150 px at the lower
-    right (0.6 m). Every published distance within 15% of the truth, and the new face
-    published for the first two frames after the jump (not held back as a bystander)."""
+    right (0.6 m). Every published distance within 15% of the truth, the new face
+    published for the first two frames after the jump (not held back as a bystander),
+    and on a new track: whoever named the first face must not name this one."""
     pub = probe.publisher(keys.CAMERA_IMAGE, camera="test")
     faces = Collector(probe, keys.FACE, camera="test")
     proc = spawn("face-detector", "--camera", "test")
     before, _ = scenes.scene(scenes.astronaut(), 1.0, 130, 120)
     after, placed = scenes.scene(scenes.astronaut(), 0.6, 470, 330)
+    started_s = time.time()
     answer(pub, faces, image(before, m.now_ns(), "warm-up"))
     base = m.now_ns()  # camera stamps 33 ms apart from here (plausible: behind arrival)
+    tracks_before = set()
     for i in range(8):
         face = answer(pub, faces, image(before, base + i * 33_333_333, f"before-{i}"))
         assert face.point.x == pytest.approx(1.0, rel=0.15)
+        tracks_before.add(face.track)
     published: list[float | None] = []
+    tracks_after = set()
     for i in range(8, 16):
         pub.put(image(after, base + i * 33_333_333, f"after-{i}"))
         try:
             face = faces.wait_for(lambda f, i=i: f.frame_id == f"after-{i}", timeout=5.0)
             published.append(face.point.x)
+            tracks_after.add(face.track)
         except TimeoutError:
             published.append(None)
     print(f"published after the jump (true {placed.z_m} m): {published}")
+    # One track each, counted from the detector's start time (never an earlier run's).
+    [track] = tracks_before
+    assert track is not None and track >= first_track(started_s - 60.0)
+    assert len(tracks_after) == 1 and min(tracks_after) > track, (track, tracks_after)
     assert published[0] is not None and published[1] is not None, published
     assert all(abs(x - placed.z_m) <= 0.15 * placed.z_m for x in published if x is not None)
     assert proc.alive()

@@ -36,3 +36,15 @@ def test_ids_are_never_reused() -> None:
     t = FaceTracks(min_iou=0.9, lost_s=0.1)
     seen = [t.update((float(i * 100), 0, float(i * 100 + 50), 50), i * S) for i in range(50)]
     assert seen == list(range(1, 51))
+
+
+def test_the_detectors_track_id_is_the_track_when_it_gives_one() -> None:
+    """The detector knows whom it follows: its id wins over the boxes' overlap, so a
+    name is decided for the track the people service sees on the face."""
+    t = FaceTracks(min_iou=0.3, lost_s=1.0)
+    assert t.update((100, 100, 200, 200), 0, given=700) == 700
+    assert t.update((400, 100, 500, 200), S // 30, given=700) == 700  # moved fast, same one
+    assert t.update((400, 100, 500, 200), 2 * S // 30, given=701) == 701  # another person
+    assert t.update(None, 3 * S // 30) == 701  # a missed frame keeps it ...
+    assert t.update(None, 2 * S) is None  # ... `lost_s` ends it
+    assert t.update((0, 0, 50, 50), 2 * S + 1) == 1  # a source without ids: tracks of its own

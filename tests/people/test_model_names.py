@@ -1,14 +1,18 @@
 """Names on persons: the identity service's `NameSeen` joins the person holding
-the followed face, sticks while they are present, and is cleared at once when
-the track that gave it says it has no name (forgotten)."""
+the followed face, sticks while they are present and their face is on the
+track that was named, and is withdrawn at once when the face is of another
+track or the track that gave it says it has no name (forgotten)."""
 
 from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from buddybot.people.model import Input, NameSeen, PeopleModel, Tick
+from buddybot.people.model import FaceSeen, Input, NameSeen, PeopleModel, Tick
 from tests.properties import examples
 
 from .test_model import SETTINGS, faces, ns, radar, radar_out, run, tick
@@ -33,28 +37,46 @@ def test_the_name_of_the_followed_face_joins_its_person_and_makes_no_event() -> 
     assert names(model) == [(1, "Ada")]
 
 
-def test_the_name_sticks_while_the_face_turns_away_and_comes_back_as_a_new_track() -> None:
+def test_the_name_sticks_while_the_face_turns_away_and_goes_with_a_new_track() -> None:
+    """Lost, the face is still theirs; back as a new track it may be someone else's
+    (a wrong name is worse than none): withdrawn at once, until that track says."""
     model = PeopleModel(SETTINGS)
     run([radar(0.0), faces(0.5, 1.0), name(1.0, 7, "Ada"),
          name(1.6, None, None), tick(3.0)], model)  # no face followed
     assert names(model) == [(1, "Ada")]
     run([faces(3.1, 3.5), name(3.2, 8, None)], model)  # a new track, undecided
-    assert names(model) == [(1, "Ada")]
+    assert names(model) == [(1, None)]
     run([name(3.5, 8, "Ada"), name(5.0, 7, None)], model)  # the old track says nothing now
     assert names(model) == [(1, "Ada")]
 
 
-def test_a_new_track_that_does_not_confirm_the_name_in_time_drops_it() -> None:
-    """Forgotten while their face was on a new, undecided track: nothing would say
-    so (the track that gave the name is gone), so the new track must confirm it."""
-    model = PeopleModel(SETTINGS)  # name_confirm_s 2 s
-    run([radar(0.0), faces(0.5, 1.0), name(1.0, 7, "Ada"), name(1.6, None, None),
-         faces(3.0, 4.0), name(3.1, 8, None), tick(5.0)], model)
-    assert names(model) == [(1, "Ada")]  # 1.9 s undecided: still theirs
-    run([tick(5.1), faces(5.2, 5.5), name(5.5, 8, None)], model)
-    assert names(model) == [(1, None)]  # dropped at 3.1 + 2.0
-    run([name(5.6, 8, "Ada")], model)
-    assert names(model) == [(1, "Ada")]  # confirmed after all: theirs again
+def tracked_faces(start: float, end: float, track: int) -> Iterator[FaceSeen]:
+    """`faces`, each with the detector's track id."""
+    for f in faces(start, end):
+        yield dataclasses.replace(f, track=track)
+
+
+def test_a_face_of_another_track_withdraws_the_name_before_the_identity_service_speaks(
+        ) -> None:
+    model = PeopleModel(SETTINGS)
+    run([radar(0.0), tracked_faces(0.5, 1.0, 7), name(1.0, 7, "Ada"),
+         tracked_faces(1.1, 1.5, 7)], model)
+    assert names(model) == [(1, "Ada")]
+    run([tracked_faces(1.6, 1.6, 8)], model)  # the detector follows someone else
+    assert names(model) == [(1, None)]
+    # The identity service's answer for the old track, late, is not given to the new one.
+    run([name(1.65, 7, "Ada"), tracked_faces(1.7, 1.8, 8)], model)
+    assert names(model) == [(1, None)]
+    run([name(1.9, 8, "Grace"), tracked_faces(1.9, 2.0, 8)], model)
+    assert names(model) == [(1, "Grace")]
+
+
+def test_a_name_for_a_track_not_yet_seen_waits_for_its_face() -> None:
+    model = PeopleModel(SETTINGS)
+    run([radar(0.0), tracked_faces(0.5, 1.0, 7), name(1.05, 8, "Grace")], model)
+    assert names(model) == [(1, None)]  # the face is still track 7's
+    run([tracked_faces(1.1, 1.1, 8)], model)
+    assert names(model) == [(1, "Grace")]
 
 
 def test_a_forgotten_name_is_cleared_at_once() -> None:
