@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from typing import assert_never
 
 from buddybot.contract.messages import MAX_PEOPLE
+from buddybot.people.clutter import Point, Spots
 from buddybot.people.settings import PeopleSettings
 from buddybot.people.tracker import Report, SensorId, Target, Tracker, TrackerLimits
 from buddybot.people.zones import Zone, zone_after, zone_of
@@ -109,7 +110,22 @@ class NameSeen:
             raise ValueError("name must not be empty")
 
 
-Input = RadarSeen | FaceSeen | TargetsSeen | NameSeen | Tick
+@dataclass(frozen=True, slots=True)
+class RangeSeen:
+    """One LD2410 frame (`LD2410TargetDataFrame`): the distance of its nearest
+    target, None when it sees nobody. Radar presence says whether someone is in
+    range; these say whether what it sees moves through the room (clutter)."""
+
+    stamp_ns: int
+    sensor: SensorId
+    """(device_id, radar_id)."""
+    distance_m: float | None
+
+    def __post_init__(self) -> None:
+        _check_sample(self.stamp_ns, 0.0 if self.distance_m is None else self.distance_m)
+
+
+Input = RadarSeen | RangeSeen | FaceSeen | TargetsSeen | NameSeen | Tick
 
 # --- persons -----------------------------------------------------------------------------
 
@@ -223,6 +239,11 @@ class _Track:
     bearing_rad: float | None = None
     radar_last_ns: int | None = None
     """When their radar track last matched a report (None: no track yet)."""
+    origin: Point | None = None
+    """Where the radar first showed them (an LD2410's distance as (d, 0))."""
+    real: bool = False
+    """Shown to be a person: the camera saw them, or the radar showed them move more
+    than `clutter_spread_m` from `origin`. Else, after `clutter_after_s`, clutter."""
     name: str | None = None
     name_track: int | None = None
     """The face track whose name `name` is (None: no name)."""
@@ -262,6 +283,18 @@ class PeopleModel:
         self._now: int | None = None
         """The newest time seen (stamps and ticks); it never goes back."""
         self._radar: RadarSeen | None = None
+        self._ranges: dict[SensorId, tuple[int, float | None]] = {}
+        """Each LD2410's newest frame: (stamp, nearest distance or None)."""
+        self._range_clutter = False
+        """The LD2410s' nearest target is at a clutter spot now."""
+        self._spots = Spots(settings.clutter_spread_m, _ns(settings.clutter_after_s))
+        """Clutter spots of angle radars (floor plan)."""
+        self._range_spots = Spots(settings.clutter_spread_m, _ns(settings.clutter_after_s))
+        """Clutter spots of LD2410s: (distance, 0)."""
+        self._clutter_tracks: set[int] = set()
+        """Radar tracks at clutter spots: no person."""
+        self.clutter = 0
+        """Persons found to be clutter."""
         self._radar_lost_ns: int | None = None
         """The stamp of the last OUT_OF_RANGE after IN_RANGE: the absence's first frame."""
         self._face: FaceSeen | None = None
@@ -329,6 +362,12 @@ class PeopleModel:
                 self._unname_other_face(event)
                 self._name_face()
                 return out
+            case RangeSeen():
+                last_range = self._ranges.get(event.sensor)
+                if last_range is not None and event.stamp_ns < last_range[0]:
+                    return []
+                out = self._advance(event.stamp_ns)
+                return out + self._ranged(event)
             case TargetsSeen():
                 last = self._reports.get(event.sensor)
                 if last is not None and event.stamp_ns < last:
@@ -358,6 +397,56 @@ class PeopleModel:
     def _limits(self) -> TrackerLimits:
         s = self.s
         return TrackerLimits(s.track_gate_m, s.track_coast_s, s.max_tracks)
+
+    # -- clutter --
+
+    def _spots_now(self, at: int, spots: Spots | None = None) -> Spots:
+        """The spots (of angle radars, or `spots`) with today's settings, those shown
+        nothing for long forgotten."""
+        spots = self._spots if spots is None else spots
+        spots.spread_m = self.s.clutter_spread_m
+        spots.forget_ns = _ns(self.s.clutter_after_s)
+        spots.expire(at)
+        return spots
+
+    def _nearest_range(self, at: int) -> float | None:
+        """The nearest target of the LD2410s heard within `radar_timeout_s`."""
+        fresh = [d for stamp, d in self._ranges.values()
+                 if d is not None and at - stamp < _ns(self.s.radar_timeout_s)]
+        return min(fresh, default=None)
+
+    def _ranged(self, event: RangeSeen) -> list[PersonEvent]:
+        """An LD2410 frame: is its nearest target at a clutter spot, and did the
+        untracked person the radar shows move through the room."""
+        assert self._now is not None
+        self._ranges.pop(event.sensor, None)
+        self._ranges[event.sensor] = (event.stamp_ns, event.distance_m)
+        while len(self._ranges) > _MAX_SENSORS:
+            self._ranges.pop(next(iter(self._ranges)))
+        nearest = self._nearest_range(self._now)
+        spots = self._spots_now(self._now, self._range_spots)
+        if nearest is not None:
+            spots.hidden(nearest, event.stamp_ns)
+        self._range_clutter = nearest is not None and spots.shown((nearest, 0.0),
+                                                                  event.stamp_ns)
+        person = None if self._untracked is None else self._persons[self._untracked]
+        if person is not None and nearest is not None and not self._range_clutter \
+                and Sensor.RADAR in person.seen_by:
+            self._moved(person, (nearest, 0.0))
+        out = self._evaluate(self._now, event.stamp_ns)
+        if (self._untracked is None and nearest is not None and not self._range_clutter
+                and Sensor.RADAR in self._untracked_seen(self._now)):
+            out += self._sensed(event.stamp_ns, nearest, None)
+            if self._untracked is not None and len(self._range_spots):
+                # Off a spot: someone came through it (the fan hid their approach).
+                self._persons[self._untracked].real = True
+        return out
+
+    def _moved(self, person: _Track, at: Point) -> None:
+        if person.origin is None:
+            person.origin = at
+        elif math.dist(person.origin, at) > self.s.clutter_spread_m:
+            person.real = True
 
     def _remember_report(self, event: TargetsSeen) -> None:
         self._reports.pop(event.sensor, None)
@@ -455,6 +544,8 @@ class PeopleModel:
                            track.engagement_since_ns + _ns(self.s.disengage_hold_s))
             if not track.seen_by:
                 due.append(track.lost_since_ns + _ns(self.s.absence_hold_s))
+            if not track.real and track.origin is not None:
+                due.append(self._clutter_at(track))
         coast = self._tracker.next_deadline()
         if coast is not None:
             due.append(coast)
@@ -472,7 +563,8 @@ class PeopleModel:
     def _untracked_seen(self, at: int) -> Sensor:
         """What shows the untracked person (whether or not they are present yet)."""
         seen = Sensor.NONE
-        if self._radar is not None and self._radar.in_range and not self._angle_radars(at):
+        if (self._radar is not None and self._radar.in_range and not self._angle_radars(at)
+                and not self._range_clutter):
             seen |= Sensor.RADAR
         if self._face_holder is None and self._face_fresh(at):
             seen |= Sensor.CAMERA
@@ -552,8 +644,22 @@ class PeopleModel:
         at = self._now
         tracks = {t.id: t for t in self._tracker.tracks()}
         out: list[PersonEvent] = []
+        spots = self._spots_now(at)
+        self._clutter_tracks &= set(tracks)
+        freed = []
+        for track_id in [i for i in sorted(self._clutter_tracks) if i not in started]:
+            t = tracks[track_id]
+            if not spots.shown((t.x_m, t.y_m), stamp):  # it left the spot: a person
+                self._clutter_tracks.discard(track_id)
+                freed.append(track_id)
+        started = [*started, *freed]
         for track_id in started:
             t = tracks[track_id]
+            if track_id not in self._clutter_tracks and spots.near((t.x_m, t.y_m)) is not None \
+                    and self._continued(t.x_m, t.y_m, t.bearing_rad, t.distance_m, at) is None:
+                spots.shown((t.x_m, t.y_m), stamp)
+                self._clutter_tracks.add(track_id)  # a new track at a spot: clutter
+                continue
             person = self._continued(t.x_m, t.y_m, t.bearing_rad, t.distance_m, at)
             if person is not None:
                 person.track_id = track_id
@@ -566,6 +672,8 @@ class PeopleModel:
                 continue
             person.radar_xy, person.bearing_rad = (t.x_m, t.y_m), t.bearing_rad
             person.yaw_rad, person.pitch_rad = t.bearing_rad, 0.0
+            person.origin = (t.x_m, t.y_m)
+            person.real = track_id in freed  # moved off a spot: through the room
             out.append(Arrived(person.id, stamp, person.person()))
         for person in [self._persons[i] for i in sorted(self._persons)]:
             now = tracks.get(person.track_id) if person.track_id is not None else None
@@ -573,6 +681,7 @@ class PeopleModel:
                 continue
             person.radar_xy, person.bearing_rad = (now.x_m, now.y_m), now.bearing_rad
             person.radar_last_ns = now.last_ns
+            self._moved(person, (now.x_m, now.y_m))
             if Sensor.CAMERA in self._seen_by(person, at):
                 continue
             out += self._move(person, stamp, now.distance_m)
@@ -651,6 +760,10 @@ class PeopleModel:
 
     def _evaluate_one(self, track: _Track, at: int, stamp: int) -> list[PersonEvent]:
         seen = self._seen_by(track, at)
+        if Sensor.CAMERA in seen:
+            track.real = True
+        if self._is_clutter(track, seen, at):
+            return self._to_clutter(track, max(stamp, self._clutter_at(track)))
         if seen != track.seen_by:
             if not seen:
                 track.lost_since_ns = self._last_shown(track, stamp)
@@ -660,6 +773,26 @@ class PeopleModel:
             if at >= gone_at:
                 return self._leave(track, max(stamp, gone_at))
         return self._engage(track, at, stamp)
+
+    def _clutter_at(self, track: _Track) -> int:
+        return track.arrived_ns + _ns(self.s.clutter_after_s)
+
+    def _is_clutter(self, track: _Track, seen: Sensor, at: int) -> bool:
+        """Shown only by the radar, never moved through the room, for the clutter time."""
+        return (not track.real and track.origin is not None and seen == Sensor.RADAR
+                and at >= self._clutter_at(track))
+
+    def _to_clutter(self, track: _Track, stamp: int) -> list[PersonEvent]:
+        """Not a person: their place becomes a spot, and they leave."""
+        assert track.origin is not None
+        self.clutter += 1
+        if track.track_id is None:
+            self._range_spots.add(track.origin, stamp)
+            self._range_clutter = True
+        else:
+            self._spots.add(track.origin, stamp)
+            self._clutter_tracks.add(track.track_id)
+        return self._leave(track, stamp)
 
     def _last_shown(self, track: _Track, stamp: int) -> int:
         """When the sensors that showed `track` until now last showed them (never

@@ -44,6 +44,7 @@ from buddybot.people.model import (
     Person,
     PersonEvent,
     RadarSeen,
+    RangeSeen,
     Sensor,
     TargetsSeen,
     Tick,
@@ -84,6 +85,23 @@ def radar_seen(msg: m.PresenceDetection) -> RadarSeen:
     return RadarSeen(stamp_ns=msg.stamp_ns,
                      in_range=msg.presence_state == m.PresenceState.IN_RANGE,
                      distance_m=msg.distance_m)
+
+
+def ranges_seen(msg: m.LD2410TargetDataFrameArray) -> list[RangeSeen]:
+    """Each sensor's nearest target in one LD2410 report (None: it sees nobody, or
+    it measures its background noise). A target at 0 cm (sent by real modules)
+    takes the distance of the kind it reports."""
+    out = []
+    for f in msg.sensors:
+        state = int(f.target_state)
+        distance: float | None = None
+        if state in (1, 2, 3):
+            kinds = [cm for bit, cm in ((1, f.movement_distance), (2, f.stationary_distance))
+                     if state & bit and cm > 0]
+            cm = f.detection_distance or min(kinds, default=0)
+            distance = cm / 100.0 if cm > 0 else None
+        out.append(RangeSeen(msg.stamp_ns, (msg.device_id, f.radar_id), distance))
+    return out
 
 
 def face_seen(msg: m.FacePosition) -> FaceSeen:
@@ -203,12 +221,17 @@ class PeopleService:
             self._publish_state(m.now_ns())
         self.node.subscribe(keys.PRESENCE, self._on_presence)
         self.node.subscribe(keys.RADAR_TARGETS, self._on_targets, device="*")
+        self.node.subscribe(keys.RADAR_FRAMES, self._on_frames, device="*")
         self.node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
         self.node.subscribe(keys.FACE_NAME, self._on_name, camera=self.settings.camera)
         self.node.every(self.settings.tick_s, self.tick, name="people-tick")
 
     def _on_presence(self, msg: m.PresenceDetection, _key: str) -> None:
         self.step(radar_seen(msg))
+
+    def _on_frames(self, msg: m.LD2410TargetDataFrameArray, _key: str) -> None:
+        for seen in ranges_seen(msg):
+            self.step(seen)
 
     def _on_targets(self, msg: m.RadarTargets, _key: str) -> None:
         try:
@@ -244,6 +267,7 @@ class PeopleService:
         values["events"] = self._events
         values["tracks_refused"] = self.model.tracks_refused
         values["people_refused"] = self.model.refused
+        values["clutter"] = self.model.clutter
 
     def step(self, given: Input) -> None:
         """Feed one input; publish its events, then the state if it changed."""

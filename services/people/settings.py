@@ -59,6 +59,19 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     absence_hold_s: Annotated[Hold, msgspec.Meta(
         description="seconds: seen by no sensor this long after their last sighting, a "
         "person has left (the one time from leaving to LEFT)")] = 3.0
+    # A fan or a curtain never shows a face and never walks through the room; a person
+    # shown only by the radar, standing still from the moment they appeared, is taken
+    # for one after this long (a face brings a person back at once).
+    clutter_after_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0, description="seconds: a person only the radar has shown, never "
+        "more than `clutter_spread_m` from where it first did, is clutter after this long",
+        extra={"live": True})] = 20.0
+    # An LD2410 measures in gates of 0.75 m: a fan may hop one; a person walking in
+    # moves further.
+    clutter_spread_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=5.0, description="metres: a radar target that stays within this of "
+        "where it first appeared has not moved through the room", extra={"live": True})
+    ] = 0.8
     # Angle radars (LD2450): a brisk walk moves 0.15 m between two reports (10/s) and
     # a target jitters by ~0.1 m; two people side by side stand ~0.6 m apart.
     track_gate_m: Annotated[float, msgspec.Meta(

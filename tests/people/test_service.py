@@ -27,6 +27,7 @@ from buddybot.people.model import (
     Person,
     PersonEvent,
     RadarSeen,
+    RangeSeen,
     Sensor,
     Tick,
     ZoneChanged,
@@ -37,6 +38,7 @@ from buddybot.people.service import (
     face_seen,
     person_message,
     radar_seen,
+    ranges_seen,
     state_message,
     state_stamp,
     targets_seen,
@@ -91,6 +93,21 @@ def test_presence_is_in_range_with_its_distance_and_stamp() -> None:
 
     assert radar_seen(presence(m.PresenceState.IN_RANGE)) == RadarSeen(T0, True, 2.5)
     assert radar_seen(presence(m.PresenceState.OUT_OF_RANGE)) == RadarSeen(T0, False, 2.5)
+
+
+def test_each_ld2410_frame_is_its_nearest_target_or_nobody() -> None:
+    def frame(radar_id: int, state: int, detection: int, moving: int = 0,
+              still: int = 0) -> m.LD2410TargetDataFrame:
+        return m.LD2410TargetDataFrame(
+            radar_id=radar_id, target_state=m.TargetState(state), movement_distance=moving,
+            movement_energy=50, stationary_distance=still, stationary_energy=50,
+            detection_distance=detection)
+
+    msg = m.LD2410TargetDataFrameArray(stamp_ns=T0, device_id=3, sensors=[
+        frame(0, 1, 170), frame(1, 0, 0), frame(2, 2, 0, moving=90, still=140),
+        frame(3, 5, 120)])  # 5: the sensor measures its background noise
+    assert ranges_seen(msg) == [RangeSeen(T0, (3, 0), 1.7), RangeSeen(T0, (3, 1), None),
+                                RangeSeen(T0, (3, 2), 1.4), RangeSeen(T0, (3, 3), None)]
 
 
 # --- model -> messages -----------------------------------------------------------------

@@ -24,6 +24,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.runtime.registry import available_services
 from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
+from tests.sim import SCENARIOS
 
 pytestmark = pytest.mark.integration
 
@@ -200,6 +201,25 @@ def test_two_people_one_truth_and_one_goodbye_each_visit(tmp_path: Path) -> None
         assert "greeting" in sounds(state.messages), sounds(state.messages)
         assert sounds(state.messages)[-1] == "farewell", sounds(state.messages)
         assert watch.one_truth_problems(empty.stamp_ns) == []
+
+
+def test_a_fan_is_clutter_the_robot_sleeps_and_still_greets_a_visitor(tmp_path: Path) -> None:
+    """A fan the radar sees moving stops counting as a person after the clutter time
+    (20 s): the robot falls asleep beside it, wakes for a visitor's face, says
+    goodbye when they leave and sleeps again, the fan still running."""
+    with robot_on(tmp_path, str(SCENARIOS / "fan_then_visit.toml")) as probe:
+        watch = Watch(probe)
+        truth, state = watch.truth, watch.state
+        people = Collector[m.PeopleState](probe, keys.PEOPLE_STATE)
+        early = truth.wait_for(lambda w: 5 < w.t_s < 30, 120, "the fan alone")
+        assert not early.people and early.clutter
+        truth.wait_for(lambda w: w.t_s > 30, 120, "the fan alone for 30 s")
+        assert people.messages[-1].people == [], people.messages[-1]
+        assert state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP
+        truth.wait_for(lambda w: w.t_s > 56 and not w.people, 120, "the visitor gone")
+        retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP,
+                    60, 0.2, "asleep again beside the fan")
+        assert sounds(state.messages) == ["greeting", "farewell"], sounds(state.messages)
 
 
 def test_someone_walking_past_is_never_greeted(tmp_path: Path) -> None:
