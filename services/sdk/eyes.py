@@ -73,6 +73,10 @@ def gaze_of(yaw: float, pitch: float, distance_m: float | None) -> tuple[float, 
     return float(yaw), float(pitch), float(distance_m) * 100
 
 
+RESOURCES: tuple[str, ...] = ("expression", "gaze")
+"""The parts of the eyes a lease holds, and `release` gives back."""
+
+
 class EyesHandle:
     """One expression or gaze on the eyes: `done`, `wait()`, `cancel()`, `await`.
 
@@ -171,10 +175,17 @@ class Eyes(Actuator):
         return self._command("gaze", f"gaze {gaze[0]:+.2f}/{gaze[1]:+.2f} rad", None,
                              yaw=gaze[0], pitch=gaze[1], target_distance_cm=gaze[2])
 
-    def release(self, timeout: float | None = None) -> None:
-        """End the leases the eyes took themselves: the controller resumes."""
+    def release(self, *what: str, timeout: float | None = None) -> None:
+        """End the leases the eyes took themselves for `what` ("expression",
+        "gaze"; both when none): the robot's behaviour resumes that part at once,
+        e.g. its gaze while the app keeps showing its expression."""
+        parts = set(what or RESOURCES)
+        unknown = sorted(parts - set(RESOURCES))
+        if unknown:
+            raise ValueError(f"unknown part(s) {', '.join(unknown)} of the eyes "
+                             f"(known: {', '.join(RESOURCES)})")
         with self._lock:
-            taken, self._implicit = list(self._implicit.values()), {}
+            taken = [self._implicit.pop(r) for r in sorted(parts) if r in self._implicit]
         for lease in taken:
             lease.release(timeout)
 

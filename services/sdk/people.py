@@ -21,7 +21,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 from buddybot.contract import keys
@@ -30,47 +30,15 @@ from buddybot.runtime.node import Node
 from buddybot.sdk import identity
 from buddybot.sdk.errors import NoService, SdkError, TimedOut
 from buddybot.sdk.identity import KnownPerson
+from buddybot.sdk.persons import Event, Person, person_from
+from buddybot.sdk.triggers import Dwell, Motion, Trigger, Within
 
 KINDS: tuple[str, ...] = ("ARRIVED", "ZONE_CHANGED", "ENGAGEMENT_CHANGED", "LEFT")
 """Every event kind, in the order a visit goes through them."""
+TICK_S = 0.1
+"""How often derived events (triggers.py) are checked besides every `people/state`."""
 
 log = logging.getLogger("buddybot.sdk")
-
-
-@dataclass(frozen=True)
-class Person:
-    """One person. Fields the event alone does not carry (distance, direction,
-    arrival) come from the latest `people/state` and are None when unknown."""
-
-    id: int
-    zone: str
-    engagement: str
-    distance_m: float | None = None
-    seen_by: str | None = None
-    arrived_ns: int | None = None
-    yaw_rad: float | None = None
-    pitch_rad: float | None = None
-    name: str | None = None
-    """Who they are, once the identity service recognised them (None: unknown)."""
-
-
-@dataclass(frozen=True)
-class Event:
-    """Something that happened to a person (`kind` is one of `KINDS`).
-
-    `replayed`: synthesized from the state present when the subscription was
-    made (an ARRIVED stamped with the person's arrival), not a change now."""
-
-    kind: str
-    person: Person
-    stamp_ns: int
-    replayed: bool = False
-
-
-def person_from(msg: m.Person) -> Person:
-    return Person(id=msg.id, zone=msg.zone, engagement=msg.engagement,
-                  distance_m=msg.distance_m, seen_by=msg.seen_by, arrived_ns=msg.arrived_ns,
-                  yaw_rad=msg.yaw_rad, pitch_rad=msg.pitch_rad, name=msg.name)
 
 
 def check_kinds(kinds: Iterable[str]) -> frozenset[str]:
@@ -186,6 +154,12 @@ class EventStream:
                 self._cond.wait(left)
             return self._items.popleft()
 
+    def poll(self) -> Event | None:
+        """The next event if one is waiting, else None at once (a loop that also
+        waits on something else)."""
+        with self._cond:
+            return self._items.popleft() if self._items else None
+
     def close(self) -> None:
         with self._cond:
             if self._closed:
@@ -251,6 +225,8 @@ class People:
         self._view = PeopleView()
         self._lock = threading.Condition()
         self._streams: list[EventStream] = []
+        self._triggers: list[tuple[Trigger, EventStream]] = []
+        self._ticking = False
         self._handles = [
             node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
             node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
@@ -260,6 +236,20 @@ class People:
         with self._lock:
             self._view.on_state(msg)
             self._lock.notify_all()
+            self._fire()
+
+    def _fire(self) -> None:
+        """Feed every trigger the persons present now (lock held)."""
+        if not self._triggers:
+            return
+        now, present = time.time_ns(), self._view.present()
+        for trigger, stream in list(self._triggers):
+            for event in trigger.update(now, present):
+                stream.push(event)
+
+    def _tick(self) -> None:
+        with self._lock:
+            self._fire()
 
     def _on_event(self, msg: m.PersonEvent, _key: str) -> None:
         with self._lock:
@@ -307,6 +297,39 @@ class People:
         threading.Thread(target=run, name="sdk-events", daemon=True).start()
         return stream
 
+    # -- derived events: dwell, distance, approach --
+
+    def trigger(self, trigger: Trigger, kinds: Iterable[str],
+                timeout: float | None = None) -> EventStream:
+        """A stream of the events `trigger` derives from who is present (checked
+        on every `people/state` and every `TICK_S`)."""
+        stream = EventStream(frozenset(kinds), on_close=self._forget)
+        with self._lock:
+            self._wait_state(timeout)
+            self._triggers.append((trigger, stream))
+            self._fire()
+            if not self._ticking:
+                self._ticking = True
+                self._node.every(TICK_S, self._tick, name="sdk-triggers")
+        return stream
+
+    def dwell(self, seconds: float, timeout: float | None = None) -> EventStream:
+        """DWELL once per person `seconds` after they arrived (a person already
+        there counts from their arrival, not from now)."""
+        return self.trigger(Dwell(seconds), ("DWELL",), timeout)
+
+    def within(self, metres: float, margin_m: float = 0.2,
+               timeout: float | None = None) -> EventStream:
+        """NEAR when a person comes within `metres`, FAR when they are more than
+        `margin_m` beyond it again (no flicker for someone standing on the line)."""
+        return self.trigger(Within(metres, margin_m), ("NEAR", "FAR"), timeout)
+
+    def motion(self, speed_mps: float = 0.3, window_s: float = 1.0,
+               timeout: float | None = None) -> EventStream:
+        """APPROACHING / RECEDING when a person's distance changes faster than
+        `speed_mps` over `window_s`: someone walking up, or walking away."""
+        return self.trigger(Motion(speed_mps, window_s), ("APPROACHING", "RECEDING"), timeout)
+
     # -- names, with consent (the identity service) --
 
     def enrol(self, name: str, samples: int = 5, timeout_s: float = 10.0,
@@ -333,10 +356,11 @@ class People:
         with self._lock:
             if stream in self._streams:
                 self._streams.remove(stream)
+            self._triggers = [(t, s) for t, s in self._triggers if s is not stream]
 
     def close(self) -> None:
         with self._lock:
-            streams = list(self._streams)
+            streams = list(self._streams) + [s for _t, s in self._triggers]
         for stream in streams:
             stream.close()
         for handle in self._handles:

@@ -47,22 +47,6 @@ def test_the_greeting_depends_on_the_time_of_day() -> None:
     assert len(lines) == 4
 
 
-def test_love_counts_from_the_arrival_even_a_replayed_one_in_the_past() -> None:
-    dwell = example("love_after_10s").Dwell(10.0)
-    s = 1_000_000_000
-    dwell.arrived(1, arrived_ns=100 * s)
-    dwell.arrived(2, arrived_ns=85 * s)  # replayed: there for 15 s when we started
-    assert dwell.due(100 * s) == [2]
-    assert dwell.due(109 * s) == []
-    assert dwell.due(110 * s) == [1]
-    assert dwell.due(200 * s) == []  # each once
-    assert dwell.left(2) is False  # 1 is still loved: keep LOVE
-    assert dwell.left(1) is True  # the last one loved left: release
-    dwell.arrived(3, arrived_ns=300 * s)
-    assert dwell.left(3) is False  # left before the dwell: nothing to release
-    assert dwell.due(400 * s) == []
-
-
 def test_wizard_commands() -> None:
     wizard = example("wizard_of_oz")
     parse, command = wizard.parse, wizard.Command

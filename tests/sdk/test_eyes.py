@@ -126,6 +126,29 @@ def test_express_shows_it_and_release_gives_the_eyes_back(
 
 
 @pytest.mark.integration
+def test_the_gaze_is_given_back_alone_and_the_expression_stays(
+        controller: Callable[[], Process], bot_factory: Callable[..., Bot],
+        expr: Collector[m.ScreenExpression], probe: Node) -> None:
+    controller()
+    control = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
+    bot = bot_factory()
+    shown = bot.eyes.express("love")
+    expr.wait_for(lambda e: e.action == X.ANIMATE_LOVE, 10, "ANIMATE_LOVE")
+    gaze = bot.eyes.look_at(0.3, -0.2, distance_m=1.0)
+    control.wait_for(lambda c: abs(c.yaw - 0.3) < 1e-6, 10, "the gaze asked for")
+    control.clear()
+    bot.eyes.release("gaze")
+    # The controller's gaze (centre: nobody is there) comes back; LOVE stays.
+    control.wait_for(lambda c: c.yaw == 0.0 and c.pitch == 0.0, 10, "the controller's gaze")
+    assert gaze.wait(5) == "released" and not shown.done
+    assert _actions(expr)[-1] == X.ANIMATE_LOVE
+    with pytest.raises(ValueError, match="unknown part"):
+        bot.eyes.release("pupils")
+    bot.eyes.release("expression")
+    expr.wait_for(lambda e: e.action == X.EYE_SLEEP, 10, "the controller's EYE_SLEEP back")
+
+
+@pytest.mark.integration
 def test_for_s_ends_on_the_controller_and_its_own_expression_comes_back(
         controller: Callable[[], Process], bot_factory: Callable[..., Bot],
         expr: Collector[m.ScreenExpression]) -> None:

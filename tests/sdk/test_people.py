@@ -193,3 +193,34 @@ def test_a_bot_connected_later_gets_the_arrival_replayed(spawn: Callable[..., Pr
     assert [p.id for p in bot.people.now()] == [1]
     with pytest.raises(TimedOut, match=r"no LEFT event within 0\.3 s"):
         bot.wait_for("LEFT", timeout=0.3)
+
+
+@pytest.mark.integration
+def test_dwell_and_distance_events_from_the_real_people_service(
+        spawn: Callable[..., Process], probe: Node, bot_factory: Callable[..., Bot],
+        tmp_path: Path) -> None:
+    """`bot.people.dwell` and `within` through the real people service: the dwell
+    counts from the arrival, the distance line fires once each way."""
+    start_people(spawn, probe, tmp_path)
+    bot = bot_factory()
+    dwell, line = bot.people.dwell(1.0), bot.people.within(1.5, margin_m=0.2)
+    visitor = Visitor(probe)
+    stamp = visitor.presence(True, 2.5)
+    event = dwell.get(30)
+    assert (event.kind, event.person.id, event.stamp_ns) == ("DWELL", 1, stamp + 10**9)
+    assert time.time_ns() >= event.stamp_ns
+    for metres in (2.0, 1.4, 1.6, 1.45, 1.8):  # a face's distances, 1.4 m -> near
+        visitor.face(metres)
+        if metres == 1.4:
+            assert line.get(30).kind == "NEAR"
+    assert line.get(30).kind == "FAR"
+    with pytest.raises(TimedOut):
+        line.get(0.5)  # 1.6 and 1.45 were inside the margin: nothing more
+
+
+def test_poll_takes_a_waiting_event_and_never_waits() -> None:
+    stream = EventStream(frozenset(KINDS))
+    assert stream.poll() is None
+    event = Event("LEFT", Person(id=1, zone="SOCIAL", engagement="GONE"), 5)
+    stream.push(event)
+    assert stream.poll() is event and stream.poll() is None
