@@ -344,32 +344,53 @@ def open_session(
 
     A failure (a bounded connect timeout ran out) raises RouterUnreachable
     naming Zenoh's reason per endpoint (refused, TLS, ...) when Zenoh's log
-    is routed (`route_zenoh_log`), else Zenoh's own error text."""
-    result: dict[str, Any] = {}
-    done = threading.Event()
+    is routed (`route_zenoh_log`), else Zenoh's own error text. Zenoh failing
+    to start for want of file descriptors (a flood of connections on the
+    process's web server) is tried again every `RETRY_S` until it opens."""
     forget_connect_failures()
-
-    def opener() -> None:
-        try:
-            result["session"] = zenoh.open(config)
-        except Exception as exc:  # zenoh raises ZError
-            result["error"] = exc
-        done.set()
-
-    threading.Thread(target=opener, name="zenoh-open", daemon=True).start()
     waited = 0.0
-    while not done.wait(0.1):
-        if stop.is_set():
+    while True:
+        result: dict[str, Any] = {}
+        done = threading.Event()
+
+        def opener(result: dict[str, Any] = result, done: threading.Event = done) -> None:
+            try:
+                result["session"] = zenoh.open(config)
+            except BaseException as exc:  # ZError, or a Rust panic (a BaseException)
+                result["error"] = exc
+            done.set()
+
+        threading.Thread(target=opener, name="zenoh-open", daemon=True).start()
+        while not done.wait(0.1):
+            if stop.is_set():
+                return None
+            waited += 0.1
+            if abs(waited - 2.0) < 0.05 or (waited > 2 and int(waited * 10) % 100 == 0):
+                why = _reasons_text(connect_failures())
+                log.warning("waiting for the Zenoh %s (%.0f s so far)%s", what, waited,
+                            f": {why}" if why else "")
+        error = result.get("error")
+        if error is None:
+            session: zenoh.Session = result["session"]
+            return session
+        if not _out_of_resources(error):
+            raise RouterUnreachable(_unreachable(what, error, _endpoints(config)))
+        log.warning("Zenoh could not start (%s): out of file descriptors? again in %g s",
+                    _clean(str(error)) or type(error).__name__, RETRY_S)
+        if stop.wait(RETRY_S):
             return None
-        waited += 0.1
-        if abs(waited - 2.0) < 0.05 or (waited > 2 and int(waited * 10) % 100 == 0):
-            why = _reasons_text(connect_failures())
-            log.warning("waiting for the Zenoh %s (%.0f s so far)%s", what, waited,
-                        f": {why}" if why else "")
-    if "error" in result:
-        raise RouterUnreachable(_unreachable(what, result["error"], _endpoints(config)))
-    session: zenoh.Session = result["session"]
-    return session
+        waited += RETRY_S
+
+
+RETRY_S = 1.0
+"""How long `open_session` waits before trying again after Zenoh could not start."""
+
+
+def _out_of_resources(error: BaseException) -> bool:
+    """Zenoh could not start its runtime (no descriptor for a channel or a socket):
+    a transient state of the process, not a fact about the router."""
+    text = str(error)
+    return "Too many open files" in text or "Failed to init" in text
 
 
 def _reasons_text(reasons: dict[str, str]) -> str:

@@ -133,3 +133,51 @@ def test_the_reader_counts_the_overflow_and_loses_no_whole_line(
     assert flood[-1].getMessage().endswith(f"flood line {writer.written - 1:06d}")
     warned = [r for r in caplog.records if "log pipe was full" in r.getMessage()]
     assert len(warned) == 1 and warned[0].levelno == logging.WARNING
+
+
+class PanicException(BaseException):
+    """What pyo3 raises for a Rust panic: a BaseException, not an Exception."""
+
+
+def test_zenoh_failing_to_start_for_want_of_descriptors_is_tried_again(
+        monkeypatch: pytest.MonkeyPatch, caplog: pytest.LogCaptureFixture) -> None:
+    """A flood of connections on a process's web server can leave Zenoh no
+    descriptor for its runtime ("Failed to init tx", a panic): the session is
+    opened again once they are back, not left waiting for ever."""
+    opened = object()
+    calls: list[int] = []
+
+    def fake_open(_config: object) -> object:
+        calls.append(1)
+        if len(calls) == 1:
+            raise PanicException("Failed to init tx")
+        return opened
+
+    monkeypatch.setattr(session.zenoh, "open", fake_open)
+    monkeypatch.setattr(session, "RETRY_S", 0.05)
+    with caplog.at_level(logging.WARNING, logger="buddybot.node"):
+        got = session.open_session(session.zenoh.Config(), threading.Event())
+    assert got is opened and len(calls) == 2
+    assert "out of file descriptors" in caplog.text
+
+
+def test_any_other_failure_to_open_is_unreachable_at_once(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    def fake_open(_config: object) -> object:
+        raise session.zenoh.ZError("Unable to connect to any of [tcp/127.0.0.1:1]")
+
+    monkeypatch.setattr(session.zenoh, "open", fake_open)
+    with pytest.raises(session.RouterUnreachable):
+        session.open_session(session.zenoh.Config(), threading.Event())
+
+
+def test_a_stop_while_waiting_to_try_again_returns_none(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    stop = threading.Event()
+
+    def fake_open(_config: object) -> object:
+        stop.set()
+        raise PanicException("Failed to init tx")
+
+    monkeypatch.setattr(session.zenoh, "open", fake_open)
+    assert session.open_session(session.zenoh.Config(), stop) is None
