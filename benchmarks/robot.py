@@ -4,8 +4,9 @@ Starts a router and the services `buddybot up --sim` starts (its launch plan,
 with the same command lines: simulated camera at 30 frames/s, simulated radar
 with a visitor who comes and goes) as separate processes, then measures for
 `--seconds` the gaze latency (capture -> `eyes/direction`, split by hop), the
-presence latency (the radar frame that brought someone in range, as
-`people/state` stamps it -> EYE_AWAKE) and the CPU
+presence latency (the sensor data that brought someone after nobody, as
+`people/state` stamps it -> EYE_AWAKE, by sensor: a radar frame, or a
+camera capture when the face came first) and the CPU
 and memory of each process. `--dashboard remote|browser` also asks whether
 an open dashboard page slows the robot, in alternating windows with the
 page closed and open.
@@ -184,7 +185,8 @@ def main() -> None:
         retry_until(lambda: set(services) <= set(probe.node_instances()), 90, 0.5,
                     "all nodes up")
         gaze_ms: list[float] = []
-        awake_ms: list[float] = []
+        awake_ms: dict[str, list[float]] = {"RADAR": [], "CAMERA": []}
+        """Arrival -> EYE_AWAKE, by the sensor that showed the person first."""
         hops: dict[str, list[float]] = {"camera/front/face": [], "eyes/control": []}
 
         def on_direction(msg: m.EyesDirection, _key: str) -> None:
@@ -198,20 +200,26 @@ def main() -> None:
                 hops[name].append((time.time_ns() - msg.stamp_ns) / 1e6)
             return on
 
-        arrived: list[int | None] = [None]
-        """The stamp of the people/state that brought someone in range, until the eyes wake."""
-        in_range = [False]
+        arrived: list[tuple[int, str] | None] = [None]
+        """The stamp of the people/state that brought someone in range and the sensor
+        that showed them, until the eyes wake."""
+        present = [False]
 
         def on_people(msg: m.PeopleState, _key: str) -> None:
-            now_in_range = people_changed(msg).in_range  # the controller's own reading
-            if now_in_range and not in_range[0]:
-                arrived[0] = msg.stamp_ns
-            in_range[0] = now_in_range
+            change = people_changed(msg)  # the controller's own reading
+            # An arrival after nobody was there (a person held and shown again is
+            # no arrival: the eyes never slept).
+            if change.in_range and not present[0]:
+                who = next(p for p in msg.people if p.id == change.person_id)
+                arrived[0] = (msg.stamp_ns, "CAMERA" if who.seen_by == "CAMERA" else "RADAR")
+            elif not (change.in_range or change.held):
+                arrived[0] = None
+            present[0] = change.in_range or change.held
 
         def on_expression(msg: m.ScreenExpression, _key: str) -> None:
-            stamp = arrived[0]
-            if msg.action == m.ExpressionAction.EYE_AWAKE and stamp is not None:
-                awake_ms.append((time.time_ns() - stamp) / 1e6)
+            first = arrived[0]
+            if msg.action == m.ExpressionAction.EYE_AWAKE and first is not None:
+                awake_ms[first[1]].append((time.time_ns() - first[0]) / 1e6)
                 arrived[0] = None
 
         Collector(probe, keys.EYES_DIRECTION).wait_for(timeout=60, what="gaze")
@@ -308,11 +316,13 @@ def main() -> None:
         print(f"  {'the rest (router too)':<20}"
               f"{sum(cpu_by_side[False].get(n, 0.0) for n in robot):>8.1f}"
               f"{sum(cpu_by_side[True].get(n, 0.0) for n in robot):>8.1f}")
-    if awake_ms:
-        print(f"presence latency radar frame -> people/state -> eyes/expression AWAKE: "
-              f"median {statistics.median(awake_ms):.1f} ms, max {max(awake_ms):.1f} ms, "
-              f"n={len(awake_ms)}")
-    else:
+    for sensor, what in (("RADAR", "radar frame"), ("CAMERA", "camera capture")):
+        got = awake_ms[sensor]
+        if got:
+            print(f"presence latency {what} -> people/state -> eyes/expression AWAKE: "
+                  f"median {statistics.median(got):.1f} ms, max {max(got):.1f} ms, "
+                  f"n={len(got)}")
+    if not any(awake_ms.values()):
         print("presence latency: no EYE_AWAKE seen (run longer)")
     print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}{'RSS growth kB':>15}")
     for name in ps:
