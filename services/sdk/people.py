@@ -227,6 +227,10 @@ class People:
         self._streams: list[EventStream] = []
         self._triggers: list[tuple[Trigger, EventStream]] = []
         self._ticking = False
+        self._watching = False
+        """Subscribed to `controller/state` (on the first `attended`)."""
+        self._attention: m.ControllerState | None = None
+        """The robot's own behaviour's latest state (subscribed on first `attended`)."""
         self._handles = [
             node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
             node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
@@ -296,6 +300,31 @@ class People:
 
         threading.Thread(target=run, name="sdk-events", daemon=True).start()
         return stream
+
+    def attended(self, timeout: float | None = None) -> Person | None:
+        """The person the robot's own behaviour attends to now (its visit's person,
+        `controller/state`), if present; None when it attends to nobody. NoService
+        without the robot's behaviour running."""
+        limit = self.timeout if timeout is None else timeout
+        with self._lock:
+            if not self._watching:
+                self._watching = True
+                self._handles.append(self._node.subscribe(
+                    keys.CONTROLLER_STATE, self._on_controller, delivery="queue"))
+            if not self._lock.wait_for(lambda: self._attention is not None, limit):
+                raise NoService(f"no {keys.CONTROLLER_STATE.pattern} within {limit:g} s: "
+                                "is the controller running (`buddybot run controller`)?")
+            self._wait_state(limit)
+            state = self._attention
+            assert state is not None
+            if state.phase == "idle" or state.person_id is None:
+                return None
+            return next((p for p in self._view.present() if p.id == state.person_id), None)
+
+    def _on_controller(self, msg: m.ControllerState, _key: str) -> None:
+        with self._lock:
+            self._attention = msg
+            self._lock.notify_all()
 
     # -- derived events: dwell, distance, approach --
 

@@ -15,7 +15,7 @@ import pytest
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
-from buddybot.sdk import Bot, Event, EventStream, Person, SdkError, TimedOut
+from buddybot.sdk import Bot, Event, EventStream, NoService, Person, SdkError, TimedOut
 from buddybot.sdk.people import KINDS, PeopleView, check_kinds
 from buddybot.tools.testing import Collector, Process, retry_until
 from tests.people.test_service import Visitor
@@ -224,3 +224,20 @@ def test_poll_takes_a_waiting_event_and_never_waits() -> None:
     event = Event("LEFT", Person(id=1, zone="SOCIAL", engagement="GONE"), 5)
     stream.push(event)
     assert stream.poll() is event and stream.poll() is None
+
+
+@pytest.mark.integration
+def test_the_person_the_robot_attends_to(spawn: Callable[..., Process], probe: Node,
+                                         bot_factory: Callable[..., Bot],
+                                         controller: Callable[[], Process],
+                                         tmp_path: Path) -> None:
+    bot = bot_factory()
+    with pytest.raises(NoService, match="controller"):
+        bot.people.attended(timeout=0.5)  # nobody decides yet
+    start_people(spawn, probe, tmp_path)
+    controller()
+    assert bot.people.attended() is None  # asleep: nobody attended
+    Visitor(probe).presence(True, 1.0)
+    retry_until(lambda: bot.people.attended() is not None, 30, 0.1, "attended")
+    attended = bot.people.attended()
+    assert attended is not None and attended.id == 1
