@@ -66,7 +66,7 @@ def test_enrol_list_recognise_and_forget_from_the_command_line(
     # Another photo of him in front of the robot: his person in people/state is named.
     camera.show(None)
     camera.show(scenes["obama2"])
-    state.wait_for(lambda s: [p.name for p in s.people] == ["Barack"], 60,
+    state.wait_for(lambda s: [p.name for p in s.people] == ["Barack"], 180,
                    "Barack named in people/state")
     count = len(state.messages)
     person = state.messages[-1].people[0].id

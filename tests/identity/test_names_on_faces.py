@@ -35,8 +35,9 @@ pytestmark = pytest.mark.integration
 
 WHO = {"obama": ("Barack", 190), "biden": ("Joe", 450)}
 """Photo -> (the name enrolled, where the face is in the image: its x, px)."""
-BLOCK = 24
-"""Frames of one face before the other (1.6 s at 15 frames/s)."""
+BLOCK = 45
+"""Frames of one face before the other (3 s at 15 frames/s: named within it also on a
+busy machine)."""
 
 
 def frames(folder: Path) -> tuple[str, dict[str, np.ndarray]]:
@@ -84,7 +85,7 @@ def test_no_person_ever_carries_the_name_of_a_face_not_theirs(
     def named() -> set[str]:
         return {p.name for s in state.messages for p in s.people if p.name}
 
-    retry_until(lambda: named() == {"Barack", "Joe"}, 120, 0.2, "both faces named")
+    retry_until(lambda: named() == {"Barack", "Joe"}, 300, 0.2, "both faces named")
     start = len(state.messages)
 
     def switches() -> int:
@@ -92,7 +93,7 @@ def test_no_person_ever_carries_the_name_of_a_face_not_theirs(
         shown = [p.name for s in state.messages[start:] for p in s.people if p.name]
         return sum(1 for a, b in itertools.pairwise(shown) if a != b)
 
-    retry_until(lambda: switches() >= 4, 120, 0.2, "four more switches of the face, named")
+    retry_until(lambda: switches() >= 4, 300, 0.2, "four more switches of the face, named")
     wrong = []
     names: list[str] = []
     for s in state.messages:
