@@ -52,7 +52,7 @@ class Timer:
 
 def run_faces(node: Node, count: int, rate: float) -> list[float]:
     timer = Timer()
-    node.subscribe(keys.EYE_CONTROL, lambda msg, _k: timer.arrived(msg.stamp_ns))
+    node.subscribe(keys.BEHAVIOUR_GAZE, lambda msg, _k: timer.arrived(msg.stamp_ns))
     pub = node.publisher(keys.FACE, camera="front")
     point = m.Point(x=1.0, y=0.2, z=0.1)
 

@@ -5,7 +5,7 @@ Starts a router, `buddybot run eyes` and `buddybot run eye-renderer
 Debian's headless Chromium through Playwright. Prints, per eye style and
 page size, the frame time (target: 60 fps, p95 < 16.7 ms), the page's own
 update+draw cost and Chromium's CPU; the latency from a published
-`eyes/direction`, and from `eyes/control` through the driver, to the first
+`eyes/direction`, and from `controller/eye_control` through the driver, to the first
 frame drawn with the new target (target: median < 20 ms); and, under
 attack (stuck WebSocket clients and a flood), how old the page's gaze is.
 
@@ -97,7 +97,7 @@ class Flood:
 
     def __init__(self, node: Node, direct: bool) -> None:
         self._direct = direct
-        self._pub = node.publisher(keys.EYES_DIRECTION if direct else keys.EYE_CONTROL)
+        self._pub = node.publisher(keys.EYES_DIRECTION if direct else keys.BEHAVIOUR_GAZE)
         self._stop = threading.Event()
         self.count = 0
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -156,7 +156,7 @@ def attack(page: Any, node: Node, port: int, renderer_pid: int, stuck_n: int,
             for rec in page.evaluate("window.eyes.latency")
             if float(rec["stamp_ns"]) / 1e6 >= flood_start_ms]
     received = page.evaluate("window.eyes.stats.messages") - messages0
-    topic = "eyes/direction" if direct else "eyes/control"
+    topic = "eyes/direction" if direct else "controller/eye_control"
     print(f"flood: {flood.count} {topic} in {seconds:.0f} s "
           f"({flood.count / seconds:.0f}/s); the real page got {received} messages")
     if ages:
@@ -240,7 +240,7 @@ def bench_style(browser: Any, node: Node, router: Router, style: str, sizes: lis
     try:
         wait_port(port, 30)
         direction = node.publisher(keys.EYES_DIRECTION)
-        control = node.publisher(keys.EYE_CONTROL)
+        control = node.publisher(keys.BEHAVIOUR_GAZE)
         for size in sizes:
             width, height = (int(v) for v in size.split("x"))
             page = browser.new_page(viewport={"width": width, "height": height})
@@ -277,8 +277,8 @@ def bench_style(browser: Any, node: Node, router: Router, style: str, sizes: lis
             figures("eyes/direction -> page (WebSocket)", to_page)
             figures("eyes/direction -> drawn (frame)", to_frame)
             to_page_c, to_frame_c = measure_latency(page, args.count, args.rate, send_control)
-            figures("eyes/control -> driver -> page", to_page_c)
-            figures("eyes/control -> driver -> drawn", to_frame_c)
+            figures("controller/eye_control -> driver -> page", to_page_c)
+            figures("controller/eye_control -> driver -> drawn", to_frame_c)
             met = "met" if statistics.median(to_frame) < 20 else "NOT met"
             print(f"(target direction -> drawn median < 20 ms: {met})")
             summary.append(

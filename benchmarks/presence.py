@@ -1,16 +1,17 @@
 """Benchmark: radar presence -> the controller's EYE_AWAKE, through a real router.
 
-Starts `buddybot router`, `buddybot run people` and `buddybot run
-controller` on loopback (the controller reads the person from
-`people/state`, so an arrival crosses radar/presence -> people -> controller
--> eyes/expression), then a probe node publishes IN_RANGE on
+Starts `buddybot router`, `buddybot run people`, `buddybot run
+controller` and `buddybot run eyes` on loopback (the controller reads the
+person from `people/state` and wishes its expression, which the eyes
+driver's arbiter shows, so an arrival crosses radar/presence -> people ->
+controller -> eyes -> eyes/expression), then a probe node publishes IN_RANGE on
 `radar/presence` and times it until `eyes/expression` EYE_AWAKE comes
 back; OUT_OF_RANGE and EYE_SLEEP in between reset the robot. The holds
 are 0 (the people service's `absence_hold_s`, the controller's
 `farewell_delay_s` and `sleepy_s`) so the cycle is quick; entering
 needs no hold, so the figure is the pipeline's own latency: the people
-service's step, the controller's decision thread and four router
-crossings. A loopback baseline (probe -> router -> probe) is
+service's step, the controller's decision thread, the arbiter and five
+router crossings. A loopback baseline (probe -> router -> probe) is
 printed next to it.
 
     .venv/bin/python benchmarks/presence.py [--count N]
@@ -103,14 +104,15 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=50)
     args = parser.parse_args()
-    with services_up(("people", "controller"), CONFIG, "buddybot-bench-presence-") as endpoint:
+    with services_up(("people", "controller", "eyes"), CONFIG,
+                     "buddybot-bench-presence-") as endpoint:
         with Node("bench", connect=[endpoint]) as node:
             Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
             lat = run_visits(node, args.count)
         with (Node("bench-a", connect=[endpoint]) as a,
               Node("bench-b", connect=[endpoint]) as b):
             base = run_loopback(a, b, args.count)
-    print(summary("radar/presence -> people -> controller -> EYE_AWAKE", lat))
+    print(summary("radar/presence -> people -> controller -> eyes -> EYE_AWAKE", lat))
     print(summary("loopback probe -> router -> probe", base))
     return 0
 

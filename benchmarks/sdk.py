@@ -14,7 +14,7 @@
    `ScreenExpression` at the subscriber minus the time `bot.eyes.express()`
    was called: bot -> router -> controller (lease check, publish) -> router
    -> subscriber. Expressions alternate so each one is a change, at `--rate`
-   per second (under the controller's `lease_actions_per_s`, 20). The
+   per second (under the arbiter's `lease_actions_per_s`, 20). The
    `express()` call's own round trip (it returns on the controller's reply)
    is printed beside it.
 """
@@ -112,13 +112,13 @@ EXPRESSIONS = (m.ExpressionAction.ANIMATE_LOVE, m.ExpressionAction.EYE_GRIN,
 
 
 def bench_express(router: Router, count: int, rate: float) -> None:
-    controller = run_service("controller", router.endpoint)
+    arbiter = run_service("eyes", router.endpoint)
     screen_node = Node("bench-screen", connect=[router.endpoint])
     try:
-        retry_until(lambda: any(i.node == "controller" and "leases/acquire" in i.services
+        retry_until(lambda: any(i.node == "eyes" and "leases/acquire" in i.services
                                 and "eyes/command" in i.services
                                 for i in screen_node.node_infos(1.0)),
-                    60, 0.2, "the controller serving leases")
+                    60, 0.2, "the eyes driver serving leases")
         screen = Screen(screen_node)
         latencies: list[float] = []
         calls: list[float] = []
@@ -136,12 +136,12 @@ def bench_express(router: Router, count: int, rate: float) -> None:
                 time.sleep(1.0 / rate)  # the pace (not a synchronisation)
     finally:
         screen_node.close()
-        controller.stop()
+        arbiter.stop()
     print(f"bot.eyes.express() called -> ScreenExpression at a subscriber (n={len(latencies)}, "
           f"{rate:g}/s, under a held lease): median {statistics.median(latencies):.2f} ms, "
           f"p90 {percentile(latencies, 0.9):.2f} ms, max {max(latencies):.2f} ms  "
           f"(target: median <= 3 ms)")
-    print(f"bot.eyes.express() call itself (returns on the controller's reply): median "
+    print(f"bot.eyes.express() call itself (returns on the arbiter's reply): median "
           f"{statistics.median(calls):.2f} ms, p90 {percentile(calls, 0.9):.2f} ms, "
           f"max {max(calls):.2f} ms")
 

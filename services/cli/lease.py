@@ -1,9 +1,9 @@
 """`buddybot lease list|break`: who holds the eyes and the speaker, and ending a lease.
 
-`list` reads the controller's latched `leases/state` (every lease now, and
+`list` reads the arbiter's latched `leases/state` (every lease now, and
 the last ones that ended with their reasons); `break ID` asks the
-controller (`leases/release`) to end one, as an operator: the lease ends
-`broken` and the controller's own behaviour takes the resources back at
+arbiter in the eyes driver (`leases/release`) to end one, as an operator: the lease ends
+`broken` and the built-in behaviour gets the resources back at
 once (docs/design.md 4.8).
 
 Exit status: 0 done, 1 no answer within `--timeout` or the lease is unknown
@@ -88,7 +88,7 @@ def _list(ctx: ServiceContext) -> int:
         if not arrived.wait(ctx.args.timeout):
             raise ServiceError(
                 f"no {keys.LEASES.pattern} within {ctx.args.timeout:g} s "
-                "(is the controller running?)")
+                "(is the eyes driver running?)")
     state = got[-1]
     if ctx.args.json:
         print(msgspec.json.encode(state).decode())
@@ -112,7 +112,7 @@ def _break(ctx: ServiceContext) -> int:
         except NoReplyError:
             raise ServiceError(
                 f"nobody answered {keys.LEASE_RELEASE.pattern} within {ctx.args.timeout:g} s "
-                "(is the controller running?)") from None
+                "(is the eyes driver running?)") from None
     reply = m.TriggerReply(success=True, message=text)
     print(msgspec.json.encode(reply).decode() if ctx.args.json else text)
     return 0

@@ -253,7 +253,8 @@ DEBUG_IMAGE = Topic(
     type=m.Image, codec=MSGPACK, qos=IMAGES, max_bytes=IMAGE_MESSAGE_BYTES,
 )
 EXPRESSION = Topic(
-    "eyes/expression", "the eyes' expression", type=m.ScreenExpression, qos=STATE, latched=True,
+    "eyes/expression", "the eyes' expression (the arbiter's winner)",
+    type=m.ScreenExpression, qos=STATE, latched=True,
 )
 EYE_CONTROL = Topic(
     "eyes/control", "gaze target, radians and cm", type=m.EyeControl, qos=STREAM,
@@ -266,6 +267,14 @@ PUPIL = Topic(
 )
 LIDS = Topic(
     "eyes/lids", "lid positions per eye", type=m.EyeLidControl, qos=STATE, latched=True,
+)
+BEHAVIOUR_EXPRESSION = Topic(
+    "controller/expression", "the built-in behaviour's expression: shown while no lease holds it",
+    type=m.ScreenExpression, qos=STATE, latched=True,
+)
+BEHAVIOUR_GAZE = Topic(
+    "controller/eye_control", "the built-in behaviour's gaze: shown while no lease holds it",
+    type=m.EyeControl, qos=STREAM,
 )
 CONTROLLER_STATE = Topic(
     "controller/state", "engagement phase, visit, sounds, why the controller waits; on change",
@@ -316,7 +325,7 @@ LEASE_RELEASE = Service(
     request=m.LeaseRelease, reply=m.TriggerReply,
 )
 EYES_COMMAND = Service(
-    "eyes/command", "a lease holder's expression or gaze, published by the controller",
+    "eyes/command", "a lease holder's expression or gaze, published by the eyes driver",
     request=m.EyesCommand, reply=m.TriggerReply,
 )
 PLAY_SOUND = Service(
@@ -359,7 +368,8 @@ NODE_INFO = Service(
 
 TOPICS: tuple[Topic, ...] = (
     RADAR_FRAMES, RADAR_TARGETS, PRESENCE, CAMERA_IMAGE, FACE, FACES, DEBUG_IMAGE, EXPRESSION,
-    EYE_CONTROL, EYES_DIRECTION, PUPIL, LIDS, CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
+    EYE_CONTROL, EYES_DIRECTION, PUPIL, LIDS, BEHAVIOUR_EXPRESSION, BEHAVIOUR_GAZE,
+    CONTROLLER_STATE, PEOPLE_STATE, PEOPLE_EVENTS,
     FACE_NAME, LEASES, PLAY_SOUND_STATUS, DEVICE_FREE, DIAGNOSTICS, SIM_WORLD,
 )
 SERVICES: tuple[Service, ...] = (

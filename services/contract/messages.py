@@ -650,8 +650,8 @@ class KnownPeople(Message):
 # --- leases ------------------------------------------------------------------
 
 LeasePriority = Literal["builtin", "app", "operator"]
-"""Low to high. `builtin` is the controller's own behaviour: it holds whatever
-no lease holds, and no request may ask for it."""
+"""Low to high. `builtin` is the controller's own behaviour (`controller/expression`,
+`controller/eye_control`): it holds whatever no lease holds, and no request may ask for it."""
 LEASE_PRIORITIES: tuple[str, ...] = ("builtin", "app", "operator")
 LeaseId = Annotated[str, msgspec.Meta(max_length=64)]
 NodeName = Annotated[str, msgspec.Meta(min_length=1, max_length=64,
@@ -735,7 +735,7 @@ class Leases(Message):
 class EyesCommand(Message):
     """`eyes/command`: what a lease holder wants the eyes to do.
 
-    The controller publishes it on `eyes/expression` / `eyes/control` if
+    The eyes driver publishes it on `eyes/expression` / `eyes/control` if
     `lease_id` holds `expression` (for `expression`) and `gaze` (for the
     gaze fields); it is the one publisher of both keys, so `eyes/expression`
     keeps exactly one retained value whoever drives it.

@@ -113,4 +113,19 @@ class CancelReply:
     success: bool
 
 
-Event = PeopleChanged | RadarGaze | DeviceFree | SoundStatus | GoalReply | CancelReply
+@dataclass(frozen=True, slots=True)
+class Yielded:
+    """What the leases of `leases/state` hold now: the eyes driver shows those
+    parts for their holders, and a held speaker keeps the behaviour silent."""
+
+    resources: tuple[m.Resource, ...]
+
+
+def yielded(msg: m.Leases) -> Yielded:
+    """The resources some lease holds, each once, in the contract's order."""
+    held = {r for lease in msg.leases for r in lease.resources}
+    return Yielded(tuple(r for r in ("expression", "gaze", "audio") if r in held))
+
+
+Event = (PeopleChanged | RadarGaze | DeviceFree | SoundStatus | GoalReply | CancelReply
+         | Yielded)

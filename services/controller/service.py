@@ -3,10 +3,10 @@
 A face is the latency path (camera -> eyes), so it is decided in Zenoh's
 callback thread under the lock that guards the `Behaviour`; every other
 callback only posts an event to the decision thread, which runs `tick()`
-and publishes; one sound thread makes the blocking audio calls. Leases
-(`leases.LeaseTable`) are answered on the node's service workers under
-the same lock, from one liveliness view of the holders. `controller/state`
-is published at start and on change.
+and publishes; one sound thread makes the blocking audio calls. The
+behaviour's expression and gaze are wishes (`controller/expression`,
+`controller/eye_control`): the eyes driver's arbiter shows them while no
+lease holds those parts. `controller/state` is published at start and on change.
 
 Threads, leases and state, and why: docs/controller.md, 'The service in detail'.
 """
@@ -42,10 +42,11 @@ from buddybot.controller.events import (
     PeopleChanged,
     RadarGaze,
     SoundStatus,
+    Yielded,
     people_changed,
     radar_point,
+    yielded,
 )
-from buddybot.controller.leases import LeaseTable
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
 from buddybot.runtime.errors import ConfigError
@@ -55,11 +56,6 @@ from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.controller")
-
-ACQUIRE_QUEUE = 256
-"""Lease requests that may wait for the worker: each is answered in tens of
-microseconds, so a burst of this many waits milliseconds, and a real holder
-asking during a flood is queued behind it rather than refused "busy"."""
 
 SoundCommand = PlaySound | CancelSound
 """The commands the sound thread carries out (blocking audio calls)."""
@@ -92,20 +88,14 @@ class Controller:
     """Wires one Node to one Behaviour; `start()` declares everything, `close()` stops."""
 
     def __init__(self, node: Node, settings: ControllerSettings,
-                 clock: Callable[[], float] = time.monotonic,
-                 wall_ns: Callable[[], int] = m.now_ns) -> None:
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self.transform = camera_transform(settings)
         self.node = node
         self.settings = settings
         self.clock = clock
-        self.wall_ns = wall_ns
-        """Wall-clock ns, the clock of lease grants and expiries."""
         self.behaviour = Behaviour(settings, clock())
-        self.leases = LeaseTable()
-        self._alive: set[tuple[str, str]] = set()
-        """(node, instance) of every liveliness token seen alive."""
-        self._last_look = Look(None)
-        """The behaviour's latest gaze, put again when a gaze lease ends."""
+        self._yielded: tuple[m.Resource, ...] = ()
+        """What leases hold (from `leases/state`), shown in `controller/state`."""
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
         self._last_people: PeopleChanged | None = None
         """The last presence posted (under `_cond`): the next is posted only if it differs."""
@@ -117,10 +107,9 @@ class Controller:
         face callback both decide."""
         self._sounds: queue.Queue[SoundCommand | None] = queue.Queue()
         self._warn = RateLimitedLog(log)
-        self._expression_pub = node.publisher(keys.EXPRESSION)
-        self._control_pub = node.publisher(keys.EYE_CONTROL)
+        self._expression_pub = node.publisher(keys.BEHAVIOUR_EXPRESSION)
+        self._control_pub = node.publisher(keys.BEHAVIOUR_GAZE)
         self._state_pub = node.publisher(keys.CONTROLLER_STATE)
-        self._leases_pub = node.publisher(keys.LEASES)
         self._state: tuple[State, tuple[m.Resource, ...]] | None = None  # the last one put
         self._threads: list[threading.Thread] = []
         self._last_diag = 0.0
@@ -142,13 +131,9 @@ class Controller:
         node.subscribe(keys.DEVICE_FREE, self._on_device_free)
         node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
         node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
-        node.watch_nodes(self.on_token)
+        node.subscribe(keys.LEASES, self._on_leases)
         with self._lock:
             self._publish_state(self.clock())  # the first one, even before any input
-            self._leases_pub.put(self.leases.snapshot(self.wall_ns()))
-        node.serve(keys.LEASE_ACQUIRE, self.acquire, queue_size=ACQUIRE_QUEUE)
-        node.serve(keys.LEASE_RELEASE, self.release)
-        node.serve(keys.EYES_COMMAND, self.eyes_command)
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
             thread = threading.Thread(target=target, name=f"controller:{name}", daemon=True)
             thread.start()
@@ -205,87 +190,14 @@ class Controller:
         age = (m.now_ns() - msg.stamp_ns) / 1e9 if msg.stamp_ns > 0 else None
         self._post(SoundStatus(msg.goal_id, msg.state, age))
 
+    def _on_leases(self, msg: m.Leases, _key: str) -> None:
+        self._post(yielded(msg))
+
     def _on_face(self, msg: m.FacePosition, _key: str) -> None:
         with self._lock:
             now = self.clock()
             self._handle_face(msg, now)
             self._publish_state(now)
-
-    def on_token(self, node: str, instance: str, alive: bool) -> None:
-        """A liveliness token came or went (Zenoh's thread): a holder that went
-        away loses its leases at once."""
-        with self._lock:
-            if alive:
-                self._alive.add((node, instance))
-                return
-            self._alive.discard((node, instance))
-            before = self.leases.held()
-            if self.leases.holder_gone(node, instance, self.wall_ns()):
-                self._leases_changed(before)
-
-    # -- lease services (the node's service workers) --
-
-    def acquire(self, req: m.LeaseRequest) -> m.LeaseReply:
-        """Grant or refuse at once: whether the holder is alive is read from the
-        watch of `nodes/*/*` (`on_token`), never asked per request, so a flood
-        of invented holders costs each a set lookup and cannot hold up the
-        worker; a program whose token has not arrived yet retries (leasing.ask)."""
-        with self._lock:
-            alive = (req.holder, req.instance) in self._alive
-            before = self.leases.held()
-            decision = self.leases.acquire(req, self.wall_ns(), alive)
-            if decision.reply.granted:
-                log.info("lease %s granted to %s (%s, %s)", decision.reply.lease_id,
-                         req.holder, req.priority, ", ".join(req.resources))
-                self._leases_changed(before)
-            else:
-                self._warn.warning("lease_refused", "lease refused to %s: %s", req.holder,
-                                   decision.reply.message)
-        return decision.reply
-
-    def release(self, req: m.LeaseRelease) -> m.TriggerReply:
-        with self._lock:
-            before = self.leases.held()
-            reply, ended = self.leases.release(req.lease_id, req.by, req.reason, self.wall_ns())
-            if ended:
-                log.info("lease %s", reply.message)
-                self._leases_changed(before)
-        return reply
-
-    def eyes_command(self, cmd: m.EyesCommand) -> m.TriggerReply:
-        with self._lock:
-            s = self.settings
-            eyes = self.leases.eyes_command(cmd, self.wall_ns(), s.lease_actions_per_s,
-                                            s.lease_actions_burst)
-            if eyes.expression is not None:
-                self._expression_pub.put(eyes.expression)
-            if eyes.control is not None:
-                self._control_pub.put(eyes.control)
-        if not eyes.reply.success:
-            # One topic for all: a lease id is the caller's text, and a topic per id
-            # would grow the log's table with every invented one.
-            self._warn.warning("eyes_refused", "eyes command refused: %s", eyes.reply.message)
-        return eyes.reply
-
-    def _leases_changed(self, before: list[m.Resource]) -> None:
-        """After the table changed (under the lock): put `leases/state`, give the
-        behaviour back what no lease holds any more (its expression and gaze at
-        once), and tell it whether the speaker is held."""
-        now = self.clock()
-        after = self.leases.held()
-        self._leases_pub.put(self.leases.snapshot(self.wall_ns()))
-        freed = set(before) - set(after)
-        if "expression" in freed:
-            expression = self.behaviour.snapshot(now).expression
-            if expression is not None:
-                log.info("expression resumed -> %s", expression.name)
-                self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
-                                                            action=expression))
-        if "gaze" in freed:
-            self._control_pub.put(self._eye_control(Look(self._last_look.gaze)))
-        if ("audio" in before) != ("audio" in after):
-            self._execute(self.behaviour.audio_held(now, "audio" in after))
-        self._publish_state(now)
 
     # -- decision thread --
 
@@ -313,9 +225,6 @@ class Controller:
         this, and pure tests drive it with a fake clock and node."""
         with self._lock:
             self._handle(events)
-            before = self.leases.held()
-            if self.leases.expire(self.wall_ns()):
-                self._leases_changed(before)
             now = self.clock()
             if now >= next_tick:
                 next_tick = now + self.settings.tick_s
@@ -344,6 +253,10 @@ class Controller:
                     commands = b.sound_reply(now, request, accepted, goal_id)
                 case CancelReply(goal_id=goal_id, success=success):
                     commands = b.cancel_reply(now, goal_id, success)
+                case Yielded(resources=resources):
+                    audio_changed = ("audio" in resources) != ("audio" in self._yielded)
+                    self._yielded = resources
+                    commands = b.audio_held(now, "audio" in resources) if audio_changed else []
                 case _:
                     assert_never(event)
             self._execute(commands)
@@ -362,18 +275,11 @@ class Controller:
         """Carry out the behaviour's commands. Exhaustive: a `Command` member without a
         case fails type checking at `assert_never`, and at run time it raises instead
         of being taken for a sound."""
-        held = self.leases.held()
         for cmd in commands:
             match cmd:
                 case Look():
-                    self._last_look = cmd
-                    if "gaze" not in held:
-                        self._control_pub.put(self._eye_control(cmd))
+                    self._control_pub.put(self._eye_control(cmd))
                 case SetExpression(action=action):
-                    if "expression" in held:
-                        log.info("expression %s held back: a lease holds the eyes",
-                                 action.name)
-                        continue
                     log.info("expression -> %s", action.name)
                     self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
                                                                 action=action))
@@ -393,7 +299,7 @@ class Controller:
 
     def _publish_state(self, now: float) -> None:
         """Put `controller/state` if it changed (beyond `waiting_s`); under the lock."""
-        current = (self.behaviour.state(now), tuple(self.leases.held()))
+        current = (self.behaviour.state(now), self._yielded)
         if current == self._state:
             return
         self._state = current
@@ -412,8 +318,6 @@ class Controller:
         values["recovering"] = snap.recovering
         values["farewell_pending"] = snap.farewell_pending
         values.update(snap.counters)
-        values.update(self.leases.counters)
-        values["leases"] = len(self.leases)
 
     # -- sound thread --
 

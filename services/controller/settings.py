@@ -123,10 +123,3 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
         ge=0.005, le=1.0, description="seconds: period of the decision loop's timers")] = 0.05
     call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",
                                         positive=True, live=False)] = 3.0
-    lease_actions_per_s: Annotated[float, msgspec.Meta(
-        gt=0.0, le=1000.0, extra=LIVE,
-        description="eyes commands per second one lease may send (token bucket refill); "
-                    "more are refused \"rate limited\"")] = 20.0
-    lease_actions_burst: Annotated[float, msgspec.Meta(
-        ge=1.0, le=1000.0, extra=LIVE,
-        description="eyes commands one lease may send at once (token bucket depth)")] = 40.0

@@ -290,14 +290,14 @@ def _granted(lease_id: str) -> str:
 
 
 def _lease_call(what: str, call: Callable[[], str]) -> tuple[bool, str]:
-    """A lease call's outcome as the page shows it: refusals with the controller's
-    reason, a missing controller said plainly (every call is bounded in time)."""
+    """A lease call's outcome as the page shows it: refusals with the arbiter's
+    reason, a missing eyes driver said plainly (every call is bounded in time)."""
     try:
         text = call()
     except LeaseRefused as exc:
         return False, f"{what} refused: {clip(exc, 200)}"
     except NoReplyError:
-        return False, f"{what}: the controller does not answer (is it running?)"
+        return False, f"{what}: the eyes driver does not answer (is it running?)"
     except ServiceError as exc:
         return False, f"{what}: {clip(exc, 200)}"
     return True, f"{what}: {clip(text, 200)}" if text else what

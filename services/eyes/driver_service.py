@@ -1,11 +1,13 @@
 """`buddybot run eyes`: the eyes driver service.
 
-A thin adapter around `buddybot.eyes.driver`: `eyes/control` ->
-`eyes/direction` + `eyes/pupil`, `eyes/expression` -> `eyes/lids`
-(latched, so a renderer that starts later gets the current lids).
-The mapping is microseconds of arithmetic, so handlers run inline in
-Zenoh's callback thread; malformed samples are dropped and counted by
-the node runtime, never fatal.
+The arbiter (`arbiter.py`) decides what the eyes show, the built-in
+behaviour's wish or a lease holder's command, and puts it on
+`eyes/expression` / `eyes/control`; this adapter turns the winner into
+`eyes/direction` + `eyes/pupil` and `eyes/lids` (latched, so a renderer
+that starts later gets the current lids) through `buddybot.eyes.driver`.
+The mapping is microseconds of arithmetic, so it runs inline in Zenoh's
+callback thread; malformed samples are dropped and counted by the node
+runtime, never fatal.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import argparse
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes import driver
+from buddybot.eyes.arbiter import Arbiter
 from buddybot.eyes.settings import EyesSettings
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.overrides import merge, settings_option
@@ -64,35 +67,40 @@ def run(ctx: ServiceContext) -> int:
         lids_pub = node.publisher(keys.LIDS)
         diag = node.diagnostics
 
-        def on_control(control: m.EyeControl, _key: str) -> None:
+        def on_control(control: m.EyeControl) -> None:
             curve, unknown, _table = built[0]
             direction_pub.put(driver.direction_from_control(control))
             pupil_pub.put(driver.pupil_from_control(control, curve, unknown))
             diag.increment("controls")
 
-        def on_expression(expression: m.ScreenExpression, _key: str) -> None:
+        def on_expression(expression: m.ScreenExpression) -> None:
             last[:] = [expression]
             for lids in driver.lids_for_expression(expression, built[0][2]):
                 lids_pub.put(lids)
             diag.increment("expressions")
             diag.values["expression"] = expression.action.name
 
+        def show(expression: m.ScreenExpression | None, control: m.EyeControl | None) -> None:
+            if expression is not None:
+                on_expression(expression)
+            if control is not None:
+                on_control(control)
+
+        arbiter = Arbiter(node, show, settings.lease_actions_per_s,
+                          settings.lease_actions_burst)
+
         def apply(new: EyesSettings) -> None:
             """A live change (`buddybot param set eyes ...`): a curve or lid table the
             driver cannot use is refused (ValueError); new lids are shown at once."""
             built[0] = build_from(new)
+            arbiter.set_rates(new.lease_actions_per_s, new.lease_actions_burst)
             for expression in last[-1:]:
                 for lids in driver.lids_for_expression(expression, built[0][2]):
                     lids_pub.put(lids)
 
         LiveSettings(settings, apply).serve(node)
-
-        # Inline: the conversion is two small puts (tens of microseconds), and gaze is
-        # the latency path (camera -> eyes); a worker thread cost a wake-up per frame.
-        # A flood cannot build a backlog here: a handler this fast keeps up with any
-        # rate the link delivers, and the renderer keeps only the newest gaze itself.
-        node.subscribe(keys.EYE_CONTROL, on_control, delivery="inline")
-        node.subscribe(keys.EXPRESSION, on_expression, delivery="inline")
+        arbiter.start()
+        node.every(1.0, lambda: diag.values.update(arbiter.counters), "diagnostics")
         node.log.info("eyes driver ready")
         node.spin()
     finally:

@@ -40,6 +40,15 @@ class EyesSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     # [left_top, left_bottom, right_top, right_bottom]; 0/0 open, 50/50 closed.
     lids: Annotated[dict[str, list[float]], msgspec.Meta(extra={"live": True})] = msgspec.field(
         default_factory=dict)
+    # The arbiter's budget per lease (a token bucket): an app looping on eyes
+    # commands is slowed down and counted, not obeyed.
+    lease_actions_per_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=1000.0, extra={"live": True},
+        description="eyes commands per second one lease may send (token bucket refill); "
+                    "more are refused \"rate limited\"")] = 20.0
+    lease_actions_burst: Annotated[float, msgspec.Meta(
+        ge=1.0, le=1000.0, extra={"live": True},
+        description="eyes commands one lease may send at once (token bucket depth)")] = 40.0
 
 
 EyeName = Literal["left", "right"]

@@ -1,8 +1,8 @@
 """A node's lease on the robot's eyes and speaker, from the holder's side.
 
-The controller arbitrates (`leases/acquire`, `leases/release`, `eyes/command`,
+The eyes driver arbitrates (`leases/acquire`, `leases/release`, `eyes/command`,
 docs/design.md section 4.8); a lease holder is a node with a liveliness
-token, so the controller can end the lease when the holder's process goes
+token, so the eyes driver can end the lease when the holder's process goes
 away. This module is the holder's wire side, once for every holder (the
 dashboard, Foxglove, the SDK, `buddybot lease`): the request checked before
 it leaves (`request`), asking (`ask`, `acquire`), driving the eyes (`eyes_command`),
@@ -12,9 +12,9 @@ processes that drive the eyes for a person (the dashboard's operator switch,
 Foxglove's expression service).
 
 Every call is bounded by a timeout and raises `ServiceError` (a
-`NoReplyError` when no controller answers, a `CallError` for a bad reply)
-or `LeaseRefused` (the controller said no, with its reason): never a hang.
-A release names this node (`by`), so the controller tells a holder giving
+`NoReplyError` when no eyes driver answers, a `CallError` for a bad reply)
+or `LeaseRefused` (the eyes driver said no, with its reason): never a hang.
+A release names this node (`by`), so the eyes driver tells a holder giving
 its lease back (`released`) from an operator breaking someone's (`broken`).
 """
 
@@ -31,13 +31,13 @@ from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import Node
 
 CALL_TIMEOUT_S = 3.0
-"""How long a lease call may take before it counts as failed (the controller is
+"""How long a lease call may take before it counts as failed (the arbiter is
 local and answers in milliseconds)."""
 NOT_ALIVE_WAIT_S = 2.0
-"""How long a holder asks again while the controller has not seen its liveliness
+"""How long a holder asks again while the arbiter has not seen its liveliness
 token (it travels there in milliseconds; seconds only under a heavy load)."""
 BROKEN_BY_OPERATOR = "broken by operator"
-"""The release reason an operator gives for someone else's lease (the controller
+"""The release reason an operator gives for someone else's lease (the arbiter
 records it as `broken`)."""
 RESOURCES: tuple[m.Resource, ...] = ("expression", "gaze", "audio")
 SHORTHANDS: dict[str, tuple[m.Resource, ...]] = {"eyes": ("expression", "gaze")}
@@ -51,7 +51,7 @@ NOT_LISTED = "not in a leases/state newer than its request"
 
 
 class LeaseRefused(ServiceError):
-    """The controller answered no: the text is its reason (who holds what)."""
+    """The arbiter answered no: the text is its reason (who holds what)."""
 
 
 # --- the request, checked before it leaves (pure) ------------------------------------------
@@ -109,7 +109,7 @@ def request(node: Node, names: Iterable[str], priority: str = "app",
 def ask(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S, *,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep) -> m.LeaseReply:
-    """The controller's reply to `req`. The controller knows live holders from
+    """The arbiter's reply to `req`. The arbiter knows live holders from
     its watch of liveliness tokens only, so a program that has just started
     may ask before its own token reached it: that refusal (HOLDER_NOT_ALIVE,
     for a request of this node itself, which is alive) is asked again, with
@@ -129,7 +129,7 @@ def ask(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S, *,
 
 def acquire(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S) -> str:
     """Ask for `req` (`ask`); the granted lease's id, LeaseRefused with the
-    controller's reason otherwise."""
+    arbiter's reason otherwise."""
     reply = ask(node, req, timeout)
     if not reply.granted or not reply.lease_id:
         raise LeaseRefused(reply.message or f"{'+'.join(req.resources)} refused")
@@ -140,7 +140,7 @@ def release(node: Node, lease_id: str, reason: str = "",
             timeout: float = CALL_TIMEOUT_S, *, by: str | None = None) -> str:
     """End any lease by id, asked by this node (or `by`): its holder's own lease
     is `released`, anyone else's `broken` (an operator gives BROKEN_BY_OPERATOR).
-    The controller's text on success, LeaseRefused (an unknown id) otherwise."""
+    The arbiter's text on success, LeaseRefused (an unknown id) otherwise."""
     reply: m.TriggerReply = node.call(
         keys.LEASE_RELEASE,
         m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name if by is None else by),
@@ -151,7 +151,7 @@ def release(node: Node, lease_id: str, reason: str = "",
 
 
 def eyes_command(node: Node, command: m.EyesCommand, timeout: float = CALL_TIMEOUT_S) -> str:
-    """Send `command` on `eyes/command`; the controller's text, or LeaseRefused
+    """Send `command` on `eyes/command`; the arbiter's text, or LeaseRefused
     (the lease does not hold what it drives, has ended, or runs over the rate)."""
     reply: m.TriggerReply = node.call(keys.EYES_COMMAND, command, timeout=timeout)
     if not reply.success:
@@ -174,7 +174,7 @@ def ending(state: m.Leases, lease_id: str, *, seen: bool = False,
     """(reason, message) when `state` shows that lease `lease_id` has ended; None
     while it is listed or may not be listed yet.
 
-    Ended: listed in `ended` (the controller's reason and text); or not listed
+    Ended: listed in `ended` (the arbiter's reason and text); or not listed
     though an earlier state listed it (`seen`); or not listed in a state
     stamped after the request was sent (`asked_ns`, same clock as the stamp)."""
     if find(state, lease_id) is not None:
@@ -212,7 +212,7 @@ class LeaseHolder:
 
     def acquire(self, duration_s: float | None = None) -> str:
         """Take the lease (the one already held is kept); its id, or LeaseRefused
-        naming who holds what, or ServiceError when the controller does not answer."""
+        naming who holds what, or ServiceError when the arbiter does not answer."""
         with self._lock:
             if self.lease_id is not None:
                 return self.lease_id
@@ -223,8 +223,8 @@ class LeaseHolder:
             return lease_id
 
     def release(self, reason: str = "") -> str | None:
-        """Give the lease back; the controller's text, None when none was held.
-        The id is forgotten even when the call fails (the controller ends the
+        """Give the lease back; the arbiter's text, None when none was held.
+        The id is forgotten even when the call fails (the arbiter ends the
         lease anyway when this node goes away)."""
         with self._lock:
             lease_id, self.lease_id = self.lease_id, None
@@ -246,8 +246,8 @@ class LeaseHolder:
     def command(self, expression: m.ExpressionAction | None = None,
                 yaw: float | None = None, pitch: float | None = None,
                 target_distance_cm: float = 0.0) -> str:
-        """Send `eyes/command` with the lease held; the controller's text, or
-        LeaseRefused (none held, or the controller refused it)."""
+        """Send `eyes/command` with the lease held; the arbiter's text, or
+        LeaseRefused (none held, or the arbiter refused it)."""
         lease_id = self.lease_id
         if lease_id is None:
             raise LeaseRefused("no lease held")

@@ -5,7 +5,7 @@ a spoken text, a lease) first takes a token of one bucket per `Bot`: at
 most `actions_per_s` on average, `actions_burst` at once. Over the limit
 the action raises `Refused("rate limited: ...")` at once and nothing is
 sent, so an app looping on actions neither blocks nor floods the bus (the
-controller limits eyes commands per lease as well: this is the first
+arbiter limits eyes commands per lease as well: this is the first
 fence, not the only one). `actions` and `rate_limited` are counted in the
 bot node's diagnostics (`diagnostics/<name>`, `buddybot echo`), whose
 status turns WARN while the program runs over the limit, which the

@@ -134,13 +134,13 @@ class Bot:
     def lease(self, *resources: str, priority: str = "app",
               duration_s: float | None = None) -> Lease:
         """Take `resources` ("expression", "gaze", "audio"; "eyes" = expression +
-        gaze) from the controller; Refused naming the holder, NoService without
-        a controller, ValueError for a malformed request."""
+        gaze) from the eyes driver's arbiter; Refused naming the holder, NoService without
+        an eyes driver, ValueError for a malformed request."""
         return self.leases.acquire(resources, priority, duration_s)
 
     @property
     def eyes(self) -> Eyes:
-        """Expressions and gaze through the controller (opened on first use)."""
+        """Expressions and gaze through the eyes driver's arbiter (opened on first use)."""
         return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout,
                                                   self.limit))
 
@@ -176,7 +176,7 @@ class Bot:
             return cast(T, part)
 
     def close(self) -> None:
-        """Release the leases held (bounded: a gone controller ends them anyway when
+        """Release the leases held (bounded: a gone eyes driver ends them anyway when
         the token goes), then leave the router."""
         if self._people is not None:
             self._people.close()

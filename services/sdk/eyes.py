@@ -1,11 +1,11 @@
-"""`bot.eyes`: expressions and gaze, through the controller under a lease.
+"""`bot.eyes`: expressions and gaze, through the eyes driver's arbiter under a lease.
 
-The controller is the one publisher of `eyes/expression` and `eyes/control`;
+The eyes driver is the one publisher of `eyes/expression` and `eyes/control`;
 a program asks it on `eyes/command`, naming a lease that holds `expression`
 (for an expression) or `gaze` (for a gaze). A program that holds none gets
 one implicitly, at app priority: with `for_s`, for that long (the
-controller ends it on time even if the program dies, and resumes its own
-expression); without, until `bot.eyes.release()` or the bot closes. Once a
+arbiter ends it on time even if the program dies, and shows the built-in
+behaviour's expression again); without, until `bot.eyes.release()` or the bot closes. Once a
 lease has ended, the next action takes a new one.
 
 `expression_of()` (names and aliases) and the handle are pure.
@@ -26,7 +26,7 @@ from buddybot.runtime.leasing import check_duration
 from buddybot.runtime.node import Node
 from buddybot.sdk.actions import ActionLimit, Actuator
 from buddybot.sdk.errors import Refused, TimedOut
-from buddybot.sdk.leases import Lease, LeaseTable, controller_errors
+from buddybot.sdk.leases import Lease, LeaseTable, arbiter_errors
 from buddybot.sdk.people import Person
 
 ALIASES: dict[str, m.ExpressionAction] = {
@@ -120,8 +120,8 @@ class EyesHandle:
         return reason
 
     def cancel(self, timeout: float | None = None) -> str:
-        """Stop it: an implicit lease is released (the controller resumes its own
-        behaviour); under a lease of yours the handle is only marked done."""
+        """Stop it: an implicit lease is released (the built-in behaviour's
+        eyes come back); under a lease of yours the handle is only marked done."""
         if self.implicit and self.lease.active:
             self.lease.release(timeout)
         if self.reason is None:
@@ -139,7 +139,7 @@ class EyesHandle:
 
 
 class Eyes(Actuator):
-    """Expressions and gaze sent to the controller on `eyes/command` (one token
+    """Expressions and gaze sent to the eyes driver on `eyes/command` (one token
     of the action limit each; `_lock`: one action at a time picks or takes
     its lease)."""
 
@@ -209,7 +209,7 @@ class Eyes(Actuator):
                  ) -> EyesHandle:
         with self._lock:
             lease, implicit = self._lease_for(resource, for_s)
-        with controller_errors(keys.EYES_COMMAND, self.timeout):
+        with arbiter_errors(keys.EYES_COMMAND, self.timeout):
             leasing.eyes_command(self.node, m.EyesCommand(lease_id=lease.lease_id, **fields),
                                  self.timeout)
         return EyesHandle(what, lease, implicit, for_s)

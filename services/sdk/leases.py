@@ -1,6 +1,6 @@
-"""Leases: a program's claim on the eyes and the speaker, granted by the controller.
+"""Leases: a program's claim on the eyes and the speaker, granted by the eyes driver.
 
-The controller arbitrates (docs/design.md, leases): a request is granted
+The eyes driver arbitrates (docs/design.md, leases): a request is granted
 when every resource asked for is free or held at a lower priority, refused
 naming the holder otherwise. A lease is bound to this program's liveliness
 token (`nodes/<name>/<zid>`, declared by `Bot`), so it ends when the program
@@ -10,7 +10,7 @@ priority, broken by an operator, expired: the program learns it from
 
 The wire side (the request's checks, the calls, reading the state) is the
 runtime's, shared with every lease holder (`buddybot.runtime.leasing`); here
-its errors become the SDK's (`controller_errors`) and `LeaseTable` follows
+its errors become the SDK's (`arbiter_errors`) and `LeaseTable` follows
 the published state to the leases this program holds.
 """
 
@@ -33,14 +33,14 @@ from buddybot.sdk.errors import Refused, TimedOut
 
 log = logging.getLogger("buddybot.sdk")
 
-CONTROLLER_HINT = "is the controller running? it grants the leases: `buddybot run controller`"
+ARBITER_HINT = "is the eyes driver running? it grants the leases: `buddybot run eyes`"
 
 
 @contextmanager
-def controller_errors(service: keys.Service, timeout: float) -> Iterator[None]:
-    """A lease call to the controller in the block, its errors as the SDK's:
-    Refused with the controller's reason, NoService naming the controller."""
-    with sdk_errors(service, timeout, hint=CONTROLLER_HINT):
+def arbiter_errors(service: keys.Service, timeout: float) -> Iterator[None]:
+    """A lease call to the eyes driver in the block, its errors as the SDK's:
+    Refused with the arbiter's reason, NoService naming the eyes driver."""
+    with sdk_errors(service, timeout, hint=ARBITER_HINT):
         try:
             yield
         except leasing.LeaseRefused as exc:
@@ -52,7 +52,7 @@ class Lease:
     the program's end. A context manager: leaving the block releases it.
 
     `ended` is None while active, then why it ended: released, expired,
-    holder_gone, preempted or broken (`end_message` has the controller's text)."""
+    holder_gone, preempted or broken (`end_message` has the arbiter's text)."""
 
     def __init__(self, table: LeaseTable | None, lease_id: str, resources: tuple[str, ...],
                  priority: str, duration_s: float | None) -> None:
@@ -140,7 +140,7 @@ class Lease:
 
 
 class LeaseTable:
-    """The leases this program holds, asked of and followed on the controller."""
+    """The leases this program holds, asked of and followed on the eyes driver."""
 
     def __init__(self, node: Node, timeout: float, limit: ActionLimit | None = None) -> None:
         self.node = node
@@ -162,15 +162,15 @@ class LeaseTable:
     def acquire(self, names: Iterable[str], priority: str = "app",
                 duration_s: float | None = None, timeout: float | None = None, *,
                 counted: bool = True) -> Lease:
-        """A granted lease; Refused with the controller's reason (or "rate
-        limited" over the program's action limit), NoService when no controller
+        """A granted lease; Refused with the arbiter's reason (or "rate
+        limited" over the program's action limit), NoService when no eyes driver
         answers, ValueError for a malformed request. `counted=False`: a lease an
         action takes for itself (the action was counted already)."""
         req = leasing.request(self.node, names, priority, duration_s)
         if counted and self.limit is not None:
             self.limit.take("lease")
         limit = self.timeout if timeout is None else timeout
-        with controller_errors(keys.LEASE_ACQUIRE, limit):
+        with arbiter_errors(keys.LEASE_ACQUIRE, limit):
             lease_id = leasing.acquire(self.node, req, limit)
         lease = Lease(self, lease_id, tuple(req.resources), priority, req.duration_s)
         with self._lock:
@@ -179,11 +179,11 @@ class LeaseTable:
         return lease
 
     def release(self, lease: Lease, timeout: float | None = None) -> None:
-        """Ask the controller to end `lease`; it is over here whatever it answers
-        (a lease the controller no longer knows has ended already)."""
+        """Ask the eyes driver to end `lease`; it is over here whatever it answers
+        (a lease the eyes driver no longer knows has ended already)."""
         limit = self.timeout if timeout is None else timeout
         try:
-            with sdk_errors(keys.LEASE_RELEASE, limit, hint=CONTROLLER_HINT):
+            with sdk_errors(keys.LEASE_RELEASE, limit, hint=ARBITER_HINT):
                 leasing.release(self.node, lease.lease_id, timeout=limit)
         except leasing.LeaseRefused as exc:
             log.debug("release of lease %s: %s", lease.lease_id, exc)
@@ -219,6 +219,6 @@ class LeaseTable:
         for lease in held:
             try:
                 lease.release(timeout)
-            except Exception as exc:  # the controller may be gone: the token's end ends it
+            except Exception as exc:  # the eyes driver may be gone: the token's end ends it
                 log.debug("release of lease %s at close: %r", lease.lease_id, exc)
         self._state.close()

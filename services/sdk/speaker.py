@@ -15,8 +15,8 @@ action refuses.
 
 A program that holds no "audio" lease gets one for the sound's length
 (released when the sound ends), so the controller's greeting does not talk
-over it, and an operator holding the speaker refuses it. Without a
-controller there is nobody to share the speaker with: the sound plays.
+over it, and an operator holding the speaker refuses it. Without an
+eyes driver there is nobody to share the speaker with: the sound plays.
 """
 
 from __future__ import annotations
@@ -222,7 +222,7 @@ class Speaker(Actuator):
 
     def _audio_lease(self, timeout: float) -> Lease | None:
         """An "audio" lease for one sound, or None: the program holds one already,
-        or no controller answers (nobody to share the speaker with)."""
+        or no eyes driver answers (nobody to share the speaker with)."""
         if self.leases.holding("audio") is not None:
             return None
         try:

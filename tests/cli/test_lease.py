@@ -1,5 +1,5 @@
 """`buddybot lease list|break`: the table for people (pure), then the verb as a
-process against a real router and controller."""
+process against a real router, eyes driver and controller."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Process, buddybot_argv
 
-from ..controller.test_service_leases import acquire
-from ..controller.test_service_leases import controller as controller  # the fixture
+from ..eyes.test_arbiter import acquire
+from ..eyes.test_arbiter import robot as robot  # the fixture
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
@@ -46,7 +46,7 @@ def lease_cli(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
 
 @pytest.mark.integration
 def test_lease_list_and_break_from_the_command_line(
-        controller: Process, node_factory: Callable[..., Node], endpoint: str,
+        robot: tuple[Process, Process], node_factory: Callable[..., Node], endpoint: str,
         probe: Node) -> None:
     app = node_factory("app-cli")
     lease = acquire(app, "expression", "audio", duration_s=600)

@@ -46,7 +46,7 @@ def drain(controller: Controller) -> list[Any]:
 
 
 def expressions(node: FakeNode) -> list[A]:
-    return [msg.action for msg in node.publishers["eyes/expression"].sent]
+    return [msg.action for msg in node.publishers["controller/expression"].sent]
 
 
 def commanded(controller: Controller) -> list[Any]:
@@ -74,7 +74,7 @@ def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Cloc
     # the goal's reply and status then end it.
     controller._on_face(m.FacePosition(stamp_ns=1, frame_id="front",
                                        point=m.Point(x=1.0, y=0.0, z=0.0), confidence=0.9), "k")
-    assert node.publishers["eyes/control"].sent[-1].stamp_ns == 1
+    assert node.publishers["controller/eye_control"].sent[-1].stamp_ns == 1
     [play] = commanded(controller)
     assert isinstance(play, PlaySound) and play.sound == "greeting"
     assert expressions(node)[-1] == A.EYE_GRIN

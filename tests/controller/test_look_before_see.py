@@ -167,7 +167,7 @@ def test_a_new_radar_direction_reaches_the_inbox_and_the_eyes() -> None:
     assert [type(e) for e in events] == [PeopleChanged, RadarGaze, RadarGaze]
     ctl.decision_step(events, next_tick=0.0)
     ctl._inbox.clear()
-    sent = node.publishers["eyes/control"].sent
+    sent = node.publishers["controller/eye_control"].sent
     assert [(round(math.degrees(c.yaw), 6), c.stamp_ns) for c in sent] == [(40.0, 10),
                                                                           (35.0, 12)]
     assert sent[0].target_distance_cm == pytest.approx(200.0)

@@ -78,10 +78,10 @@ class Scene:
     # -- what the test sees --
 
     def expressions(self) -> list[X]:
-        return [msg.action for msg in self.node.publishers["eyes/expression"].sent]
+        return [msg.action for msg in self.node.publishers["controller/expression"].sent]
 
     def controls(self) -> list[m.EyeControl]:
-        return list(self.node.publishers["eyes/control"].sent)
+        return list(self.node.publishers["controller/eye_control"].sent)
 
     def states(self) -> list[m.ControllerState]:
         return list(self.node.publishers["controller/state"].sent)
@@ -312,6 +312,27 @@ def test_refused_and_failing_audio_do_not_stop_the_controller(how: str, logged: 
     assert s.controls()[-1].stamp_ns == stamp  # still following faces
 
 
+def leases_holding(*resources: m.Resource) -> m.Leases:
+    """`leases/state` with one app lease on `resources` (none: no lease)."""
+    held = [m.Lease(lease_id="L1-t", holder="app-a", instance="i1", priority="app",
+                    resources=list(resources), granted_ns=1)] if resources else []
+    return m.Leases(stamp_ns=m.now_ns(), leases=held)
+
+
+def test_while_a_lease_holds_the_speaker_no_greeting_starts_and_after_it_does() -> None:
+    s = Scene()
+    s.controller._on_leases(leases_holding("audio", "gaze"), "")
+    s.presence(True)
+    s.watch(True)
+    s.run(3.0)  # well past the greeting dwell
+    assert s.sounds == []
+    assert (s.states()[-1].waiting, s.states()[-1].yielded) == ("yielded", ["gaze", "audio"])
+    assert s.controls(), "the gaze is still wished: the eyes driver decides what is shown"
+    s.controller._on_leases(leases_holding(), "")
+    s.until(lambda: "play:greeting" in s.log, "the greeting once the speaker is free")
+    assert s.states()[-1].yielded == []
+
+
 def test_the_state_is_published_at_start_and_then_on_change_only() -> None:
     s = Scene()
     assert s.states()[0].waiting == "recovery"  # the first one, before any input
@@ -396,7 +417,7 @@ def wait_expressions(col: Collector[m.ScreenExpression], tail: list[X],
 
 @pytest.fixture
 def watch(probe: Node) -> tuple[Collector[m.ScreenExpression], Collector[m.EyeControl]]:
-    return Collector(probe, keys.EXPRESSION), Collector(probe, keys.EYE_CONTROL)
+    return Collector(probe, keys.BEHAVIOUR_EXPRESSION), Collector(probe, keys.BEHAVIOUR_GAZE)
 
 
 def start_controller(spawn: Spawn, config: Path,
@@ -556,7 +577,7 @@ def test_malformed_payloads_on_every_input_are_survived(spawn, fast_config, stim
     audio = make_audio(durations={"greeting": 0.3})
     proc = start_controller(spawn, fast_config, expr)
     inputs = [keys.PEOPLE_STATE.key(), keys.FACE.key(camera="front"), keys.DEVICE_FREE.key(),
-              keys.PLAY_SOUND_STATUS.key(), keys.EXPRESSION.key()]
+              keys.PLAY_SOUND_STATUS.key(), keys.LEASES.key()]
     with zenoh.open(_probe_config(endpoint)) as session:
         for rel in inputs:
             for payload in MALFORMED:
@@ -674,7 +695,7 @@ def test_greeting_dwell_is_live(spawn: Callable[..., Process], probe: Node, stim
     config = tmp_path / "controller.toml"  # a dwell nobody waits out: never greets
     config.write_text(FAST_CONFIG.replace("greet_dwell_s = 0.5", "greet_dwell_s = 3600.0"))
     audio = make_audio(durations={"greeting": 0.3})
-    expr = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    expr = Collector[m.ScreenExpression](probe, keys.BEHAVIOUR_EXPRESSION)
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="controller")
     proc = spawn("controller", "--config", str(config))
     expr.wait_for(lambda e: e.action == X.EYE_SLEEP, 20, "initial EYE_SLEEP")

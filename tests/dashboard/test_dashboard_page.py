@@ -221,12 +221,13 @@ def wait_leases(leases: Collector[m.Leases], predicate: Callable[[m.Leases], boo
 def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leases(
         browser: Any, spawn: Callable[..., Process], probe: Node,
         node_factory: Callable[..., Node]) -> None:
-    """Router + controller + dashboard: the switch takes an operator lease, the
-    buttons act under it (the controller publishes), switching off gives the
+    """Router + eyes driver + controller + dashboard: the switch takes an operator
+    lease, the buttons act under it (the arbiter publishes), switching off gives the
     eyes back, and the lease panel breaks an app's lease."""
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
     controls = Collector[m.EyeControl](probe, keys.EYE_CONTROL)
     leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("eyes")
     spawn("controller")
     own = expressions.wait_for(timeout=30, what="the controller's own expression").action
     port = start_dashboard(spawn)
@@ -251,7 +252,7 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
 
     page.click(grin)
     expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
-                         "EYE_GRIN on eyes/expression (published by the controller)")
+                         "EYE_GRIN on eyes/expression (published by the arbiter)")
     page.wait_for_function("document.getElementById('expression').textContent === 'EYE_GRIN'",
                            timeout=15_000)
     page.click("button[data-gaze='left']")
@@ -520,7 +521,7 @@ def test_the_map_shows_the_angle_radar_targets_published_on_the_bus(
 def test_the_operator_remembers_a_face_sees_the_name_and_forgets_it(
         browser: Any, spawn: Callable[..., Process], probe: Node,
         node_factory: Callable[..., Node]) -> None:
-    """Router + controller + dashboard + a stand-in for the identity service's
+    """Router + eyes driver + controller + dashboard + a stand-in for the identity service's
     queryables: remembering and forgetting need the operator lease; the list and
     the present person's name follow. The screenshot (docs/images/dashboard-identity.png
     is a copy of one) shows the panel with Ada enrolled and present."""
@@ -528,6 +529,7 @@ def test_the_operator_remembers_a_face_sees_the_name_and_forgets_it(
 
     identity = FakeIdentity(node_factory("identity"))
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    spawn("eyes")
     spawn("controller")
     expressions.wait_for(timeout=30, what="the controller's own expression")
     port = start_dashboard(spawn)

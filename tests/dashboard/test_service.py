@@ -135,8 +135,8 @@ def test_bad_requests_get_error_replies_and_foreign_origins_are_refused(
 
 def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
         spawn: Callable[..., Process]) -> None:
-    """No controller: taking control fails within the call timeout, naming it;
-    a stale lease id is refused by the controller, and the page learns it all."""
+    """No eyes driver: taking control fails within the call timeout, naming it;
+    a stale lease id is refused by the arbiter, and the page learns it all."""
     proc, port = start_dashboard(spawn)
     retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
     url = f"http://{LOOPBACK}:{port}/ws"
@@ -156,20 +156,20 @@ def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
             assert panel == {"known": False, "holding": False, "own": None, "leases": [],
                              "ended": []}
             reply, took = await ask(ws, {"op": "control", "on": True, "id": 1})
-            assert not reply["ok"] and "controller does not answer" in reply["text"]
+            assert not reply["ok"] and "eyes driver does not answer" in reply["text"]
             assert took < 10
             reply, _ = await ask(ws, {"op": "break", "lease_id": "L-old", "id": 2})
-            assert not reply["ok"] and "controller does not answer" in reply["text"]
+            assert not reply["ok"] and "eyes driver does not answer" in reply["text"]
             reply, _ = await ask(ws, {"op": "gaze", "yaw": 0.5, "pitch": 0, "id": 3})
             assert not reply["ok"] and reply["text"].startswith("take control first")
 
     asyncio.run(without())
-    spawn("controller")
+    spawn("eyes")  # the arbiter
 
     async def stale() -> None:
         async with aiohttp.ClientSession() as http, http.ws_connect(
                 url, origin=f"http://{LOOPBACK}:{port}") as ws:
-            end = time.monotonic() + 30  # until the controller's services are declared
+            end = time.monotonic() + 30  # until the eyes driver's services are declared
             while True:
                 reply, _ = await ask(ws, {"op": "break", "lease_id": "L-old", "id": 4})
                 if "does not answer" not in reply["text"] or time.monotonic() > end:
@@ -177,7 +177,7 @@ def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
             assert not reply["ok"] and "L-old" in reply["text"], reply
             reply, _ = await ask(ws, {"op": "control", "on": True, "id": 5})
             assert reply["ok"], reply
-            end = time.monotonic() + 30  # the controller declares its services one by one
+            end = time.monotonic() + 30  # the eyes driver declares its services one by one
             while True:
                 reply, _ = await ask(ws, {"op": "expression", "action": "EYE_GRIN", "id": 6})
                 if "does not answer" not in reply["text"] or time.monotonic() > end:

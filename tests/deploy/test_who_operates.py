@@ -1,11 +1,11 @@
 """Who may operate the robot over Zenoh: the shipped ACL (deploy/zenoh/router.json5).
 
 A real `buddybot router` with the deployment's access control and test-made
-certificates, and a real controller on the robot's identity. Setting a
+certificates, and a real controller and eyes driver on the robot's identity. Setting a
 parameter (`params/*`) is the operator laptop's and the robot's; taking a
 lease (`leases/acquire`) is the robot's own services' alone (the dashboard
 and the Foxglove bridge take the operator lease for a person, from the
-robot). A refused query never reaches the controller: the caller gets no
+robot). A refused query never reaches the arbiter: the caller gets no
 reply. Each refusal comes after a positive control through the same router.
 """
 
@@ -51,6 +51,7 @@ def acquire(node: Node, timeout: float = 3.0) -> m.LeaseReply:
 def test_the_acl_lets_the_operator_set_parameters_and_only_the_robot_take_leases(
         host_node: Callable[..., Node], host_process: Callable[..., Process]) -> None:
     host_process("robot", "run", "controller")
+    host_process("robot", "run", "eyes")  # the arbiter: serves leases/acquire
     robot = host_node("robot", "dashboard")
     operator = host_node("operator", "operator-cli")
     # Positive controls: the robot and the operator laptop set a parameter.
@@ -68,7 +69,7 @@ def test_the_acl_lets_the_operator_set_parameters_and_only_the_robot_take_leases
     assert get_centre(robot) == 130.0
     # Leases: the robot's service takes one; the operator laptop and the others cannot ask.
     def granted() -> m.LeaseReply | None:
-        """Asked again while the controller has not yet seen the robot node's token."""
+        """Asked again while the arbiter has not yet seen the robot node's token."""
         reply = acquire(robot)
         return reply if reply.granted else None
 

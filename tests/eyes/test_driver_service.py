@@ -24,7 +24,7 @@ def test_control_becomes_direction_and_pupil(spawn: Callable[..., Process], prob
     spawn("eyes")
     directions = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
     pupils = Collector[m.PupilControl](probe, keys.PUPIL)
-    pub = probe.publisher(keys.EYE_CONTROL)
+    pub = probe.publisher(keys.BEHAVIOUR_GAZE)
     # Real stamps: the runtime replaces implausible ones (not near now) by the arrival time.
     now = m.now_ns()
     near = m.EyeControl(stamp_ns=now, yaw=math.radians(20), pitch=math.radians(-10),
@@ -49,7 +49,7 @@ def test_every_expression_becomes_latched_lids(
     spawn("eyes")
     probe = node_factory("probe")
     lids = Collector[m.EyeLidControl](probe, keys.LIDS)
-    pub = probe.publisher(keys.EXPRESSION)
+    pub = probe.publisher(keys.BEHAVIOUR_EXPRESSION)
     expected = {A.EYE_AWAKE: (0, 0), A.EYE_SLEEP: (50, 50)}
     base = m.now_ns()
     for stamp, action in enumerate(A, start=base):
@@ -68,8 +68,8 @@ def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node)
     proc = spawn("eyes")
     directions = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
     diags = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="eyes")
-    control = probe.publisher(keys.EYE_CONTROL)
-    expression = probe.publisher(keys.EXPRESSION)
+    control = probe.publisher(keys.BEHAVIOUR_GAZE)
+    expression = probe.publisher(keys.BEHAVIOUR_EXPRESSION)
     good = m.EyeControl(stamp_ns=m.now_ns(), yaw=0.1, pitch=0.0, target_distance_cm=100)
     retry_until(lambda: control.put(good) or directions.messages, 20, 0.2, "driver answering")
     for bad in (b"", b"not json", b"{}", b'{"stamp_ns": 1, "yaw": 9, "pitch": 0, '
@@ -118,7 +118,7 @@ def test_unknown_distance_pupil_and_lids_are_live(spawn: Callable[..., Process],
     eyes = spawn("eyes")
     pupils = Collector[m.PupilControl](probe, keys.PUPIL)
     lids = Collector[m.EyeLidControl](probe, keys.LIDS)
-    pub = probe.publisher(keys.EYE_CONTROL)
+    pub = probe.publisher(keys.BEHAVIOUR_GAZE)
     stamp = m.now_ns()
 
     def pupil() -> float:
@@ -136,7 +136,8 @@ def test_unknown_distance_pupil_and_lids_are_live(spawn: Callable[..., Process],
     assert result.returncode == 0, result.stderr
     assert pupil() == pytest.approx(80.0)
 
-    probe.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp, action=A.EYE_SAD))
+    probe.publisher(keys.BEHAVIOUR_EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp,
+                                                                      action=A.EYE_SAD))
     lids.wait_for(lambda x: x.eye_id == m.EyeId.BOTH, 20, "lids for EYE_SAD")
     lids.clear()
     result = param(endpoint, "set", "eyes", "lids", '{"EYE_SAD": [33, 7]}')

@@ -102,8 +102,9 @@ def colour_pixels(img: np.ndarray, bgr: tuple[int, int, int], tol: int = 30) -> 
 
 
 def gaze(probe: Node, page: Any, yaw_deg: float, pitch_deg: float, stamp: int) -> None:
-    """Publish eye control (radians) to the driver until the page has the new target."""
-    pub = probe.publisher(keys.EYE_CONTROL)
+    """Publish eye control (radians) to the driver, as the built-in behaviour does,
+    until the page has the new target."""
+    pub = probe.publisher(keys.BEHAVIOUR_GAZE)
     msg = m.EyeControl(stamp_ns=stamp, yaw=math.radians(yaw_deg), pitch=math.radians(pitch_deg),
                        target_distance_cm=120)
 
@@ -142,7 +143,7 @@ def test_page_follows_published_direction(
 
     # Near -> large pupil, far -> small (the driver's curve), measured as black area.
     pupil_area = {}
-    pub = probe.publisher(keys.EYE_CONTROL)
+    pub = probe.publisher(keys.BEHAVIOUR_GAZE)
     for stamp, cm, expected in ((5, 35.0, 75.0 - 20.0 / 14), (6, 280.0, 32.5)):
         msg = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)
 
@@ -165,7 +166,7 @@ def test_lids_close_on_sleep_and_open_on_awake(
     page = open_page(browser, port, "both")
     open_white = sclera_pixels(shot(page))
     assert open_white > 0.1 * W * H
-    expression = probe.publisher(keys.EXPRESSION)
+    expression = probe.publisher(keys.BEHAVIOUR_EXPRESSION)
     expression.put(m.ScreenExpression(stamp_ns=1, action=A.EYE_SLEEP))
     page.wait_for_function("window.eyes.target.lids.left.top === 50 "
                            "&& window.eyes.target.lids.right.bottom === 50", timeout=20_000)
@@ -184,7 +185,7 @@ def test_screenshots_of_every_expression(
     spawn("eyes")
     _proc, port = start_renderer(spawn)
     page = open_page(browser, port, "both")
-    expression = probe.publisher(keys.EXPRESSION)
+    expression = probe.publisher(keys.BEHAVIOUR_EXPRESSION)
     images: dict[A, np.ndarray] = {}
     for stamp, action in enumerate(A, start=1):
         expression.put(m.ScreenExpression(stamp_ns=stamp, action=action))
@@ -260,7 +261,7 @@ def test_page_reconnects_after_server_restart(
     spawn("eyes")
     proc, port = start_renderer(spawn)
     page = open_page(browser, port, "left")
-    expression = probe.publisher(keys.EXPRESSION)   # one publisher: one latched value
+    expression = probe.publisher(keys.BEHAVIOUR_EXPRESSION)   # one publisher: one latched value
     expression.put(m.ScreenExpression(stamp_ns=1, action=A.EYE_SLEEPY))
     page.wait_for_function("window.eyes.target.expression === 2", timeout=20_000)
     proc.stop()

@@ -79,7 +79,8 @@ def shot(page: Any, name: str | None = None) -> np.ndarray:
 
 def express(probe: Node, page: Any, action: A, stamp: int) -> None:
     """Publish an expression (the driver adds its lids) and wait until it is drawn."""
-    probe.publisher(keys.EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp, action=action))
+    probe.publisher(keys.BEHAVIOUR_EXPRESSION).put(m.ScreenExpression(stamp_ns=stamp,
+                                                                      action=action))
     # The driver's lids come on their own topic, maybe after the expression.
     lids = driver.DEFAULT_LIDS[action].left
     page.wait_for_function(
@@ -273,7 +274,7 @@ def test_the_driver_passes_the_distance_and_the_eyes_converge(
     renderer -> page, measured as the gap between the two glowing eyes."""
     spawn("eyes")
     page = open_page(browser, start(spawn, "glow"))
-    pub = probe.publisher(keys.EYE_CONTROL)
+    pub = probe.publisher(keys.BEHAVIOUR_GAZE)
     gaps = {}
     for stamp, cm in enumerate((300, 30), start=1):
         control = m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0, target_distance_cm=cm)

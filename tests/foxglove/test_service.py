@@ -227,15 +227,16 @@ def test_a_client_expression_goes_through_an_operator_lease(
         bridge: int, probe: Node, spawn: Callable[..., Process],
         node_factory: Callable[..., Node]) -> None:
     """The bridge never publishes eyes/expression: it takes an operator lease on
-    `expression` and asks the controller (eyes/command); eyes/release gives the
+    `expression` and asks the arbiter (eyes/command); eyes/release gives the
     expression back; another operator's lease refuses it with the holder named."""
     expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
     leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("eyes")
     spawn("controller")
     own = expressions.wait_for(timeout=30, what="the controller's own expression").action
-    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
+    retry_until(lambda: any(i.node == "eyes" and "eyes/command" in i.services
                             for i in probe.node_infos(1.0)),
-                30, 0.2, "the controller's lease services")
+                30, 0.2, "the arbiter's lease services")
 
     async def scenario() -> None:
         client = await FoxgloveClient.connect(bridge)

@@ -148,9 +148,9 @@ def test_a_play_sound_goal_plays_under_an_audio_lease_and_its_result_comes_at_th
         probe: Node, tmp_path: Any) -> None:
     config, samples = beep_config(tmp_path, 0.6)
     a = sounds(config)
-    spawn("controller")
+    spawn("eyes")
     retry_until(lambda: any(keys.LEASE_ACQUIRE.pattern in " ".join(i.services)
-                            for i in probe.node_infos(1.0)), 30, 0.2, "the controller's leases")
+                            for i in probe.node_infos(1.0)), 30, 0.2, "the arbiter's leases")
     leases = Collector[m.Leases](probe, keys.LEASES)
     start_bridge(spawn, ros)
     seen: dict[str, list[bytes]] = {"feedback": [], "status": []}

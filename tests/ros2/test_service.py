@@ -73,12 +73,13 @@ def diag(probe: Node) -> Collector[m.DiagnosticStatus]:
 
 @pytest.fixture
 def controller(spawn: Callable[..., Process], probe: Node) -> Process:
-    """The controller, once its lease services (the bridge's commands) are declared."""
-    proc = spawn("controller")
-    retry_until(lambda: any(i.node == "controller" and "eyes/command" in i.services
+    """The eyes driver and the controller, once the arbiter's lease services (the
+    bridge's commands) are declared; the controller's process."""
+    spawn("eyes")
+    retry_until(lambda: any(i.node == "eyes" and "eyes/command" in i.services
                             for i in probe.node_infos(1.0)),
-                30, 0.2, "the controller's lease services")
-    return proc
+                30, 0.2, "the arbiter's lease services")
+    return spawn("controller")
 
 
 @pytest.mark.integration

@@ -40,18 +40,19 @@ CONTROLLER_CONFIG = "[controller]\nrecover_s = 0.3\n"
 @pytest.fixture
 def controller(spawn: Callable[..., Process], probe: Node, tmp_path: Path
                ) -> Callable[[], Process]:
-    """Start a `controller` (no inputs: its own expression is EYE_SLEEP), returning
-    once it serves `leases/acquire` and `eyes/command` and has published its
-    expression."""
+    """Start the eyes driver (the arbiter) and a `controller` (no inputs: its own
+    expression is EYE_SLEEP), returning the controller once the eyes driver serves
+    `leases/acquire` and `eyes/command` and shows the controller's expression."""
     def start() -> Process:
         expr = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
         config = tmp_path / "controller.toml"
         config.write_text(CONTROLLER_CONFIG)
-        proc = spawn("controller", "--config", str(config))
-        retry_until(lambda: any(i.node == "controller" and "leases/acquire" in i.services
+        spawn("eyes", "--config", str(config))
+        retry_until(lambda: any(i.node == "eyes" and "leases/acquire" in i.services
                                 and "eyes/command" in i.services
                                 for i in probe.node_infos(1.0)),
-                    30, 0.2, "the controller serving leases")
+                    30, 0.2, "the eyes driver serving leases")
+        proc = spawn("controller", "--config", str(config))
         expr.wait_for(lambda e: e.action == m.ExpressionAction.EYE_SLEEP, 30,
                       "the controller's own EYE_SLEEP")
         return proc

@@ -138,8 +138,8 @@ def test_the_gaze_is_given_back_alone_and_the_expression_stays(
     control.wait_for(lambda c: abs(c.yaw - 0.3) < 1e-6, 10, "the gaze asked for")
     control.clear()
     bot.eyes.release("gaze")
-    # The controller's gaze (centre: nobody is there) comes back; LOVE stays.
-    control.wait_for(lambda c: c.yaw == 0.0 and c.pitch == 0.0, 10, "the controller's gaze")
+    # The built-in gaze (centre: nobody is there) comes back; LOVE stays.
+    control.wait_for(lambda c: c.yaw == 0.0 and c.pitch == 0.0, 10, "the built-in gaze")
     assert gaze.wait(5) == "released" and not shown.done
     assert _actions(expr)[-1] == X.ANIMATE_LOVE
     with pytest.raises(ValueError, match="unknown part"):

@@ -17,23 +17,23 @@ from buddybot.runtime.errors import CallError, NoReplyError
 from buddybot.runtime.leasing import LeaseRefused
 from buddybot.runtime.node import Node
 from buddybot.sdk import Bot, Lease, NoService, Refused, SdkError, TimedOut
-from buddybot.sdk.leases import LeaseTable, controller_errors
+from buddybot.sdk.leases import LeaseTable, arbiter_errors
 from buddybot.tools.testing import Collector, Process, retry_until
 
 # --- pure ----------------------------------------------------------------------------------
 
 
-def test_the_runtime_s_lease_errors_become_the_sdk_s_naming_the_controller() -> None:
+def test_the_runtime_s_lease_errors_become_the_sdk_s_naming_the_eyes_driver() -> None:
     with pytest.raises(Refused, match="audio is held by greeter") as refused, \
-            controller_errors(keys.LEASE_ACQUIRE, 1.0):
+            arbiter_errors(keys.LEASE_ACQUIRE, 1.0):
         raise LeaseRefused("audio is held by greeter")
     assert refused.value.reason == "audio is held by greeter"
     with pytest.raises(NoService, match=r"nobody answered on eyes/command within 0\.5 s "
-                                        r"\(is the controller running\?"), \
-            controller_errors(keys.EYES_COMMAND, 0.5):
+                                        r"\(is the eyes driver running\?"), \
+            arbiter_errors(keys.EYES_COMMAND, 0.5):
         raise NoReplyError("eyes/command", "no reply")
     with pytest.raises(SdkError, match="leases/release: bad reply"), \
-            controller_errors(keys.LEASE_RELEASE, 0.5):
+            arbiter_errors(keys.LEASE_RELEASE, 0.5):
         raise CallError("leases/release", "bad reply")
 
 
@@ -130,10 +130,10 @@ def test_the_controller_refuses_what_it_does_not_grant_with_its_reason(
 
 
 @pytest.mark.integration
-def test_without_a_controller_a_lease_is_no_service(bot_factory: Callable[..., Bot],
+def test_without_an_eyes_driver_a_lease_is_no_service(bot_factory: Callable[..., Bot],
                                                     probe: Node) -> None:
     bot = bot_factory(timeout=0.5)
-    with pytest.raises(NoService, match=r"nobody answered on leases/acquire.*controller"):
+    with pytest.raises(NoService, match=r"nobody answered on leases/acquire.*eyes driver"):
         bot.lease("eyes")
     with pytest.raises(NoService, match=r"nobody answered on leases/acquire"):
         bot.eyes.express("love")

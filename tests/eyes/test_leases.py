@@ -8,7 +8,7 @@ import msgspec
 import pytest
 
 from buddybot.contract import messages as m
-from buddybot.controller.leases import ENDED_KEPT, MAX_LEASES, MAX_PER_HOLDER, LeaseTable
+from buddybot.eyes.leases import ENDED_KEPT, MAX_LEASES, MAX_PER_HOLDER, LeaseTable
 
 X = m.ExpressionAction
 S = 1_000_000_000

@@ -1,7 +1,7 @@
 """The lease table: who holds the eyes and the speaker, as pure decisions.
 
-The controller is the arbiter (docs/design.md 4.8); this module is its rule
-book, with no Zenoh and no clock of its own: every method takes `now_ns`
+The eyes driver hosts the arbiter (`arbiter.py`, docs/design.md 4.8); this
+module is its rule book, with no Zenoh and no clock of its own: every method takes `now_ns`
 (wall-clock ns, the unit of `expires_ns`) and returns what it decided, so
 the service only publishes. The rule:
 
