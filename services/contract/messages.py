@@ -738,7 +738,9 @@ class EyesCommand(Message):
     The eyes driver publishes it on `eyes/expression` / `eyes/control` if
     `lease_id` holds `expression` (for `expression`) and `gaze` (for the
     gaze fields); it is the one publisher of both keys, so `eyes/expression`
-    keeps exactly one retained value whoever drives it.
+    keeps exactly one retained value whoever drives it. `pupil_percent`
+    (needs `gaze`) sets the pupils' dilation instead of the one the driver's
+    curve gives for the distance, until the next gaze.
     """
 
     lease_id: LeaseId
@@ -746,6 +748,7 @@ class EyesCommand(Message):
     yaw: Annotated[float, msgspec.Meta(ge=-3.15, le=3.15)] | None = None
     pitch: Annotated[float, msgspec.Meta(ge=-1.58, le=1.58)] | None = None
     target_distance_cm: DistanceCm = 0.0
+    pupil_percent: Percent | None = None
 
 
 # --- system ----------------------------------------------------------------

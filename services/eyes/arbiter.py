@@ -34,8 +34,10 @@ EXPIRE_S = 0.05
 AHEAD = m.EyeControl(stamp_ns=0, yaw=0.0, pitch=0.0, target_distance_cm=0.0)
 """The gaze given back when the built-in behaviour has wished none yet."""
 
-Show = Callable[[m.ScreenExpression | None, m.EyeControl | None], None]
-"""What the driver does with a winner (its lids, direction and pupil)."""
+Show = Callable[[m.ScreenExpression | None, m.EyeControl | None, m.PupilControl | None],
+               None]
+"""What the driver does with a winner (its lids, direction and pupil); the
+pupil, when given, instead of the one the gaze's distance gives."""
 
 
 class Arbiter:
@@ -139,7 +141,7 @@ class Arbiter:
     def eyes_command(self, cmd: m.EyesCommand) -> m.TriggerReply:
         with self._lock:
             eyes = self.leases.eyes_command(cmd, self.wall_ns(), self.rate_per_s, self.burst)
-            self._put(eyes.expression, eyes.control)
+            self._put(eyes.expression, eyes.control, eyes.pupil)
         if not eyes.reply.success:
             # One topic for all: a lease id is the caller's text, and a topic per id
             # would grow the log's table with every invented one.
@@ -174,11 +176,11 @@ class Arbiter:
             log.info("expression resumed -> %s", expression.action.name)
         self._put(expression, control)
 
-    def _put(self, expression: m.ScreenExpression | None, control: m.EyeControl | None
-             ) -> None:
+    def _put(self, expression: m.ScreenExpression | None, control: m.EyeControl | None,
+             pupil: m.PupilControl | None = None) -> None:
         if expression is not None:
             self._expression_pub.put(expression)
         if control is not None:
             self._control_pub.put(control)
-        if expression is not None or control is not None:
-            self.show(expression, control)
+        if expression is not None or control is not None or pupil is not None:
+            self.show(expression, control, pupil)

@@ -67,11 +67,15 @@ def run(ctx: ServiceContext) -> int:
         lids_pub = node.publisher(keys.LIDS)
         diag = node.diagnostics
 
-        def on_control(control: m.EyeControl) -> None:
+        def on_control(control: m.EyeControl | None, pupil: m.PupilControl | None) -> None:
             curve, unknown, _table = built[0]
-            direction_pub.put(driver.direction_from_control(control))
-            pupil_pub.put(driver.pupil_from_control(control, curve, unknown))
-            diag.increment("controls")
+            if control is not None:
+                direction_pub.put(driver.direction_from_control(control))
+                diag.increment("controls")
+            if pupil is None and control is not None:
+                pupil = driver.pupil_from_control(control, curve, unknown)
+            if pupil is not None:
+                pupil_pub.put(pupil)
 
         def on_expression(expression: m.ScreenExpression) -> None:
             last[:] = [expression]
@@ -80,11 +84,11 @@ def run(ctx: ServiceContext) -> int:
             diag.increment("expressions")
             diag.values["expression"] = expression.action.name
 
-        def show(expression: m.ScreenExpression | None, control: m.EyeControl | None) -> None:
+        def show(expression: m.ScreenExpression | None, control: m.EyeControl | None,
+                 pupil: m.PupilControl | None) -> None:
             if expression is not None:
                 on_expression(expression)
-            if control is not None:
-                on_control(control)
+            on_control(control, pupil)
 
         arbiter = Arbiter(node, show, settings.lease_actions_per_s,
                           settings.lease_actions_burst)

@@ -42,6 +42,8 @@ class Eyes:
     reply: m.TriggerReply
     expression: m.ScreenExpression | None
     control: m.EyeControl | None
+    pupil: m.PupilControl | None = None
+    """A holder's pupil size, instead of the one the distance gives."""
 
 
 @dataclass(frozen=True)
@@ -169,21 +171,26 @@ class LeaseTable:
     def eyes_command(self, cmd: m.EyesCommand, now_ns: int, rate_per_s: float,
                      burst: float) -> Eyes:
         """What `eyes/command` publishes: the expression if the lease holds
-        `expression`, the gaze (yaw/pitch, a missing one 0) if it holds `gaze`;
+        `expression`, the gaze (yaw/pitch, a missing one 0) and the pupil size
+        if it holds `gaze`;
         refused with the reason otherwise, or when the lease's actions run over
         the rate (the bucket of `allow`)."""
         reply, expression, control = self._eyes(cmd, now_ns, rate_per_s, burst)
         self.counters["eyes_commands" if reply.success else "eyes_commands_refused"] += 1
-        return Eyes(reply, expression, control)
+        pupil = (m.PupilControl(stamp_ns=now_ns, dilation_percentage=cmd.pupil_percent)
+                 if reply.success and cmd.pupil_percent is not None else None)
+        return Eyes(reply, expression, control, pupil)
 
     def _eyes(self, cmd: m.EyesCommand, now_ns: int, rate_per_s: float, burst: float
               ) -> tuple[m.TriggerReply, m.ScreenExpression | None, m.EyeControl | None]:
         lease = self._leases.get(cmd.lease_id)
         if lease is None:
             return _refuse(self._gone(cmd.lease_id)), None, None
-        gaze = cmd.yaw is not None or cmd.pitch is not None
+        turn = cmd.yaw is not None or cmd.pitch is not None
+        gaze = turn or cmd.pupil_percent is not None
         if cmd.expression is None and not gaze:
-            return _refuse("nothing to do: give an expression or a gaze (yaw, pitch)"), None, None
+            return (_refuse("nothing to do: give an expression, a gaze (yaw, pitch) or a "
+                            "pupil size"), None, None)
         asked = [r for r, wanted in (("expression", cmd.expression is not None),
                                      ("gaze", gaze)) if wanted]
         missing = [r for r in asked if r not in lease.resources]
@@ -196,7 +203,7 @@ class LeaseTable:
         expression = (None if cmd.expression is None
                       else m.ScreenExpression(stamp_ns=now_ns, action=cmd.expression))
         control = (m.EyeControl(stamp_ns=now_ns, yaw=cmd.yaw or 0.0, pitch=cmd.pitch or 0.0,
-                                target_distance_cm=cmd.target_distance_cm) if gaze else None)
+                                target_distance_cm=cmd.target_distance_cm) if turn else None)
         return m.TriggerReply(success=True), expression, control
 
     # -- internals --

@@ -2,7 +2,8 @@
 
 The eyes driver is the one publisher of `eyes/expression` and `eyes/control`;
 a program asks it on `eyes/command`, naming a lease that holds `expression`
-(for an expression) or `gaze` (for a gaze). A program that holds none gets
+(for an expression) or `gaze` (for a gaze or the pupils' size). A program
+that holds none gets
 one implicitly, at app priority: with `for_s`, for that long (the
 arbiter ends it on time even if the program dies, and shows the built-in
 behaviour's expression again); without, until `bot.eyes.release()` or the bot closes. Once a
@@ -55,6 +56,16 @@ def expression_of(value: m.ExpressionAction | str) -> m.ExpressionAction:
             return m.ExpressionAction[value]
     raise ValueError(f"unknown expression {value!r} (valid: {', '.join(ALIASES)}, or "
                      f"{', '.join(m.ExpressionAction.__members__)})")
+
+
+def pupil_of(percent: float | None) -> float | None:
+    """The pupils' dilation in % (0..100, None: from the distance); ValueError."""
+    if percent is None:
+        return None
+    if isinstance(percent, bool) or not isinstance(percent, int | float) or not (
+            math.isfinite(percent) and 0 <= percent <= 100):
+        raise ValueError(f"pupil must be a percentage in [0, 100], not {percent!r}")
+    return float(percent)
 
 
 def gaze_of(yaw: float, pitch: float, distance_m: float | None) -> tuple[float, float, float]:
@@ -158,10 +169,11 @@ class Eyes(Actuator):
         return self._command("expression", action.name, duration, expression=action)
 
     def look_at(self, yaw: float | Person, pitch: float | None = None,
-                distance_m: float | None = None) -> EyesHandle:
+                distance_m: float | None = None, pupil: float | None = None) -> EyesHandle:
         """Turn the gaze to (`yaw`, `pitch`) radians (+ = left, + = up), or to a
         `Person` (their direction and distance); Refused for a person whose
-        direction is not known yet."""
+        direction is not known yet. `pupil`: dilation in % instead of the one
+        the distance gives (the eyes driver's curve: near -> large)."""
         if isinstance(yaw, Person):
             person = yaw
             if person.yaw_rad is None or person.pitch_rad is None:
@@ -171,9 +183,21 @@ class Eyes(Actuator):
         if pitch is None:
             raise ValueError("look_at(yaw, pitch) needs a pitch (or pass a Person)")
         gaze = gaze_of(yaw, pitch, distance_m)
+        size = pupil_of(pupil)
         self._take("look_at")
         return self._command("gaze", f"gaze {gaze[0]:+.2f}/{gaze[1]:+.2f} rad", None,
-                             yaw=gaze[0], pitch=gaze[1], target_distance_cm=gaze[2])
+                             yaw=gaze[0], pitch=gaze[1], target_distance_cm=gaze[2],
+                             pupil_percent=size)
+
+    def pupils(self, percent: float) -> EyesHandle:
+        """Set the pupils' dilation (0..100 %) where the eyes look now, until the
+        next gaze: wide for delight or someone close, small for doubt. Takes the
+        gaze, as `look_at` does."""
+        size = pupil_of(percent)
+        if size is None:
+            raise ValueError("pupils(percent) needs a percentage")
+        self._take("pupils")
+        return self._command("gaze", f"pupils {size:g} %", None, pupil_percent=size)
 
     def release(self, *what: str, timeout: float | None = None) -> None:
         """End the leases the eyes took themselves for `what` ("expression",

@@ -60,13 +60,13 @@ class Scene:
     def __init__(self, rate_per_s: float = 20.0, burst: float = 40.0) -> None:
         self.node = FakeNode()
         self.wall = T_WALL
-        self.shown: list[m.ScreenExpression | m.EyeControl] = []
+        self.shown: list[m.ScreenExpression | m.EyeControl | m.PupilControl] = []
         self.arbiter = Arbiter(self.node, self._show, rate_per_s, burst,  # type: ignore[arg-type]
                                wall_ns=lambda: self.wall)
 
-    def _show(self, expression: m.ScreenExpression | None, control: m.EyeControl | None
-              ) -> None:
-        self.shown += [x for x in (expression, control) if x is not None]
+    def _show(self, expression: m.ScreenExpression | None, control: m.EyeControl | None,
+              pupil: m.PupilControl | None) -> None:
+        self.shown += [x for x in (expression, control, pupil) if x is not None]
 
     def expressions(self) -> list[X]:
         return [msg.action for msg in self.node.publishers["eyes/expression"].sent]
@@ -140,6 +140,23 @@ def test_a_held_gaze_is_not_followed_and_a_gone_holder_gives_it_back() -> None:
     assert s.controls()[-1].yaw == pytest.approx(0.3)  # the behaviour's, not the app's
     assert s.leases()[-1].ended[-1].reason == "holder_gone"
     assert s.shown[-1] == s.controls()[-1]
+
+
+def test_a_holder_of_the_gaze_sets_the_pupils_and_nobody_else_can() -> None:
+    s = Scene()
+    eyes = s.take("gaze")
+    assert s.command(eyes, yaw=0.2, pitch=0.0, target_distance_cm=300.0,
+                     pupil_percent=90.0).success
+    control, pupil = s.shown[-2:]
+    assert isinstance(control, m.EyeControl) and control.yaw == pytest.approx(0.2)
+    assert isinstance(pupil, m.PupilControl) and pupil.dilation_percentage == 90.0
+    assert s.command(eyes, pupil_percent=20.0).success  # the size alone: no gaze put
+    assert [c.yaw for c in s.controls()] == [pytest.approx(0.2)]
+    assert s.shown[-1] == m.PupilControl(stamp_ns=T_WALL, dilation_percentage=20.0)
+    face = s.take("expression", holder="app-b")
+    refused = s.command(face, pupil_percent=50.0)
+    assert not refused.success and "does not hold gaze" in refused.message
+    assert len(s.shown) == 3
 
 
 def test_an_operator_breaking_a_lease_is_recorded_as_broken_and_the_eyes_look_ahead(

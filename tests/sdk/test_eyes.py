@@ -18,7 +18,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.sdk import ALIASES, Bot, EyesHandle, Person, Refused, TimedOut
-from buddybot.sdk.eyes import Eyes, expression_of, gaze_of
+from buddybot.sdk.eyes import Eyes, expression_of, gaze_of, pupil_of
 from buddybot.sdk.leases import Lease
 from buddybot.tools.testing import Collector, Process
 
@@ -52,6 +52,13 @@ def test_gaze_values_are_checked_against_the_command_ranges() -> None:
                                   (True, 0.0, None, "yaw")):
         with pytest.raises(ValueError, match=why):
             gaze_of(yaw, pitch, dist)  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("bad", [-1, 100.5, float("nan"), True, "big"])
+def test_a_pupil_size_is_a_percentage(bad: object) -> None:
+    assert pupil_of(None) is None and pupil_of(90) == 90.0
+    with pytest.raises(ValueError, match="pupil must be a percentage"):
+        pupil_of(bad)  # type: ignore[arg-type]
 
 
 def test_a_person_without_a_direction_is_refused_before_anything_is_sent() -> None:
@@ -123,6 +130,23 @@ def test_express_shows_it_and_release_gives_the_eyes_back(
     assert handle.wait(5) == "released" and gaze.wait(5) == "released"
     bot.eyes.express("grin")  # the next action takes a new lease
     expr.wait_for(lambda e: e.action == X.EYE_GRIN, 10, "EYE_GRIN")
+
+
+@pytest.mark.integration
+def test_an_app_sets_the_pupils_with_its_gaze_or_alone(
+        controller: Callable[[], Process], bot_factory: Callable[..., Bot],
+        probe: Node) -> None:
+    controller()
+    pupil = Collector[m.PupilControl](probe, keys.PUPIL)
+    bot = bot_factory()
+    bot.eyes.look_at(0.1, 0.0, distance_m=3.0)  # far: the driver's curve gives 30 %
+    pupil.wait_for(lambda p: p.dilation_percentage == pytest.approx(30.0), 10, "30 % at 3 m")
+    bot.eyes.look_at(0.1, 0.0, distance_m=3.0, pupil=90)
+    pupil.wait_for(lambda p: p.dilation_percentage == 90.0, 10, "90 % asked with the gaze")
+    bot.eyes.pupils(15)
+    pupil.wait_for(lambda p: p.dilation_percentage == 15.0, 10, "15 % asked alone")
+    with pytest.raises(ValueError, match="percentage"):
+        bot.eyes.pupils(101)
 
 
 @pytest.mark.integration
