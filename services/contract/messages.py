@@ -67,6 +67,22 @@ class TargetState(enum.IntEnum):
     NOISE_DETECTION_FAILED = 6
 
 
+TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
+"""The states that carry a target; NO_TARGET and the noise states carry none."""
+
+
+def target_distance_cm(state: int, detection_cm: int, moving_cm: int, still_cm: int) -> int:
+    """The distance of an LD2410 target, in cm, as every reader takes it: the
+    detection distance, or, when a module says "target" with 0 cm there (seen
+    on real modules), the distance of the kind it reports (moving first); 0
+    when the state carries no target."""
+    if state not in TARGET_STATES:
+        return 0
+    if detection_cm:
+        return detection_cm
+    return moving_cm if state & TargetState.MOVING else still_cm
+
+
 class LD2410TargetDataFrame(Message):
     """One LD2410 report frame, as the sensor sent it (distances in cm)."""
 

@@ -88,21 +88,14 @@ def radar_seen(msg: m.PresenceDetection) -> RadarSeen:
 
 
 def ranges_seen(msg: m.LD2410TargetDataFrameArray) -> list[RangeSeen]:
-    """Each sensor's nearest target in one LD2410 report (None: it sees nobody, or
-    it measures its background noise). A target at 0 cm (sent by real modules)
-    takes the distance of the kind it reports."""
-    moving, still = m.TargetState.MOVING, m.TargetState.STATIONARY
+    """Each sensor's nearest target in one LD2410 report, read by the contract's
+    rule (None: it sees nobody, or it measures its background noise)."""
     out = []
     for f in msg.sensors:
-        state = int(f.target_state)
-        distance: float | None = None
-        if state in (moving, still, moving | still):
-            kinds = [cm for bit, cm in ((moving, f.movement_distance),
-                                        (still, f.stationary_distance))
-                     if state & bit and cm > 0]
-            cm = f.detection_distance or min(kinds, default=0)
-            distance = cm / 100.0 if cm > 0 else None
-        out.append(RangeSeen(msg.stamp_ns, (msg.device_id, f.radar_id), distance))
+        cm = m.target_distance_cm(int(f.target_state), f.detection_distance,
+                                  f.movement_distance, f.stationary_distance)
+        out.append(RangeSeen(msg.stamp_ns, (msg.device_id, f.radar_id),
+                             cm / 100.0 if cm > 0 else None))
     return out
 
 

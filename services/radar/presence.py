@@ -24,12 +24,12 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
+from buddybot.contract import messages as m
 from buddybot.contract.messages import PresenceState, PresenceTarget, RadarTarget, TargetState
 from buddybot.radar.settings import RadarPresenceSettings
 from buddybot.radar.zones import ZoneVerdict, judge
 from buddybot.runtime.limits import BoundedDict
 
-TARGET_STATES = (TargetState.MOVING, TargetState.STATIONARY, TargetState.MOVING_AND_STATIONARY)
 ESTABLISHED_S = 1.0  # a sensor heard this long ...
 ESTABLISHED_FRAMES = 5  # ... with this many frames is a real one (10 Hz: after ~1 s)
 
@@ -47,19 +47,13 @@ class Reading:
     def present(self) -> bool:
         """A moving and/or still target; NO_TARGET and the background-noise
         detection states (4..6) carry none."""
-        return self.target_state in TARGET_STATES
+        return self.target_state in m.TARGET_STATES
 
     @property
     def distance_m(self) -> float:
-        """Detection distance; a sensor that says "target" with detection 0 cm
-        (seen on real modules) falls back to the distance of the kind it reports."""
-        cm = self.detection_distance_cm
-        if cm == 0:
-            if self.target_state & TargetState.MOVING:
-                cm = self.moving_distance_cm
-            else:
-                cm = self.still_distance_cm
-        return cm / 100.0
+        """The contract's reading of the frame's distance (`target_distance_cm`)."""
+        return m.target_distance_cm(self.target_state, self.detection_distance_cm,
+                                    self.moving_distance_cm, self.still_distance_cm) / 100.0
 
     @property
     def kind(self) -> PresenceTarget:

@@ -400,24 +400,29 @@ def test_malformed_input_is_counted_and_dropped(
         spawn: Spawn, probe: Node, endpoint: str, tmp_path: Path) -> None:
     proc, events, _state = _start(spawn, probe, tmp_path)
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="people")
-    wanted = {keys.PRESENCE.key(), keys.FACE.key(camera="front")}
+    inputs = [keys.PRESENCE.key(), keys.FACE.key(camera="front"),
+              keys.RADAR_FRAMES.key(device="0"), keys.RADAR_TARGETS.key(device="1"),
+              keys.FACE_NAME.key(camera="front")]
+    wanted = {keys.PRESENCE.key(), keys.FACE.key(camera="front"), "radar/*/frames",
+              "radar/*/targets", keys.FACE_NAME.key(camera="front")}
     retry_until(lambda: any(i.node == "people" and wanted <= set(i.subscriptions)
                             for i in probe.node_infos(1.0)),
-                30, 0.2, "both subscriptions declared")
+                30, 0.2, "every input's subscription declared")
     config = zenoh.Config()
     config.insert_json5("mode", '"client"')
     config.insert_json5("connect/endpoints", msgspec.json.encode([endpoint]).decode())
     config.insert_json5("scouting/multicast/enabled", "false")
     with zenoh.open(config) as session:
-        for key in (keys.PRESENCE.key(), keys.FACE.key(camera="front")):
+        for key in inputs:
             for payload in MALFORMED:
                 # BLOCK: a burst from a bare session may otherwise be dropped on a
                 # busy machine before it reaches the service, and the count is exact.
                 session.put(keys.absolute("buddy", key), payload,
                             congestion_control=zenoh.CongestionControl.BLOCK)
-    counted = diag.wait_for(lambda d: int(d.values.get("malformed", 0)) >= 2 * len(MALFORMED),
+    sent = len(inputs) * len(MALFORMED)
+    counted = diag.wait_for(lambda d: int(d.values.get("malformed", 0)) >= sent,
                             30, "every malformed sample counted")
-    assert int(counted.values["malformed"]) == 2 * len(MALFORMED)
+    assert int(counted.values["malformed"]) == sent
     Visitor(probe).presence(True, 1.0)
     events.wait_for(lambda e: e.kind == "ARRIVED", 20, "ARRIVED after the garbage")
     assert proc.alive()
