@@ -1,4 +1,4 @@
-"""How deep untrusted JSON or TOML nests, measured before a recursive decoder sees it.
+"""How deep untrusted JSON, JSON5 or TOML nests, measured before a recursive decoder sees it.
 
 Python's TOML reader (behind `msgspec.toml`) and msgspec's JSON decoder
 descend one call per `[` or `{`, so a file of 5,000 nested arrays ends in
@@ -20,6 +20,8 @@ _JSON_TOKENS = re.compile(rb'"(?:\\.|[^"\\])*"|[\[\]{}]', re.DOTALL)
 _TOML_TOKENS = re.compile(
     rb'"""(?:\\.|[^\\])*?"""|\'\'\'.*?\'\'\'|"(?:\\.|[^"\\\n])*"|\'[^\'\n]*\'|#[^\n]*|[\[\]{}]',
     re.DOTALL)
+_JSON5_TOKENS = re.compile(
+    rb'"(?:\\.|[^"\\])*"|\'(?:\\.|[^\'\\])*\'|//[^\n]*|/\*.*?\*/|[\[\]{}]', re.DOTALL)
 _OPEN = frozenset(b"[{")
 _CLOSE = frozenset(b"]}")
 
@@ -28,14 +30,17 @@ class TooDeep(ValueError):
     """Text nested deeper than the limit; the text says where."""
 
 
-def check_depth(text: bytes | str, *, toml: bool = False, limit: int = MAX_DEPTH) -> None:
-    """TooDeep when `text` (JSON, or TOML with `toml`) nests arrays and
-    objects deeper than `limit`, naming the line it happens on."""
+def check_depth(text: bytes | str, *, toml: bool = False, json5: bool = False,
+                limit: int = MAX_DEPTH) -> None:
+    """TooDeep when `text` (JSON, TOML with `toml`, JSON5 with `json5`: comments
+    and single-quoted strings skipped) nests arrays and objects deeper than
+    `limit`, naming the line it happens on."""
     data = text.encode() if isinstance(text, str) else text
     if data.count(b"[") + data.count(b"{") <= limit:
         return  # the common case, at C speed: too few brackets to nest that deep
     depth = 0
-    for token in (_TOML_TOKENS if toml else _JSON_TOKENS).finditer(data):
+    tokens = _TOML_TOKENS if toml else _JSON5_TOKENS if json5 else _JSON_TOKENS
+    for token in tokens.finditer(data):
         first = token.group()[0]
         if first in _OPEN and len(token.group()) == 1:
             depth += 1

@@ -28,6 +28,7 @@ import zenoh.ext
 from buddybot.contract import keys
 from buddybot.runtime.endpoints import parse as parse_endpoint
 from buddybot.runtime.errors import BuddyBotError, ConfigError
+from buddybot.runtime.nesting import TooDeep, check_depth
 
 log = logging.getLogger("buddybot.node")
 
@@ -294,10 +295,7 @@ def zenoh_config(
 
     `connect_timeout_s`: None (services) waits for the router forever;
     a number (probes) gives up after that long, so a tool never hangs."""
-    try:
-        config = zenoh.Config.from_file(base_file) if base_file else zenoh.Config()
-    except zenoh.ZError as exc:  # exit status 2 (systemd units do not restart on it)
-        raise ConfigError(f"{base_file}: not a valid Zenoh config: {exc}") from None
+    config = read_zenoh_file(base_file) if base_file else zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("scouting/multicast/enabled", "false")
     # A link that stays blocked this long is closed instead of holding back
@@ -319,6 +317,32 @@ def zenoh_config(
         config.insert_json5("connect/timeout_ms", str(timeout_ms))
         config.insert_json5("connect/retry", '{"period_init_ms": 100, "period_max_ms": 500}')
     return config
+
+
+MAX_ZENOH_FILE_BYTES = 1 << 20
+"""The largest Zenoh config file read (the deployment's router file is ~15 KB)."""
+
+
+def read_zenoh_file(path: str) -> zenoh.Config:
+    """A Zenoh config file, bounded before Zenoh parses it: its JSON5 parser
+    recurses per level and a deeply nested file overflows the stack (SIGSEGV),
+    so size and depth are checked first. ConfigError naming the file (exit
+    status 2: the systemd units do not restart on it). YAML is Zenoh's own read."""
+    try:
+        with open(path, "rb") as file:
+            data = file.read(MAX_ZENOH_FILE_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the Zenoh config: {exc.strerror}") from None
+    if len(data) > MAX_ZENOH_FILE_BYTES:
+        raise ConfigError(f"{path}: not a valid Zenoh config: larger than "
+                          f"{MAX_ZENOH_FILE_BYTES >> 20} MiB")
+    try:
+        check_depth(data, json5=True)
+        if path.endswith((".yaml", ".yml")):
+            return zenoh.Config.from_file(path)
+        return zenoh.Config.from_json5(data.decode())
+    except (TooDeep, UnicodeDecodeError, zenoh.ZError) as exc:
+        raise ConfigError(f"{path}: not a valid Zenoh config: {exc}") from None
 
 
 def open_router(listen: list[str], base_file: str | None = None, *,

@@ -122,6 +122,28 @@ def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
     assert "Traceback" not in result.stderr
 
 
+@pytest.mark.integration
+@pytest.mark.parametrize(("content", "said"), [
+    ("{a: " * 30_000 + "1" + "}" * 30_000, "nested deeper than 32 levels (line 1)"),
+    ("// a comment\n{ a: " + "{ b: " * 100 + "1" + " }" * 101 + "\n", "(line 2)"),
+    ("{ big: '" + "x" * (1 << 20) + "' }", "larger than 1 MiB"),
+], ids=["deep", "deep-after-a-comment", "big"])
+def test_a_zenoh_config_file_too_deep_or_too_big_is_exit_2_not_a_crash(
+        tmp_path: Path, content: str, said: str) -> None:
+    """Zenoh's JSON5 parser recurses per level: 30,000 levels overflowed the
+    stack (SIGSEGV, exit 139, a crash loop under systemd). Bounded before it."""
+    (tmp_path / "zenoh.json5").write_text(content)
+    path = tmp_path / "robot.toml"
+    path.write_text('[zenoh]\nconfig_file = "zenoh.json5"\n')
+    result = subprocess.run(
+        [sys.executable, "-m", "buddybot", "run", "eyes", "--config", str(path)],
+        capture_output=True, text=True, timeout=60,
+    )
+    assert result.returncode == 2, result.stderr
+    assert str(tmp_path / "zenoh.json5") in result.stderr and said in result.stderr
+    assert "Traceback" not in result.stderr and len(result.stderr.splitlines()) <= 2
+
+
 # --- [apps] ----------------------------------------------------------------------------
 
 
