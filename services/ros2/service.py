@@ -46,6 +46,7 @@ from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import merge, settings_option
+from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.rates import TokenBucket
 from buddybot.runtime.service import ServiceContext
 
@@ -55,6 +56,8 @@ KEPT_BLOCK = 16 << 20
 KEPT_FREE = 64 << 20
 """Free memory the heap keeps before it gives any back to the system."""
 QUEUE_SIZE = 64
+IDLE_CHECK_S = 0.25
+"""How often leases are checked for a quiet ROS 2 side (`lease_idle_s`)."""
 """Samples of one ROS 2 topic waiting for the controller (oldest dropped)."""
 
 
@@ -188,6 +191,9 @@ class Ros2Bridge:
             node.diagnostics.values[name] = 0
         self.servers = servers.Servers(node, settings, self._token, self._publisher)
         """The ROS 2 services and the `/play_sound` action (servers.py)."""
+        self._last_sample: dict[str, float] = {}
+        """Per resource: when its last ROS 2 command came (monotonic)."""
+        node.diagnostics.values["idle_released"] = 0
 
     def _token(self, kind: wire.Kind, route: bridge.Route | None = None,
                qos: wire.Qos = bridge.DEFAULT_QOS) -> None:
@@ -291,6 +297,7 @@ class Ros2Bridge:
             return
         lease = self.leases[inc.resource]
         what = msg.action.name if isinstance(msg, m.ScreenExpression) else route.ros_name
+        self._last_sample[inc.resource] = time.monotonic()  # before: no idle release meanwhile
         try:
             lease.acquire()
             if isinstance(msg, m.ScreenExpression):
@@ -312,6 +319,30 @@ class Ros2Bridge:
         self.node.diagnostics.increment("commands")
         if isinstance(msg, m.ScreenExpression):
             self.node.log.info("expression %s from ROS 2", what)
+
+    def apply_settings(self, settings: Ros2Settings) -> None:
+        """A live change (`buddybot param set ros2-bridge lease_idle_s 2`)."""
+        self.settings = settings
+
+    def release_idle(self, now: float | None = None) -> None:
+        """Give back each lease whose ROS 2 side sent nothing for `lease_idle_s`:
+        the robot's own behaviour takes that part back (a later sample takes a
+        new lease)."""
+        now = time.monotonic() if now is None else now
+        idle = self.settings.lease_idle_s
+        for resource, lease in self.leases.items():
+            last = self._last_sample.get(resource)
+            if lease.lease_id is None or last is None or now - last < idle:
+                continue
+            try:
+                lease.release(f"no ROS 2 command for {idle:g} s")
+            except ServiceError as exc:
+                self._warn.warning(f"idle:{resource}", "idle lease not released: %s",
+                                   clip(exc))
+                continue
+            self.node.diagnostics.increment("idle_released")
+            self.node.log.info("%s lease given back: no ROS 2 command for %g s", resource,
+                               idle)
 
     def update_diagnostics(self) -> None:
         for name, count in self.sent.items():
@@ -344,6 +375,8 @@ def run(ctx: ServiceContext) -> int:
         node.log.info("ROS 2 bridge on domain %d, namespace %s", settings.domain_id,
                       settings.namespace)
         node.every(1.0, ros.update_diagnostics, name="ros2-diagnostics")
+        node.every(IDLE_CHECK_S, ros.release_idle, name="ros2-idle-leases")
+        LiveSettings(settings, ros.apply_settings).serve(node)
         node.spin()
         ros.close()
     finally:

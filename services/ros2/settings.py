@@ -38,3 +38,9 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     incoming_burst: Annotated[int, msgspec.Meta(
         ge=1, le=1000, description="samples taken in at once per ROS 2 topic "
         "before `max_incoming_hz` applies")] = 20
+    # A lease taken for a remote peer ends when the peer goes quiet, so one
+    # ROS 2 sample never keeps the eyes from the robot's own behaviour.
+    lease_idle_s: Annotated[float, msgspec.Meta(
+        gt=0, le=3600, extra={"live": True},
+        description="seconds without a ROS 2 expression (or gaze) after which the "
+        "bridge gives that lease back")] = 5.0

@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -261,6 +262,34 @@ def test_a_ros_2_gaze_moves_the_eyes_and_a_flood_is_cut(
                  attachment=wire.Attachment(2 + i, m.now_ns(), gid).encode())
     retry_until(lambda: counter(diag, "flooded") >= 1000, 30, 0.2, "the flood counted")
     assert counter(diag, "malformed") < 200, "a flooded sample was decoded"
+
+
+@pytest.mark.integration
+def test_one_ros_2_sample_holds_the_eyes_only_until_the_peer_goes_quiet(
+        spawn: Callable[..., Process], peer: zenoh.Session, probe: Node,
+        controller: Process, tmp_path: Path) -> None:
+    """One /screen_expression used to keep the bridge's lease until shutdown (the
+    eyes on LOVE for good); now the lease ends `lease_idle_s` after the last
+    sample, and the robot's own expression is back."""
+    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    own = expressions.wait_for(timeout=30, what="the controller's own expression").action
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    config = tmp_path / "ros2.toml"
+    config.write_text("[ros2]\nlease_idle_s = 1.0\n")
+    spawn("ros2-bridge", "--domain-id", str(SETTINGS.domain_id), "--config", str(config))
+    retry_until(lambda: sum(t.kind == "MS" for t in graph(peer)) == 2 or None, 30, 0.2,
+                "the bridge's graph tokens")
+    encode: Any = their_encoder(bridge.EXPRESSION, schema_of_ours("ScreenExpression"))
+    love = encode({"stamp_ns": 5, "action": int(m.ExpressionAction.ANIMATE_LOVE)})
+    peer.put(EXPRESSION.key, love, attachment=wire.Attachment(1, m.now_ns(), bytes(16)).encode())
+    expressions.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30,
+                         "LOVE from the ROS 2 peer")
+    expressions.clear()
+    ended = leases.wait_for(lambda s: any(e.holder == "ros2-bridge" and "no ROS 2 command"
+                                          in e.message for e in s.ended), 30,
+                            "the bridge's lease given back when the peer went quiet")
+    assert not any(x.holder == "ros2-bridge" for x in ended.leases)
+    expressions.wait_for(lambda e: e.action == own, 30, f"the robot's own {own.name} back")
 
 
 MAPPED_BLOCKS = """
