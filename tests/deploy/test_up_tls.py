@@ -53,4 +53,4 @@ def test_up_uses_the_shipped_router_and_robot_files(profile: HostProfile,
         assert info.returncode == 0, info.stderr
         line = next(t for t in reversed(info.stdout.splitlines()) if t.startswith("{"))
         declared = json.loads(line)["info"]
-        assert any(k.endswith("eyes/expression") for k in declared["publishers"]), declared
+        assert any(k.endswith("controller/expression") for k in declared["publishers"]), declared
