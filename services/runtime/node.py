@@ -496,6 +496,7 @@ class Node:
         callback: Callable[[str, bytes, str], None],
         *,
         history: bool = False,
+        recover: bool = False,
         delivery: Delivery = "inline",
         queue_size: int = 64,
         remote_only: bool = False,
@@ -506,10 +507,16 @@ class Node:
 
         `history`: also get the latched value of every matching publisher at
         once (an advanced subscriber that declares nothing else, so a probe
-        stays unseen). Deletions are not delivered. A failing callback is
-        counted and logged, never fatal. `remote_only`: samples this node
-        publishes itself are not delivered (a bridge that both publishes and
-        takes a key must not hear its own samples back).
+        stays unseen). That alone loses a latched sample dropped on the way
+        (state keys drop under congestion) if it was published after its
+        publisher's cache was asked: `recover` (implies `history`) subscribes
+        as `subscribe` does to latched topics, so the publisher's heartbeat
+        reveals the gap and the sample is fetched from its cache; it declares
+        more (a heartbeat subscriber, subscriber detection), so a probe that
+        must stay unseen goes without. Deletions are not delivered. A failing
+        callback is counted and logged, never fatal. `remote_only`: samples
+        this node publishes itself are not delivered (a bridge that both
+        publishes and takes a key must not hear its own samples back).
         """
         key_expr = _key_expr(key_expr)
 
@@ -529,8 +536,9 @@ class Node:
             except Exception as exc:  # only inline handlers raise here
                 on_error(exc)
 
-        return self._subscriber(key_expr, on_sample, history="probe" if history else None,
-                                worker=worker, remote_only=remote_only)
+        mode = "full" if recover else "probe" if history else None
+        return self._subscriber(key_expr, on_sample, history=mode, worker=worker,
+                                remote_only=remote_only)
 
     def _subscriber(self, key: str, on_sample: Callable[[zenoh.Sample], None], *,
                     history: str | None, worker: Worker | None,

@@ -74,17 +74,19 @@ class RawCollector:
         self._latched = latched
         node.subscribe_raw(key, self._on)
         for each in latched:
-            node.subscribe_raw(each, self._on_latched, history=True)
+            node.subscribe_raw(each, self._on_latched, recover=True)
 
     def _on(self, key: str, payload: bytes, _encoding: str) -> None:
         if key not in self._latched:
             self._on_latched(key, payload, _encoding)
 
     def _on_latched(self, key: str, payload: bytes, _encoding: str) -> None:
-        """`latched` keys come through their own subscription with history, as a
-        service subscribes to them: a player's latched publisher does not wait
-        for subscribers (its cache serves those that come later), so its one
-        put can be gone before a plain subscriber is known to it."""
+        """`latched` keys come through their own subscription as a service
+        subscribes to them: history, and recovery from the heartbeat. Their QoS
+        drops under congestion (on a busy machine the player's puts leave back
+        to back, express, and their priority's queue holds two); a history-only
+        probe asked the player's cache when it appeared, still empty, so the
+        value was lost for it, where a service fetches it again."""
         with self._lock:
             self.items.append((key, payload, time.monotonic()))
 
