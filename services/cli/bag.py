@@ -113,8 +113,10 @@ def record(ctx: ServiceContext) -> int:
         def on_sample(key: str, payload: bytes, _encoding: str) -> None:
             recorder.offer(key, payload, time.time_ns())  # never blocks Zenoh's thread
 
-        subscriptions = [node.subscribe_raw(key, on_sample, history=history)
-                         for key, history in wanted]
+        # Latched keys as services take them (history, and recovery of a value
+        # dropped under congestion), so a recording misses no state.
+        subscriptions = [node.subscribe_raw(key, on_sample, recover=latched)
+                         for key, latched in wanted]
         started = time.monotonic()
         end = probing.deadline(args.duration)
         next_line = started + PROGRESS_S
