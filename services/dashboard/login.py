@@ -31,6 +31,8 @@ PRIORITY = {OPERATOR: 2, VIEWER: 1}
 """Page-slot priority of a logged-in page (above `web.guard.ANONYMOUS`): an
 operator can always get a slot, taken from a viewer's or an idle page's."""
 MAX_FORM_BYTES = 4096
+MAX_ENDED = 100_000
+"""Logged-out sessions remembered until their cookies expire (each needed a login)."""
 
 
 class Gate:
@@ -45,11 +47,14 @@ class Gate:
         self.secure = secure
         self.lifetime_s = lifetime_s
         self.refused_logins = 0
+        self._ended: dict[str, int] = {}
+        """Nonce -> expiry of every session logged out: its cookie no longer holds."""
         self._page = (importlib.resources.files("buddybot.dashboard") / "web" /
                       "login.html").read_text()
 
     def session(self, cookie: str | None) -> web_auth.Session | None:
-        return web_auth.check_cookie(cookie, self.store.current(), time.time())
+        found = web_auth.check_cookie(cookie, self.store.current(), time.time())
+        return None if found is None or found.nonce in self._ended else found
 
     def role(self, request: web.Request) -> str | None:
         found = self.session(request.cookies.get(web_auth.COOKIE))
@@ -97,7 +102,17 @@ class Gate:
                          samesite="Strict", secure=self.secure)
         return reply
 
-    async def logout(self, _request: web.Request) -> web.StreamResponse:
+    async def logout(self, request: web.Request) -> web.StreamResponse:
+        """End the session on the server too: its cookie, copied or not, no longer
+        holds, and its open pages are cut (`end_stale_sessions`)."""
+        found = self.session(request.cookies.get(web_auth.COOKIE))
+        if found is not None:
+            now = time.time()
+            self._ended = {n: t for n, t in self._ended.items() if t >= now}
+            if len(self._ended) >= MAX_ENDED:  # never reached by people logging in
+                self._ended.pop(next(iter(self._ended)))
+            self._ended[found.nonce] = found.expires
+            log.info("%s logged out from %s", found.role, clip(request.remote, 60))
         reply = web.HTTPSeeOther("/login")
         reply.del_cookie(web_auth.COOKIE, path="/")
         return reply

@@ -160,6 +160,8 @@ def _mac(secret: str, body: str) -> str:
 class Session:
     role: str
     expires: int
+    nonce: str = ""
+    """The cookie's own random part: what a logout ends."""
 
 
 def make_cookie(role: str, secret: str, now: float, lifetime_s: float) -> str:
@@ -176,7 +178,7 @@ def check_cookie(value: str | None, current: Mapping[str, str | None],
     parts = value.split(".")
     if len(parts) != 4:
         return None
-    role, expires, _nonce, mac = parts
+    role, expires, nonce, mac = parts
     secret = current.get(role) if role in LOGIN_ROLES else None
     if not secret or not expires.isdigit():
         return None
@@ -184,7 +186,7 @@ def check_cookie(value: str | None, current: Mapping[str, str | None],
         return None
     if int(expires) < now:
         return None
-    return Session(role, int(expires))
+    return Session(role, int(expires), nonce)
 
 
 def token_ok(given: str | None, want: str | None) -> bool:

@@ -139,6 +139,48 @@ def test_beyond_loopback_only_a_login_gets_in_and_only_an_operator_presses(
     assert proc.alive()
 
 
+def test_logout_ends_the_session_on_the_server_and_its_open_page(
+        spawn: Callable[..., Process], tmp_path: Path) -> None:
+    """The cookie used to hold for its 12 h after `POST /logout` (only the browser
+    forgot it): a copy of it, or a page still open, kept the operator's powers."""
+    env = {"BUDDYBOT_STATE_DIR": str(tmp_path)}
+    proc, port = start_dashboard(spawn, "--login", "always", env=env)
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    base = f"http://{LOOPBACK}:{port}"
+
+    async def scenario() -> None:
+        async with aiohttp.ClientSession() as http:
+            async with await log_in(http, base, secret(tmp_path, "operator")) as resp:
+                operator = cookie_of(resp)
+            async with await log_in(http, base, secret(tmp_path, "operator")) as resp:
+                other = cookie_of(resp)  # a second login: its own session
+            with_cookie = {"Cookie": f"{web_auth.COOKIE}={operator}"}
+            ws = await http.ws_connect(f"ws://{LOOPBACK}:{port}/ws", origin=base,
+                                       headers=with_cookie)
+            await _next(ws, "hello")
+
+            async def until_closed() -> None:
+                while not ws.closed:
+                    msg = await ws.receive()
+                    if msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED):
+                        break
+
+            reader = asyncio.create_task(until_closed())
+            async with http.post(f"{base}/logout", headers=with_cookie,
+                                 allow_redirects=False) as resp:
+                assert resp.status == 303 and resp.headers["Location"] == "/login"
+            async with asyncio.timeout(60):
+                await reader
+            assert ws.close_code == 4401
+            async with http.get(f"{base}/", allow_redirects=False, headers=with_cookie) as resp:
+                assert resp.status == 303  # the copied cookie no longer holds
+            hello, reply = await press(http, base, other, base)
+            assert hello["role"] == "operator"  # the other session is untouched
+
+    asyncio.run(scenario())
+    assert proc.alive() and "operator logged out" in proc.output()
+
+
 def make_certificate(folder: Path) -> tuple[Path, Path]:
     """A self-signed certificate for 127.0.0.1 (the deployment's would be signed by its CA)."""
     cert, key = folder / "dash.pem", folder / "dash.key"
