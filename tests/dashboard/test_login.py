@@ -174,7 +174,7 @@ def test_logout_ends_the_session_on_the_server_and_its_open_page(
             assert ws.close_code == 4401
             async with http.get(f"{base}/", allow_redirects=False, headers=with_cookie) as resp:
                 assert resp.status == 303  # the copied cookie no longer holds
-            hello, reply = await press(http, base, other, base)
+            hello, _reply = await press(http, base, other, base)
             assert hello["role"] == "operator"  # the other session is untouched
 
     asyncio.run(scenario())
