@@ -64,7 +64,8 @@ def test_login_picks_the_role_whose_secret_was_given() -> None:
 def test_cookies_are_signed_by_their_role_secret_and_expire() -> None:
     current: dict[str, str | None] = {"operator": "s1", "viewer": "s2"}
     cookie = wa.make_cookie("operator", "s1", 1000.0, 60.0)
-    assert wa.check_cookie(cookie, current, 1000.0) == wa.Session("operator", 1060)
+    assert wa.check_cookie(cookie, current, 1000.0) == wa.Session("operator", 1060,
+                                                              cookie.split(".")[2])
     assert wa.check_cookie(cookie, current, 1061.0) is None  # expired
     assert wa.check_cookie(cookie, {**current, "operator": "rotated"}, 1000.0) is None
     assert wa.check_cookie(cookie, {**current, "operator": None}, 1000.0) is None  # revoked
