@@ -121,10 +121,11 @@ def gallery_figures(count: int) -> None:
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "gallery.bin"
         t = time.perf_counter()
-        gallery.save(path, g)
+        key = bytes(32)  # any key: the figures are of the file, not of keeping it
+        gallery.save(path, g, key)
         save_ms = (time.perf_counter() - t) * 1000
         t = time.perf_counter()
-        loaded = gallery.load(path, embedding.MODEL_ID)
+        loaded = gallery.load(path, embedding.MODEL_ID, key)
         load_ms = (time.perf_counter() - t) * 1000
         names, vectors = loaded.table()
         t = time.perf_counter()

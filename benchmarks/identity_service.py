@@ -159,7 +159,7 @@ def face_latency(folder: Path, seconds: float, with_identity: bool) -> tuple[lis
     g = gallery.Gallery(embedding.MODEL_ID)
     g.enrol("somebody else", [embedding.unit(np.random.default_rng(1).normal(
         size=embedding.DIM))], time.time())
-    gallery.save(path, g)
+    gallery.save(path, g, gallery.load_key(gallery.key_path())[0])
     config = folder / "gaze.toml"
     config.write_text(f'[identity]\ngallery = "{path}"\n')
     router = Router(log_dir=folder)
@@ -227,6 +227,8 @@ def main() -> None:
     parser.add_argument("--only", choices=("match", "names", "gaze"))
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="identity-bench-") as tmp:
+        # The services' state (the gallery key) in the benchmark's folder, not the user's.
+        os.environ["BUDDYBOT_STATE_DIR"] = str(Path(tmp) / "state")
         if args.only in (None, "match"):
             match_speed(args.people)
         if args.only in (None, "names"):

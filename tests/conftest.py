@@ -195,16 +195,24 @@ def probe(node_factory: Callable[..., Node]) -> Node:
 
 
 @pytest.fixture
-def spawn(endpoint: str, log_dir: Path) -> Iterator[Callable[..., Process]]:
+def state_dir(tmp_path: Path) -> Path:
+    """The robot state folder of the services a test spawns (secrets, gallery key):
+    the test's own, never the user's."""
+    return tmp_path / "state"
+
+
+@pytest.fixture
+def spawn(endpoint: str, log_dir: Path, state_dir: Path) -> Iterator[Callable[..., Process]]:
     """Start `buddybot run SERVICE ...` processes; every one is stopped afterwards.
 
     On failure their logs are printed, so a broken test shows what the
-    services said.
+    services said. Their state folder is `state_dir` unless `env` says otherwise.
     """
     started: list[Process] = []
 
     def start(service: str, *args: str, robot: str = "buddy",
               env: dict[str, str] | None = None, nofile: int | None = None) -> Process:
+        env = {"BUDDYBOT_STATE_DIR": str(state_dir), **(env or {})}
         proc = run_service(service, endpoint, *args, robot=robot, log_dir=log_dir, env=env,
                            nofile=nofile)
         started.append(proc)

@@ -10,13 +10,15 @@ input at once:
   one, never half of one;
 * refused on load, with a message that says what to do, when it is not
   owner-only (someone else could read the templates or plant a name),
-  not ours (bad header, truncated, checksum mismatch, undecodable), or
+  not ours (bad header, truncated, undecodable, or not signed with this
+  robot's key: an edited or foreign file, e.g. a face renamed), or
   from another model (`model` differs: its vectors live in another space,
   and comparing them would give wrong names). The identity stage then runs
   without names rather than with wrong ones.
 
-Layout: `MAGIC` (one line naming format and version), the SHA-256 of the
-rest, then a msgpack `GalleryFile` with each person's embeddings as raw
+Layout: `MAGIC` (one line naming format and version), the HMAC-SHA256 of
+the rest under the robot's gallery key (`load_key`: an owner-only file in
+the state folder's `secrets/`), then a msgpack `GalleryFile` with each person's embeddings as raw
 little-endian float32 bytes. Names are trimmed, 1-`MAX_NAME` characters,
 no control characters; at most `MAX_PEOPLE` people of at most
 `MAX_EMBEDDINGS` embeddings each (10,000 people load in about 0.3 s:
@@ -26,7 +28,9 @@ benchmarks/identity.py).
 from __future__ import annotations
 
 import hashlib
+import hmac
 import os
+import secrets
 import unicodedata
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,9 +39,19 @@ import msgspec
 import numpy as np
 import numpy.typing as npt
 
-from buddybot.runtime.private_files import private_problem, write_private
+from buddybot.runtime.private_files import (
+    NotPrivate,
+    private_problem,
+    read_private,
+    state_dir,
+    write_private,
+)
 
-MAGIC = b"BUDDYBOT-GALLERY 1\n"
+MAGIC = b"BUDDYBOT-GALLERY 2\n"
+UNKEYED = b"BUDDYBOT-GALLERY 1\n"
+"""The format before the key (a plain SHA-256): read once, on the first start
+with a key, and written again signed; refused once the key exists."""
+KEY_BYTES = 32
 MAX_NAME = 64
 MAX_PEOPLE = 10_000
 MAX_EMBEDDINGS = 16
@@ -158,21 +172,68 @@ def valid_name(name: str) -> str:
     return key
 
 
-def encode(g: Gallery) -> bytes:
-    """The file's bytes for `g`."""
+def key_path(folder: Path | None = None) -> Path:
+    """Where the robot keeps its gallery key (beside the web secrets)."""
+    return (folder if folder is not None else state_dir()) / "secrets" / "gallery-key"
+
+
+def load_key(path: Path) -> tuple[bytes, bool]:
+    """(the gallery key, whether it was made now): made owner-only on first use;
+    GalleryError when the file is unusable (not ours, readable by others, damaged)."""
+    try:
+        text = read_private(path, 4 * KEY_BYTES, "it signs the gallery; check who "
+                            "changed it, then chmod 600 it")
+    except NotPrivate as e:
+        raise GalleryError(str(e)) from None
+    if text is None:
+        key = secrets.token_bytes(KEY_BYTES)
+        try:
+            write_private(path, key.hex().encode() + b"\n")
+        except OSError as e:
+            raise GalleryError(f"cannot make the gallery key {path}: {e.strerror}") from e
+        return key, True
+    try:
+        key = bytes.fromhex(text.strip().decode())
+    except (UnicodeDecodeError, ValueError):
+        key = b""
+    if len(key) != KEY_BYTES:
+        raise GalleryError(f"the gallery key {path} is damaged: move it away and enrol "
+                           "everyone again (the gallery it signed cannot be trusted)")
+    return key, False
+
+
+def _mac(key: bytes, body: bytes) -> bytes:
+    return hmac.new(key, body, hashlib.sha256).digest()
+
+
+def encode(g: Gallery, key: bytes) -> bytes:
+    """The file's bytes for `g`, signed with `key`."""
     body = msgspec.msgpack.encode(GalleryFile(g.model, g.dim, [
         PersonRecord(p.name, p.embeddings.astype("<f4").tobytes(), p.enrolled_s, p.last_seen_s)
         for p in g.people.values()]))
-    return MAGIC + hashlib.sha256(body).digest() + body
+    return MAGIC + _mac(key, body) + body
 
 
-def decode(data: bytes, model: str, where: str = "gallery") -> Gallery:
-    """Bytes of a gallery file -> Gallery; GalleryError when they are not a usable gallery."""
-    if not data.startswith(MAGIC):
+def decode(data: bytes, model: str, key: bytes, where: str = "gallery", *,
+           unkeyed: bool = False) -> Gallery:
+    """Bytes of a gallery file -> Gallery; GalleryError when they are not a usable
+    gallery. `unkeyed`: a file of the format before the key is read too (the
+    first start with a key: the caller writes it again, signed)."""
+    if unkeyed and data.startswith(UNKEYED):
+        digest, body = data[len(UNKEYED):len(UNKEYED) + 32], data[len(UNKEYED) + 32:]
+        if len(digest) < 32 or hashlib.sha256(body).digest() != digest:
+            raise GalleryError(f"{where} is truncated or corrupt (checksum mismatch)")
+    elif data.startswith(UNKEYED):
+        raise GalleryError(f"{where} is not signed with this robot's gallery key (a file "
+                           "of the old format written after the key was made): enrol again")
+    elif not data.startswith(MAGIC):
         raise GalleryError(f"{where} is not a BuddyBot gallery (or of another format version)")
-    digest, body = data[len(MAGIC):len(MAGIC) + 32], data[len(MAGIC) + 32:]
-    if len(digest) < 32 or hashlib.sha256(body).digest() != digest:
-        raise GalleryError(f"{where} is truncated or corrupt (checksum mismatch)")
+    else:
+        mac, body = data[len(MAGIC):len(MAGIC) + 32], data[len(MAGIC) + 32:]
+        if len(mac) < 32 or not hmac.compare_digest(_mac(key, body), mac):
+            raise GalleryError(f"{where} is not signed with this robot's gallery key: edited, "
+                               "damaged or from another robot; not used (enrol again, or "
+                               "put back this robot's file)")
     try:
         file = msgspec.msgpack.decode(body, type=GalleryFile)
     except msgspec.DecodeError as e:
@@ -204,8 +265,9 @@ def check_private(st: os.stat_result, path: Path) -> None:
         raise GalleryError(problem)
 
 
-def load(path: Path, model: str) -> Gallery:
-    """The gallery at `path` (empty when there is no file yet); GalleryError when unusable."""
+def load(path: Path, model: str, key: bytes, *, unkeyed: bool = False) -> Gallery:
+    """The gallery at `path` (empty when there is no file yet); GalleryError when
+    unusable (`decode`)."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
     except FileNotFoundError:
@@ -219,9 +281,10 @@ def load(path: Path, model: str) -> Gallery:
             raise GalleryError(f"{path} is {st.st_size} bytes, more than a gallery can be "
                                f"({MAX_FILE_BYTES}): not read")
         data = f.read(MAX_FILE_BYTES + 1)
-    return decode(data, model, str(path))
+    return decode(data, model, key, str(path), unkeyed=unkeyed)
 
 
-def save(path: Path, g: Gallery) -> None:
-    """Write `g` to `path` atomically, owner-only (the old file stays whole on any failure)."""
-    write_private(path, encode(g))
+def save(path: Path, g: Gallery, key: bytes) -> None:
+    """Write `g` to `path` atomically, owner-only, signed with `key` (the old file
+    stays whole on any failure)."""
+    write_private(path, encode(g, key))

@@ -40,7 +40,7 @@ from buddybot.contract import messages as m
 from buddybot.identity import embedding, gallery
 from buddybot.identity.frames import ImageRing
 from buddybot.identity.matching import Index
-from buddybot.identity.settings import GALLERY_FILE, IdentitySettings, state_dir
+from buddybot.identity.settings import GALLERY_FILE, IdentitySettings
 from buddybot.identity.tracks import FaceTracks
 from buddybot.identity.vote import Answer, TrackVote, VoteRules
 from buddybot.runtime.config import resolve_path
@@ -48,6 +48,7 @@ from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.params import LiveSettings
+from buddybot.runtime.private_files import state_dir
 from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.identity")
@@ -156,6 +157,9 @@ class IdentityService:
         self.vote: TrackVote | None = None
         self.gallery: gallery.Gallery | None = None
         self.gallery_problem: str | None = None
+        self.key_path = gallery.key_path()
+        self.key: bytes | None = None
+        """The gallery key (None until read, or when its file is unusable)."""
         self.index = Index.build([], np.zeros((0, embedding.DIM), np.float32))
         self.enrolment: Enrolment | None = None
         self.inflight: Job | None = None
@@ -215,8 +219,12 @@ class IdentityService:
     def _load_gallery(self) -> None:
         """Read the gallery file; on any problem: no names, and say why. Under the lock."""
         try:
-            self.gallery = gallery.load(self.path, embedding.MODEL_ID)
+            self.key, made = gallery.load_key(self.key_path)
+            self.gallery = gallery.load(self.path, embedding.MODEL_ID, self.key, unkeyed=made)
             self.gallery_problem = None
+            if made and self.gallery.people:  # the old format, read once: signed from now on
+                log.info("gallery key made (%s); the gallery is signed with it", self.key_path)
+                self._save("signed with the new key")
         except gallery.GalleryError as exc:
             self.gallery, self.gallery_problem = None, str(exc)
             log.error("gallery unusable, running without names: %s", exc)
@@ -371,8 +379,10 @@ class IdentityService:
         """Write the gallery; the error text, or None. Under the lock."""
         if self.gallery is None:
             return "no usable gallery"
+        if self.key is None:
+            return f"no usable gallery key ({self.key_path})"
         try:
-            gallery.save(self.path, self.gallery)
+            gallery.save(self.path, self.gallery, self.key)
         except OSError as exc:
             self.node.diagnostics.increment("save_errors")
             log.error("could not save the gallery %s (%s): %s", self.path, why, exc)

@@ -8,26 +8,12 @@ identity ...`); `camera`, `gallery` and `model` are read once at start.
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
 from typing import Annotated
 
 import msgspec
 
 GALLERY_FILE = "identity/gallery.bin"
 """The gallery's place inside the robot's state directory."""
-
-
-def state_dir() -> Path:
-    """The robot's state directory: systemd's $STATE_DIRECTORY (`StateDirectory=buddybot`
-    in the unit: /var/lib/buddybot), else $XDG_STATE_HOME/buddybot, else
-    ~/.local/state/buddybot (the XDG default)."""
-    given = os.environ.get("STATE_DIRECTORY", "").split(":")[0]
-    if given:
-        return Path(given)
-    xdg = os.environ.get("XDG_STATE_HOME")
-    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "state"
-    return base / "buddybot"
 
 
 class IdentitySettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):

@@ -1,7 +1,8 @@
 """Owner-only files: the one way BuddyBot keeps what others must not read.
 
-The identity gallery (biometric data) and the web surfaces' login secrets
-are such files. Both need the same two rules: a file is used only when it
+The identity gallery (biometric data) and its key, and the web surfaces'
+login secrets are such files, kept in the robot's state folder
+(`state_dir`). All need the same two rules: a file is used only when it
 is a regular file of this user that no one else may read or write, and it
 is written atomically (a temporary file, fsynced, renamed, the folder
 fsynced), owner-only from its first byte, so a crash leaves the old file
@@ -13,7 +14,23 @@ from __future__ import annotations
 import contextlib
 import os
 import stat
+from collections.abc import Mapping
 from pathlib import Path
+
+
+def state_dir(env: Mapping[str, str] | None = None) -> Path:
+    """The robot's state folder: `$BUDDYBOT_STATE_DIR`, else systemd's
+    `$STATE_DIRECTORY` (`StateDirectory=buddybot`: /var/lib/buddybot), else
+    `$XDG_STATE_HOME/buddybot` (an absolute one: the XDG spec), else
+    `~/.local/state/buddybot`."""
+    env = os.environ if env is None else env
+    for name in ("BUDDYBOT_STATE_DIR", "STATE_DIRECTORY"):
+        value = env.get(name, "").split(":")[0]
+        if value:
+            return Path(value).expanduser()
+    xdg = env.get("XDG_STATE_HOME", "")
+    base = Path(xdg) if xdg and Path(xdg).is_absolute() else Path.home() / ".local" / "state"
+    return base / "buddybot"
 
 
 def private_problem(st: os.stat_result, path: Path, advice: str) -> str | None:
@@ -26,6 +43,28 @@ def private_problem(st: os.stat_result, path: Path, advice: str) -> str | None:
     if st.st_mode & 0o077:
         return f"{path} is accessible to others (mode {stat.S_IMODE(st.st_mode):o}): {advice}"
     return None
+
+
+class NotPrivate(Exception):
+    """A file that cannot be used as a private one; the text says why."""
+
+
+def read_private(path: Path, limit: int, advice: str) -> bytes | None:
+    """Up to `limit` + 1 bytes of the private file `path` (so a caller sees it is
+    too long); None when there is none; NotPrivate when it cannot be opened or
+    others may use it (`private_problem`, ending with `advice`). A symlink is
+    never followed."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
+    except FileNotFoundError:
+        return None
+    except OSError as exc:
+        raise NotPrivate(f"cannot open {path}: {exc.strerror}") from None
+    with os.fdopen(fd, "rb") as f:
+        problem = private_problem(os.fstat(f.fileno()), path, advice)
+        if problem is not None:
+            raise NotPrivate(problem)
+        return f.read(limit + 1)
 
 
 def write_private(path: Path, data: bytes) -> None:

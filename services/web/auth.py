@@ -20,7 +20,7 @@ from pathlib import Path
 
 from buddybot.runtime.endpoints import is_loopback
 from buddybot.runtime.errors import BuddyBotError
-from buddybot.runtime.private_files import private_problem, write_private
+from buddybot.runtime.private_files import NotPrivate, read_private, state_dir, write_private
 
 ROLES = ("operator", "viewer", "foxglove")
 """Every secret there is; `operator` and `viewer` log in to the dashboard."""
@@ -33,18 +33,6 @@ SECRET_BYTES = 32
 
 class SecretError(BuddyBotError):
     """A secret file that cannot be used (not ours, readable by others, not a file)."""
-
-
-def state_dir(env: Mapping[str, str] | None = None) -> Path:
-    """The robot's state folder: `$BUDDYBOT_STATE_DIR`, else systemd's
-    `$STATE_DIRECTORY`, else `$XDG_STATE_HOME/buddybot` (`~/.local/state/buddybot`)."""
-    env = os.environ if env is None else env
-    for name in ("BUDDYBOT_STATE_DIR", "STATE_DIRECTORY"):
-        value = env.get(name, "").split(":")[0]
-        if value:
-            return Path(value).expanduser()
-    xdg = env.get("XDG_STATE_HOME") or str(Path("~/.local/state").expanduser())
-    return Path(xdg) / "buddybot"
 
 
 def secret_path(role: str, folder: Path | None = None) -> Path:
@@ -66,17 +54,12 @@ def login_required(host: str, mode: str) -> bool:
 def read_secret(path: Path) -> str | None:
     """The secret in `path`; None when revoked (empty) or absent; SecretError when unusable."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
-    except FileNotFoundError:
+        data = read_private(path, MAX_SECRET_CHARS, "rotate the secret "
+                            "(`buddybot secret rotate`), then chmod 600 it")
+    except NotPrivate as exc:
+        raise SecretError(str(exc)) from None
+    if data is None:
         return None
-    except OSError as exc:
-        raise SecretError(f"cannot open {path}: {exc.strerror}") from None
-    with os.fdopen(fd, "rb") as f:
-        problem = private_problem(os.fstat(f.fileno()), path, "rotate the secret "
-                                  "(`buddybot secret rotate`), then chmod 600 it")
-        if problem is not None:
-            raise SecretError(problem)
-        data = f.read(MAX_SECRET_CHARS + 1)
     text = data.decode("ascii", "replace").strip()
     if len(text) > MAX_SECRET_CHARS:
         raise SecretError(f"{path} holds more than {MAX_SECRET_CHARS} characters: not a secret")

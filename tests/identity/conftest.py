@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from buddybot.identity import embedding
+from buddybot.identity import embedding, gallery
 from tests.identity.photos import Photo, PhotosUnavailable, detectors, keypoints, photos
 
 
@@ -32,3 +34,16 @@ def vectors(shots: list[Photo], embedder: embedding.Embedder) -> dict[str, np.nd
     """Photo name -> unit embedding, faces found and aligned as face-detector finds them."""
     nets = detectors()
     return {p.name: embedder.face(p.bgr, keypoints(nets, p.bgr)) for p in shots}
+
+
+@pytest.fixture(autouse=True)
+def own_state(monkeypatch: pytest.MonkeyPatch, state_dir: Path) -> Path:
+    """The gallery key (and any state) of this test, in the test's own state folder:
+    the folder the services it spawns use too (the `spawn` fixture)."""
+    monkeypatch.setenv("BUDDYBOT_STATE_DIR", str(state_dir))
+    return state_dir
+
+
+def key() -> bytes:
+    """This test's gallery key (made on first use), as the identity service reads it."""
+    return gallery.load_key(gallery.key_path())[0]

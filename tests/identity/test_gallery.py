@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import hmac
 import subprocess
 import sys
 import textwrap
@@ -14,6 +15,7 @@ import pytest
 
 from buddybot.identity import gallery as gal
 from buddybot.identity.embedding import DIM, unit
+from tests.identity.conftest import key
 
 MODEL = "test-model/1"
 
@@ -31,13 +33,13 @@ def two_people() -> gal.Gallery:
 
 @pytest.fixture
 def path(tmp_path: Path) -> Path:
-    p = tmp_path / "state" / "gallery.bin"
-    gal.save(p, two_people())
+    p = tmp_path / "galleries" / "gallery.bin"  # beside, not in, the state folder
+    gal.save(p, two_people(), key())
     return p
 
 
 def test_round_trip_keeps_names_vectors_and_times(path: Path) -> None:
-    g = gal.load(path, MODEL)
+    g = gal.load(path, MODEL, key())
     assert list(g.people) == ["Ada", "Bob"]
     np.testing.assert_array_equal(g.people["Ada"].embeddings, np.stack([vec(1), vec(2)]))
     assert g.people["Bob"].enrolled_s == 200.0 and g.people["Bob"].last_seen_s == 200.0
@@ -46,7 +48,7 @@ def test_round_trip_keeps_names_vectors_and_times(path: Path) -> None:
 
 
 def test_no_file_yet_is_an_empty_gallery(tmp_path: Path) -> None:
-    g = gal.load(tmp_path / "none.bin", MODEL)
+    g = gal.load(tmp_path / "none.bin", MODEL, key())
     assert g.people == {} and g.table()[1].shape == (0, DIM)
 
 
@@ -60,14 +62,14 @@ def test_the_file_is_owner_only_and_holds_no_image(path: Path) -> None:
 def test_a_file_others_can_read_or_write_is_refused(path: Path, mode: int) -> None:
     path.chmod(mode)
     with pytest.raises(gal.GalleryError, match="chmod 600"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 def test_a_symlink_is_refused(path: Path) -> None:
     link = path.parent / "link.bin"
     link.symlink_to(path)
     with pytest.raises(gal.GalleryError, match="cannot open"):
-        gal.load(link, MODEL)
+        gal.load(link, MODEL, key())
 
 
 def write_private(path: Path, data: bytes) -> None:
@@ -79,21 +81,53 @@ def write_private(path: Path, data: bytes) -> None:
 def test_a_truncated_file_is_refused(path: Path, cut: int) -> None:
     write_private(path, path.read_bytes()[:cut])
     with pytest.raises(gal.GalleryError, match=r"not a BuddyBot gallery|truncated"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 def test_an_oversized_file_is_refused_unread(path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(gal, "MAX_FILE_BYTES", path.stat().st_size - 1)
     with pytest.raises(gal.GalleryError, match="more than a gallery can be"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 def test_a_flipped_byte_is_refused(path: Path) -> None:
     data = bytearray(path.read_bytes())
-    data[-50] ^= 0x40  # inside an embedding: would silently change a face without the checksum
+    data[-50] ^= 0x40  # inside an embedding: would silently change a face unsigned
     write_private(path, bytes(data))
-    with pytest.raises(gal.GalleryError, match="corrupt"):
-        gal.load(path, MODEL)
+    with pytest.raises(gal.GalleryError, match="not signed with this robot's gallery key"):
+        gal.load(path, MODEL, key())
+
+
+def test_a_file_edited_by_anyone_without_the_key_is_refused(path: Path) -> None:
+    """The old plain checksum let whoever could write the file rename a face (and fix the
+    checksum); a file signed without this robot's key, or of the unkeyed format once
+    the key exists, is refused. An unkeyed file is read once, when the key is new."""
+    g = gal.load(path, MODEL, key())
+    g.people["Mallory"] = g.people.pop("Ada")  # a face renamed
+    g.people["Mallory"].name = "Mallory"
+    body = gal.encode(g, key())[len(gal.MAGIC) + 32:]
+    for forged in (gal.MAGIC + hashlib.sha256(body).digest() + body,
+                   gal.encode(g, bytes(32)),
+                   gal.UNKEYED + hashlib.sha256(body).digest() + body):
+        write_private(path, forged)
+        with pytest.raises(gal.GalleryError, match="not signed with this robot's gallery key"):
+            gal.load(path, MODEL, key())
+    migrated = gal.load(path, MODEL, key(), unkeyed=True)  # the first start with a key
+    assert sorted(migrated.people) == ["Bob", "Mallory"]
+
+
+def test_the_key_is_made_owner_only_once_and_a_bad_key_file_refused(tmp_path: Path) -> None:
+    where = tmp_path / "keys" / "gallery-key"
+    first, made = gal.load_key(where)
+    assert made and len(first) == gal.KEY_BYTES
+    assert where.stat().st_mode & 0o777 == 0o600
+    assert gal.load_key(where) == (first, False)
+    where.chmod(0o644)
+    with pytest.raises(gal.GalleryError, match="accessible to others"):
+        gal.load_key(where)
+    write_private(where, b"not hex\n")
+    with pytest.raises(gal.GalleryError, match="damaged"):
+        gal.load_key(where)
 
 
 @pytest.mark.parametrize("data", [b"", b"\x00" * 100, b"hello\n", bytes(range(256)) * 16],
@@ -101,11 +135,12 @@ def test_a_flipped_byte_is_refused(path: Path) -> None:
 def test_garbage_is_refused(path: Path, data: bytes) -> None:
     write_private(path, data)
     with pytest.raises(gal.GalleryError, match="not a BuddyBot gallery"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 def with_checksum(body: bytes) -> bytes:
-    return gal.MAGIC + hashlib.sha256(body).digest() + body
+    """`body` as a file this robot wrote (signed with its key)."""
+    return gal.MAGIC + hmac.new(key(), body, hashlib.sha256).digest() + body
 
 
 @pytest.mark.parametrize("body", [
@@ -115,7 +150,7 @@ def with_checksum(body: bytes) -> bytes:
 def test_a_well_signed_but_undecodable_body_is_refused(path: Path, body: bytes) -> None:
     write_private(path, with_checksum(body))
     with pytest.raises(gal.GalleryError, match="corrupt"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 @pytest.mark.parametrize("record", [
@@ -129,25 +164,25 @@ def test_a_bad_entry_is_refused(path: Path, record: gal.PersonRecord) -> None:
     write_private(path, with_checksum(msgspec.msgpack.encode(gal.GalleryFile(MODEL, DIM,
                                                                               [record]))))
     with pytest.raises(gal.GalleryError, match=r"bad entry|malformed"):
-        gal.load(path, MODEL)
+        gal.load(path, MODEL, key())
 
 
 def test_a_file_of_another_model_is_refused(path: Path) -> None:
     with pytest.raises(gal.GalleryError, match="enrolled again"):
-        gal.load(path, "other-model/2")
+        gal.load(path, "other-model/2", key())
 
 
 def test_a_failure_before_the_rename_leaves_the_old_file(
         path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     before = path.read_bytes()
-    g = gal.load(path, MODEL)
+    g = gal.load(path, MODEL, key())
     g.forget("Ada")
 
     def broken(*_: object) -> None:
         raise OSError(28, "No space left on device")
     monkeypatch.setattr(gal.os, "replace", broken)
     with pytest.raises(OSError):
-        gal.save(path, g)
+        gal.save(path, g, key())
     assert path.read_bytes() == before
     assert [p.name for p in path.parent.iterdir()] == ["gallery.bin"]
 
@@ -165,15 +200,16 @@ def test_a_process_killed_mid_write_leaves_the_old_file(path: Path) -> None:
             v = np.random.default_rng(i).normal(size=128).astype(np.float32)
             g.enrol(f"p{{i}}", [v / np.linalg.norm(v)], now_s=0.0)
         gal.os.replace = lambda *a: os._exit(9)
-        gal.save(gal.Path(sys.argv[1]), g)
+        gal.save(gal.Path(sys.argv[1]), g, bytes(32))
     """)
     run = subprocess.run([sys.executable, "-c", child, str(path)], timeout=60)
     assert run.returncode == 9
     assert path.read_bytes() == before
-    assert list(gal.load(path, MODEL).people) == ["Ada", "Bob"]
-    leftovers = [p for p in path.parent.iterdir() if p.name != "gallery.bin"]
+    assert list(gal.load(path, MODEL, key()).people) == ["Ada", "Bob"]
+    leftovers = [p for p in path.parent.iterdir()
+                 if p.name not in ("gallery.bin", "state", "secrets")]
     assert leftovers and all(p.stat().st_mode & 0o777 == 0o600 for p in leftovers)
-    gal.save(path, gal.load(path, MODEL))  # a later save still works beside the leftover
+    gal.save(path, gal.load(path, MODEL, key()), key())  # a later save works beside it
 
 
 @pytest.mark.parametrize("name", ["", "   ", "x" * 10_000, "a\nb", "tab\there", "\u200b"])
@@ -212,17 +248,17 @@ def test_the_gallery_is_bounded(tmp_path: Path) -> None:
     with pytest.raises(gal.BadName, match="full"):
         g.enrol("one more", one, now_s=0.0)
     g.enrol("p0", [vec(2)], now_s=0.0, replace=True)  # retaking someone is still allowed
-    gal.save(tmp_path / "g.bin", g)
-    assert len(gal.load(tmp_path / "g.bin", MODEL).people) == gal.MAX_PEOPLE
+    gal.save(tmp_path / "g.bin", g, key())
+    assert len(gal.load(tmp_path / "g.bin", MODEL, key()).people) == gal.MAX_PEOPLE
 
 
 def test_forget_one_and_all(path: Path) -> None:
-    g = gal.load(path, MODEL)
+    g = gal.load(path, MODEL, key())
     assert g.forget(" Ada ") and not g.forget("Ada") and not g.forget("nobody")
     assert list(g.people) == ["Bob"]
     assert g.forget_all() == 1 and g.forget_all() == 0
-    gal.save(path, g)
-    assert gal.load(path, MODEL).people == {}
+    gal.save(path, g, key())
+    assert gal.load(path, MODEL, key()).people == {}
 
 
 def test_retention_forgets_people_not_seen_for_n_days() -> None:

@@ -29,6 +29,7 @@ from buddybot.identity import gallery as gal
 from buddybot.runtime.node import Node
 from buddybot.sim.faces import path as photo_path
 from buddybot.tools.testing import Collector, Process, retry_until
+from tests.identity.conftest import key
 from tests.identity.photos import detection, detectors
 
 pytestmark = pytest.mark.integration
@@ -66,7 +67,7 @@ def enrolled(path: Path, shown: dict[str, np.ndarray]) -> Path:
     for face, frame in shown.items():
         name = WHO[face][0]
         g.enrol(name, [embedder.face(frame, detection(nets, frame).keypoints)], time.time())
-    gal.save(path, g)
+    gal.save(path, g, key())
     return path
 
 

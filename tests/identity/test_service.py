@@ -5,6 +5,7 @@ a wrong one, erasure at once, refusals, and a corrupt gallery. Marked `integrati
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from buddybot.identity import embedding
 from buddybot.identity import gallery as gal
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, retry_until
+from tests.identity.conftest import key
 from tests.identity.feed import Camera, Scene, scene
 from tests.identity.photos import Photo, detectors
 
@@ -153,6 +155,29 @@ def test_a_corrupt_gallery_gives_no_names_and_is_not_overwritten(
 
 
 @pytest.mark.integration
+def test_a_gallery_edited_without_the_robots_key_names_nobody(
+        spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    """Whoever could write the file could rename a face and fix its plain checksum;
+    the file is now signed with a key in the robot's state folder, so the edited
+    file is refused and no name is given at all."""
+    path = tmp_path / "gallery.bin"
+    g = gal.Gallery(embedding.MODEL_ID)
+    vector = embedding.unit(np.random.default_rng(1).normal(size=embedding.DIM))
+    g.enrol("Ada", [vector], m.now_ns() / 1e9)
+    gal.save(path, g, key())
+    g.people["Mallory"] = g.people.pop("Ada")
+    g.people["Mallory"].name = "Mallory"
+    body = gal.encode(g, key())[len(gal.MAGIC) + 32:]
+    path.write_bytes(gal.MAGIC + hashlib.sha256(body).digest() + body)  # the old "checksum"
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="identity")
+    _start(spawn, probe, tmp_path, path)
+    status = diag.wait_for(lambda d: d.level == "ERROR", 30, "an ERROR status")
+    assert "not signed with this robot's gallery key" in status.message
+    with pytest.raises(Exception, match="unusable"):
+        probe.call(keys.IDENTITY_LIST, m.Trigger())
+
+
+@pytest.mark.integration
 def test_without_the_model_it_runs_with_no_names_and_says_how_to_install(
         spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
         tmp_path: Path) -> None:
@@ -177,9 +202,9 @@ def test_retention_forgets_who_was_not_seen_for_too_long_at_start(
     now = m.now_ns() / 1e9
     for name, days in (("old", 40.0), ("recent", 2.0)):
         g.enrol(name, [embedding.unit(rng.normal(size=embedding.DIM))], now - days * 86400)
-    gal.save(path, g)
+    gal.save(path, g, key())
     proc = _start(spawn, probe, tmp_path, path, "retention_days = 30\n")
     listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
     assert [p.name for p in listed.people] == ["recent"] and listed.retention_days == 30
     assert "forgot old: not seen for 30 days" in proc.wait_for_output("forgot old")
-    assert list(gal.load(path, embedding.MODEL_ID).people) == ["recent"]
+    assert list(gal.load(path, embedding.MODEL_ID, key()).people) == ["recent"]

@@ -18,6 +18,7 @@ from buddybot.identity import embedding, gallery
 from buddybot.identity.service import IdentityService, Job
 from buddybot.identity.settings import IdentitySettings
 from buddybot.tools.testing import FakeDiagnostics, RecordingPublisher
+from tests.identity.conftest import key
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
@@ -60,7 +61,7 @@ def _enrolled(tmp_path: Path, **people: int) -> None:
     g = gallery.Gallery(embedding.MODEL_ID)
     for name, seed in people.items():
         g.enrol(name, [_vector(seed)], T0 / S)
-    gallery.save(tmp_path / "gallery.bin", g)
+    gallery.save(tmp_path / "gallery.bin", g, key())
 
 
 def _frame(service: IdentityService, stamp: int, x: float = 0.0) -> None:
@@ -126,7 +127,7 @@ def test_forget_strikes_the_name_of_the_followed_face_at_once(tmp_path: Path) ->
     reply = service.forget(m.ForgetRequest(name="ada"))
     assert reply.success and reply.forgotten == ["ada"]
     assert _said(node)[-1] == (1, None)
-    assert list(gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID).people) == ["bob"]
+    assert list(gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key()).people) == ["bob"]
     assert not service.forget(m.ForgetRequest(name="ada")).success
     assert not service.forget(m.ForgetRequest(name="bob", all=True)).success
 
@@ -159,7 +160,7 @@ def test_a_bad_gallery_means_no_names_and_is_only_replaced_by_forget_all(
         service.list_people(m.Trigger())
     assert service.forget(m.ForgetRequest(all=True)).success
     assert node.diagnostics.level == "OK"
-    assert gallery.load(path, embedding.MODEL_ID).people == {}
+    assert gallery.load(path, embedding.MODEL_ID, key()).people == {}
 
 
 def test_a_gallery_others_may_write_is_refused(tmp_path: Path) -> None:
@@ -176,10 +177,10 @@ def test_last_seen_is_saved_at_a_bounded_rate(tmp_path: Path) -> None:
     service, _node = _service(tmp_path, seen_save_s=3600.0)
     service.prepare()
     _frames(service, 3, start=T0 + 100 * S)
-    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
+    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key())
     assert saved.people["ada"].last_seen_s == T0 / S  # not yet: within seen_save_s
     service.close()
-    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
+    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key())
     assert saved.people["ada"].last_seen_s > T0 / S + 99
 
 
@@ -216,7 +217,7 @@ def test_enrol_stores_embeddings_and_refuses_what_it_must(tmp_path: Path) -> Non
     assert not reply.success and "more than one face" in reply.message
     reply = _enrol_while_frames(service, m.EnrolRequest(name="cy", samples=3, timeout_s=10))
     assert reply.success and reply.samples == 3
-    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID)
+    saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key())
     assert sorted(saved.people) == ["ada", "cy"] and len(saved.people["cy"].embeddings) == 3
     service.embedder.who = 1  # type: ignore[union-attr]
     reply = _enrol_while_frames(service, m.EnrolRequest(name="dee", samples=2, timeout_s=10))
