@@ -23,7 +23,7 @@ from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime import leasing, options
-from buddybot.runtime.errors import NoReplyError, ServiceError
+from buddybot.runtime.errors import NoReplyError, ServiceError, UsageError
 from buddybot.runtime.service import ServiceContext
 
 HELP = "list the leases on the eyes and the speaker, or break one"
@@ -105,10 +105,15 @@ def _add_break(parser: argparse.ArgumentParser) -> None:
 
 def _break(ctx: ServiceContext) -> int:
     lease_id = ctx.args.lease_id
+    credential = leasing.operator_credential()
+    if not credential:
+        raise UsageError("breaking a lease needs the robot's operator secret, and none is "
+                         "readable here: `buddybot secret show` makes and prints it (run "
+                         "this as the robot's owner)")
     with ctx.probe() as node:
         try:
             text = leasing.release(node, lease_id, ctx.args.reason, ctx.args.timeout,
-                                   by=OPERATOR)
+                                   by=OPERATOR, credential=credential)
         except NoReplyError:
             raise ServiceError(
                 f"nobody answered {keys.LEASE_RELEASE.pattern} within {ctx.args.timeout:g} s "

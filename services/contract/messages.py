@@ -670,16 +670,28 @@ LeasePriority = Literal["builtin", "app", "operator"]
 `controller/eye_control`): it holds whatever no lease holds, and no request may ask for it."""
 LEASE_PRIORITIES: tuple[str, ...] = ("builtin", "app", "operator")
 LeaseId = Annotated[str, msgspec.Meta(max_length=64)]
+"""A lease's public id (`L<n>-<run>`, what `leases/state` shows), or its
+holder's handle `<public id>.<secret>` (what only the grant's reply carries,
+and what commands and releases need)."""
+
+
+def public_lease_id(given: str) -> str:
+    """The public id of a lease id or of its holder's handle."""
+    return given.partition(".")[0]
+
+
+Credential = Annotated[str, msgspec.Meta(max_length=256)]
+"""The robot's operator secret (`secrets/operator` in its state folder), or ""."""
 NodeName = Annotated[str, msgspec.Meta(min_length=1, max_length=64,
                                        description="a node name: letters, digits, - and _")]
 Resources = Annotated[list[Resource], msgspec.Meta(min_length=1, max_length=3)]
 LeaseEndReason = Literal["released", "expired", "holder_gone", "preempted", "broken"]
 MAX_LEASE_S = 86400.0
-"""Longest lease duration the controller grants (a day); longer is refused."""
+"""Longest lease duration the arbiter grants (a day); longer is refused."""
 HOLDER_NOT_ALIVE = "holder not alive"
-"""How the controller's refusal of a holder without a live liveliness token
+"""How the arbiter's refusal of a holder without a live liveliness token
 begins: a program that just started retries on it (its token may not have
-reached the controller yet), and on no other refusal."""
+reached the arbiter yet), and on no other refusal."""
 
 
 class LeaseRequest(Message):
@@ -689,7 +701,8 @@ class LeaseRequest(Message):
     (`nodes/<holder>/<instance>`): the lease ends when that token goes away
     (the program ended, crashed or was killed). `duration_s` None: until
     released; otherwise it expires on its own after that many seconds.
-    Ranges are checked by the controller, which refuses with the reason.
+    Priority `operator` needs `credential`, the robot's operator secret.
+    Ranges are checked by the arbiter, which refuses with the reason.
     """
 
     holder: NodeName
@@ -698,24 +711,28 @@ class LeaseRequest(Message):
     resources: Resources
     priority: LeasePriority = "app"
     duration_s: float | None = None
+    credential: Credential = ""
 
 
 class LeaseReply(Message):
     granted: bool
     lease_id: LeaseId = ""
+    """The holder's handle `<public id>.<secret>`: only this reply carries it."""
     message: Text = ""
     """Why it was refused, or which leases it took over."""
     expires_ns: StampNs | None = None
 
 
 class LeaseRelease(Message):
-    """`leases/release`: end a lease (its holder, or an operator breaking it)."""
+    """`leases/release`: end a lease: its holder, with the handle (`released`),
+    or an operator, with the public id and the operator `credential` (`broken`,
+    recorded with `by`)."""
 
     lease_id: LeaseId
     reason: Text = ""
     by: NodeName | None = None
-    """Who asks: the lease's holder releases it (`released`); anyone else breaks
-    it (`broken`)."""
+    """Who asks (recorded when an operator breaks a lease)."""
+    credential: Credential = ""
 
 
 class Lease(Message):

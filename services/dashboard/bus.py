@@ -21,7 +21,13 @@ from buddybot.contract import messages as m
 from buddybot.dashboard import identity, model, radar_map
 from buddybot.dashboard.settings import DashboardSettings
 from buddybot.runtime.errors import NoReplyError, ServiceError
-from buddybot.runtime.leasing import BROKEN_BY_OPERATOR, LeaseHolder, LeaseRefused, release
+from buddybot.runtime.leasing import (
+    BROKEN_BY_OPERATOR,
+    LeaseHolder,
+    LeaseRefused,
+    operator_credential,
+    release,
+)
 from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
 from buddybot.runtime.node import Node, RateLimitedLog, Subscription
@@ -204,7 +210,7 @@ class Bus:
             self._post_leases()
 
     def _post_leases(self) -> None:
-        self.mailbox.put("leases", (self._leases, self.lease.lease_id))
+        self.mailbox.put("leases", (self._leases, self.lease.public_id))  # never the handle
 
     def _leases_changed(self) -> None:
         with self._leases_lock:
@@ -249,7 +255,8 @@ class Bus:
 
     def _control(self, on: bool) -> tuple[bool, str]:
         if on:
-            ok, text = _lease_call("take control", lambda: _granted(self.lease.acquire()))
+            ok, text = _lease_call("take control", lambda: _granted(
+                m.public_lease_id(self.lease.acquire())))
         else:
             ok, text = _lease_call("give back control",
                                    lambda: self.lease.release("released by operator")
@@ -258,12 +265,13 @@ class Bus:
         return ok, text
 
     def _break(self, lease_id: str) -> tuple[bool, str]:
-        if lease_id == self.lease.lease_id:
+        if lease_id == self.lease.public_id:
             ok, text = _lease_call(f"break {clip(lease_id, 64)}",
                                    lambda: self.lease.release(BROKEN_BY_OPERATOR) or "")
         else:
             ok, text = _lease_call(f"break {clip(lease_id, 64)}", lambda: release(
-                self.node, lease_id, BROKEN_BY_OPERATOR, CALL_TIMEOUT_S))
+                self.node, lease_id, BROKEN_BY_OPERATOR, CALL_TIMEOUT_S,
+                credential=operator_credential()))
         self._leases_changed()
         return ok, text
 

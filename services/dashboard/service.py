@@ -121,6 +121,10 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     tls = tls_context(ctx, s)
     guard = guard_for(s, s.host, log)
     accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())
+    try:
+        web_auth.ensure_operator_secret("dashboard")  # its lease is an operator's
+    except web_auth.SecretError as exc:
+        raise ConfigError(str(exc)) from None
     app = App(board, guard, make_gate(s, tls is not None, guard))
     runner = web.AppRunner(app.make(), access_log=None)
     await runner.setup()

@@ -12,6 +12,7 @@ Why here and not in the controller: docs/design.md 4.8.
 
 from __future__ import annotations
 
+import hmac
 import logging
 import threading
 from collections.abc import Callable
@@ -22,12 +23,15 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes.leases import LeaseTable
 from buddybot.runtime.node import Node, RateLimitedLog
+from buddybot.runtime.private_files import NotPrivate, read_secret_text, secret_file
 
 log = logging.getLogger("buddybot.eyes")
 
 ACQUIRE_QUEUE = 256
 """Pending `leases/acquire` requests kept: each is answered in microseconds
 (no call out), so a flood waits briefly instead of being shed."""
+OPERATOR_SECRET = "operator"
+"""The secret (`secrets/operator`, the dashboard's operator login) an operator shows."""
 EXPIRE_S = 0.05
 """How often leases are checked for expiry."""
 
@@ -116,10 +120,11 @@ class Arbiter:
         watch of `nodes/*/*` (`on_token`), never asked per request, so a flood
         of invented holders costs each a set lookup; a program whose token has
         not arrived yet retries (leasing.ask)."""
+        operator = self.operator(req.credential)  # a file read: outside the lock
         with self._lock:
             alive = (req.holder, req.instance) in self._alive
             before = self.leases.held()
-            decision = self.leases.acquire(req, self.wall_ns(), alive)
+            decision = self.leases.acquire(req, self.wall_ns(), alive, operator)
             if decision.reply.granted:
                 log.info("lease %s granted to %s (%s, %s)", decision.reply.lease_id,
                          req.holder, req.priority, ", ".join(req.resources))
@@ -130,9 +135,11 @@ class Arbiter:
         return decision.reply
 
     def release(self, req: m.LeaseRelease) -> m.TriggerReply:
+        operator = self.operator(req.credential)
         with self._lock:
             before = self.leases.held()
-            reply, ended = self.leases.release(req.lease_id, req.by, req.reason, self.wall_ns())
+            reply, ended = self.leases.release(req.lease_id, req.by, req.reason, self.wall_ns(),
+                                               operator)
             if ended:
                 log.info("lease %s", reply.message)
                 self._changed(before)
@@ -153,6 +160,19 @@ class Arbiter:
             before = self.leases.held()
             if self.leases.expire(self.wall_ns()):
                 self._changed(before)
+
+    def operator(self, credential: str) -> bool:
+        """Whether `credential` is the robot's operator secret (read from its state
+        folder each time: a rotated or revoked secret counts at once)."""
+        if not credential:
+            return False
+        try:
+            want = read_secret_text(secret_file(OPERATOR_SECRET), 512,
+                                    "it lets a program operate the robot; chmod 600 it")
+        except NotPrivate as exc:
+            self._warn.warning("operator_secret", "operator secret unusable: %s", exc)
+            return False
+        return want is not None and hmac.compare_digest(credential.encode(), want.encode())
 
     @property
     def counters(self) -> dict[str, int]:

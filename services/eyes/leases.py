@@ -9,6 +9,12 @@ the service only publishes. The rule:
   at a LOWER priority; those lower leases end whole (reason `preempted`);
 * it is refused, naming the holder, when any is held at the same or a
   higher priority: first come, first served among equals;
+* a lease is a capability: the grant's reply alone carries its handle
+  `<public id>.<secret>`; commands and releases need the handle, and
+  `leases/state` shows only public ids, so reading the bus lets no one act
+  on a lease. An operator (the robot's operator secret as `credential`)
+  may break any lease by its public id (`broken`, with who broke it), and
+  only an operator may ask for priority `operator`;
 * `builtin` (the controller's own behaviour) is never requestable; a
   duration must be finite, > 0 and <= MAX_LEASE_S (None: until released);
   resources may not repeat; the holder must be alive (its liveliness
@@ -22,6 +28,7 @@ looping on eyes commands is slowed down and counted, not obeyed.
 from __future__ import annotations
 
 import collections
+import hmac
 import math
 import secrets
 from dataclasses import dataclass
@@ -29,6 +36,8 @@ from dataclasses import dataclass
 from buddybot.contract import messages as m
 from buddybot.runtime.rates import TokenBucket
 
+SECRET_BYTES = 16
+"""Random bytes of a handle's secret half (22 characters)."""
 MAX_LEASES = 64
 MAX_PER_HOLDER = 8
 ENDED_KEPT = 16
@@ -62,11 +71,14 @@ class LeaseTable:
         self._tag = run_tag if run_tag is not None else secrets.token_hex(3)
         self._next = 1
         self._leases: dict[str, m.Lease] = {}
+        self._secrets: dict[str, str] = {}
+        """Public id -> the secret half of its holder's handle."""
         self._buckets: dict[str, TokenBucket] = {}
         self._ended: collections.deque[m.LeaseEnd] = collections.deque(maxlen=ENDED_KEPT)
         self.counters: dict[str, int] = {
             "leases_granted": 0, "leases_refused": 0, "eyes_commands": 0,
             "eyes_commands_refused": 0, "rate_limited": 0, "holders_not_alive": 0,
+            "forged": 0, "operator_refused": 0,
         }
 
     # -- queries --
@@ -94,9 +106,11 @@ class LeaseTable:
 
     # -- decisions --
 
-    def acquire(self, req: m.LeaseRequest, now_ns: int, holder_alive: bool) -> Decision:
-        """Grant or refuse `req` (see the module's rule)."""
-        problem = self._invalid(req, holder_alive)
+    def acquire(self, req: m.LeaseRequest, now_ns: int, holder_alive: bool,
+                operator: bool = False) -> Decision:
+        """Grant or refuse `req` (see the module's rule); `operator`: its credential
+        is the robot's operator secret."""
+        problem = self._invalid(req, holder_alive, operator)
         rank = PRIORITY_RANK[req.priority]
         lower: list[m.Lease] = []
         if problem is None:
@@ -125,22 +139,35 @@ class LeaseTable:
             lease_id=lease_id, holder=req.holder, instance=req.instance,
             priority=req.priority, resources=list(req.resources), granted_ns=now_ns,
             expires_ns=expires)
+        self._secrets[lease_id] = secrets.token_urlsafe(SECRET_BYTES)
         self.counters["leases_granted"] += 1
         message = ("took over " + ", ".join(f"{e.lease_id} ({e.holder})" for e in ended)
                    if ended else "")
-        return Decision(m.LeaseReply(granted=True, lease_id=lease_id, message=message,
-                                     expires_ns=expires), ended)
+        return Decision(m.LeaseReply(granted=True, lease_id=self.handle(lease_id),
+                                     message=message, expires_ns=expires), ended)
 
-    def release(self, lease_id: str, by: str | None, reason: str,
-                now_ns: int) -> tuple[m.TriggerReply, list[m.LeaseEnd]]:
-        """End a lease: `released` when its holder asks (`by`), else `broken`."""
-        lease = self._leases.get(lease_id)
+    def handle(self, lease_id: str) -> str:
+        """The holder's handle of the lease `lease_id` (what its grant returned)."""
+        return f"{lease_id}.{self._secrets[lease_id]}"
+
+    def release(self, given: str, by: str | None, reason: str, now_ns: int,
+                operator: bool = False) -> tuple[m.TriggerReply, list[m.LeaseEnd]]:
+        """End a lease: `released` by its holder (the handle), `broken` by an
+        operator (`operator`: the credential held; the public id is enough);
+        refused, and counted as forged, for anyone else."""
+        lease, holder = self._resolve(given)
         if lease is None:
-            return _refuse(self._gone(lease_id)), []
-        how: m.LeaseEndReason = "released" if by == lease.holder else "broken"
+            return _refuse(self._gone(m.public_lease_id(given))), []
+        if not holder and not operator:
+            self.counters["forged"] += 1
+            return _refuse(f"lease {lease.lease_id}: only its holder (the handle its grant "
+                           "returned) or an operator (the operator secret) ends it"), []
+        how: m.LeaseEndReason = "released" if holder else "broken"
         text = reason or (f"broken by {by}" if how == "broken" and by else "")
-        end = self._end(lease_id, how, now_ns, text)
-        return m.TriggerReply(success=True, message=f"{lease_id} {how}"), [end]
+        if how == "broken" and by and by not in text:
+            text = f"{text} (by {by})"
+        end = self._end(lease.lease_id, how, now_ns, text)
+        return m.TriggerReply(success=True, message=f"{lease.lease_id} {how}"), [end]
 
     def expire(self, now_ns: int) -> list[m.LeaseEnd]:
         due = [lease.lease_id for lease in self._leases.values()
@@ -183,9 +210,13 @@ class LeaseTable:
 
     def _eyes(self, cmd: m.EyesCommand, now_ns: int, rate_per_s: float, burst: float
               ) -> tuple[m.TriggerReply, m.ScreenExpression | None, m.EyeControl | None]:
-        lease = self._leases.get(cmd.lease_id)
+        lease, holder = self._resolve(cmd.lease_id)
         if lease is None:
-            return _refuse(self._gone(cmd.lease_id)), None, None
+            return _refuse(self._gone(m.public_lease_id(cmd.lease_id))), None, None
+        if not holder:
+            self.counters["forged"] += 1
+            return (_refuse(f"lease {lease.lease_id}: only its holder commands with it (the "
+                            "handle its grant returned)"), None, None)
         turn = cmd.yaw is not None or cmd.pitch is not None
         gaze = turn or cmd.pupil_percent is not None
         if cmd.expression is None and not gaze:
@@ -208,6 +239,14 @@ class LeaseTable:
 
     # -- internals --
 
+    def _resolve(self, given: str) -> tuple[m.Lease | None, bool]:
+        """(the lease `given` names, whether `given` is its holder's handle)."""
+        lease_id, _, secret = given.partition(".")
+        lease = self._leases.get(lease_id)
+        if lease is None:
+            return None, False
+        return lease, bool(secret) and hmac.compare_digest(secret, self._secrets[lease_id])
+
     def _gone(self, lease_id: str) -> str:
         """Why `lease_id` is no lease: it ended (and how, if still remembered) or never was."""
         for end in reversed(self._ended):
@@ -215,9 +254,13 @@ class LeaseTable:
                 return f"lease {lease_id} ended ({end.reason})"
         return f"no lease {lease_id!r}"
 
-    def _invalid(self, req: m.LeaseRequest, holder_alive: bool) -> str | None:
+    def _invalid(self, req: m.LeaseRequest, holder_alive: bool, operator: bool) -> str | None:
         if req.priority == "builtin":
             return "priority builtin is the controller's own behaviour: not requestable"
+        if req.priority == "operator" and not operator:
+            self.counters["operator_refused"] += 1
+            return ("priority operator needs the operator credential (the robot's operator "
+                    "secret: the dashboard's login, `buddybot secret show`)")
         if len(set(req.resources)) != len(req.resources):
             return f"resources repeat: {req.resources}"
         d = req.duration_s
@@ -242,6 +285,7 @@ class LeaseTable:
     def _end(self, lease_id: str, reason: m.LeaseEndReason, now_ns: int,
              message: str) -> m.LeaseEnd:
         lease = self._leases.pop(lease_id)
+        self._secrets.pop(lease_id, None)
         self._buckets.pop(lease_id, None)
         end = m.LeaseEnd(lease_id=lease_id, holder=lease.holder,
                          reason=reason,

@@ -43,13 +43,14 @@ from buddybot.foxglove.server import FoxgloveServer, service_schema
 from buddybot.foxglove.settings import FoxgloveSettings
 from buddybot.foxglove.token import token_check
 from buddybot.runtime.endpoints import is_wildcard, local_host
-from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.errors import ConfigError, ServiceError
 from buddybot.runtime.handles import Subscription
 from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
 from buddybot.runtime.params import LiveSettings
 from buddybot.runtime.service import ServiceContext
+from buddybot.web import auth as web_auth
 from buddybot.web.guard import guard_for
 
 __all__ = ["add_arguments", "run", "settings_from"]
@@ -266,6 +267,10 @@ def gate_of(settings: FoxgloveSettings, upstream_port: int) -> Gate:
 
 def run(ctx: ServiceContext) -> int:
     settings = settings_from(ctx)
+    try:
+        web_auth.ensure_operator_secret("foxglove bridge")  # its lease is an operator's
+    except web_auth.SecretError as exc:
+        raise ConfigError(str(exc)) from None
     fox = FoxgloveServer(settings.max_channels)
     gate = gate_of(settings, 0)
     port = gate.start(settings.host, settings.port)  # busy port: ServeError, exit 1

@@ -14,8 +14,10 @@ Foxglove's expression service).
 Every call is bounded by a timeout and raises `ServiceError` (a
 `NoReplyError` when no eyes driver answers, a `CallError` for a bad reply)
 or `LeaseRefused` (the eyes driver said no, with its reason): never a hang.
-A release names this node (`by`), so the eyes driver tells a holder giving
-its lease back (`released`) from an operator breaking someone's (`broken`).
+A lease is a capability: the grant returns the holder's handle
+(`<public id>.<secret>`), which commands and releases need; `leases/state`
+shows public ids only. An operator (the robot's operator secret, read by
+`operator_credential`) may ask priority `operator` and break any lease.
 """
 
 from __future__ import annotations
@@ -24,11 +26,13 @@ import math
 import threading
 import time
 from collections.abc import Callable, Iterable
+from pathlib import Path
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import Node
+from buddybot.runtime.private_files import NotPrivate, read_secret_text, secret_file
 
 CALL_TIMEOUT_S = 3.0
 """How long a lease call may take before it counts as failed (the arbiter is
@@ -36,6 +40,8 @@ local and answers in milliseconds)."""
 NOT_ALIVE_WAIT_S = 2.0
 """How long a holder asks again while the arbiter has not seen its liveliness
 token (it travels there in milliseconds; seconds only under a heavy load)."""
+OPERATOR_SECRET = "operator"
+"""The secret an operator shows (`secrets/operator`: the dashboard's operator login)."""
 BROKEN_BY_OPERATOR = "broken by operator"
 """The release reason an operator gives for someone else's lease (the arbiter
 records it as `broken`)."""
@@ -94,13 +100,26 @@ def check_priority(priority: str) -> m.LeasePriority:
 
 
 def request(node: Node, names: Iterable[str], priority: str = "app",
-            duration_s: float | None = None) -> m.LeaseRequest:
+            duration_s: float | None = None, credential: str = "") -> m.LeaseRequest:
     """The checked request of this node (its name and liveliness instance) for
-    `names` (see `resources`); ValueError before anything is sent."""
+    `names` (see `resources`); ValueError before anything is sent. Priority
+    `operator` is granted only with the operator `credential`."""
     return m.LeaseRequest(holder=node.name, instance=node.instance,
                           resources=list(resources(names)),
                           priority=check_priority(priority),
-                          duration_s=check_duration(duration_s))
+                          duration_s=check_duration(duration_s), credential=credential)
+
+
+def operator_credential(folder: Path | None = None) -> str:
+    """The robot's operator secret from its state folder ("" when there is none,
+    it is revoked, or this user may not read it): what an operator's program
+    (the dashboard, Foxglove, `buddybot lease break`) shows the arbiter."""
+    try:
+        text = read_secret_text(secret_file(OPERATOR_SECRET, folder), 512,
+                                "it lets a program operate the robot; chmod 600 it")
+    except (NotPrivate, OSError):
+        return ""
+    return text or ""
 
 
 # --- the calls -----------------------------------------------------------------------------
@@ -137,13 +156,16 @@ def acquire(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S) ->
 
 
 def release(node: Node, lease_id: str, reason: str = "",
-            timeout: float = CALL_TIMEOUT_S, *, by: str | None = None) -> str:
-    """End any lease by id, asked by this node (or `by`): its holder's own lease
-    is `released`, anyone else's `broken` (an operator gives BROKEN_BY_OPERATOR).
-    The arbiter's text on success, LeaseRefused (an unknown id) otherwise."""
+            timeout: float = CALL_TIMEOUT_S, *, by: str | None = None,
+            credential: str = "") -> str:
+    """End a lease, asked by this node (or `by`): with its handle (the holder)
+    it is `released`; with its public id and the operator `credential` it is
+    `broken` (an operator gives BROKEN_BY_OPERATOR). The arbiter's text on
+    success, LeaseRefused (unknown, or neither the handle nor an operator)."""
     reply: m.TriggerReply = node.call(
         keys.LEASE_RELEASE,
-        m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name if by is None else by),
+        m.LeaseRelease(lease_id=lease_id, reason=reason, by=node.name if by is None else by,
+                       credential=credential),
         timeout=timeout)
     if not reply.success:
         raise LeaseRefused(reply.message or f"lease {lease_id} not released")
@@ -166,7 +188,8 @@ def find(state: m.Leases | None, lease_id: str | None) -> m.Lease | None:
     """The lease `lease_id` in a `leases/state` message, if it is still there."""
     if state is None or not lease_id:
         return None
-    return next((lease for lease in state.leases if lease.lease_id == lease_id), None)
+    public = m.public_lease_id(lease_id)
+    return next((lease for lease in state.leases if lease.lease_id == public), None)
 
 
 def ending(state: m.Leases, lease_id: str, *, seen: bool = False,
@@ -179,7 +202,8 @@ def ending(state: m.Leases, lease_id: str, *, seen: bool = False,
     stamped after the request was sent (`asked_ns`, same clock as the stamp)."""
     if find(state, lease_id) is not None:
         return None
-    end = next((e for e in state.ended if e.lease_id == lease_id), None)
+    public = m.public_lease_id(lease_id)
+    end = next((e for e in state.ended if e.lease_id == public), None)
     if end is not None:
         return end.reason, end.message
     if seen:
@@ -192,18 +216,21 @@ def ending(state: m.Leases, lease_id: str, *, seen: bool = False,
 class LeaseHolder:
     """This node's one lease on `resources` at `priority`: at most one at a time.
 
-    Thread-safe (a web server runs each button in a worker thread); the lease
-    id is kept until released here or seen gone from `leases/state`
-    (`forget_unless_in`), so a lease broken elsewhere is not used again.
+    Thread-safe (a web server runs each button in a worker thread); the lease's
+    handle is kept until released here or seen gone from `leases/state`
+    (`forget_unless_in`), so a lease broken elsewhere is not used again. At
+    priority `operator` the robot's operator secret is read from the state
+    folder at each request (`operator_credential`; `credential` overrides).
     """
 
     def __init__(self, node: Node, resources: list[m.Resource],
                  priority: m.LeasePriority = "operator",
-                 timeout: float = CALL_TIMEOUT_S) -> None:
+                 timeout: float = CALL_TIMEOUT_S, credential: str | None = None) -> None:
         self.node = node
         self.resources = resources
         self.priority = priority
         self.timeout = timeout
+        self.credential = credential
         self._lock = threading.Lock()
         self.lease_id: str | None = None
         self._asked_ns = 0
@@ -216,11 +243,20 @@ class LeaseHolder:
         with self._lock:
             if self.lease_id is not None:
                 return self.lease_id
-            req = request(self.node, self.resources, self.priority, duration_s)
+            credential = self.credential
+            if credential is None:
+                credential = operator_credential() if self.priority == "operator" else ""
+            req = request(self.node, self.resources, self.priority, duration_s, credential)
             asked_ns = m.now_ns()
             lease_id = acquire(self.node, req, self.timeout)
             self.lease_id, self._asked_ns = lease_id, asked_ns
             return lease_id
+
+    @property
+    def public_id(self) -> str | None:
+        """The held lease's public id (what `leases/state` and pages may show)."""
+        lease_id = self.lease_id
+        return None if lease_id is None else m.public_lease_id(lease_id)
 
     def release(self, reason: str = "") -> str | None:
         """Give the lease back; the arbiter's text, None when none was held.

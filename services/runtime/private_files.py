@@ -45,6 +45,19 @@ def private_problem(st: os.stat_result, path: Path, advice: str) -> str | None:
     return None
 
 
+def secret_file(name: str, folder: Path | None = None) -> Path:
+    """A named secret of the robot: `secrets/<name>` in its state folder."""
+    return (folder if folder is not None else state_dir()) / "secrets" / name
+
+
+def read_secret_text(path: Path, limit: int, advice: str) -> str | None:
+    """The text of a secret file, stripped; None when absent or empty (revoked);
+    NotPrivate as `read_private`."""
+    data = read_private(path, limit, advice)
+    text = "" if data is None else data.decode("ascii", "replace").strip()
+    return text or None
+
+
 class NotPrivate(Exception):
     """A file that cannot be used as a private one; the text says why."""
 

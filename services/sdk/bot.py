@@ -132,11 +132,12 @@ class Bot:
         return self._opened("_leases", lambda: LeaseTable(self.node, self.timeout, self.limit))
 
     def lease(self, *resources: str, priority: str = "app",
-              duration_s: float | None = None) -> Lease:
+              duration_s: float | None = None, credential: str = "") -> Lease:
         """Take `resources` ("expression", "gaze", "audio"; "eyes" = expression +
         gaze) from the eyes driver's arbiter; Refused naming the holder, NoService without
-        an eyes driver, ValueError for a malformed request."""
-        return self.leases.acquire(resources, priority, duration_s)
+        an eyes driver, ValueError for a malformed request. Priority "operator"
+        is granted only with the robot's operator secret as `credential`."""
+        return self.leases.acquire(resources, priority, duration_s, credential=credential)
 
     @property
     def eyes(self) -> Eyes:

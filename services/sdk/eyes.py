@@ -234,6 +234,6 @@ class Eyes(Actuator):
         with self._lock:
             lease, implicit = self._lease_for(resource, for_s)
         with arbiter_errors(keys.EYES_COMMAND, self.timeout):
-            leasing.eyes_command(self.node, m.EyesCommand(lease_id=lease.lease_id, **fields),
+            leasing.eyes_command(self.node, m.EyesCommand(lease_id=lease.handle, **fields),
                                  self.timeout)
         return EyesHandle(what, lease, implicit, for_s)

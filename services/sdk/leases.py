@@ -52,12 +52,16 @@ class Lease:
     the program's end. A context manager: leaving the block releases it.
 
     `ended` is None while active, then why it ended: released, expired,
-    holder_gone, preempted or broken (`end_message` has the arbiter's text)."""
+    holder_gone, preempted or broken (`end_message` has the arbiter's text).
+    `lease_id` is the public id (as `leases/state` shows it); `handle`, which
+    only this program got from the grant, is what commands and releases it:
+    whoever has it acts as the holder, so it is never shown or shared."""
 
-    def __init__(self, table: LeaseTable | None, lease_id: str, resources: tuple[str, ...],
+    def __init__(self, table: LeaseTable | None, handle: str, resources: tuple[str, ...],
                  priority: str, duration_s: float | None) -> None:
         self._table = table
-        self.lease_id = lease_id
+        self.handle = handle
+        self.lease_id = m.public_lease_id(handle)
         self.resources = resources
         self.priority = priority
         self.duration_s = duration_s
@@ -161,12 +165,13 @@ class LeaseTable:
 
     def acquire(self, names: Iterable[str], priority: str = "app",
                 duration_s: float | None = None, timeout: float | None = None, *,
-                counted: bool = True) -> Lease:
+                counted: bool = True, credential: str = "") -> Lease:
         """A granted lease; Refused with the arbiter's reason (or "rate
         limited" over the program's action limit), NoService when no eyes driver
         answers, ValueError for a malformed request. `counted=False`: a lease an
-        action takes for itself (the action was counted already)."""
-        req = leasing.request(self.node, names, priority, duration_s)
+        action takes for itself (the action was counted already). Priority
+        "operator" needs the robot's operator secret as `credential`."""
+        req = leasing.request(self.node, names, priority, duration_s, credential)
         if counted and self.limit is not None:
             self.limit.take("lease")
         limit = self.timeout if timeout is None else timeout
@@ -184,7 +189,7 @@ class LeaseTable:
         limit = self.timeout if timeout is None else timeout
         try:
             with sdk_errors(keys.LEASE_RELEASE, limit, hint=ARBITER_HINT):
-                leasing.release(self.node, lease.lease_id, timeout=limit)
+                leasing.release(self.node, lease.handle, timeout=limit)
         except leasing.LeaseRefused as exc:
             log.debug("release of lease %s: %s", lease.lease_id, exc)
         finally:

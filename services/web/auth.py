@@ -20,7 +20,15 @@ from pathlib import Path
 
 from buddybot.runtime.endpoints import is_loopback
 from buddybot.runtime.errors import BuddyBotError
-from buddybot.runtime.private_files import NotPrivate, read_private, state_dir, write_private
+from buddybot.runtime.private_files import (
+    NotPrivate,
+    read_private,
+    secret_file,
+    write_private,
+)
+from buddybot.runtime.private_files import (
+    state_dir as state_dir,  # the web surfaces name it from here
+)
 
 ROLES = ("operator", "viewer", "foxglove")
 """Every secret there is; `operator` and `viewer` log in to the dashboard."""
@@ -38,7 +46,7 @@ class SecretError(BuddyBotError):
 def secret_path(role: str, folder: Path | None = None) -> Path:
     if role not in ROLES:
         raise ValueError(f"unknown role {role!r}: one of {', '.join(ROLES)}")
-    return (folder if folder is not None else state_dir()) / "secrets" / role
+    return secret_file(role, folder)
 
 
 def login_required(host: str, mode: str) -> bool:
@@ -82,6 +90,20 @@ def ensure_secret(path: Path) -> bool:
         return False
     write_secret(path, new_secret())
     return True
+
+
+def ensure_operator_secret(who: str) -> None:
+    """Make the operator secret on first start of a program that operates for a
+    person (the dashboard, Foxglove): the arbiter grants priority `operator` and
+    breaks leases only for it. ConfigError-worthy problems raise SecretError."""
+    path = secret_path("operator")
+    try:
+        made = ensure_secret(path)
+    except OSError as exc:
+        raise SecretError(f"cannot make the operator secret {path}: {exc.strerror}") from None
+    if made:
+        print(f"{who}: made the operator secret in {path} (`buddybot secret show` "
+              "prints it)", flush=True)
 
 
 class SecretStore:

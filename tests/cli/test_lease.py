@@ -4,8 +4,10 @@ process against a real router, eyes driver and controller."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -39,32 +41,40 @@ def test_the_table_shows_every_lease_and_why_the_last_ones_ended() -> None:
     assert table_lines(m.Leases(stamp_ns=T0), T0)[0].startswith("no leases")
 
 
-def lease_cli(endpoint: str, *args: str) -> subprocess.CompletedProcess[str]:
+def lease_cli(endpoint: str, *args: str, state: Path | None = None
+              ) -> subprocess.CompletedProcess[str]:
+    """The verb as the robot's owner runs it: the state folder (its operator secret)
+    `state`, else one without any secret."""
+    env = {**os.environ, "BUDDYBOT_STATE_DIR": str(state or Path("/nonexistent-state"))}
     return subprocess.run(buddybot_argv("lease", *args, "--connect", endpoint),
-                          capture_output=True, text=True, timeout=60)
+                          capture_output=True, text=True, timeout=60, env=env)
 
 
 @pytest.mark.integration
 def test_lease_list_and_break_from_the_command_line(
         robot: tuple[Process, Process], node_factory: Callable[..., Node], endpoint: str,
-        probe: Node) -> None:
+        probe: Node, state_dir: Path) -> None:
     app = node_factory("app-cli")
     lease = acquire(app, "expression", "audio", duration_s=600)
     assert lease.granted
+    public = m.public_lease_id(lease.lease_id)
     listed = lease_cli(endpoint, "list")
     assert listed.returncode == 0, listed.stderr
-    assert lease.lease_id in listed.stdout and "app-cli" in listed.stdout
+    assert public in listed.stdout and "app-cli" in listed.stdout
+    assert lease.lease_id not in listed.stdout  # the holder's handle is nobody else's
     data = json.loads(lease_cli(endpoint, "list", "--json").stdout)
-    assert [x["lease_id"] for x in data["leases"]] == [lease.lease_id]
+    assert [x["lease_id"] for x in data["leases"]] == [public]
 
-    broken = lease_cli(endpoint, "break", lease.lease_id, "--reason", "demo over")
+    stranger = lease_cli(endpoint, "break", public)  # no operator secret readable
+    assert stranger.returncode == 2 and "operator secret" in stranger.stderr
+    broken = lease_cli(endpoint, "break", public, "--reason", "demo over", state=state_dir)
     assert broken.returncode == 0, broken.stdout + broken.stderr
     assert "broken" in broken.stdout
-    again = lease_cli(endpoint, "break", lease.lease_id)
+    again = lease_cli(endpoint, "break", public, state=state_dir)
     assert again.returncode == 1 and "ended (broken)" in (again.stdout + again.stderr)
-    usage = lease_cli(endpoint, "break")
+    usage = lease_cli(endpoint, "break", state=state_dir)
     assert usage.returncode == 2
     after = json.loads(lease_cli(endpoint, "list", "--json").stdout)
     assert after["leases"] == []
     assert after["ended"][-1]["reason"] == "broken"
-    assert after["ended"][-1]["message"] == "demo over"
+    assert after["ended"][-1]["message"] == "demo over (by operator-cli)"

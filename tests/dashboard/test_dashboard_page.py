@@ -249,6 +249,8 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
     row = f"#leases div[data-lease='{held.lease_id}']"
     page.wait_for_selector(row, timeout=10_000)
     assert page.inner_text(f"{row} .prio-operator") == "operator"
+    own_id = page.evaluate("window.dash.leases.own")
+    assert own_id == held.lease_id, own_id  # the page knows its lease by the public id only
 
     page.click(grin)
     expressions.wait_for(lambda e: e.action == m.ExpressionAction.EYE_GRIN, 15,
@@ -281,17 +283,18 @@ def test_operator_control_drives_the_eyes_through_the_controller_and_breaks_leas
         holder="greeter", instance=app.instance, resources=["expression"], duration_s=60),
         timeout=10)
     assert reply.granted, reply
-    app_row = f"#leases div[data-lease='{reply.lease_id}']"
+    public = m.public_lease_id(reply.lease_id)  # what the page and the bus show
+    app_row = f"#leases div[data-lease='{public}']"
     page.wait_for_selector(app_row, timeout=15_000)
     assert page.inner_text(f"{app_row} .holder") == "greeter"
     assert page.inner_text(f"{app_row} .expires").startswith("expires in ")
     page.click(f"{app_row} button.break")
     broken = wait_leases(leases, lambda s: any(
-        e.lease_id == reply.lease_id for e in s.ended), "the app's lease broken")
-    end = next(e for e in broken.ended if e.lease_id == reply.lease_id)
-    assert (end.reason, end.message) == ("broken", "broken by operator")
-    page.wait_for_selector(f"#leases-ended div[data-ended='{reply.lease_id}']", timeout=10_000)
-    assert "broken" in page.inner_text(f"#leases-ended div[data-ended='{reply.lease_id}']")
+        e.lease_id == public for e in s.ended), "the app's lease broken")
+    end = next(e for e in broken.ended if e.lease_id == public)
+    assert (end.reason, end.message) == ("broken", "broken by operator (by dashboard)")
+    page.wait_for_selector(f"#leases-ended div[data-ended='{public}']", timeout=10_000)
+    assert "broken" in page.inner_text(f"#leases-ended div[data-ended='{public}']")
     page.wait_for_selector(app_row, state="detached", timeout=10_000)
     assert page.errors == []
 
@@ -306,11 +309,12 @@ def operator_takes_over_an_app(page: Any, endpoint: str) -> None:
             holder="greeter", instance=app.instance, resources=["expression", "gaze"],
             duration_s=600), timeout=10)
         assert reply.granted, reply
-        page.wait_for_selector(f"#leases div[data-lease='{reply.lease_id}']", timeout=15_000)
+        public = m.public_lease_id(reply.lease_id)
+        page.wait_for_selector(f"#leases div[data-lease='{public}']", timeout=15_000)
         page.click("label.switch")
-        page.wait_for_selector(f"#leases-ended div[data-ended='{reply.lease_id}']",
+        page.wait_for_selector(f"#leases-ended div[data-ended='{public}']",
                                timeout=15_000)
-        assert "preempted" in page.inner_text(f"#leases-ended div[data-ended='{reply.lease_id}']")
+        assert "preempted" in page.inner_text(f"#leases-ended div[data-ended='{public}']")
         page.click("button[data-expression='EYE_GRIN']")
         page.wait_for_function(
             "document.getElementById('expression').textContent === 'EYE_GRIN'", timeout=15_000)

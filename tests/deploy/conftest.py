@@ -249,7 +249,8 @@ def host_process(profile: HostProfile, tls_router: TlsRouter,
         config = profile.toml(host, tls_router.endpoint, cert_name=cert_name)
         argv = buddybot_argv(*args, "--config", str(config))
         label = re.sub(r"[^\w.-]+", "_", "-".join(args[:2]))
-        proc = Process(argv, f"{host}-{label}-{len(started)}", tmp_path / "logs")
+        proc = Process(argv, f"{host}-{label}-{len(started)}", tmp_path / "logs",
+                       env={"BUDDYBOT_STATE_DIR": str(tmp_path / "state")})
         started.append(proc)
         return proc
 

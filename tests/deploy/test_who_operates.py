@@ -12,6 +12,7 @@ reply. Each refusal comes after a positive control through the same router.
 from __future__ import annotations
 
 from collections.abc import Callable
+from pathlib import Path
 
 import pytest
 
@@ -19,6 +20,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import Node
+from buddybot.runtime.private_files import secret_file, write_private
 from buddybot.tools.testing import Process, retry_until
 
 pytestmark = pytest.mark.integration
@@ -40,16 +42,23 @@ def get_centre(node: Node) -> float:
     return float(reply.params[0].value)
 
 
+OPERATOR_SECRET = "the-robots-operator-secret"
+"""The robot's operator secret (in the hosts' state folder): the dashboard shows it."""
+
+
 def acquire(node: Node, timeout: float = 3.0) -> m.LeaseReply:
     reply: m.LeaseReply = node.call(
         keys.LEASE_ACQUIRE, m.LeaseRequest(holder=node.name, instance=node.instance,
-                                           resources=["expression"], priority="operator"),
+                                           resources=["expression"], priority="operator",
+                                           credential=OPERATOR_SECRET),
         timeout=timeout)
     return reply
 
 
 def test_the_acl_lets_the_operator_set_parameters_and_only_the_robot_take_leases(
-        host_node: Callable[..., Node], host_process: Callable[..., Process]) -> None:
+        host_node: Callable[..., Node], host_process: Callable[..., Process],
+        tmp_path: Path) -> None:
+    write_private(secret_file("operator", tmp_path / "state"), OPERATOR_SECRET.encode())
     host_process("robot", "run", "controller")
     host_process("robot", "run", "eyes")  # the arbiter: serves leases/acquire
     robot = host_node("robot", "dashboard")

@@ -24,6 +24,7 @@ from buddybot.eyes.arbiter import Arbiter
 from buddybot.runtime import leasing
 from buddybot.runtime.errors import CallError
 from buddybot.runtime.node import Node
+from buddybot.runtime.private_files import secret_file, write_private
 from buddybot.tools.testing import Collector, Process, retry_until
 from tests.controller.conftest import FAST_CONFIG
 from tests.controller.fakes import FakeNode
@@ -111,7 +112,7 @@ def test_a_held_expression_is_the_holders_and_released_it_is_the_behaviours_at_o
     s = Scene()
     s.wish(X.EYE_SLEEP)
     lease = s.take("expression")
-    assert s.leases()[-1].leases[0].lease_id == lease
+    assert s.leases()[-1].leases[0].lease_id == m.public_lease_id(lease)  # never the handle
     s.wish(X.EYE_AWAKE)  # the behaviour wants EYE_AWAKE now: held back
     assert s.expressions() == [X.EYE_SLEEP]
     assert s.command(lease, expression=X.ANIMATE_LOVE).success
@@ -160,11 +161,19 @@ def test_a_holder_of_the_gaze_sets_the_pupils_and_nobody_else_can() -> None:
 
 
 def test_an_operator_breaking_a_lease_is_recorded_as_broken_and_the_eyes_look_ahead(
-) -> None:
+        monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
+    monkeypatch.setenv("BUDDYBOT_STATE_DIR", str(tmp_path))
+    write_private(secret_file("operator"), b"the-operator-secret\n")
     s = Scene()
     lease = s.take("gaze")
     assert s.command(lease, yaw=0.5).success
-    s.arbiter.release(m.LeaseRelease(lease_id=lease, by="operator-cli"))
+    public = m.public_lease_id(lease)
+    for credential in ("", "guessed"):  # the public id alone, or a wrong secret: refused
+        refused = s.arbiter.release(m.LeaseRelease(lease_id=public, by="operator-cli",
+                                                   credential=credential))
+        assert not refused.success and "only its holder" in refused.message
+    s.arbiter.release(m.LeaseRelease(lease_id=public, by="operator-cli",
+                                     credential="the-operator-secret"))
     assert s.leases()[-1].ended[-1].reason == "broken"
     back = s.controls()[-1]  # no built-in gaze yet: ahead, distance unknown
     assert (back.yaw, back.pitch, back.target_distance_cm) == (0.0, 0.0, 0.0)
@@ -206,9 +215,12 @@ T_WALL = 1_700_000_000_000_000_000
 
 
 @pytest.fixture
-def robot(spawn: Spawn, tmp_path: Path, probe: Node) -> tuple[Process, Process]:
+def robot(spawn: Spawn, tmp_path: Path, probe: Node, state_dir: Path
+          ) -> tuple[Process, Process]:
     """The eyes driver (the arbiter) and the controller of FAST_CONFIG, up (the
-    lease services declared) and past the controller's recovery (EYE_SLEEP shown)."""
+    lease services declared) and past the controller's recovery (EYE_SLEEP shown);
+    the robot's operator secret is OPERATOR_SECRET."""
+    write_private(secret_file("operator", state_dir), OPERATOR_SECRET.encode() + b"\n")
     config = tmp_path / "robot.toml"
     config.write_text(FAST_CONFIG)
     expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
@@ -224,11 +236,17 @@ def robot(spawn: Spawn, tmp_path: Path, probe: Node) -> tuple[Process, Process]:
     return eyes, controller
 
 
+OPERATOR_SECRET = "the-robots-operator-secret"
+
+
 def acquire(node: Node, *resources: m.Resource, priority: m.LeasePriority = "app",
-            duration_s: float | None = None) -> m.LeaseReply:
+            duration_s: float | None = None, credential: str | None = None) -> m.LeaseReply:
+    """Asked as `node`; an operator shows the robot's secret unless `credential`."""
+    if credential is None:
+        credential = OPERATOR_SECRET if priority == "operator" else ""
     return leasing.ask(node, m.LeaseRequest(
         holder=node.name, instance=node.instance, resources=list(resources),
-        priority=priority, duration_s=duration_s), timeout=10)
+        priority=priority, duration_s=duration_s, credential=credential), timeout=10)
 
 
 def express(node: Node, lease_id: str, action: X) -> m.TriggerReply:
@@ -246,7 +264,8 @@ def test_a_holder_drives_the_eyes_and_a_late_screen_gets_one_value(
     states: Collector[m.Leases] = Collector(probe, keys.LEASES)
     lease = acquire(app, "expression", "gaze")
     assert lease.granted, lease.message
-    states.wait_for(lambda s: [x.lease_id for x in s.leases] == [lease.lease_id],
+    states.wait_for(lambda s: [x.lease_id for x in s.leases] == [m.public_lease_id(
+        lease.lease_id)],
                     what="the lease in leases/state")
     assert express(app, lease.lease_id, X.ANIMATE_LOVE).success
     expr.wait_for(lambda e: e.action == X.ANIMATE_LOVE, what="ANIMATE_LOVE on the bus")
@@ -313,13 +332,66 @@ def test_an_operator_preempts_an_app_and_equals_queue(
     assert first.granted
     second = acquire(other, "expression", "audio")
     assert not second.granted
-    assert "app-a" in second.message and first.lease_id in second.message
+    public = m.public_lease_id(first.lease_id)
+    assert "app-a" in second.message and public in second.message
+    assert first.lease_id not in second.message  # the handle is told to its holder only
     taken = acquire(operator, "expression", priority="operator")
-    assert taken.granted and first.lease_id in taken.message
+    assert taken.granted and public in taken.message
     stale = express(app, first.lease_id, X.ANIMATE_LOVE)
     assert not stale.success and "preempted" in stale.message
     assert express(operator, taken.lease_id, X.ANIMATE_STAR).success
     expr.wait_for(lambda e: e.action == X.ANIMATE_STAR, what="the operator's STAR")
+    assert X.ANIMATE_LOVE not in [e.action for e in expr.messages]
+
+
+@pytest.mark.integration
+def test_what_the_bus_shows_of_a_lease_lets_nobody_act_on_it(
+        robot: tuple[Process, Process], node_factory: Callable[..., Node], probe: Node,
+        endpoint: str) -> None:
+    """The attacks that worked while a lease id was a bearer token published to all:
+    a raw client reads `leases/state` and drives the eyes with the operator's lease,
+    ends it "as" its holder, and takes priority operator for itself. Each is refused
+    and counted; the operator keeps the eyes."""
+    wizard = node_factory("dashboard")
+    expr: Collector[m.ScreenExpression] = Collector(probe, keys.EXPRESSION)
+    states: Collector[m.Leases] = Collector(probe, keys.LEASES)
+    diag: Collector[m.DiagnosticStatus] = Collector(probe, keys.DIAGNOSTICS, node="eyes")
+    held = acquire(wizard, "expression", "gaze", priority="operator")
+    assert held.granted, held.message
+    assert express(wizard, held.lease_id, X.EYE_GRIN).success
+    expr.wait_for(lambda e: e.action == X.EYE_GRIN, what="the operator's GRIN")
+    listed = states.wait_for(lambda s: any(x.holder == "dashboard" for x in s.leases),
+                             what="the operator's lease on the bus").leases
+    public = next(x.lease_id for x in listed if x.holder == "dashboard")
+    assert public == m.public_lease_id(held.lease_id) != held.lease_id
+
+    session = zenoh.open(_client(endpoint))  # no node, no token: just the bus
+    try:
+        def call(service: keys.Service, request: m.Message) -> m.Message:
+            (reply,) = list(session.get(probe.key(service), timeout=10.0,
+                                        payload=service.codec.encode(request)))
+            assert reply.ok is not None
+            decoded: m.Message = service.codec.decode(reply.ok.payload.to_bytes(),
+                                                      service.reply)
+            return decoded
+
+        for forged in (public, f"{public}.guessed"):
+            drove = call(keys.EYES_COMMAND, m.EyesCommand(lease_id=forged,
+                                                          expression=X.ANIMATE_LOVE, yaw=0.9))
+            assert not drove.success and "only its holder" in drove.message  # type: ignore[attr-defined]
+        ended = call(keys.LEASE_RELEASE, m.LeaseRelease(lease_id=public, by="dashboard"))
+        assert not ended.success and "only its holder" in ended.message  # type: ignore[attr-defined]
+        intruder = node_factory("app-evil")
+        took = acquire(intruder, "expression", priority="operator", credential="guessed")
+        assert not took.granted and "operator credential" in took.message
+    finally:
+        session.close()
+    counted = diag.wait_for(lambda d: d.values.get("forged", 0) >= 3
+                            and d.values.get("operator_refused", 0) >= 1, 30,
+                            "the forgeries counted")
+    assert counted.values["forged"] == 3
+    assert express(wizard, held.lease_id, X.EYE_SAD).success  # still the operator's
+    expr.wait_for(lambda e: e.action == X.EYE_SAD, what="the operator's SAD")
     assert X.ANIMATE_LOVE not in [e.action for e in expr.messages]
 
 

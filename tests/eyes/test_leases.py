@@ -23,7 +23,8 @@ def req(holder: str = "app-a", *resources: m.Resource, priority: m.LeasePriority
 
 
 def grant(table: LeaseTable, request: m.LeaseRequest, at: int = T0) -> m.LeaseReply:
-    decision = table.acquire(request, at, True)
+    """Granted (an operator request as if its credential were right)."""
+    decision = table.acquire(request, at, True, operator=request.priority == "operator")
     assert decision.reply.granted, decision.reply.message
     return decision.reply
 
@@ -32,7 +33,10 @@ def test_a_free_resource_is_granted_with_a_unique_id() -> None:
     table = LeaseTable(run_tag="t")
     first = grant(table, req("app-a", "expression", "gaze"))
     second = grant(table, req("app-b", "audio"))
-    assert first.lease_id == "L1-t" and second.lease_id == "L2-t"
+    assert m.public_lease_id(first.lease_id) == "L1-t"
+    assert m.public_lease_id(second.lease_id) == "L2-t"
+    assert first.lease_id.startswith("L1-t.") and len(first.lease_id) > 20  # the handle
+    assert table.snapshot(T0).leases[0].lease_id == "L1-t"  # the bus sees no secret
     assert table.held() == ["expression", "gaze", "audio"]
     owner = table.owner("gaze")
     assert owner is not None and owner.holder == "app-a" and owner.granted_ns == T0
@@ -63,7 +67,7 @@ def test_a_higher_priority_preempts_lower_leases_whole() -> None:
     grant(table, req("app-a", "expression", "audio"))
     grant(table, req("app-b", "gaze"))
     decision = table.acquire(req("wizard", "expression", "gaze", priority="operator"),
-                             T0 + S, True)
+                             T0 + S, True, operator=True)
     assert decision.reply.granted
     assert [(e.lease_id, e.reason) for e in decision.ended] == [("L1-t", "preempted"),
                                                                 ("L2-t", "preempted")]
@@ -102,17 +106,24 @@ def test_a_day_is_the_longest_lease_and_it_expires() -> None:
     short = grant(table, req("app-b", "gaze", duration_s=2.5))
     assert table.expire(T0 + 2 * S) == []
     ended = table.expire(T0 + 2_500_000_000)
-    assert [(e.lease_id, e.reason) for e in ended] == [(short.lease_id, "expired")]
+    assert [(e.lease_id, e.reason) for e in ended] == [(m.public_lease_id(short.lease_id),
+                                                        "expired")]
     assert table.owner("gaze") is None and table.owner("expression") is not None
 
 
-def test_release_by_the_holder_and_break_by_anyone_else() -> None:
+def test_release_by_the_holders_handle_and_break_only_by_an_operator() -> None:
     table = LeaseTable(run_tag="t")
     a = grant(table, req("app-a", "gaze"))
     b = grant(table, req("app-b", "audio"))
     done, ended = table.release(a.lease_id, "app-a", "", T0)
     assert done.success and ended[0].reason == "released"
-    broke, ended = table.release(b.lease_id, "operator-cli", "", T0)
+    # The public id (from leases/state), even naming its holder: not enough.
+    for by in ("app-b", "dashboard", None):
+        forged, ended = table.release("L2-t", by, "", T0)
+        assert not forged.success and ended == [] and "only its holder" in forged.message
+    wrong, _ = table.release("L2-t.not-the-secret", "app-b", "", T0)
+    assert not wrong.success and table.counters["forged"] == 4
+    broke, ended = table.release("L2-t", "operator-cli", "", T0, operator=True)
     assert broke.success and ended[0].reason == "broken"
     assert ended[0].message == "broken by operator-cli"
     gone, ended = table.release(b.lease_id, "app-b", "", T0)
@@ -120,8 +131,17 @@ def test_release_by_the_holder_and_break_by_anyone_else() -> None:
     unknown, _ = table.release("nope", None, "", T0)
     assert not unknown.success and unknown.message == "no lease 'nope'"
     nameless = grant(table, req("app-c"))
-    _, ended = table.release(nameless.lease_id, None, "demo over", T0)
-    assert ended[0].reason == "broken" and ended[0].message == "demo over"
+    _, ended = table.release(m.public_lease_id(nameless.lease_id), "wizard", "demo over", T0,
+                             operator=True)
+    assert ended[0].reason == "broken" and ended[0].message == "demo over (by wizard)"
+
+
+def test_operator_priority_needs_the_operator_credential() -> None:
+    table = LeaseTable()
+    refused = table.acquire(req("app-x", "expression", priority="operator"), T0, True).reply
+    assert not refused.granted and "operator credential" in refused.message
+    assert table.counters["operator_refused"] == 1
+    assert table.acquire(req("wizard", priority="operator"), T0, True, operator=True).reply.granted
 
 
 def test_a_gone_holder_loses_only_its_own_instance_leases() -> None:
@@ -168,7 +188,7 @@ def test_at_most_64_leases_but_preempted_ones_make_room() -> None:
     fill(table, MAX_LEASES)
     reply = table.acquire(req("app-new", "gaze"), T0, True).reply
     assert not reply.granted and reply.message == f"too many leases: {MAX_LEASES} held"
-    taken = table.acquire(req("wizard", "audio", priority="operator"), T0, True)
+    taken = table.acquire(req("wizard", "audio", priority="operator"), T0, True, operator=True)
     assert taken.reply.granted and len(taken.ended) == 1 and len(table) == MAX_LEASES
 
 
@@ -181,6 +201,10 @@ def test_eyes_commands_need_the_resource_and_are_rate_limited() -> None:
     assert ok.expression == m.ScreenExpression(stamp_ns=T0, action=X.ANIMATE_LOVE)
     gaze = table.eyes_command(m.EyesCommand(lease_id=eyes.lease_id, yaw=0.2), T0, 20.0, 2.0)
     assert not gaze.reply.success and gaze.reply.message == "lease L1-t does not hold gaze"
+    forged = table.eyes_command(m.EyesCommand(lease_id="L1-t", expression=X.EYE_SAD), T0, 20.0,
+                                2.0)  # the public id, read from leases/state
+    assert not forged.reply.success and forged.expression is None
+    assert "only its holder commands" in forged.reply.message
     empty = table.eyes_command(m.EyesCommand(lease_id=eyes.lease_id), T0, 20.0, 2.0)
     assert not empty.reply.success and "nothing to do" in empty.reply.message
     # burst 2: the first took one token, the second goes, the third is refused ...
@@ -195,7 +219,7 @@ def test_eyes_commands_need_the_resource_and_are_rate_limited() -> None:
                               T0 + S // 20, 20.0, 2.0).reply.success
     assert table.counters["rate_limited"] == 1
     assert table.counters["eyes_commands"] == 3
-    assert table.counters["eyes_commands_refused"] == 3
+    assert table.counters["eyes_commands_refused"] == 4 and table.counters["forged"] == 1
 
 
 def test_a_gaze_command_becomes_eye_control() -> None:

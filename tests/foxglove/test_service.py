@@ -16,6 +16,7 @@ import socket
 import subprocess
 import threading
 from collections.abc import Callable, Iterator
+from pathlib import Path
 
 import cv2
 import msgspec
@@ -225,7 +226,7 @@ def test_keys_annotations_images_and_services_reach_a_foxglove_client(
 @pytest.mark.integration
 def test_a_client_expression_goes_through_an_operator_lease(
         bridge: int, probe: Node, spawn: Callable[..., Process],
-        node_factory: Callable[..., Node]) -> None:
+        node_factory: Callable[..., Node], state_dir: Path) -> None:
     """The bridge never publishes eyes/expression: it takes an operator lease on
     `expression` and asks the arbiter (eyes/command); eyes/release gives the
     expression back; another operator's lease refuses it with the holder named."""
@@ -260,7 +261,8 @@ def test_a_client_expression_goes_through_an_operator_lease(
             wizard = node_factory("wizard")
             taken = leasing.ask(wizard, m.LeaseRequest(
                 holder="wizard", instance=wizard.instance, resources=["expression"],
-                priority="operator"), timeout=10)
+                priority="operator", credential=leasing.operator_credential(state_dir)),
+                timeout=10)
             assert taken.granted, taken
             with pytest.raises(CallFailed, match="held by wizard"):
                 await client.call("eyes/expression", b'{"action": "EYE_GRIN"}', 4)

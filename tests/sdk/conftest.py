@@ -11,6 +11,7 @@ import pytest
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
+from buddybot.runtime.private_files import secret_file, write_private
 from buddybot.sdk import Bot
 from buddybot.tools.testing import Collector, Process, closed_afterwards, retry_until
 
@@ -35,6 +36,14 @@ def start_people(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> 
 
 
 CONTROLLER_CONFIG = "[controller]\nrecover_s = 0.3\n"
+
+
+@pytest.fixture
+def operator_secret(state_dir: Path) -> str:
+    """The robot's operator secret, in the state folder the spawned eyes driver reads."""
+    secret = "the-robots-operator-secret"
+    write_private(secret_file("operator", state_dir), secret.encode() + b"\n")
+    return secret
 
 
 @pytest.fixture

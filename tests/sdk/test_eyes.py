@@ -189,14 +189,16 @@ def test_for_s_ends_on_the_controller_and_its_own_expression_comes_back(
 @pytest.mark.integration
 def test_a_second_program_is_refused_naming_the_first_and_an_operator_preempts(
         controller: Callable[[], Process], bot_factory: Callable[..., Bot],
-        expr: Collector[m.ScreenExpression]) -> None:
+        expr: Collector[m.ScreenExpression], operator_secret: str) -> None:
     controller()
     first = bot_factory(name="first_app")
     second = bot_factory(name="second_app")
     handle = first.eyes.express("love")
     with pytest.raises(Refused, match="expression is held by first_app at priority app"):
         second.eyes.express("sad")
-    with second.lease("eyes", priority="operator") as wizard:
+    with pytest.raises(Refused, match="operator credential"):
+        second.lease("eyes", priority="operator")  # a flag any program could set: no
+    with second.lease("eyes", priority="operator", credential=operator_secret) as wizard:
         assert handle.wait(10) == "preempted" and handle.lease.ended == "preempted"
         assert "second_app" in handle.lease.end_message
         with pytest.raises(Refused, match="held by second_app at priority operator"):

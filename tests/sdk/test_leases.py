@@ -105,14 +105,14 @@ def test_a_lease_is_granted_listed_under_the_program_and_released_on_leaving(
 @pytest.mark.integration
 def test_a_lease_broken_elsewhere_ends_here_with_the_reason(
         controller: Callable[[], Process], bot_factory: Callable[..., Bot],
-        probe: Node) -> None:
+        probe: Node, operator_secret: str) -> None:
     controller()
     bot = bot_factory()
     lease = bot.lease("gaze")
     ended = threading.Event()
     lease.on_end(lambda _lease: ended.set())
-    reply = probe.call(keys.LEASE_RELEASE, m.LeaseRelease(lease_id=lease.lease_id,
-                                                          by="wizard"), timeout=10)
+    reply = probe.call(keys.LEASE_RELEASE, m.LeaseRelease(
+        lease_id=lease.lease_id, by="wizard", credential=operator_secret), timeout=10)
     assert reply.success, reply.message
     assert ended.wait(10) and lease.ended == "broken" and "wizard" in lease.end_message
 

@@ -200,13 +200,15 @@ def test_without_an_audio_service_play_says_so(bot_factory: Callable[..., Bot]) 
 @pytest.mark.integration
 def test_a_sound_holds_the_speaker_for_its_length_and_an_operator_refuses_it(
         ready_audio: Callable[..., Audio], controller: Callable[[], Process],
-        bot_factory: Callable[..., Bot], probe: Node, tmp_path: Path) -> None:
+        bot_factory: Callable[..., Bot], probe: Node, tmp_path: Path,
+        operator_secret: str) -> None:
     config, _ = beep_config(tmp_path, 0.4)
     ready_audio(config)
     controller()
     state = Collector[m.Leases](probe, keys.LEASES)
     bot = bot_factory(name="player_app")
-    with (bot_factory(name="wizard").lease("audio", priority="operator"),
+    with (bot_factory(name="wizard").lease("audio", priority="operator",
+                                           credential=operator_secret),
           pytest.raises(Refused, match="audio is held by wizard at priority operator")):
         bot.play("beep")
     handle = bot.play("beep")
