@@ -35,6 +35,7 @@ from buddybot.runtime.errors import (
     ServiceError,
     UsageError,
 )
+from buddybot.runtime.private_files import operator_secret as operator_credential
 from buddybot.runtime.service import ServiceContext
 from buddybot.sdk.identity import ENROL_MARGIN_S, checked
 
@@ -100,7 +101,8 @@ def _add_enrol(parser: argparse.ArgumentParser) -> None:
 def _enrol(ctx: ServiceContext) -> int:
     a = ctx.args
     req = request(m.EnrolRequest, name=a.name.strip(), samples=a.samples,
-                  timeout_s=a.collect_s, replace=a.replace)
+                  timeout_s=a.collect_s, replace=a.replace,
+                  credential=operator_credential(), sent_ns=m.now_ns())
     print(f"look at the camera, {req.name} (up to {req.timeout_s:g} s)...", file=sys.stderr)
     reply = _ask(ctx, keys.IDENTITY_ENROL, req, req.timeout_s + ENROL_MARGIN_S)
     assert isinstance(reply, m.EnrolReply)
@@ -179,9 +181,9 @@ def _forget(ctx: ServiceContext) -> int:
         if not _confirmed(ctx):
             print("nothing forgotten", file=sys.stderr)
             return EXIT_FAILURE
-        req = request(m.ForgetRequest, all=True)
+        req = request(m.ForgetRequest, all=True, credential=operator_credential())
     else:
-        req = request(m.ForgetRequest, name=a.name.strip())
+        req = request(m.ForgetRequest, name=a.name.strip(), credential=operator_credential())
     reply = _ask(ctx, keys.IDENTITY_FORGET, req, a.timeout)
     assert isinstance(reply, m.ForgetReply)
     if reply.success:

@@ -613,6 +613,11 @@ class FaceName(Message):
     """Frames of this track that agreed on `name` (or were embedded, while unknown)."""
 
 
+ENROL_MARGIN_S = 5.0
+"""How much longer than its collection time an enrolment's answer may take: the
+asker waits `timeout_s` + this, and the identity service drops a request older."""
+
+
 class EnrolRequest(Message):
     """Remember the one face in front of the camera now under `name` (explicit consent)."""
 
@@ -621,6 +626,12 @@ class EnrolRequest(Message):
     timeout_s: Annotated[float, msgspec.Meta(gt=0.0, le=60.0, description="s")] = 10.0
     replace: bool = False
     """An existing `name` is refused unless this is set; then its templates are replaced."""
+    credential: Annotated[str, msgspec.Meta(max_length=256)] = ""
+    """The robot's operator secret: a biometric change is an operator's act."""
+    sent_ns: StampNs = 0
+    """When the asker sent it (wall clock): a request its asker has given up on
+    (`sent_ns` + `timeout_s` + ENROL_MARGIN_S ago) is dropped, and a forget of
+    that name (or of all) after `sent_ns` wins over it."""
 
 
 class EnrolReply(Message):
@@ -636,6 +647,8 @@ class ForgetRequest(Message):
 
     name: PersonName | None = None
     all: bool = False
+    credential: Annotated[str, msgspec.Meta(max_length=256)] = ""
+    """The robot's operator secret: a biometric change is an operator's act."""
 
 
 class ForgetReply(Message):

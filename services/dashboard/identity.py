@@ -20,10 +20,10 @@ from buddybot.contract import messages as m
 from buddybot.runtime.errors import NoReplyError, ServiceError
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
+from buddybot.runtime.private_files import operator_secret as operator_credential
 
 NOT_RUNNING = "the identity service does not answer (is [identity] enabled?)"
-ENROL_MARGIN_S = 5.0
-"""How much longer than its collection time an enrolment's answer may take."""
+ENROL_MARGIN_S = m.ENROL_MARGIN_S
 LIST_TIMEOUT_S = 3.0
 
 _Id = Annotated[int, msgspec.Meta(ge=0, le=2**53)]
@@ -76,7 +76,8 @@ def run(node: Node, req: Request) -> tuple[bool, str, dict[str, Any] | None]:
     try:
         if isinstance(req, EnrolFace):
             name = req.name.strip()
-            asked = m.EnrolRequest(name=name)
+            asked = m.EnrolRequest(name=name, credential=operator_credential(),
+                                   sent_ns=m.now_ns())
             enrolled: m.EnrolReply = node.call(keys.IDENTITY_ENROL, asked,
                                                timeout=asked.timeout_s + ENROL_MARGIN_S)
             text = (f"remembered {clip(enrolled.name or name, 64)} "
@@ -85,7 +86,8 @@ def run(node: Node, req: Request) -> tuple[bool, str, dict[str, Any] | None]:
             return enrolled.success, text, _listed(node)
         if isinstance(req, ForgetFace):
             forgot: m.ForgetReply = node.call(
-                keys.IDENTITY_FORGET, m.ForgetRequest(name=req.name.strip()),
+                keys.IDENTITY_FORGET, m.ForgetRequest(name=req.name.strip(),
+                                                      credential=operator_credential()),
                 timeout=LIST_TIMEOUT_S)
             text = (f"forgot {clip(req.name, 64)}" if forgot.success
                     else f"not forgotten: {clip(forgot.message, 200)}")

@@ -12,7 +12,6 @@ Why here and not in the controller: docs/design.md 4.8.
 
 from __future__ import annotations
 
-import hmac
 import logging
 import threading
 from collections.abc import Callable
@@ -23,15 +22,13 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.eyes.leases import LeaseTable
 from buddybot.runtime.node import Node, RateLimitedLog
-from buddybot.runtime.private_files import NotPrivate, read_secret_text, secret_file
+from buddybot.runtime.private_files import is_operator
 
 log = logging.getLogger("buddybot.eyes")
 
 ACQUIRE_QUEUE = 256
 """Pending `leases/acquire` requests kept: each is answered in microseconds
 (no call out), so a flood waits briefly instead of being shed."""
-OPERATOR_SECRET = "operator"
-"""The secret (`secrets/operator`, the dashboard's operator login) an operator shows."""
 EXPIRE_S = 0.05
 """How often leases are checked for expiry."""
 
@@ -161,18 +158,10 @@ class Arbiter:
             if self.leases.expire(self.wall_ns()):
                 self._changed(before)
 
-    def operator(self, credential: str) -> bool:
-        """Whether `credential` is the robot's operator secret (read from its state
-        folder each time: a rotated or revoked secret counts at once)."""
-        if not credential:
-            return False
-        try:
-            want = read_secret_text(secret_file(OPERATOR_SECRET), 512,
-                                    "it lets a program operate the robot; chmod 600 it")
-        except NotPrivate as exc:
-            self._warn.warning("operator_secret", "operator secret unusable: %s", exc)
-            return False
-        return want is not None and hmac.compare_digest(credential.encode(), want.encode())
+    @staticmethod
+    def operator(credential: str) -> bool:
+        """Whether `credential` is the robot's operator secret (its state folder's)."""
+        return is_operator(credential)
 
     @property
     def counters(self) -> dict[str, int]:

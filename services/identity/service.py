@@ -48,10 +48,12 @@ from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
 from buddybot.runtime.overrides import given, merge, settings_option
 from buddybot.runtime.params import LiveSettings
-from buddybot.runtime.private_files import state_dir
+from buddybot.runtime.private_files import is_operator, state_dir
 from buddybot.runtime.service import ServiceContext
 
 log = logging.getLogger("buddybot.identity")
+NOT_OPERATOR = ("enrolling and forgetting faces is an operator's act: the robot's operator "
+                "secret is needed (`buddybot secret show` prints it)")
 
 RETENTION_PERIOD_S = 3600.0
 """How often the retention limit is applied (and once at start)."""
@@ -157,6 +159,9 @@ class IdentityService:
         self.vote: TrackVote | None = None
         self.gallery: gallery.Gallery | None = None
         self.gallery_problem: str | None = None
+        self._forgot_ns: dict[str, int] = {}
+        """Name -> when it was last forgotten (wall ns): older enrolments lose."""
+        self._forgot_all_ns = 0
         self.key_path = gallery.key_path()
         self.key: bytes | None = None
         """The gallery key (None until read, or when its file is unusable)."""
@@ -409,11 +414,24 @@ class IdentityService:
         return None
 
     def enrol(self, req: m.EnrolRequest) -> m.EnrolReply:
-        """Collect `samples` frames with exactly one face, embed them, store them."""
+        """Collect `samples` frames with exactly one face, embed them, store them:
+        an operator's act (the credential), for an asker still waiting, and not
+        if a forget of that name came after the request was sent."""
+        started_ns = m.now_ns()
+        sent_ns = req.sent_ns or started_ns
         try:
             name = gallery.valid_name(req.name)
         except gallery.BadName as exc:
             return m.EnrolReply(success=False, message=str(exc))
+        if not is_operator(req.credential):
+            self.node.diagnostics.increment("refused_not_operator")
+            log.info("enrol %s refused: no operator credential", name)
+            return m.EnrolReply(success=False, message=NOT_OPERATOR)
+        left_s = (sent_ns - started_ns) / 1e9 + req.timeout_s
+        if left_s <= 0:
+            self.node.diagnostics.increment("enrol_abandoned")
+            return m.EnrolReply(success=False, message="its asker has given up (sent "
+                                f"{(started_ns - sent_ns) / 1e9:.1f} s ago): not enrolled")
         if self.embedder is None:
             return m.EnrolReply(success=False, message=f"no face model: {self.model_problem}")
         with self._lock:
@@ -428,7 +446,7 @@ class IdentityService:
                 return m.EnrolReply(success=False, message=refused)
             taking = self.enrolment = Enrolment(req.samples)
         try:
-            taking.done.wait(req.timeout_s)
+            taking.done.wait(left_s)
         finally:
             with self._lock:
                 self.enrolment = None
@@ -441,10 +459,10 @@ class IdentityService:
             vectors = [self._embed(img, kps) for img, kps in frames]
         except (images.FrameRefused, embedding.BadKeypoints, ValueError) as exc:
             return m.EnrolReply(success=False, message=f"a frame could not be embedded: {exc}")
-        return self._store(name, vectors, req.replace)
+        return self._store(name, vectors, req.replace, sent_ns)
 
     def _store(self, name: str, vectors: list[npt.NDArray[np.float32]],
-               replace: bool) -> m.EnrolReply:
+               replace: bool, sent_ns: int = 0) -> m.EnrolReply:
         rows = np.stack(vectors)
         cos = rows @ rows.T
         with self._lock:
@@ -454,6 +472,10 @@ class IdentityService:
                 log.info("enrol %s refused: frames disagree", name)
                 return m.EnrolReply(success=False, message=why)
             refused = self._refusal()
+            forgotten_ns = max(self._forgot_all_ns, self._forgot_ns.get(name, 0))
+            if refused is None and sent_ns and sent_ns <= forgotten_ns:
+                refused = (f"{name!r} was forgotten after this request was sent: a forget "
+                           "wins over every enrolment asked before it")
             others = [i for i, n in enumerate(self.index.people) if n != name]
             if refused is None and others:
                 probe = rows.mean(axis=0)
@@ -484,10 +506,20 @@ class IdentityService:
                             name=name, samples=len(person.embeddings))
 
     def forget(self, req: m.ForgetRequest) -> m.ForgetReply:
-        """Erase one person or everybody; the followed face's name goes at once."""
+        """Erase one person or everybody; the followed face's name goes at once.
+        An operator's act (the credential); every enrolment of that name asked
+        before it is refused when it comes to storing."""
         if req.all == (req.name is not None):
             return m.ForgetReply(success=False, message="give either a name or all, not both")
+        if not is_operator(req.credential):
+            self.node.diagnostics.increment("refused_not_operator")
+            return m.ForgetReply(success=False, message=NOT_OPERATOR)
         with self._lock:
+            now_ns = m.now_ns()
+            if req.all:
+                self._forgot_all_ns = now_ns
+            else:
+                self._forgot_ns[(req.name or "").strip()] = now_ns
             if req.all:
                 names = [] if self.gallery is None else sorted(self.gallery.people)
                 self.gallery = gallery.Gallery(embedding.MODEL_ID)

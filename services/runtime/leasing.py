@@ -32,7 +32,7 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.errors import ServiceError
 from buddybot.runtime.node import Node
-from buddybot.runtime.private_files import NotPrivate, read_secret_text, secret_file
+from buddybot.runtime.private_files import operator_secret
 
 CALL_TIMEOUT_S = 3.0
 """How long a lease call may take before it counts as failed (the arbiter is
@@ -40,8 +40,6 @@ local and answers in milliseconds)."""
 NOT_ALIVE_WAIT_S = 2.0
 """How long a holder asks again while the arbiter has not seen its liveliness
 token (it travels there in milliseconds; seconds only under a heavy load)."""
-OPERATOR_SECRET = "operator"
-"""The secret an operator shows (`secrets/operator`: the dashboard's operator login)."""
 BROKEN_BY_OPERATOR = "broken by operator"
 """The release reason an operator gives for someone else's lease (the arbiter
 records it as `broken`)."""
@@ -111,15 +109,10 @@ def request(node: Node, names: Iterable[str], priority: str = "app",
 
 
 def operator_credential(folder: Path | None = None) -> str:
-    """The robot's operator secret from its state folder ("" when there is none,
-    it is revoked, or this user may not read it): what an operator's program
-    (the dashboard, Foxglove, `buddybot lease break`) shows the arbiter."""
-    try:
-        text = read_secret_text(secret_file(OPERATOR_SECRET, folder), 512,
-                                "it lets a program operate the robot; chmod 600 it")
-    except (NotPrivate, OSError):
-        return ""
-    return text or ""
+    """The robot's operator secret from its state folder ("" when there is none):
+    what an operator's program (the dashboard, Foxglove, `buddybot lease break`)
+    shows the arbiter."""
+    return operator_secret(folder)
 
 
 # --- the calls -----------------------------------------------------------------------------

@@ -12,6 +12,7 @@ or the new one, never half of one, and never a moment where it is readable.
 from __future__ import annotations
 
 import contextlib
+import hmac
 import os
 import stat
 from collections.abc import Mapping
@@ -56,6 +57,27 @@ def read_secret_text(path: Path, limit: int, advice: str) -> str | None:
     data = read_private(path, limit, advice)
     text = "" if data is None else data.decode("ascii", "replace").strip()
     return text or None
+
+
+OPERATOR_SECRET = "operator"
+"""The secret an operator shows (`secrets/operator`: the dashboard's operator login)."""
+
+
+def operator_secret(folder: Path | None = None) -> str:
+    """The robot's operator secret ("" when there is none, it is revoked, or this
+    user may not read it): what an operator's program shows as `credential`."""
+    try:
+        return read_secret_text(secret_file(OPERATOR_SECRET, folder), 512,
+                                "it lets a program operate the robot; chmod 600 it") or ""
+    except (NotPrivate, OSError):
+        return ""
+
+
+def is_operator(credential: str, folder: Path | None = None) -> bool:
+    """Whether `credential` is the robot's operator secret (read each time: a
+    rotated or revoked secret counts at once)."""
+    want = operator_secret(folder) if credential else ""
+    return bool(want) and hmac.compare_digest(credential.encode(), want.encode())
 
 
 class NotPrivate(Exception):

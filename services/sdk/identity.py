@@ -23,8 +23,7 @@ from buddybot.sdk.calls import call
 from buddybot.sdk.errors import Refused
 
 HINT = "is the identity service running? enable [identity]"
-ENROL_MARGIN_S = 5.0
-"""How much longer than its collection time an enrolment's answer may take."""
+ENROL_MARGIN_S = m.ENROL_MARGIN_S
 
 Req = TypeVar("Req", bound=m.Message)
 
@@ -50,10 +49,10 @@ def checked(kind: type[Req], **fields: object) -> Req:
 
 
 def enrol(node: Node, name: str, samples: int = 5, timeout_s: float = 10.0,
-          replace: bool = False) -> int:
+          replace: bool = False, credential: str = "") -> int:
     """Remember the one face in front of the camera under `name`; the samples stored."""
     req = checked(m.EnrolRequest, name=name.strip(), samples=samples, timeout_s=timeout_s,
-                  replace=replace)
+                  replace=replace, credential=credential, sent_ns=m.now_ns())
     reply: m.EnrolReply = call(node, keys.IDENTITY_ENROL, req, req.timeout_s + ENROL_MARGIN_S,
                                hint=HINT)
     if not reply.success:
@@ -68,10 +67,11 @@ def known(node: Node, timeout: float) -> tuple[KnownPerson, ...]:
                          for p in reply.people), key=lambda p: p.name.casefold()))
 
 
-def forget(node: Node, timeout: float, name: str | None = None) -> list[str]:
+def forget(node: Node, timeout: float, name: str | None = None,
+           credential: str = "") -> list[str]:
     """Erase `name`'s templates, or everybody's (None); the names erased."""
-    req = (checked(m.ForgetRequest, all=True) if name is None
-           else checked(m.ForgetRequest, name=name.strip()))
+    req = (checked(m.ForgetRequest, all=True, credential=credential) if name is None
+           else checked(m.ForgetRequest, name=name.strip(), credential=credential))
     reply: m.ForgetReply = call(node, keys.IDENTITY_FORGET, req, timeout, hint=HINT)
     if not reply.success:
         raise Refused(reply.message or f"{name} not forgotten")

@@ -362,24 +362,29 @@ class People:
     # -- names, with consent (the identity service) --
 
     def enrol(self, name: str, samples: int = 5, timeout_s: float = 10.0,
-              replace: bool = False) -> int:
+              replace: bool = False, credential: str = "") -> int:
         """Remember the one face in front of the camera now under `name`: only with
-        that person's consent. Takes `samples` frames within `timeout_s`; returns
-        the samples stored. Refused (no face, two faces, `name` enrolled and not
-        `replace`), ValueError (a name empty or over 64 characters), NoService."""
-        return identity.enrol(self._node, name, samples, timeout_s, replace)
+        that person's consent, and as an operator (the robot's operator secret as
+        `credential`). Takes `samples` frames within `timeout_s`; returns the
+        samples stored. Refused (no face, two faces, `name` enrolled and not
+        `replace`, no operator), ValueError (a name empty or over 64 characters),
+        NoService."""
+        return identity.enrol(self._node, name, samples, timeout_s, replace, credential)
 
     def known(self, timeout: float | None = None) -> tuple[KnownPerson, ...]:
         """Everybody enrolled (name, enrolled, last seen, samples), by name."""
         return identity.known(self._node, self.timeout if timeout is None else timeout)
 
-    def forget(self, name: str, timeout: float | None = None) -> None:
-        """Erase `name`'s face templates at once; Refused when nobody has that name."""
-        identity.forget(self._node, self.timeout if timeout is None else timeout, name)
+    def forget(self, name: str, timeout: float | None = None, credential: str = "") -> None:
+        """Erase `name`'s face templates at once (an operator's act, as `enrol`);
+        Refused when nobody has that name."""
+        identity.forget(self._node, self.timeout if timeout is None else timeout, name,
+                        credential)
 
-    def forget_all(self, timeout: float | None = None) -> list[str]:
-        """Erase everybody's face templates; the names forgotten."""
-        return identity.forget(self._node, self.timeout if timeout is None else timeout)
+    def forget_all(self, timeout: float | None = None, credential: str = "") -> list[str]:
+        """Erase everybody's face templates (an operator's act); the names forgotten."""
+        return identity.forget(self._node, self.timeout if timeout is None else timeout,
+                               None, credential)
 
     def _forget(self, stream: EventStream) -> None:
         with self._lock:

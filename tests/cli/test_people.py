@@ -102,7 +102,10 @@ def test_enrol_list_forget_from_the_command_line(
     enrolled = people_cli(endpoint, "enrol", " Ada ", "--samples", "3", "--timeout", "4")
     assert enrolled.returncode == 0, enrolled.stderr
     assert enrolled.stdout.strip() == "enrolled Ada (3 samples)"
-    assert identity.requests[-1] == m.EnrolRequest(name="Ada", samples=3, timeout_s=4.0)
+    asked = identity.requests[-1]
+    assert isinstance(asked, m.EnrolRequest)
+    assert (asked.name, asked.samples, asked.timeout_s) == ("Ada", 3, 4.0)
+    assert asked.sent_ns > 0  # so a later forget wins over it
     again = people_cli(endpoint, "enrol", "Ada")
     assert again.returncode == 1 and "already enrolled" in again.stdout
     assert people_cli(endpoint, "enrol", "Ada", "--replace").returncode == 0

@@ -70,7 +70,9 @@ def test_enrol_asks_the_identity_service_then_lists_again() -> None:
                      "identity/list": LISTED})
     ok, text, known = identity.run(node, identity.EnrolFace(" Ada "))  # type: ignore[arg-type]
     assert (ok, text) == (True, "remembered Ada (5 samples)")
-    assert node.asked[0][1] == m.EnrolRequest(name="Ada") and node.asked[0][2] == 15.0
+    asked = node.asked[0][1]
+    assert isinstance(asked, m.EnrolRequest) and asked.name == "Ada" and asked.sent_ns > 0
+    assert node.asked[0][2] == 15.0
     assert known is not None and [p["name"] for p in known["people"]] == ["Ada"]
 
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from buddybot.identity import embedding, gallery
+from buddybot.runtime.private_files import secret_file, write_private
 from tests.identity.photos import Photo, PhotosUnavailable, detectors, keypoints, photos
 
 
@@ -36,11 +37,17 @@ def vectors(shots: list[Photo], embedder: embedding.Embedder) -> dict[str, np.nd
     return {p.name: embedder.face(p.bgr, keypoints(nets, p.bgr)) for p in shots}
 
 
+OPERATOR = "identity-tests-operator-secret"
+"""The robot's operator secret in every identity test's state folder."""
+
+
 @pytest.fixture(autouse=True)
 def own_state(monkeypatch: pytest.MonkeyPatch, state_dir: Path) -> Path:
-    """The gallery key (and any state) of this test, in the test's own state folder:
-    the folder the services it spawns use too (the `spawn` fixture)."""
+    """The gallery key, the operator secret (OPERATOR) and any state of this test, in
+    the test's own state folder: the folder the services and commands it starts use
+    too (the `spawn` fixture; a child process inherits the variable)."""
     monkeypatch.setenv("BUDDYBOT_STATE_DIR", str(state_dir))
+    write_private(secret_file("operator", state_dir), OPERATOR.encode() + b"\n")
     return state_dir
 
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import hashlib
 from collections.abc import Callable, Iterator
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -18,12 +19,16 @@ from buddybot.identity import embedding
 from buddybot.identity import gallery as gal
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import Collector, Process, retry_until
-from tests.identity.conftest import key
+from tests.identity.conftest import OPERATOR, key
 from tests.identity.feed import Camera, Scene, scene
 from tests.identity.photos import Photo, detectors
 
 Spawn = Callable[..., Process]
 SERVED = {"identity/enrol", "identity/forget", "identity/list"}
+
+Enrol = partial(m.EnrolRequest, credential=OPERATOR)
+"""A request as the operator makes it."""
+Forget = partial(m.ForgetRequest, credential=OPERATOR)
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +58,7 @@ def _start(spawn: Spawn, probe: Node, tmp_path: Path, gallery: Path, extra: str 
 
 
 def _enrol(probe: Node, name: str, **fields: object) -> m.EnrolReply:
-    reply: m.EnrolReply = probe.call(keys.IDENTITY_ENROL, m.EnrolRequest(name=name, **fields),
+    reply: m.EnrolReply = probe.call(keys.IDENTITY_ENROL, Enrol(name=name, **fields),
                                      timeout=60.0)
     return reply
 
@@ -117,7 +122,7 @@ def test_enrol_recognise_never_a_wrong_name_and_forget_at_once(
     camera.show(scenes["obama3"])
     named = names.wait_for(lambda n: n.name == "Barack" and n.stamp_ns > named.stamp_ns, 180)
     count = len(names.messages)
-    forgot: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(name="Barack"))
+    forgot: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, Forget(name="Barack"))
     assert forgot.success and forgot.forgotten == ["Barack"]
     cleared = names.wait_for(lambda n: names.messages.index(n) >= count, 5, "name cleared")
     assert cleared.name is None and cleared.track == named.track
@@ -141,13 +146,13 @@ def test_a_corrupt_gallery_gives_no_names_and_is_not_overwritten(
     camera.show(scenes["obama"])
     reply = _enrol(probe, "Barack", samples=1, timeout_s=10.0)
     assert not reply.success and "not overwritten" in reply.message, reply
-    one: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(name="Barack"))
+    one: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, Forget(name="Barack"))
     assert not one.success and "not overwritten" in one.message
     with pytest.raises(Exception, match="unusable"):
         probe.call(keys.IDENTITY_LIST, m.Trigger())
     assert gallery.read_bytes() == b"BUDDYBOT-GALLERY 1\n" + b"\0" * 40
 
-    everybody: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(all=True))
+    everybody: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, Forget(all=True))
     assert everybody.success, everybody
     diag.wait_for(lambda d: d.level == "OK", 30, "OK once replaced")
     reply = _enrol(probe, "Barack", samples=2, timeout_s=30.0)

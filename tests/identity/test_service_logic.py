@@ -6,6 +6,7 @@ at a bounded rate."""
 from __future__ import annotations
 
 import threading
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -18,11 +19,15 @@ from buddybot.identity import embedding, gallery
 from buddybot.identity.service import IdentityService, Job
 from buddybot.identity.settings import IdentitySettings
 from buddybot.tools.testing import FakeDiagnostics, RecordingPublisher
-from tests.identity.conftest import key
+from tests.identity.conftest import OPERATOR, key
 
 S = 1_000_000_000
 T0 = 1_700_000_000 * S
 KEYPOINTS = [m.PixelPoint(x=x, y=y) for x, y in ((3, 3), (6, 3), (4.5, 5), (4.5, 7))]
+
+Enrol = partial(m.EnrolRequest, credential=OPERATOR)
+"""A request as the operator makes it."""
+Forget = partial(m.ForgetRequest, credential=OPERATOR)
 
 
 def _vector(seed: int) -> np.ndarray:
@@ -124,12 +129,12 @@ def test_forget_strikes_the_name_of_the_followed_face_at_once(tmp_path: Path) ->
     service.prepare()
     _frames(service, 3)
     assert _said(node)[-1] == (1, "ada")
-    reply = service.forget(m.ForgetRequest(name="ada"))
+    reply = service.forget(Forget(name="ada"))
     assert reply.success and reply.forgotten == ["ada"]
     assert _said(node)[-1] == (1, None)
     assert list(gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key()).people) == ["bob"]
-    assert not service.forget(m.ForgetRequest(name="ada")).success
-    assert not service.forget(m.ForgetRequest(name="bob", all=True)).success
+    assert not service.forget(Forget(name="ada")).success
+    assert not service.forget(Forget(name="bob", all=True)).success
 
 
 def test_no_face_for_lost_s_ends_the_track(tmp_path: Path) -> None:
@@ -153,12 +158,12 @@ def test_a_bad_gallery_means_no_names_and_is_only_replaced_by_forget_all(
     assert node.diagnostics.level == "ERROR" and "no names" in node.diagnostics.message
     _frames(service, 5)
     assert all(n.name is None for n in node.out)
-    reply = service.forget(m.ForgetRequest(name="ada"))
+    reply = service.forget(Forget(name="ada"))
     assert not reply.success and "not overwritten" in reply.message
     assert path.read_bytes() == content
     with pytest.raises(gallery.GalleryError, match="unusable"):
         service.list_people(m.Trigger())
-    assert service.forget(m.ForgetRequest(all=True)).success
+    assert service.forget(Forget(all=True)).success
     assert node.diagnostics.level == "OK"
     assert gallery.load(path, embedding.MODEL_ID, key()).people == {}
 
@@ -209,19 +214,50 @@ def test_enrol_stores_embeddings_and_refuses_what_it_must(tmp_path: Path) -> Non
     service.prepare()
     service.embedder.who = 7  # type: ignore[union-attr]
     for bad in ("bad\x00name", " "):
-        reply = service.enrol(m.EnrolRequest(name=bad))
+        reply = service.enrol(Enrol(name=bad))
         assert not reply.success and "name" in reply.message
-    reply = _enrol_while_frames(service, m.EnrolRequest(name="ada", timeout_s=0.2))
+    reply = _enrol_while_frames(service, Enrol(name="ada", timeout_s=0.2))
     assert not reply.success and "already enrolled" in reply.message
-    reply = _enrol_while_frames(service, m.EnrolRequest(name="cy", timeout_s=0.3), faces=2)
+    reply = _enrol_while_frames(service, Enrol(name="cy", timeout_s=0.3), faces=2)
     assert not reply.success and "more than one face" in reply.message
-    reply = _enrol_while_frames(service, m.EnrolRequest(name="cy", samples=3, timeout_s=10))
+    reply = _enrol_while_frames(service, Enrol(name="cy", samples=3, timeout_s=10))
     assert reply.success and reply.samples == 3
     saved = gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key())
     assert sorted(saved.people) == ["ada", "cy"] and len(saved.people["cy"].embeddings) == 3
     service.embedder.who = 1  # type: ignore[union-attr]
-    reply = _enrol_while_frames(service, m.EnrolRequest(name="dee", samples=2, timeout_s=10))
+    reply = _enrol_while_frames(service, Enrol(name="dee", samples=2, timeout_s=10))
     assert not reply.success and "already enrolled as 'ada'" in reply.message
+
+
+def test_enrol_and_forget_are_an_operators_acts_and_a_forget_wins(tmp_path: Path) -> None:
+    """The attacks: 300 enrolments from a client that gave up (16 stayed queued), and one
+    of them enrolled Ada's face as "flood1" 3 ms after `forget Ada`; none needed an
+    operator. Now each needs the operator secret, one whose asker gave up is dropped,
+    and a forget wins over every enrolment asked before it."""
+    _enrolled(tmp_path, ada=1)
+    service, node = _service(tmp_path)
+    service.prepare()
+    service.embedder.who = 7  # type: ignore[union-attr]
+    for credential in ("", "guessed"):
+        refused = service.enrol(m.EnrolRequest(name="flood1", credential=credential))
+        assert not refused.success and "operator" in refused.message
+        gone = service.forget(m.ForgetRequest(name="ada", credential=credential))
+        assert not gone.success and "operator" in gone.message
+    assert node.diagnostics.values["refused_not_operator"] == 4
+    stale = service.enrol(Enrol(name="late", timeout_s=5.0, sent_ns=m.now_ns() - 6 * S))
+    assert not stale.success and "given up" in stale.message
+    asked = m.now_ns()  # asked, then Ada is forgotten while it collects its frames
+    reply: list[m.EnrolReply] = []
+    worker = threading.Thread(target=lambda: reply.append(_enrol_while_frames(
+        service, Enrol(name="ada", samples=3, timeout_s=10, sent_ns=asked))))
+    assert service.forget(Forget(name="ada")).success
+    worker.start()
+    worker.join(60)
+    assert not reply[0].success and "forgotten after this request" in reply[0].message
+    assert "ada" not in gallery.load(tmp_path / "gallery.bin", embedding.MODEL_ID, key()).people
+    later = _enrol_while_frames(service, Enrol(name="ada", samples=3, timeout_s=10,
+                                               sent_ns=m.now_ns()))
+    assert later.success, later.message  # asked after the forget: a new consent
 
 
 def test_enrol_without_the_model_says_how_to_install_it(tmp_path: Path) -> None:
@@ -230,7 +266,7 @@ def test_enrol_without_the_model_says_how_to_install_it(tmp_path: Path) -> None:
                               None, "not found; install the face identity model with: pip ...")
     service.prepare()
     assert node.diagnostics.level == "ERROR" and "install" in node.diagnostics.message
-    reply = service.enrol(m.EnrolRequest(name="ada"))
+    reply = service.enrol(Enrol(name="ada"))
     assert not reply.success and "install" in reply.message
 
 
