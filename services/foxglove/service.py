@@ -84,6 +84,8 @@ class Bridge:
         self._image_subs: dict[str, Subscription] = {}
         self._limiters: dict[str, logic.RateLimiter] = {}
         self.lease = LeaseHolder(node, ["expression"], "operator", CALL_TIMEOUT_S)
+        self._last_call = 0.0
+        """When a client last set the expression (monotonic): the lease's idle clock."""
 
     def apply_settings(self, settings: FoxgloveSettings) -> None:
         """A live change (`buddybot param set foxglove max_image_fps 5`): the image
@@ -218,6 +220,7 @@ class Bridge:
         (taken at the first call); a refusal names who holds the expression."""
         msg = describe.parse_message(m.ScreenExpression, _text(request.payload))
         assert isinstance(msg, m.ScreenExpression)
+        self._last_call = time.monotonic()  # before: no idle release meanwhile
         try:
             self.lease.acquire()
             self.lease.command(expression=msg.action)
@@ -231,6 +234,20 @@ class Bridge:
         text = self.lease.release("released from Foxglove")
         reply = m.TriggerReply(success=True, message=text or "no lease was held")
         return msgspec.json.encode(reply)
+
+    def release_idle(self, now: float | None = None) -> None:
+        """Give the lease back once no client set the expression for `lease_idle_s`:
+        the robot's own behaviour takes it back (the next call takes a new one)."""
+        now = time.monotonic() if now is None else now
+        idle = self.settings.lease_idle_s
+        if self.lease.lease_id is None or now - self._last_call < idle:
+            return
+        try:
+            self.lease.release(f"no Foxglove call for {idle:g} s")
+        except ServiceError as exc:
+            self.node.log.info("idle lease not released: %s", clip(exc))
+            return
+        self.node.log.info("expression lease given back: no Foxglove call for %g s", idle)
 
     def close(self) -> None:
         """Give the lease back at stop (were the bridge killed, the controller
@@ -292,6 +309,7 @@ def run(ctx: ServiceContext) -> int:
                                        daemon=True)
             manager.start()
             node.every(1.0, bridge.update_diagnostics, name="foxglove-diagnostics")
+            node.every(0.25, bridge.release_idle, name="foxglove-idle-lease")
             node.spin()
             fox.changed.set()  # wake the manager so it sees the stop
             manager.join(5.0)

@@ -36,6 +36,12 @@ class FoxgloveSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
     max_image_fps: Annotated[float, msgspec.Meta(
         gt=0.0, le=60.0, extra={"live": True},
         description="images sent per camera key per second, at most")] = 10.0
+    # A lease taken for a remote client ends when it goes quiet, so a Foxglove
+    # window left open never keeps the eyes from the robot's own behaviour.
+    lease_idle_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0, extra={"live": True},
+        description="seconds after the last `eyes/expression` call that the bridge "
+        "gives its operator lease back")] = 10.0
     # Channels are made from keys seen on the bus, which anyone on it can
     # invent (`radar/<anything>/frames`): the table is bounded.
     max_channels: Annotated[int, msgspec.Meta(

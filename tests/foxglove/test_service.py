@@ -79,12 +79,20 @@ class ImageSource:
         self.thread.join(5)
 
 
-@pytest.fixture
-def bridge(spawn: Callable[..., Process]) -> Iterator[int]:
+def start_bridge(spawn: Callable[..., Process], tmp_path: Path, idle_s: float = 600.0) -> int:
+    """The bridge on a free port; its expression lease given back after `idle_s`."""
     port = free_port()
-    proc = spawn("foxglove", "--port", str(port), "--max-image-fps", str(FPS_LIMIT))
+    config = tmp_path / "foxglove.toml"
+    config.write_text(f"[foxglove]\nlease_idle_s = {idle_s}\n")
+    proc = spawn("foxglove", "--port", str(port), "--max-image-fps", str(FPS_LIMIT),
+                 "--config", str(config))
     proc.wait_for_output("foxglove bridge serving", timeout=30)
-    yield port
+    return port
+
+
+@pytest.fixture
+def bridge(spawn: Callable[..., Process], tmp_path: Path) -> Iterator[int]:
+    yield start_bridge(spawn, tmp_path)
 
 
 ORIGIN_CASES = [
@@ -221,6 +229,33 @@ def test_keys_annotations_images_and_services_reach_a_foxglove_client(
             await client.close()
 
     asyncio.run(scenario())
+
+
+@pytest.mark.integration
+def test_a_quiet_client_gives_the_expression_back(
+        spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> None:
+    """A Foxglove window that set one expression used to hold the eyes until someone
+    released them; now the lease ends `lease_idle_s` after the last call."""
+    expressions = Collector[m.ScreenExpression](probe, keys.EXPRESSION)
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("eyes")
+    spawn("controller")
+    own = expressions.wait_for(timeout=30, what="the controller's own expression").action
+    port = start_bridge(spawn, tmp_path, idle_s=1.0)
+
+    async def scenario() -> None:
+        client = await FoxgloveClient.connect(port)
+        try:
+            await client.call("eyes/expression", b'{"action": "ANIMATE_LOVE"}', 1)
+        finally:
+            await client.close()
+
+    asyncio.run(scenario())
+    expressions.wait_for(lambda e: e.action == m.ExpressionAction.ANIMATE_LOVE, 30, "LOVE")
+    expressions.clear()
+    leases.wait_for(lambda s: any(e.holder == "foxglove" and "no Foxglove call" in e.message
+                                  for e in s.ended), 30, "the idle lease given back")
+    expressions.wait_for(lambda e: e.action == own, 30, f"the robot's own {own.name} back")
 
 
 @pytest.mark.integration
