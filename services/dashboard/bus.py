@@ -253,6 +253,21 @@ class Bus:
             self.mailbox.put("known", known)
         return ok, text
 
+    def release_idle(self, quiet_s: float) -> bool:
+        """Give the operator's lease back when no page was open for `lease_idle_s`
+        (`quiet_s` so far); True when it was given back."""
+        idle = self.s.lease_idle_s
+        if self.lease.lease_id is None or quiet_s < idle:
+            return False
+        try:
+            self.lease.release(f"no dashboard page for {idle:g} s")
+        except ServiceError as exc:
+            log.info("idle operator lease not released: %s", clip(exc, 200))
+            return False
+        log.info("operator control given back: no dashboard page for %g s", idle)
+        self._leases_changed()
+        return True
+
     def _control(self, on: bool) -> tuple[bool, str]:
         if on:
             ok, text = _lease_call("take control", lambda: _granted(

@@ -20,6 +20,7 @@ import asyncio
 import contextlib
 import logging
 import ssl
+import time
 from functools import partial
 
 from aiohttp import web
@@ -152,9 +153,12 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             app.bus.watch_images(count > 0)
 
     board.on_pages_changed = pages_changed
+    last_page = time.monotonic()
     try:
         while not ctx.stop.is_set():
             await asyncio.sleep(0.2)
+            if board.pages:
+                last_page = time.monotonic()
             if node is None and opening.done():
                 node = opening.result()
                 if node is None:
@@ -167,6 +171,10 @@ async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
             board.set_bus(node.connected())
             board.refresh_map()
             await app.end_stale_sessions()
+            quiet_s = time.monotonic() - last_page
+            bus = app.bus
+            if bus is not None and not board.pages and bus.lease.lease_id is not None:
+                await asyncio.to_thread(bus.release_idle, quiet_s)
             d = node.diagnostics.values
             d["pages"] = len(board.pages)
             d["images_sent"] = board.images_sent

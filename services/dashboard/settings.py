@@ -64,6 +64,12 @@ class DashboardSettings(WebSurface, forbid_unknown_fields=True, kw_only=True):
         ge=1, le=64, extra={"live": True},
         description="dashboard pages connected at once at most (lowering it cuts no page "
         "already connected)")] = 8
+    # The operator's lease ends when no page is left to operate it from, so a
+    # closed laptop never keeps the eyes from the robot's own behaviour.
+    lease_idle_s: Annotated[float, msgspec.Meta(
+        gt=0.0, le=3600.0, extra={"live": True},
+        description="seconds with no dashboard page open after which the operator's "
+        "control (its lease) is given back; a reload keeps it")] = 30.0
     # Beyond loopback anyone on the network could press the buttons: a login
     # (the per-robot secrets of `buddybot secret`) is asked for there.
     login: Annotated[Literal["auto", "always"], msgspec.Meta(

@@ -15,6 +15,7 @@ import socket
 import subprocess
 import time
 from collections.abc import AsyncIterator, Callable
+from pathlib import Path
 from typing import Any
 
 import aiohttp
@@ -186,6 +187,42 @@ def test_operator_requests_without_a_controller_or_with_a_stale_lease_say_why(
 
     asyncio.run(stale())
     assert proc.alive()
+
+
+@pytest.mark.integration
+def test_the_operators_control_ends_when_no_page_is_left(
+        spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> None:
+    """The operator lease used to hold until the switch was turned off, broken or the
+    dashboard stopped: a laptop closed with control on kept the eyes for good. With
+    no page open for `lease_idle_s` it is given back (a reload keeps it)."""
+    leases = Collector[m.Leases](probe, keys.LEASES)
+    spawn("eyes")
+    config = tmp_path / "dashboard.toml"
+    config.write_text("[dashboard]\nlease_idle_s = 2.0\n")
+    _proc, port = start_dashboard(spawn, "--config", str(config))
+    retry_until(lambda: health(port)["bus"], 30, what="dashboard on the bus")
+    url = f"http://{LOOPBACK}:{port}/ws"
+
+    async def take_control_and_leave() -> None:
+        async with aiohttp.ClientSession() as http, http.ws_connect(
+                url, origin=f"http://{LOOPBACK}:{port}") as ws:
+            await _next(ws, "hello")
+            end = time.monotonic() + 30  # the arbiter's services may still be declared
+            while True:
+                await ws.send_str(json.dumps({"op": "control", "on": True, "id": 1}))
+                reply = await _next(ws, "reply", timeout=20)
+                if reply["ok"] or time.monotonic() > end:
+                    break
+            assert reply["ok"], reply
+
+    asyncio.run(take_control_and_leave())  # the page is closed with control on
+    held = leases.wait_for(lambda s: any(x.holder == "dashboard" for x in s.leases), 30,
+                           "the operator lease")
+    assert held.leases
+    ended = leases.wait_for(lambda s: any(e.holder == "dashboard" and "no dashboard page"
+                                          in e.message for e in s.ended), 30,
+                            "the operator lease given back with no page left")
+    assert not any(x.holder == "dashboard" for x in ended.leases)
 
 
 FLOOD_LIMIT = 256
