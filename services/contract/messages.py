@@ -630,8 +630,8 @@ class EnrolRequest(Message):
     """The robot's operator secret: a biometric change is an operator's act."""
     sent_ns: StampNs = 0
     """When the asker sent it (wall clock): a request its asker has given up on
-    (`sent_ns` + `timeout_s` + ENROL_MARGIN_S ago) is dropped, and a forget of
-    that name (or of all) after `sent_ns` wins over it."""
+    (`sent_ns` + `timeout_s` + ENROL_MARGIN_S ago) is dropped, and any forget
+    after `sent_ns` wins over it (the face may be the one forgotten)."""
 
 
 class EnrolReply(Message):

@@ -159,9 +159,8 @@ class IdentityService:
         self.vote: TrackVote | None = None
         self.gallery: gallery.Gallery | None = None
         self.gallery_problem: str | None = None
-        self._forgot_ns: dict[str, int] = {}
-        """Name -> when it was last forgotten (wall ns): older enrolments lose."""
-        self._forgot_all_ns = 0
+        self._last_forget_ns = 0
+        """When someone was last forgotten (wall ns): every enrolment asked before loses."""
         self.key_path = gallery.key_path()
         self.key: bytes | None = None
         """The gallery key (None until read, or when its file is unusable)."""
@@ -416,7 +415,8 @@ class IdentityService:
     def enrol(self, req: m.EnrolRequest) -> m.EnrolReply:
         """Collect `samples` frames with exactly one face, embed them, store them:
         an operator's act (the credential), for an asker still waiting, and not
-        if a forget of that name came after the request was sent."""
+        if a forget (of anyone: the face may be the one forgotten) came after the
+        request was sent."""
         started_ns = m.now_ns()
         sent_ns = req.sent_ns or started_ns
         try:
@@ -472,10 +472,9 @@ class IdentityService:
                 log.info("enrol %s refused: frames disagree", name)
                 return m.EnrolReply(success=False, message=why)
             refused = self._refusal()
-            forgotten_ns = max(self._forgot_all_ns, self._forgot_ns.get(name, 0))
-            if refused is None and sent_ns and sent_ns <= forgotten_ns:
-                refused = (f"{name!r} was forgotten after this request was sent: a forget "
-                           "wins over every enrolment asked before it")
+            if refused is None and sent_ns and sent_ns <= self._last_forget_ns:
+                refused = ("a forget came after this request was sent: it wins over every "
+                           "enrolment asked before it (the face may be the one forgotten)")
             others = [i for i, n in enumerate(self.index.people) if n != name]
             if refused is None and others:
                 probe = rows.mean(axis=0)
@@ -507,7 +506,7 @@ class IdentityService:
 
     def forget(self, req: m.ForgetRequest) -> m.ForgetReply:
         """Erase one person or everybody; the followed face's name goes at once.
-        An operator's act (the credential); every enrolment of that name asked
+        An operator's act (the credential); every enrolment asked
         before it is refused when it comes to storing."""
         if req.all == (req.name is not None):
             return m.ForgetReply(success=False, message="give either a name or all, not both")
@@ -515,11 +514,7 @@ class IdentityService:
             self.node.diagnostics.increment("refused_not_operator")
             return m.ForgetReply(success=False, message=NOT_OPERATOR)
         with self._lock:
-            now_ns = m.now_ns()
-            if req.all:
-                self._forgot_all_ns = now_ns
-            else:
-                self._forgot_ns[(req.name or "").strip()] = now_ns
+            self._last_forget_ns = m.now_ns()
             if req.all:
                 names = [] if self.gallery is None else sorted(self.gallery.people)
                 self.gallery = gallery.Gallery(embedding.MODEL_ID)

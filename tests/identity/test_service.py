@@ -183,6 +183,31 @@ def test_a_gallery_edited_without_the_robots_key_names_nobody(
 
 
 @pytest.mark.integration
+def test_biometric_changes_on_the_bus_need_the_operator_and_a_waiting_asker(
+        spawn: Spawn, probe: Node, tmp_path: Path) -> None:
+    """Enrol and forget used to need no operator on the bus (only the dashboard asked
+    for one), and a request queued long after its asker gave up still enrolled."""
+    path = tmp_path / "gallery.bin"
+    g = gal.Gallery(embedding.MODEL_ID)
+    g.enrol("Ada", [embedding.unit(np.random.default_rng(2).normal(size=embedding.DIM))],
+            m.now_ns() / 1e9)
+    gal.save(path, g, key())
+    _start(spawn, probe, tmp_path, path)
+    for credential in ("", "guessed"):
+        enrol: m.EnrolReply = probe.call(keys.IDENTITY_ENROL, m.EnrolRequest(
+            name="flood1", timeout_s=1.0, credential=credential), timeout=30.0)
+        assert not enrol.success and "operator" in enrol.message, enrol
+        forget: m.ForgetReply = probe.call(keys.IDENTITY_FORGET, m.ForgetRequest(
+            name="Ada", credential=credential), timeout=30.0)
+        assert not forget.success and "operator" in forget.message, forget
+    stale: m.EnrolReply = probe.call(keys.IDENTITY_ENROL, Enrol(
+        name="flood2", timeout_s=1.0, sent_ns=m.now_ns() - 30 * 10**9), timeout=30.0)
+    assert not stale.success and "given up" in stale.message, stale
+    listed: m.KnownPeople = probe.call(keys.IDENTITY_LIST, m.Trigger())
+    assert [p.name for p in listed.people] == ["Ada"]  # nothing changed
+
+
+@pytest.mark.integration
 def test_without_the_model_it_runs_with_no_names_and_says_how_to_install(
         spawn: Spawn, probe: Node, camera: Camera, scenes: dict[str, Scene],
         tmp_path: Path) -> None:
