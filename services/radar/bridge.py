@@ -56,6 +56,13 @@ from buddybot.runtime.service import ServiceContext
 from buddybot.sim.options import add_world_arguments, world_from
 
 FIRMWARE_TIMEOUT_S = 0.5  # per ACK, two attempts: a mute sensor costs 1 s per connect
+DRAIN_BYTES = 1 << 20
+"""The most read from a port at once: everything that waits, in one go."""
+FRESH_BYTES = 4096
+"""The newest bytes of what waited that are parsed; older ones are a flood's backlog.
+A sensor sends at most ~25 kB/s (256000 baud), 30-60 bytes per report at 10 Hz:
+4 kB waiting means the reader fell behind by seconds (or a flood), so the older
+reports are stale and dropped, counted, and only the newest reach the bus."""
 NOISE_STATES = {
     ld2410.STATE_NOISE_DETECTING: "in progress",
     ld2410.STATE_NOISE_DETECTION_SUCCEEDED: "succeeded",
@@ -85,6 +92,10 @@ class SensorStatus:
     model: str = "unknown"  # as recognised from the frames: "LD2410 basic", "LD2450", ...
     model_changes: int = 0
     implausible_targets: int = 0
+    stale_bytes: int = 0
+    """Bytes of a backlog dropped unread (a flood, or the reader fell behind)."""
+    superseded: int = 0
+    """Reports of a backlog's newest bytes not published: a newer one was."""
 
 
 class SensorReader:
@@ -203,15 +214,21 @@ class SensorReader:
         skipped_at_open = 0
         intact = 0
         while not self._stop.is_set():
-            data = port.read(port.in_waiting or 1)
+            data = read_waiting(port, DRAIN_BYTES)
             now = time.monotonic()
+            backlog = len(data) > FRESH_BYTES
+            if backlog:  # only the newest bytes are fresh
+                st.stale_bytes += len(data) - FRESH_BYTES
+                data = data[-FRESH_BYTES:]
+                sniffer.reset()  # what it held does not continue these bytes
             if data:
                 stamp = time.time_ns()
-                for frame in sniffer.feed(data):
-                    kind = describe(frame)
-                    if kind is None:
-                        continue
-                    self._recognised(kind)
+                reports = [f for f in sniffer.feed(data) if describe(f) is not None]
+                if backlog and len(reports) > 1:  # a flood: its newest report alone
+                    st.superseded += len(reports) - 1
+                    reports = reports[-1:]
+                for frame in reports:
+                    self._recognised(describe(frame) or "")
                     st.frames += 1
                     if isinstance(frame, Report):
                         st.noise_detection = NOISE_STATES.get(frame.target_state,
@@ -228,6 +245,22 @@ class SensorReader:
                 hint = " (bytes arrive but never a frame: wrong baud rate, or another model " \
                     "than configured?)" if sniffer.skipped_bytes > skipped_at_open else ""
                 raise serial.SerialException(f"no valid frame for {self._silence_s:g} s{hint}")
+
+
+def read_waiting(port: Any, limit: int) -> bytes:
+    """What waits on `port`, up to `limit` bytes, in one go (at least one byte, or
+    b"" after the port's timeout). pyserial's `socket://` says only whether
+    something waits (`in_waiting` is 0 or 1): its non-blocking socket is drained
+    directly, else a flood is read a byte at a time and falls behind for good."""
+    data = port.read(max(1, min(port.in_waiting, limit)))
+    sock = getattr(port, "_socket", None)
+    if not data or len(data) >= limit or sock is None:
+        return bytes(data)
+    try:
+        more: bytes = sock.recv(limit - len(data))
+    except (BlockingIOError, InterruptedError):
+        more = b""
+    return bytes(data) + more
 
 
 class Bridge:
@@ -291,7 +324,8 @@ class Bridge:
         values: dict[str, m.DiagnosticValue] = {"sensors": len(self.readers),
                                                 "connected": len(self.readers) - len(down)}
         totals = {"frames": 0, "bad_frames": 0, "reconnects": 0, "clamped_energies": 0,
-                  "unusual_frames": 0, "bad_out_pin": 0, "implausible_targets": 0}
+                  "unusual_frames": 0, "bad_out_pin": 0, "implausible_targets": 0,
+                  "stale_bytes": 0, "superseded": 0}
         for r in self.readers:
             st = r.status
             values[f"radar{st.radar_id}.url"] = clip(st.url)
@@ -307,6 +341,8 @@ class Bridge:
             values[f"radar{st.radar_id}.frames"] = st.frames
             values[f"radar{st.radar_id}.bad_frames"] = st.bad_frames
             values[f"radar{st.radar_id}.skipped_bytes"] = st.skipped_bytes
+            values[f"radar{st.radar_id}.stale_bytes"] = st.stale_bytes
+            values[f"radar{st.radar_id}.superseded"] = st.superseded
             values[f"radar{st.radar_id}.reconnects"] = st.reconnects
             values[f"radar{st.radar_id}.clamped_energies"] = st.clamped
             totals["frames"] += st.frames
@@ -316,6 +352,8 @@ class Bridge:
             totals["unusual_frames"] += st.unusual_frames
             totals["bad_out_pin"] += st.bad_out_pin
             totals["implausible_targets"] += st.implausible_targets
+            totals["stale_bytes"] += st.stale_bytes
+            totals["superseded"] += st.superseded
             if st.last_error:
                 values[f"radar{st.radar_id}.error"] = clip(st.last_error)
         values.update(totals)

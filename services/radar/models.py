@@ -68,6 +68,11 @@ class Sniffer:
                 return self._held.pop(model)
         return []
 
+    def reset(self) -> None:
+        """Forget partial frames (the next bytes do not continue them)."""
+        self._ld2410.reset()
+        self._ld2450.reset()
+
     # Counters of the chosen parser; while recognising, what both agree on.
     def _counter(self, name: str, combine: str) -> int:
         active = self._active
