@@ -407,7 +407,7 @@ def test_live_parameters_change_the_image_rate_and_restart_only_ones_are_refused
     listed = {p["name"]: p for p in json.loads(param("list", "dashboard", "--json").stdout)}
     assert set(listed) == set(DashboardSettings.__struct_fields__)
     assert {n for n, p in listed.items() if p["live"]} == {
-        "max_image_fps", "jpeg_quality", "max_pages"}
+        "max_image_fps", "jpeg_quality", "max_pages", "lease_idle_s"}
     refused = param("set", "dashboard", "port", "9999")
     assert refused.returncode == 1 and "port" in refused.stderr and "restart" in refused.stderr
     out_of_range = param("set", "dashboard", "max_image_fps", "0")
