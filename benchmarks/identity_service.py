@@ -227,8 +227,6 @@ def main() -> None:
     parser.add_argument("--only", choices=("match", "names", "gaze"))
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix="identity-bench-") as tmp:
-        # The services' state (the gallery key) in the benchmark's folder, not the user's.
-        os.environ["BUDDYBOT_STATE_DIR"] = str(Path(tmp) / "state")
         if args.only in (None, "match"):
             match_speed(args.people)
         if args.only in (None, "names"):

@@ -17,6 +17,7 @@ import os
 import platform
 import re
 import sys
+import tempfile
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TextIO
@@ -107,10 +108,20 @@ def run(script_file: str, main: Callable[[], Any]) -> int:
     argv = sys.argv[1:]
     tee = _Tee(sys.stdout)
     sys.stdout = tee
+    # The services a benchmark starts keep their state (the operator secret, the
+    # gallery key) in a folder of the run's, never in the robot's own.
+    state = tempfile.TemporaryDirectory(prefix="buddybot-bench-state-")
+    before = os.environ.get("BUDDYBOT_STATE_DIR")
+    os.environ["BUDDYBOT_STATE_DIR"] = state.name
     try:
         status = main()
     finally:
         sys.stdout = tee.out
+        if before is None:
+            os.environ.pop("BUDDYBOT_STATE_DIR", None)
+        else:
+            os.environ["BUDDYBOT_STATE_DIR"] = before
+        state.cleanup()
     code = int(status or 0)
     if code == 0 and record_it and "--help" not in argv and "-h" not in argv:
         record(Path(script_file).stem, argv, tee.copy.getvalue())

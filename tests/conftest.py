@@ -128,6 +128,20 @@ def _started_by_test_code() -> bool:
     return False
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _the_runs_own_state_folder(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    """The robot state folder (secrets, the gallery key) of everything this test run
+    starts, its own: no service, command or test writes into the user's."""
+    before = os.environ.get("BUDDYBOT_STATE_DIR")
+    folder = tmp_path_factory.mktemp("robot-state")
+    os.environ["BUDDYBOT_STATE_DIR"] = str(folder)
+    yield folder
+    if before is None:
+        os.environ.pop("BUDDYBOT_STATE_DIR", None)
+    else:
+        os.environ["BUDDYBOT_STATE_DIR"] = before
+
+
 @pytest.fixture(autouse=True)
 def _processes_need_the_integration_marker(request: pytest.FixtureRequest,
                                            monkeypatch: pytest.MonkeyPatch) -> None:
