@@ -256,15 +256,8 @@ class Bus:
     def release_idle(self, quiet_s: float) -> bool:
         """Give the operator's lease back when no page was open for `lease_idle_s`
         (`quiet_s` so far); True when it was given back."""
-        idle = self.s.lease_idle_s
-        if self.lease.lease_id is None or quiet_s < idle:
+        if not self.lease.release_if_idle(quiet_s, self.s.lease_idle_s, "dashboard page"):
             return False
-        try:
-            self.lease.release(f"no dashboard page for {idle:g} s")
-        except ServiceError as exc:
-            log.info("idle operator lease not released: %s", clip(exc, 200))
-            return False
-        log.info("operator control given back: no dashboard page for %g s", idle)
         self._leases_changed()
         return True
 

@@ -239,15 +239,8 @@ class Bridge:
         """Give the lease back once no client set the expression for `lease_idle_s`:
         the robot's own behaviour takes it back (the next call takes a new one)."""
         now = time.monotonic() if now is None else now
-        idle = self.settings.lease_idle_s
-        if self.lease.lease_id is None or now - self._last_call < idle:
-            return
-        try:
-            self.lease.release(f"no Foxglove call for {idle:g} s")
-        except ServiceError as exc:
-            self.node.log.info("idle lease not released: %s", clip(exc))
-            return
-        self.node.log.info("expression lease given back: no Foxglove call for %g s", idle)
+        self.lease.release_if_idle(now - self._last_call, self.settings.lease_idle_s,
+                                   "Foxglove call")
 
     def close(self) -> None:
         """Give the lease back at stop (were the bridge killed, the controller

@@ -214,19 +214,16 @@ class SensorReader:
         skipped_at_open = 0
         intact = 0
         while not self._stop.is_set():
-            data = read_waiting(port, DRAIN_BYTES)
+            data, stale = fresh_bytes(read_waiting(port, DRAIN_BYTES))
             now = time.monotonic()
-            backlog = len(data) > FRESH_BYTES
-            if backlog:  # only the newest bytes are fresh
-                st.stale_bytes += len(data) - FRESH_BYTES
-                data = data[-FRESH_BYTES:]
+            if stale:
+                st.stale_bytes += stale
                 sniffer.reset()  # what it held does not continue these bytes
             if data:
                 stamp = time.time_ns()
-                reports = [f for f in sniffer.feed(data) if describe(f) is not None]
-                if backlog and len(reports) > 1:  # a flood: its newest report alone
-                    st.superseded += len(reports) - 1
-                    reports = reports[-1:]
+                reports, superseded = newest_reports(
+                    [f for f in sniffer.feed(data) if describe(f) is not None], stale > 0)
+                st.superseded += superseded
                 for frame in reports:
                     self._recognised(describe(frame) or "")
                     st.frames += 1
@@ -245,6 +242,20 @@ class SensorReader:
                 hint = " (bytes arrive but never a frame: wrong baud rate, or another model " \
                     "than configured?)" if sniffer.skipped_bytes > skipped_at_open else ""
                 raise serial.SerialException(f"no valid frame for {self._silence_s:g} s{hint}")
+
+
+def fresh_bytes(data: bytes, limit: int = FRESH_BYTES) -> tuple[bytes, int]:
+    """(the newest `limit` bytes of what waited, how many older ones are stale)."""
+    stale = max(0, len(data) - limit)
+    return (data[stale:], stale)
+
+
+def newest_reports(reports: list[Frame], backlog: bool) -> tuple[list[Frame], int]:
+    """(the reports to publish, how many are superseded): all of them, or from a
+    backlog only its newest (the others are older news of the same sensor)."""
+    if not backlog or len(reports) <= 1:
+        return reports, 0
+    return reports[-1:], len(reports) - 1
 
 
 def read_waiting(port: Any, limit: int) -> bytes:

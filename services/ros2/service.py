@@ -329,20 +329,12 @@ class Ros2Bridge:
         the robot's own behaviour takes that part back (a later sample takes a
         new lease)."""
         now = time.monotonic() if now is None else now
-        idle = self.settings.lease_idle_s
         for resource, lease in self.leases.items():
             last = self._last_sample.get(resource)
-            if lease.lease_id is None or last is None or now - last < idle:
-                continue
-            try:
-                lease.release(f"no ROS 2 command for {idle:g} s")
-            except ServiceError as exc:
-                self._warn.warning(f"idle:{resource}", "idle lease not released: %s",
-                                   clip(exc))
-                continue
-            self.node.diagnostics.increment("idle_released")
-            self.node.log.info("%s lease given back: no ROS 2 command for %g s", resource,
-                               idle)
+            if last is not None and lease.release_if_idle(now - last,
+                                                          self.settings.lease_idle_s,
+                                                          "ROS 2 command"):
+                self.node.diagnostics.increment("idle_released")
 
     def update_diagnostics(self) -> None:
         for name, count in self.sent.items():

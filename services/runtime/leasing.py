@@ -261,6 +261,22 @@ class LeaseHolder:
             return None
         return release(self.node, lease_id, reason, self.timeout)
 
+    def release_if_idle(self, quiet_s: float, idle_s: float, side: str) -> bool:
+        """Give the lease back once the remote `side` it was taken for ("ROS 2",
+        "Foxglove", "dashboard page") has been quiet `idle_s` (`quiet_s` so far):
+        the robot's own behaviour returns. True when given back; a failed call is
+        logged and, as with `release`, the handle is forgotten all the same."""
+        if self.lease_id is None or quiet_s < idle_s:
+            return False
+        try:
+            self.release(f"no {side} for {idle_s:g} s")
+        except ServiceError as exc:
+            self.node.log.info("idle lease not released: %s", str(exc)[:200])
+            return False
+        self.node.log.info("%s lease given back: no %s for %g s",
+                           "+".join(self.resources), side, idle_s)
+        return True
+
     def forget_unless_in(self, state: m.Leases) -> bool:
         """Drop the id when `leases/state` says the lease ended (see `ending`: gone
         from a state newer than the request, or listed as ended: broken,

@@ -18,17 +18,35 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.radar import bridge
 from buddybot.radar import ld2450 as p2
 from buddybot.runtime.node import Node
 from buddybot.tools.testing import LOOPBACK, Collector, Process
 
-pytestmark = pytest.mark.integration
 BATCH = 1000
 """Reports sent in one write; a batch's number b is in its reports' first target:
 x = b mod 4000 mm, y = 1000 + b div 4000 mm (unique for 12 million batches)."""
 FLOOD_S = 6.0
 RATE_BPS = 10_000_000
 """The flood: 10 MB/s, some 400 times what an LD2450 sends."""
+
+
+def report(n: int) -> bytes:
+    return p2.encode_report(p2.Report((p2.Target(n, 1500, 0, 360), None, None)))
+
+
+def test_a_backlog_keeps_only_its_newest_bytes_and_its_newest_report() -> None:
+    normal = report(1) + report(2)  # what a sensor sends between two reads: all kept
+    assert bridge.fresh_bytes(normal) == (normal, 0)
+    flood = b"".join(report(n) for n in range(1, 1001))
+    kept, stale = bridge.fresh_bytes(flood)
+    assert len(kept) == bridge.FRESH_BYTES and stale == len(flood) - bridge.FRESH_BYTES
+    assert kept == flood[-bridge.FRESH_BYTES:]  # the newest bytes
+    frames = [f for f in p2.Parser().feed(kept) if isinstance(f, p2.Report)]
+    published, superseded = bridge.newest_reports(list(frames), backlog=True)
+    assert len(published) == 1 and superseded == len(frames) - 1
+    assert published[0].slots[0] == p2.Target(1000, 1500, 0, 360)  # the very last one
+    assert bridge.newest_reports(list(frames), backlog=False) == (list(frames), 0)
 
 
 class Flood:
@@ -71,6 +89,7 @@ class Flood:
         self.thread.join(10)
 
 
+@pytest.mark.integration
 def test_a_flooding_sensor_gets_its_newest_reports_published_not_a_backlog(
         spawn: Callable[..., Process], probe: Node) -> None:
     received: list[tuple[float, int]] = []

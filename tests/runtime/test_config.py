@@ -106,17 +106,22 @@ def test_cli_exits_2_naming_key_and_file(tmp_path: Path) -> None:
     assert "radar_presence.range_m" in result.stderr and str(path) in result.stderr
 
 
+def run_with_zenoh_file(tmp_path: Path, content: str) -> subprocess.CompletedProcess[str]:
+    """`buddybot run eyes` with `[zenoh] config_file` holding `content` (next to the TOML)."""
+    (tmp_path / "zenoh.json5").write_text(content)
+    path = tmp_path / "robot.toml"
+    path.write_text('[zenoh]\nconfig_file = "zenoh.json5"\n')
+    return subprocess.run(
+        [sys.executable, "-m", "buddybot", "run", "eyes", "--config", str(path)],
+        capture_output=True, text=True, timeout=60,
+    )
+
+
 @pytest.mark.integration
 def test_bad_zenoh_config_file_is_exit_2_naming_it(tmp_path: Path) -> None:
     """`[zenoh] config_file` resolves next to the TOML file; one Zenoh cannot parse stops
     the service with status 2 (the systemd units do not restart on it)."""
-    (tmp_path / "zenoh.json5").write_text("{ this is: not json5 ")
-    path = tmp_path / "robot.toml"
-    path.write_text('[zenoh]\nconfig_file = "zenoh.json5"\n')
-    result = subprocess.run(
-        [sys.executable, "-m", "buddybot", "run", "eyes", "--config", str(path)],
-        capture_output=True, text=True, timeout=60,
-    )
+    result = run_with_zenoh_file(tmp_path, "{ this is: not json5 ")
     assert result.returncode == 2, result.stderr
     assert str(tmp_path / "zenoh.json5") in result.stderr
     assert "Traceback" not in result.stderr
@@ -132,13 +137,7 @@ def test_a_zenoh_config_file_too_deep_or_too_big_is_exit_2_not_a_crash(
         tmp_path: Path, content: str, said: str) -> None:
     """Zenoh's JSON5 parser recurses per level: 30,000 levels overflowed the
     stack (SIGSEGV, exit 139, a crash loop under systemd). Bounded before it."""
-    (tmp_path / "zenoh.json5").write_text(content)
-    path = tmp_path / "robot.toml"
-    path.write_text('[zenoh]\nconfig_file = "zenoh.json5"\n')
-    result = subprocess.run(
-        [sys.executable, "-m", "buddybot", "run", "eyes", "--config", str(path)],
-        capture_output=True, text=True, timeout=60,
-    )
+    result = run_with_zenoh_file(tmp_path, content)
     assert result.returncode == 2, result.stderr
     assert str(tmp_path / "zenoh.json5") in result.stderr and said in result.stderr
     assert "Traceback" not in result.stderr and len(result.stderr.splitlines()) <= 2

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 import threading
 from typing import Any
 
@@ -81,6 +82,7 @@ class Controller:
 
     name = "dashboard"
     instance = "abc123"
+    log = logging.getLogger("test.leasing")
 
     def __init__(self) -> None:
         self.requests: list[tuple[str, Any]] = []
@@ -134,6 +136,23 @@ def test_acquire_once_command_with_it_and_release() -> None:
     assert h.lease_id is None and h.release() is None
     with pytest.raises(leasing.LeaseRefused, match="no lease held"):
         h.command(yaw=0.1, pitch=0.0)
+
+
+def test_a_lease_for_a_remote_side_is_given_back_once_that_side_is_quiet() -> None:
+    ctl = Controller()
+    h = holder(ctl)
+    assert not h.release_if_idle(100.0, 5.0, "ROS 2 command")  # none held: nothing asked
+    assert ctl.requests == []
+    lease_id = h.acquire()
+    assert not h.release_if_idle(4.9, 5.0, "ROS 2 command") and h.lease_id == lease_id
+    ctl.absent = True  # the arbiter does not answer: logged, the handle forgotten
+    assert not h.release_if_idle(5.0, 5.0, "ROS 2 command") and h.lease_id is None
+    ctl.absent = False
+    second = h.acquire()
+    assert h.release_if_idle(5.0, 5.0, "ROS 2 command") and h.lease_id is None
+    assert ctl.requests[-1][1] == m.LeaseRelease(lease_id=second,
+                                                 reason="no ROS 2 command for 5 s",
+                                                 by="dashboard")
 
 
 def test_an_operator_breaks_a_lease_as_someone_else_and_a_refused_command_says_why(
