@@ -56,29 +56,32 @@ def run_faces(node: Node, count: int, rate: float) -> list[float]:
     pub = node.publisher(keys.FACE, camera="front")
     point = m.Point(x=1.0, y=0.2, z=0.1)
 
-    def send(stamp: int) -> None:
+    def send() -> int:
+        """One face, stamped now (the controller replaces an implausible stamp by
+        its arrival time, and the answer would not be found by it)."""
+        stamp = m.now_ns()
         with timer.lock:
             timer.sent[stamp] = time.perf_counter_ns()
         pub.put(m.FacePosition(stamp_ns=stamp, frame_id="front", point=point, confidence=0.9))
+        return stamp
 
     # Wait until the controller answers at all (discovery), then warm up.
-    retry_until(lambda: send(1) or timer.latencies_ms, 30, 0.2, what="controller answering")
-    for i in range(200):
-        send(10 + i)
+    retry_until(lambda: send() and timer.latencies_ms, 30, 0.2, what="controller answering")
+    for _ in range(200):
+        send()
         time.sleep(1.0 / rate)
     timer.latencies_ms.clear()
-    base = 1_000_000
     period = 1.0 / rate
     next_t = time.perf_counter()
-    for i in range(count):
-        send(base + i)
+    last = 0
+    for _ in range(count):
+        last = send()
         next_t += period
         delay = next_t - time.perf_counter()
         if delay > 0:
             time.sleep(delay)
     # The last face is always answered (nothing supersedes it); earlier ones may be
     # dropped by the controller's latest-value slot when two arrive within one wake-up.
-    last = base + count - 1
     retry_until(lambda: last not in timer.sent, 10, 0.05, what="answer to the last face")
     return list(timer.latencies_ms)
 
