@@ -579,5 +579,7 @@ def test_the_operator_remembers_a_face_sees_the_name_and_forgets_it(
     page.wait_for_function("document.getElementById('known').textContent === 'nobody enrolled'",
                            timeout=15_000)
     assert identity.people == {}
-    assert page.inner_text("#reply") == "forgot Ada"
+    # The list and the reply are two messages to the page: wait for the reply too.
+    page.wait_for_function("document.getElementById('reply').textContent === 'forgot Ada'",
+                           timeout=15_000)
     assert page.errors == []
