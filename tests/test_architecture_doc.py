@@ -8,8 +8,11 @@ and in them every `.publisher(keys.X)`, `.subscribe(keys.X)`,
 `.serve(keys.X)` and `.call(keys.X)`. An edge `a -> b` on a topic is "a
 publishes it, b subscribes"; on a service, "a calls it, b serves it".
 Keys of each node (`{node}` in the pattern: diagnostics, params, node_info)
-are everyone's and not drawn. The bridges (foxglove, ros2-bridge) also
-subscribe and serve keys chosen at run time: only their named keys count.
+are everyone's and not drawn. A service written on the SDK (the controller)
+wires the keys of the SDK calls it makes (`SDK_CALLS`), not of every SDK
+module it loads; each of those keys is checked to be one the SDK uses.
+The bridges (foxglove, ros2-bridge) also subscribe and serve keys chosen
+at run time: only their named keys count.
 
 The page holds the edges in two places, each edge once: the diagram (a
 code block, one line per sender and key, `a --topic--> b, c` or
@@ -39,6 +42,21 @@ ROLES = {"publisher": "pub", "publisher_on": "pub", "subscribe": "sub", "subscri
          "serve": "serve", "serve_raw": "serve", "call": "call", "call_key": "call",
          "query": "call"}
 """The node's methods, by the role they give their service in a key."""
+
+SDK_CALLS: dict[str, set[tuple[str, keys.Topic | keys.Service]]] = {
+    "on_state": {("sub", keys.PEOPLE_STATE), ("sub", keys.PEOPLE_EVENTS)},
+    "on_face": {("sub", keys.FACE)},
+    "on_status": {("sub", keys.PLAY_SOUND_STATUS), ("sub", keys.LEASES)},
+    "on_free": {("sub", keys.DEVICE_FREE)},
+    "on_held": {("sub", keys.LEASES)},
+    "play": {("call", keys.PLAY_SOUND)},
+    "cancel": {("call", keys.PLAY_SOUND_CANCEL)},
+    "express": {("pub", keys.BEHAVIOUR_EXPRESSION)},
+    "look_at": {("pub", keys.BEHAVIOUR_GAZE)},
+}
+"""An SDK call (method name) made by a service's own code -> the (role, key) it
+wires: opening `bot.people` subscribes its state and events, the speaker
+follows the leases for its own; the built-in bot's `express`/`look_at` are wishes."""
 
 Edge = tuple[str, str, str]
 """(from service, key pattern, to service)."""
@@ -74,14 +92,17 @@ def _imports(module: str) -> set[str]:
     return {m for m in found if m.startswith("buddybot.") and _path(m) is not None}
 
 
-def _closure(module: str) -> set[str]:
+def _closure(module: str, into_sdk: bool = True) -> set[str]:
+    """`module` and every module it imports, transitively; not what only the
+    SDK imports unless `into_sdk` (a service on the SDK wires its calls only)."""
     seen: set[str] = set()
     todo = [module]
     while todo:
         name = todo.pop()
         if name not in seen:
             seen.add(name)
-            todo += _imports(name)
+            if into_sdk or not _is_sdk(name):
+                todo += _imports(name)
     return seen
 
 
@@ -122,18 +143,33 @@ def _uses(module: str) -> tuple[set[tuple[str, str]], list[str]]:
     return uses, dynamic
 
 
+def _sdk_uses(module: str) -> set[tuple[str, str]]:
+    """(role, key pattern) of every SDK call (`SDK_CALLS`) in `module`'s code."""
+    return {(role, key.pattern) for node in ast.walk(_tree(module))
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+            for role, key in SDK_CALLS.get(node.func.attr, set())}
+
+
+def _is_sdk(module: str) -> bool:
+    return module == "buddybot.sdk" or module.startswith("buddybot.sdk.")
+
+
 @cache
 def _wiring() -> tuple[dict[str, set[tuple[str, str]]], dict[str, list[str]]]:
     """Per service: its (role, key) uses and its run-time-chosen calls."""
-    closures = {e.name: _closure(e.module) for e in registry.SERVICES}
-    core = set.intersection(*closures.values())  # runtime and contract: every node's
+    core = set.intersection(*(_closure(e.module) for e in registry.SERVICES))
+    """The runtime and the contract: every node's."""
+    closures = {e.name: _closure(e.module, into_sdk=False) for e in registry.SERVICES}
     uses: dict[str, set[tuple[str, str]]] = {}
     dynamic: dict[str, list[str]] = {}
     for name, modules in closures.items():
         uses[name], dynamic[name] = set(), []
+        on_sdk = any(_is_sdk(module) for module in modules)
         for module in sorted(modules - core):
+            if _is_sdk(module):
+                continue  # the library: its calls made by the service count, below
             found, chosen = _uses(module)
-            uses[name] |= found
+            uses[name] |= found | (_sdk_uses(module) if on_sdk else set())
             dynamic[name] += chosen
     return uses, dynamic
 
@@ -232,6 +268,23 @@ def test_the_derivation_sees_the_robot_s_wiring() -> None:
                  ("eyes", keys.PUPIL.pattern, "eye-renderer")]:
         assert edge in edges
     assert ("radar-presence", keys.PRESENCE.pattern, "controller") not in edges
+
+
+def test_every_sdk_call_wires_a_key_the_sdk_uses() -> None:
+    """`SDK_CALLS` cannot claim a key the SDK never touches: each is named by a node
+    call (or the SDK's bounded `call(node, key, ...)`) in some SDK module."""
+    sdk = sorted(m for m in _closure("buddybot.sdk") if _is_sdk(m))
+    used: set[tuple[str, str]] = set()
+    for module in sdk:
+        used |= _uses(module)[0]
+        for node in ast.walk(_tree(module)):
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                    and node.func.id == "call" and len(node.args) > 1:
+                entry = _catalogue_key(node.args[1])
+                if entry is not None:
+                    used.add(("call", entry.pattern))
+    claimed = {(role, key.pattern) for wired in SDK_CALLS.values() for role, key in wired}
+    assert sdk and claimed - used == set()
 
 
 def test_only_the_bridges_choose_keys_at_run_time() -> None:

@@ -17,7 +17,9 @@ tools (probing, bag, doctor, ...)─┤   areas (radar, camera, ..., dashboard, 
 An area imports only the runtime, the contract and itself, so an area can
 be lifted into its own repository (so can `sdk`, the library for
 programs, which imports the same two layers, and `apps`, which adds the
-sdk and which the sdk never imports). The areas that serve a web page
+sdk and which the sdk never imports). The controller, the robot's own
+behaviour, is an app on the SDK: it imports the SDK, the contract's
+messages and keys (pure data) and itself, never the runtime. The areas that serve a web page
 (`WEB_SURFACES`) may also import `web`, the layer beside the runtime that
 every web surface shares (who may connect, login, a page's sends); `web`
 imports only the runtime and the contract. `sim`, the simulated world,
@@ -60,6 +62,7 @@ ALLOWED: dict[str, frozenset[str]] = {
     "sim": BASE | {"sim"},  # the simulated world, its scenarios and its truth service
     **{area: BASE | {area} | ({"web"} if area in WEB_SURFACES else set())
        | ({"sim"} if area in SIM_SENSORS else set()) for area in AREAS},
+    "controller": frozenset({"contract", "sdk", "controller"}),  # an app on the SDK
     "sdk": BASE | {"sdk"},  # programs of builders: the runtime only
     "apps": BASE | {"sdk", "apps"},  # apps and their runner stand on the sdk
     "cli": BASE | {"tools", "supervisor", "cli", "sdk", "apps", "web", "sim", *AREAS},
@@ -121,6 +124,17 @@ def test_only_the_layers_using_web_may_import_it() -> None:
     assert users - {"web"} == granted - {"web"} == {*WEB_SURFACES, "cli"}
 
 
+@pytest.mark.integration
+def test_the_controllers_decisions_load_neither_the_sdk_nor_the_runtime() -> None:
+    """The behaviour's state machine, its geometry and its settings are pure: loading
+    them loads the contract and nothing else (the SDK, and the runtime under it,
+    come only with the service module that wires them to the bus)."""
+    out = loaded_after("import buddybot.controller.behaviour, "
+                       "buddybot.controller.transform, buddybot.controller.settings")
+    assert "buddybot.controller.behaviour" in out
+    assert {layer_of_module(n) for n in out} == {"contract", "controller"}
+
+
 def test_every_folder_is_a_layer() -> None:
     folders = {p.name for p in SERVICES.iterdir() if (p / "__init__.py").is_file()}
     assert folders == set(ALLOWED) - {""}
@@ -146,6 +160,11 @@ def test_every_folder_is_a_layer() -> None:
     ("dashboard", "buddybot.web.auth", True),
     ("web", "buddybot.runtime.endpoints", True),
     ("supervisor", "buddybot.tools.doctor", True),
+    ("controller", "buddybot.runtime.node", False),
+    ("controller", "buddybot.runtime.params", False),
+    ("controller", "buddybot.people.model", False),
+    ("controller", "buddybot.sdk.bot", True),
+    ("controller", "buddybot.contract.keys", True),
 ])
 def test_the_checker_catches_a_wrong_import(tmp_path: Path, layer: str, imported: str,
                                             allowed: bool) -> None:

@@ -1,4 +1,4 @@
-"""The controller's inbox vocabulary: what Zenoh callbacks and the sound thread
+"""The controller's inbox vocabulary: what the SDK's callbacks and the sound thread
 tell the decision thread.
 
 Each event is a small frozen dataclass, and `Event` is their union, so the
@@ -11,17 +11,19 @@ over.
 They live apart from `behaviour.py` because they are the service's plumbing
 (who posted what), while `Behaviour` keeps its plain method API (`presence`,
 `sound_reply`, ...) that the pure tests drive directly. Faces are not events:
-a face is decided in its Zenoh callback (the gaze's latency path), so a fast
+a face is decided in its callback (the gaze's latency path), so a fast
 camera neither waits for the decision thread nor fills the inbox.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from buddybot.contract import messages as m
 from buddybot.controller.transform import Gaze
+from buddybot.sdk.persons import Person
 
 
 @dataclass(frozen=True, slots=True)
@@ -37,7 +39,7 @@ class PeopleChanged:
     held: bool = False
 
 
-def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChanged:
+def people_changed(people: Sequence[Person], follow: int | None = None) -> PeopleChanged:
     """The controller's presence from the people service's persons, taken as they
     are: the people service alone decides who is there and for how long a
     person nobody sees any more is held (its `absence_hold_s`), so the controller
@@ -48,12 +50,12 @@ def people_changed(msg: m.PeopleState, follow: int | None = None) -> PeopleChang
     else the nearest shown (the lowest id on a tie), else, while everyone is
     held, the one followed or the nearest held.
     """
-    if not msg.people:
+    if not people:
         return PeopleChanged(False)
-    shown = [p for p in msg.people if p.seen_by != "NONE"]
-    pool = shown or msg.people
+    shown = [p for p in people if p.seen_by != "NONE"]
+    pool = shown or people
     followed = next((p for p in pool if p.id == follow), None) if follow is not None else None
-    person = followed or min(pool, key=lambda p: (p.distance_m, p.id))
+    person = followed or min(pool, key=lambda p: (_distance(p), p.id))
     return PeopleChanged(bool(shown), person.id, person.name, held=not shown)
 
 
@@ -66,13 +68,17 @@ class RadarGaze:
     stamp_ns: int | None = None
 
 
-def radar_point(msg: m.PeopleState,
+def _distance(person: Person) -> float:
+    return math.inf if person.distance_m is None else person.distance_m
+
+
+def radar_point(people: Sequence[Person],
                 person_id: int | None) -> tuple[float, float, float] | None:
     """Where the followed person is in the camera's frame by their angle-radar
     track: their bearing and distance, at their `pitch_rad` (the last face's, or
     0: the camera's level). None when no angle radar tracks them."""
-    person = next((p for p in msg.people if p.id == person_id), None)
-    if person is None or person.bearing_rad is None:
+    person = next((p for p in people if p.id == person_id), None)
+    if person is None or person.bearing_rad is None or person.distance_m is None:
         return None
     d, bearing = person.distance_m, person.bearing_rad
     pitch = person.pitch_rad or 0.0
@@ -119,12 +125,6 @@ class Yielded:
     parts for their holders, and a held speaker keeps the behaviour silent."""
 
     resources: tuple[m.Resource, ...]
-
-
-def yielded(msg: m.Leases) -> Yielded:
-    """The resources some lease holds, each once, in the contract's order."""
-    held = {r for lease in msg.leases for r in lease.resources}
-    return Yielded(tuple(r for r in ("expression", "gaze", "audio") if r in held))
 
 
 Event = (PeopleChanged | RadarGaze | DeviceFree | SoundStatus | GoalReply | CancelReply

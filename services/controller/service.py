@@ -1,12 +1,14 @@
-"""`buddybot run controller`: the thin adapter between Zenoh and `behaviour.Behaviour`.
+"""`buddybot run controller`: the robot's own behaviour, an app on the SDK.
 
-A face is the latency path (camera -> eyes), so it is decided in Zenoh's
-callback thread under the lock that guards the `Behaviour`; every other
-callback only posts an event to the decision thread, which runs `tick()`
-and publishes; one sound thread makes the blocking audio calls. The
-behaviour's expression and gaze are wishes (`controller/expression`,
-`controller/eye_control`): the eyes driver's arbiter shows them while no
-lease holds those parts. `controller/state` is published at start and on change.
+It asks the robot what any app may ask (`bot.people.on_state`,
+`bot.on_face`, `bot.speaker`, `bot.leases.on_held`, `bot.params.offer`)
+and answers with wishes (`bot.wishes`): the eyes driver's arbiter shows
+them while no lease holds those parts. A face is the latency path (camera
+-> eyes), so it is decided in its callback under the lock that guards the
+`Behaviour`; every other callback only posts an event to the decision
+thread, which runs `tick()` and publishes; one sound thread makes the
+blocking speaker calls. `controller/state` is published at start and on
+change.
 
 Threads, leases and state, and why: docs/controller.md, 'The service in detail'.
 """
@@ -45,15 +47,22 @@ from buddybot.controller.events import (
     Yielded,
     people_changed,
     radar_point,
-    yielded,
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import RigidTransform, face_gaze
-from buddybot.runtime.errors import ConfigError
-from buddybot.runtime.node import Node, RateLimitedLog
-from buddybot.runtime.overrides import merge, settings_option
-from buddybot.runtime.params import LiveSettings
-from buddybot.runtime.service import ServiceContext
+from buddybot.sdk import Bot, Refused
+from buddybot.sdk.faces import Face
+from buddybot.sdk.leases import Parts
+from buddybot.sdk.persons import PeopleNow
+from buddybot.sdk.service import (
+    ConfigError,
+    RateLimitedLog,
+    ServiceContext,
+    run_builtin,
+    settings_of,
+    settings_option,
+)
+from buddybot.sdk.speaker import GoalStatus
 
 log = logging.getLogger("buddybot.controller")
 
@@ -70,7 +79,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def settings_from(ctx: ServiceContext) -> ControllerSettings:
     """`[controller]` with the command line on top: what `run` builds the Controller
     (and its Behaviour) from."""
-    return merge(ctx.config.section(ControllerSettings), ctx.args)
+    return settings_of(ctx, ControllerSettings)
 
 
 def camera_transform(settings: ControllerSettings) -> RigidTransform:
@@ -85,16 +94,16 @@ def camera_transform(settings: ControllerSettings) -> RigidTransform:
 
 
 class Controller:
-    """Wires one Node to one Behaviour; `start()` declares everything, `close()` stops."""
+    """The built-in behaviour on one `Bot`: `run(bot, stop_event)` like any app;
+    `start(bot)` subscribes and starts the threads, `close()` stops them."""
 
-    def __init__(self, node: Node, settings: ControllerSettings,
+    def __init__(self, settings: ControllerSettings,
                  clock: Callable[[], float] = time.monotonic) -> None:
         self.transform = camera_transform(settings)
-        self.node = node
         self.settings = settings
         self.clock = clock
         self.behaviour = Behaviour(settings, clock())
-        self._yielded: tuple[m.Resource, ...] = ()
+        self._yielded: Parts = ()
         """What leases hold (from `leases/state`), shown in `controller/state`."""
         self._inbox: collections.deque[Event] = collections.deque(maxlen=1024)
         self._last_people: PeopleChanged | None = None
@@ -107,14 +116,28 @@ class Controller:
         face callback both decide."""
         self._sounds: queue.Queue[SoundCommand | None] = queue.Queue()
         self._warn = RateLimitedLog(log)
-        self._expression_pub = node.publisher(keys.BEHAVIOUR_EXPRESSION)
-        self._control_pub = node.publisher(keys.BEHAVIOUR_GAZE)
-        self._state_pub = node.publisher(keys.CONTROLLER_STATE)
-        self._state: tuple[State, tuple[m.Resource, ...]] | None = None  # the last one put
+        self._stop = threading.Event()
+        self._state: tuple[State, Parts] | None = None  # the last one put
         self._threads: list[threading.Thread] = []
         self._last_diag = 0.0
+        self._bot: Bot | None = None
+
+    @property
+    def bot(self) -> Bot:
+        if self._bot is None:
+            raise RuntimeError("the controller is not started (start(bot) first)")
+        return self._bot
 
     # -- lifetime --
+
+    def run(self, bot: Bot, stop_event: threading.Event) -> None:
+        """The app's entry: offer the live settings, start, wait for the stop, close."""
+        bot.params.offer(self.settings, self.apply_settings)
+        self.start(bot, stop_event)
+        try:
+            stop_event.wait()
+        finally:
+            self.close()
 
     def apply_settings(self, settings: ControllerSettings) -> None:
         """A live parameter change (`buddybot param set controller ...`): the
@@ -125,29 +148,40 @@ class Controller:
             self.settings = settings
             self.behaviour.s = settings
 
-    def start(self) -> None:
-        node = self.node
-        node.subscribe(keys.PEOPLE_STATE, self._on_people)
-        node.subscribe(keys.DEVICE_FREE, self._on_device_free)
-        node.subscribe(keys.PLAY_SOUND_STATUS, self._on_status)
-        node.subscribe(keys.FACE, self._on_face, camera=self.settings.camera)
-        node.subscribe(keys.LEASES, self._on_leases)
+    def start(self, bot: Bot, stop_event: threading.Event | None = None) -> None:
+        """Take `bot`'s outputs, publish the first state, subscribe, start the
+        decision and sound threads (they end with `stop_event` or `close()`)."""
+        self.attach(bot)
+        if stop_event is not None:
+            self._stop = stop_event
         with self._lock:
             self._publish_state(self.clock())  # the first one, even before any input
+        bot.people.on_state(self._on_people)
+        bot.speaker.on_free(self._on_device_free)
+        bot.speaker.on_status(self._on_status)
+        bot.on_face(self._on_face, camera=self.settings.camera)
+        bot.leases.on_held(self._on_leases)
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
             thread = threading.Thread(target=target, name=f"controller:{name}", daemon=True)
             thread.start()
             self._threads.append(thread)
 
+    def attach(self, bot: Bot) -> None:
+        """Take `bot`'s wishes, state publisher and diagnostics (tests drive a
+        controller attached to a fake bot without starting it)."""
+        self._bot = bot
+        self._wishes = bot.wishes
+        self._state_pub = bot.publisher(keys.CONTROLLER_STATE)
+
     def close(self) -> None:
-        self.node.stop()
+        self._stop.set()
         self._sounds.put(None)
         with self._cond:
             self._cond.notify_all()
         for thread in self._threads:
             thread.join(5.0)
 
-    # -- Zenoh callbacks: enqueue only --
+    # -- the SDK's callbacks: enqueue only --
 
     def _post(self, event: Event) -> None:
         """Hand an event to the decision thread (any thread; never blocks)."""
@@ -155,21 +189,21 @@ class Controller:
             self._inbox.append(event)
             self._cond.notify()
 
-    def _on_people(self, msg: m.PeopleState, _key: str) -> None:
+    def _on_people(self, now: PeopleNow) -> None:
         # `people/state` changes with every face frame of a visitor (distance,
         # direction); only a change of who is in range, or of the followed
         # person's radar direction, is news for the behaviour.
         with self._cond:
             follow = None if self._last_people is None else self._last_people.person_id
-            change = people_changed(msg, follow)
-            point = radar_point(msg, change.person_id)
+            change = people_changed(now.people, follow)
+            point = radar_point(now.people, change.person_id)
             gaze = None
             if point is not None:
                 try:
                     gaze = face_gaze(self.transform, point)
                 except ValueError:  # cannot happen with a valid message; never NaN gaze
                     gaze = None
-            radar = RadarGaze(gaze, msg.stamp_ns if gaze is not None else None)
+            radar = RadarGaze(gaze, now.stamp_ns if gaze is not None else None)
             news = False
             if change != self._last_people:
                 self._last_people = change
@@ -182,27 +216,27 @@ class Controller:
             if news:
                 self._cond.notify()
 
-    def _on_device_free(self, msg: m.Bool, _key: str) -> None:
-        self._post(DeviceFree(msg.data))
+    def _on_device_free(self, free: bool) -> None:
+        self._post(DeviceFree(free))
 
-    def _on_status(self, msg: m.PlaySoundStatus, _key: str) -> None:
+    def _on_status(self, status: GoalStatus) -> None:
         # The age lets a restarted controller tell a fresh latched status from an old one.
-        age = (m.now_ns() - msg.stamp_ns) / 1e9 if msg.stamp_ns > 0 else None
-        self._post(SoundStatus(msg.goal_id, msg.state, age))
+        age = (m.now_ns() - status.stamp_ns) / 1e9 if status.stamp_ns > 0 else None
+        self._post(SoundStatus(status.goal_id, status.state, age))
 
-    def _on_leases(self, msg: m.Leases, _key: str) -> None:
-        self._post(yielded(msg))
+    def _on_leases(self, parts: Parts) -> None:
+        self._post(Yielded(parts))
 
-    def _on_face(self, msg: m.FacePosition, _key: str) -> None:
+    def _on_face(self, face: Face) -> None:
         with self._lock:
             now = self.clock()
-            self._handle_face(msg, now)
+            self._handle_face(face, now)
             self._publish_state(now)
 
     # -- decision thread --
 
     def _decide(self) -> None:
-        stop = self.node.stop_event
+        stop = self._stop
         next_tick = self.clock() + self.settings.tick_s
         while not stop.is_set():
             with self._cond:
@@ -216,13 +250,13 @@ class Controller:
             try:
                 next_tick = self.decision_step(events, next_tick)
             except Exception as exc:  # a bug must not stop the robot's behaviour
-                self.node.diagnostics.increment("decision_errors")
+                self.bot.diagnostics.increment("decision_errors")
                 self._warn.warning("decide", "decision step failed: %r", exc)
 
     def decision_step(self, events: list[Event], next_tick: float) -> float:
         """Hand `events` to the behaviour, tick it when `next_tick` has come, publish
         what changed; returns when the next tick is due. The decision thread runs
-        this, and pure tests drive it with a fake clock and node."""
+        this, and pure tests drive it with a fake clock and bot."""
         with self._lock:
             self._handle(events)
             now = self.clock()
@@ -261,15 +295,14 @@ class Controller:
                     assert_never(event)
             self._execute(commands)
 
-    def _handle_face(self, msg: m.FacePosition, arrived: float) -> None:
-        p = msg.point
+    def _handle_face(self, face: Face, arrived: float) -> None:
         try:
-            gaze = face_gaze(self.transform, (p.x, p.y, p.z))
+            gaze = face_gaze(self.transform, (face.x_m, face.y_m, face.z_m))
         except ValueError as exc:
-            self.node.diagnostics.increment("bad_faces")
+            self.bot.diagnostics.increment("bad_faces")
             self._warn.warning("face", "ignored face: %s", exc)
             return
-        self._execute(self.behaviour.face(arrived, gaze, msg.stamp_ns))
+        self._execute(self.behaviour.face(arrived, gaze, face.stamp_ns))
 
     def _execute(self, commands: list[Command]) -> None:
         """Carry out the behaviour's commands. Exhaustive: a `Command` member without a
@@ -278,24 +311,25 @@ class Controller:
         for cmd in commands:
             match cmd:
                 case Look():
-                    self._control_pub.put(self._eye_control(cmd))
+                    self._look(cmd)
                 case SetExpression(action=action):
                     log.info("expression -> %s", action.name)
-                    self._expression_pub.put(m.ScreenExpression(stamp_ns=m.now_ns(),
-                                                                action=action))
+                    self._wishes.express(action)
                 case PlaySound() | CancelSound():
                     self._sounds.put(cmd)
                 case _:
                     assert_never(cmd)
 
-    def _eye_control(self, cmd: Look) -> m.EyeControl:
-        stamp = cmd.stamp_ns if cmd.stamp_ns is not None else m.now_ns()
+    def _look(self, cmd: Look) -> None:
+        """The gaze wish: at the face (clamped to the eyes' range), or ahead at
+        `centre_distance_cm` when there is none."""
         if cmd.gaze is None:
-            return m.EyeControl(stamp_ns=stamp, yaw=0.0, pitch=0.0,
-                                target_distance_cm=self.settings.centre_distance_cm)
+            self._wishes.look_at(0.0, 0.0, self.settings.centre_distance_cm / 100,
+                                 stamp_ns=cmd.stamp_ns)
+            return
         g = cmd.gaze
-        return m.EyeControl(stamp_ns=stamp, yaw=_clamp(g.yaw, math.pi),
-                            pitch=_clamp(g.pitch, math.pi / 2), target_distance_cm=g.distance_cm)
+        self._wishes.look_at(_clamp(g.yaw, math.pi), _clamp(g.pitch, math.pi / 2),
+                             g.distance_cm / 100, stamp_ns=cmd.stamp_ns)
 
     def _publish_state(self, now: float) -> None:
         """Put `controller/state` if it changed (beyond `waiting_s`); under the lock."""
@@ -310,7 +344,7 @@ class Controller:
             return
         self._last_diag = now
         snap = self.behaviour.snapshot(now)
-        values = self.node.diagnostics.values
+        values = self.bot.diagnostics.values
         values["phase"] = snap.phase.value
         values["expression"] = snap.expression.name if snap.expression is not None else "-"
         values["greeted"] = snap.greeted
@@ -324,34 +358,33 @@ class Controller:
     def _sound_worker(self) -> None:
         while True:
             cmd = self._sounds.get()
-            if cmd is None or self.node.stop_event.is_set():
+            if cmd is None or self._stop.is_set():
                 return
             self.call_audio(cmd)
 
     def call_audio(self, cmd: SoundCommand) -> None:
-        """Make one blocking audio call and post its answer to the inbox; a failed
+        """Make one blocking speaker call and post its answer to the inbox; a failed
         call is answered too (refused, not successful), so the behaviour never waits
         for a reply that cannot come."""
         timeout = self.settings.call_timeout_s
+        speaker = self.bot.speaker
         match cmd:
             case PlaySound(sound=sound, request=request):
                 log.info("play_sound %r", sound)
                 try:
-                    reply = self.node.call(keys.PLAY_SOUND, m.PlaySound(sound=sound),
-                                           timeout=timeout)
-                    if not reply.accepted:
-                        log.warning("play_sound %r refused: %s", sound, reply.message)
-                    self._post(GoalReply(request, reply.accepted, reply.goal_id))
-                except Exception as exc:  # ServiceError, or Zenoh failing: always answer
-                    self.node.diagnostics.increment("sound_call_failures")
+                    handle = speaker.play(sound, timeout=timeout)
+                    self._post(GoalReply(request, True, handle.goal_id))
+                except Refused as exc:
+                    log.warning("play_sound %r refused: %s", sound, exc.reason)
+                    self._post(GoalReply(request, False, ""))
+                except Exception as exc:  # NoService, or the bus failing: always answer
+                    self.bot.diagnostics.increment("sound_call_failures")
                     log.warning("play_sound %r failed: %s", sound, exc)
                     self._post(GoalReply(request, False, ""))
             case CancelSound(goal_id=goal_id):
                 log.info("cancel goal %s", goal_id)
                 try:
-                    answer = self.node.call(keys.PLAY_SOUND_CANCEL,
-                                            m.CancelGoal(goal_id=goal_id), timeout=timeout)
-                    self._post(CancelReply(goal_id, answer.success))
+                    self._post(CancelReply(goal_id, speaker.cancel(goal_id, timeout)))
                 except Exception as exc:
                     log.warning("cancel of %s failed: %s", goal_id, exc)
                     self._post(CancelReply(goal_id, False))
@@ -384,16 +417,4 @@ def _clamp(value: float, limit: float) -> float:
 
 def run(ctx: ServiceContext) -> int:
     settings = settings_from(ctx)
-    camera_transform(settings)  # refuse a bad config before connecting
-    node = ctx.node()
-    controller: Controller | None = None
-    try:
-        controller = Controller(node, settings)
-        LiveSettings(settings, controller.apply_settings).serve(node)
-        controller.start()
-        node.spin()
-    finally:
-        if controller is not None:
-            controller.close()
-        node.close()
-    return 0
+    return run_builtin(ctx, Controller(settings))  # a bad config is refused before connecting

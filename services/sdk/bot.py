@@ -17,16 +17,21 @@ import time
 from collections.abc import Callable, Iterable
 from typing import Any, TypeVar, cast
 
+from buddybot.contract import keys
+from buddybot.runtime.diagnostics import Diagnostics
+from buddybot.runtime.handles import Handle, Publisher
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import add_common_arguments, resolve, setup_logging
 from buddybot.runtime.session import RouterUnreachable
 from buddybot.sdk.actions import ACTIONS_BURST, ACTIONS_PER_S, ActionLimit, check_rate
-from buddybot.sdk.errors import NoRouter, TimedOut
+from buddybot.sdk.errors import NoRouter, SdkError, TimedOut
 from buddybot.sdk.eyes import Eyes
+from buddybot.sdk.faces import Face, on_face
 from buddybot.sdk.leases import Lease, LeaseTable
 from buddybot.sdk.params import Params
 from buddybot.sdk.people import Event, EventStream, People, Person, check_kinds
 from buddybot.sdk.speaker import Sound, SoundHandle, Speaker
+from buddybot.sdk.wishes import Wishes
 
 T = TypeVar("T")
 
@@ -45,10 +50,13 @@ class Bot:
 
     def __init__(self, node: Node, timeout: float = TIMEOUT_S,
                  actions_per_s: float = ACTIONS_PER_S,
-                 actions_burst: float = ACTIONS_BURST) -> None:
+                 actions_burst: float = ACTIONS_BURST, builtin: bool = False) -> None:
         self.node = node
         self.robot = node.robot
         self.timeout = timeout
+        self.builtin = builtin
+        """The robot's own behaviour (`buddybot.sdk.service`): it has `wishes`
+        instead of leases on the eyes, and plays without an "audio" lease."""
         self.limit = ActionLimit(node.diagnostics, actions_per_s, actions_burst)
         """Every action of this Bot (express, look_at, play, say, lease) takes one
         token; over the limit it raises Refused("rate limited: ...") at once."""
@@ -57,6 +65,7 @@ class Bot:
         self._speaker: Speaker | None = None
         self._leases: LeaseTable | None = None
         self._eyes: Eyes | None = None
+        self._wishes: Wishes | None = None
         self._lock = threading.RLock()
         """Opens `people`, `speaker`, `leases` and `eyes` once, on first use from any
         thread."""
@@ -145,13 +154,30 @@ class Bot:
         return self._opened("_eyes", lambda: Eyes(self.node, self.leases, self.timeout,
                                                   self.limit))
 
+    @property
+    def wishes(self) -> Wishes:
+        """The built-in behaviour's eyes (lowest priority, no lease); SdkError for
+        any other program, whose eyes are `bot.eyes`."""
+        if not self.builtin:
+            raise SdkError("only the robot's own behaviour has wishes; a program uses "
+                           "bot.eyes, under a lease")
+        return self._opened("_wishes", lambda: Wishes(self.node))
+
+    # -- camera --
+
+    def on_face(self, callback: Callable[[Face], Any], camera: str = "front") -> Handle:
+        """Call `callback(face)` for every face `camera`'s detector follows, on the
+        thread that receives it (be quick), until the returned handle is closed."""
+        return on_face(self.node, camera, callback)
+
     # -- speaker --
 
     @property
     def speaker(self) -> Speaker:
         """Sounds through the `audio/play_sound` action (opened on first use)."""
         return self._opened("_speaker", lambda: Speaker(self.node, self.leases,
-                                                        self.timeout, self.limit))
+                                                        self.timeout, self.limit,
+                                                        builtin=self.builtin))
 
     def play(self, sound: Sound) -> SoundHandle:
         """Play a sound of `[audio.sounds]` by name, or a file of the player's sound
@@ -164,6 +190,19 @@ class Bot:
         """Speak any `text` (1..240 printable characters) with espeak-ng, under an
         "audio" lease; ValueError for a malformed text, Refused, NoService."""
         return self.speaker.say(text)
+
+    # -- the program as a node of the robot --
+
+    @property
+    def diagnostics(self) -> Diagnostics:
+        """This program's `diagnostics/<name>` (`values`, `increment`, `set`):
+        what `buddybot echo` and the dashboard show about it."""
+        return self.node.diagnostics
+
+    def publisher(self, topic: keys.Topic, **params: str) -> Publisher[Any]:
+        """A publisher of this program's own key `topic` (its `put(msg)` checks
+        the message against the topic's type)."""
+        return self.node.publisher(topic, **params)
 
     # -- lifetime --
 

@@ -21,7 +21,7 @@ import logging
 import threading
 from collections.abc import Callable, Generator, Iterable, Iterator
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, get_args
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
@@ -30,6 +30,7 @@ from buddybot.runtime.node import Node
 from buddybot.sdk.actions import ActionLimit
 from buddybot.sdk.calls import sdk_errors
 from buddybot.sdk.errors import Refused, TimedOut
+from buddybot.sdk.watch import Watch, Watchers
 
 log = logging.getLogger("buddybot.sdk")
 
@@ -45,6 +46,16 @@ def arbiter_errors(service: keys.Service, timeout: float) -> Iterator[None]:
             yield
         except leasing.LeaseRefused as exc:
             raise Refused(str(exc)) from None
+
+
+Parts = tuple[m.Resource, ...]
+"""Resources some lease holds, in the contract's order."""
+
+
+def held_parts(msg: m.Leases) -> Parts:
+    """The resources some lease of `msg` holds, each once, in the contract's order."""
+    held = {r for lease in msg.leases for r in lease.resources}
+    return tuple(r for r in get_args(m.Resource) if r in held)
 
 
 class Lease:
@@ -155,6 +166,7 @@ class LeaseTable:
         self._held: dict[str, Lease] = {}
         self._seen: set[str] = set()
         """Held leases the published state listed once (absent later = ended)."""
+        self._parts: Watchers[Parts] = Watchers("lease")
         self._state = node.subscribe(keys.LEASES, self._on_state, delivery="queue")
 
     def holding(self, resource: str) -> Lease | None:
@@ -203,6 +215,15 @@ class LeaseTable:
     def _on_state(self, msg: m.Leases, _key: str) -> None:
         for lease, reason, message in self.changes(msg):
             lease.end(reason, message)
+        self._parts.notify(held_parts(msg))
+
+    def on_held(self, callback: Callable[[Parts], Any]) -> Watch:
+        """Call `callback(parts)` with the parts some lease holds, anyone's
+        ("expression", "gaze", "audio", in that order), now (once the
+        arbiter's state is known) and on every change of `leases/state`, until
+        the returned watch or the bot closes: a behaviour that yields learns what
+        it does not hold."""
+        return self._parts.add(callback)
 
     def changes(self, msg: m.Leases) -> list[tuple[Lease, str, str]]:
         """(lease, reason, message) for each held lease that `msg` says has ended:
@@ -226,4 +247,5 @@ class LeaseTable:
                 lease.release(timeout)
             except Exception as exc:  # the eyes driver may be gone: the token's end ends it
                 log.debug("release of lease %s at close: %r", lease.lease_id, exc)
+        self._parts.clear()
         self._state.close()

@@ -3,17 +3,24 @@
 The node validates a change against its own settings type
 (services/runtime/params.py) and refuses it as a whole with its reason,
 which becomes `Refused`; a node that does not answer is `NoService`.
+`offer` is the other side: a program's own settings, live for everyone.
 """
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from typing import Any, TypeVar
+
+import msgspec
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
+from buddybot.runtime.params import LiveSettings
 from buddybot.sdk.calls import call
 from buddybot.sdk.errors import Refused
+
+S = TypeVar("S", bound=msgspec.Struct)
 
 
 class Params:
@@ -42,3 +49,11 @@ class Params:
         """Set a live field; True when the value changed (False: it had it already)."""
         reply = self._call(node, m.ParamRequest(op="set", values={field: value}), timeout)
         return bool(reply.changed)
+
+    def offer(self, settings: S, apply: Callable[[S], None]) -> None:
+        """Offer `settings` (a msgspec Struct) as this program's parameters on
+        `params/<its name>`: `buddybot param set`, the dashboard and
+        `bot.params.set` change the fields marked live
+        (`msgspec.Meta(extra={"live": True})`); each valid change is handed to
+        `apply(new)`, whose exception refuses it (the old settings stay)."""
+        LiveSettings(settings, apply).serve(self.node)

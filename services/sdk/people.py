@@ -30,8 +30,9 @@ from buddybot.runtime.node import Node
 from buddybot.sdk import identity
 from buddybot.sdk.errors import NoService, SdkError, TimedOut
 from buddybot.sdk.identity import KnownPerson
-from buddybot.sdk.persons import Event, Person, person_from
+from buddybot.sdk.persons import Event, PeopleNow, Person, person_from
 from buddybot.sdk.triggers import Dwell, Motion, Trigger, Within
+from buddybot.sdk.watch import Watch, Watchers
 
 KINDS: tuple[str, ...] = ("ARRIVED", "ZONE_CHANGED", "ENGAGEMENT_CHANGED", "LEFT")
 """Every event kind, in the order a visit goes through them."""
@@ -231,6 +232,7 @@ class People:
         """Subscribed to `controller/state` (on the first `attended`)."""
         self._attention: m.ControllerState | None = None
         """The robot's own behaviour's latest state (subscribed on first `attended`)."""
+        self._states: Watchers[PeopleNow] = Watchers("people state")
         self._handles = [
             node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
             node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
@@ -241,6 +243,13 @@ class People:
             self._view.on_state(msg)
             self._lock.notify_all()
             self._fire()
+        self._states.notify(PeopleNow(tuple(person_from(p) for p in msg.people), msg.stamp_ns))
+
+    def on_state(self, callback: Callable[[PeopleNow], Any]) -> Watch:
+        """Call `callback(now)` with every `people/state` as the people service
+        published it (the latched one first), until the returned watch or the
+        bot closes: for a behaviour that decides on who is there as a whole."""
+        return self._states.add(callback)
 
     def _fire(self) -> None:
         """Feed every trigger the persons present now (lock held)."""
@@ -393,6 +402,7 @@ class People:
             self._triggers = [(t, s) for t, s in self._triggers if s is not stream]
 
     def close(self) -> None:
+        self._states.clear()
         with self._lock:
             streams = list(self._streams) + [s for _t, s in self._triggers]
         for stream in streams:

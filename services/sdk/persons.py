@@ -22,6 +22,17 @@ class Person:
     pitch_rad: float | None = None
     name: str | None = None
     """Who they are, once the identity service recognised them (None: unknown)."""
+    bearing_rad: float | None = None
+    """Their bearing by an angle radar (+ = left; None: no angle radar tracks them)."""
+
+
+@dataclass(frozen=True)
+class PeopleNow:
+    """Everyone the people service lists in one `people/state`, as it published them
+    (`bot.people.on_state`): persons shown by a sensor and persons it holds."""
+
+    people: tuple[Person, ...]
+    stamp_ns: int
 
 
 @dataclass(frozen=True)
@@ -41,4 +52,5 @@ class Event:
 def person_from(msg: m.Person) -> Person:
     return Person(id=msg.id, zone=msg.zone, engagement=msg.engagement,
                   distance_m=msg.distance_m, seen_by=msg.seen_by, arrived_ns=msg.arrived_ns,
-                  yaw_rad=msg.yaw_rad, pitch_rad=msg.pitch_rad, name=msg.name)
+                  yaw_rad=msg.yaw_rad, pitch_rad=msg.pitch_rad, name=msg.name,
+                  bearing_rad=msg.bearing_rad)

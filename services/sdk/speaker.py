@@ -26,18 +26,21 @@ import contextlib
 import logging
 import os
 import threading
-from collections.abc import Generator
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
 from pathlib import PurePath
 from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime.handles import Subscription
 from buddybot.runtime.limits import BoundedDict
 from buddybot.runtime.node import Node
 from buddybot.sdk.actions import ActionLimit, Actuator
 from buddybot.sdk.calls import call
 from buddybot.sdk.errors import NoService, Refused, TimedOut
 from buddybot.sdk.leases import Lease, LeaseTable
+from buddybot.sdk.watch import Watch, Watchers
 
 log = logging.getLogger("buddybot.sdk")
 
@@ -77,6 +80,18 @@ def goal_sound(sound: Sound) -> str:
     m.spoken_text(goal)
     m.sound_file(goal)
     return goal
+
+
+@dataclass(frozen=True, slots=True)
+class GoalStatus:
+    """One status of any goal on `audio/play_sound/status` (`on_status`)."""
+
+    goal_id: str
+    state: str
+    """ACCEPTED, PLAYING, SUCCEEDED, CANCELED or ABORTED."""
+    message: str
+    stamp_ns: int
+    """When the player published it (a restarted program gets the last one, latched)."""
 
 
 class SoundHandle:
@@ -144,11 +159,16 @@ class SoundHandle:
 
 class Speaker(Actuator):
     """Goals to `audio/play_sound` (one token of the action limit each), and
-    their statuses routed to the handles."""
+    their statuses routed to the handles. `builtin`: the robot's own
+    behaviour, which takes no "audio" lease (it keeps silent while one is held)."""
 
     def __init__(self, node: Node, leases: LeaseTable, timeout: float,
-                 limit: ActionLimit | None = None) -> None:
+                 limit: ActionLimit | None = None, builtin: bool = False) -> None:
         super().__init__(node, leases, timeout, limit)
+        self.builtin = builtin
+        self._statuses: Watchers[GoalStatus] = Watchers("speaker status")
+        self._frees: Watchers[bool] = Watchers("speaker free")
+        self._free: Subscription | None = None
         self._handles: BoundedDict[str, SoundHandle] = BoundedDict(256)
         self._early: BoundedDict[str, m.PlaySoundStatus] = BoundedDict(64)
         """Statuses that came before their goal's reply (the action publishes
@@ -162,6 +182,26 @@ class Speaker(Actuator):
                 self._early[status.goal_id] = status
         if handle is not None:
             handle.update(status)
+        self._statuses.notify(GoalStatus(status.goal_id, status.state, status.message,
+                                         status.stamp_ns))
+
+    def on_status(self, callback: Callable[[GoalStatus], Any]) -> Watch:
+        """Call `callback(status)` for every goal's status, anyone's (the robot's
+        behaviour follows the speaker as a whole), until the returned watch or
+        the bot closes; first with the newest status known, if any (the latched
+        one of a goal that may have ended before this program started)."""
+        return self._statuses.add(callback)
+
+    def on_free(self, callback: Callable[[bool], Any]) -> Watch:
+        """Call `callback(free)` whenever the player says whether it is idle
+        (`audio/device_free`, latched: the current value first), until the
+        returned watch or the bot closes."""
+        with self._lock:
+            if self._free is None:
+                self._free = self.node.subscribe(
+                    keys.DEVICE_FREE, lambda msg, _key: self._frees.notify(msg.data),
+                    delivery="queue")
+        return self._frees.add(callback)
 
     def play(self, sound: Sound, timeout: float | None = None) -> SoundHandle:
         """Start a sound of `[audio.sounds]`, `say:<text>` or a file (`goal_sound`
@@ -223,7 +263,7 @@ class Speaker(Actuator):
     def _audio_lease(self, timeout: float) -> Lease | None:
         """An "audio" lease for one sound, or None: the program holds one already,
         or no eyes driver answers (nobody to share the speaker with)."""
-        if self.leases.holding("audio") is not None:
+        if self.builtin or self.leases.holding("audio") is not None:
             return None
         try:
             return self.leases.acquire(["audio"], "app", None, timeout, counted=False)
@@ -231,11 +271,19 @@ class Speaker(Actuator):
             log.debug("playing without an audio lease: %s", exc)
             return None
 
-    def cancel(self, goal_id: str, timeout: float) -> None:
-        call(self.node, keys.PLAY_SOUND_CANCEL, m.CancelGoal(goal_id=goal_id), timeout,
-             hint="is the audio service running?")
+    def cancel(self, goal_id: str, timeout: float) -> bool:
+        """Ask the player to stop goal `goal_id`; whether it did (False: no such
+        goal playing). NoService when nobody answers."""
+        reply: m.TriggerReply = call(self.node, keys.PLAY_SOUND_CANCEL,
+                                     m.CancelGoal(goal_id=goal_id), timeout,
+                                     hint="is the audio service running?")
+        return reply.success
 
     def close(self) -> None:
+        self._statuses.clear()
+        self._frees.clear()
+        if self._free is not None:
+            self._free.close()
         self._status.close()
 
 

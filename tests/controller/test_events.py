@@ -22,19 +22,21 @@ from buddybot.controller.events import (
 )
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
+from buddybot.sdk.persons import PeopleNow, Person
+from buddybot.sdk.speaker import GoalStatus
 from buddybot.tools.testing import visitor
 
-from .fakes import Clock, FakeNode
+from .fakes import Clock, FakeBot, attached, face, people_now
 
 A = m.ExpressionAction
 
 
 @pytest.fixture
-def rig() -> tuple[Controller, FakeNode, Clock]:
+def rig() -> tuple[Controller, FakeBot, Clock]:
     settings = msgspec.convert({"recover_s": 0.0, "greet_dwell_s": 0.0, "farewell_delay_s": 0.0,
                                 "sleepy_s": 0.0}, ControllerSettings)
-    node, clock = FakeNode(), Clock()
-    return Controller(node, settings, clock=clock), node, clock  # type: ignore[arg-type]
+    clock = Clock()
+    return (*attached(settings, clock), clock)
 
 
 def drain(controller: Controller) -> list[Any]:
@@ -45,7 +47,7 @@ def drain(controller: Controller) -> list[Any]:
     return events
 
 
-def expressions(node: FakeNode) -> list[A]:
+def expressions(node: FakeBot) -> list[A]:
     return [msg.action for msg in node.publishers["controller/expression"].sent]
 
 
@@ -56,24 +58,23 @@ def commanded(controller: Controller) -> list[Any]:
     return out
 
 
-def test_callbacks_post_typed_events(rig: tuple[Controller, FakeNode, Clock]) -> None:
+def test_callbacks_post_typed_events(rig: tuple[Controller, FakeBot, Clock]) -> None:
     controller, _node, _clock = rig
-    controller._on_people(visitor(True, person_id=4), "k")
-    controller._on_device_free(m.Bool(stamp_ns=1, data=False), "k")
-    controller._on_status(m.PlaySoundStatus(goal_id="g", state="PLAYING", stamp_ns=0), "k")
+    controller._on_people(people_now(visitor(True, person_id=4)))
+    controller._on_device_free(False)
+    controller._on_status(GoalStatus("g", "PLAYING", "", 0))
     assert drain(controller) == [PeopleChanged(True, 4), DeviceFree(False),
                                  SoundStatus("g", "PLAYING", None)]
 
 
-def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Clock]) -> None:
+def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeBot, Clock]) -> None:
     controller, node, clock = rig
     controller._post(PeopleChanged(True, 1))
     drain(controller)
     assert expressions(node) == [A.EYE_AWAKE]
     # A face, decided in the callback itself, makes the greeting (and gaze at once);
     # the goal's reply and status then end it.
-    controller._on_face(m.FacePosition(stamp_ns=1, frame_id="front",
-                                       point=m.Point(x=1.0, y=0.0, z=0.0), confidence=0.9), "k")
+    controller._on_face(face(1.0, 0.0, 0.0, stamp_ns=1))
     assert node.publishers["controller/eye_control"].sent[-1].stamp_ns == 1
     [play] = commanded(controller)
     assert isinstance(play, PlaySound) and play.sound == "greeting"
@@ -97,7 +98,7 @@ def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeNode, Cloc
 
 
 def test_an_unknown_event_is_an_error_not_ignored(
-    rig: tuple[Controller, FakeNode, Clock],
+    rig: tuple[Controller, FakeBot, Clock],
 ) -> None:
     controller, _node, _clock = rig
     with pytest.raises(AssertionError):
@@ -105,7 +106,7 @@ def test_an_unknown_event_is_an_error_not_ignored(
 
 
 def test_an_unknown_command_is_an_error_not_played_as_a_sound(
-    rig: tuple[Controller, FakeNode, Clock],
+    rig: tuple[Controller, FakeBot, Clock],
 ) -> None:
     controller, node, _clock = rig
     with pytest.raises(AssertionError):
@@ -122,8 +123,13 @@ def person(pid: int, seen_by: m.SeenBy, distance_m: float = 1.0) -> m.Person:
                     zone_since_ns=1, arrived_ns=1, engagement="NONE", engagement_since_ns=1)
 
 
-def people(*persons: m.Person) -> m.PeopleState:
-    return m.PeopleState(stamp_ns=5, people=list(persons))
+def people(*persons: m.Person) -> PeopleNow:
+    return people_now(m.PeopleState(stamp_ns=5, people=list(persons)))
+
+
+def crowd(*persons: m.Person) -> tuple[Person, ...]:
+    """The persons of a `people/state`, as the SDK gives them."""
+    return people(*persons).people
 
 
 @pytest.mark.parametrize(("seen_by", "expected"), [
@@ -133,45 +139,45 @@ def test_a_person_present_is_in_range_while_shown_and_held_while_missed(
         seen_by: m.SeenBy, expected: PeopleChanged) -> None:
     """The people service's persons as they are: shown by either sensor is in range,
     missed (`seen_by` NONE, held by the people service) is held, not gone."""
-    assert people_changed(people(person(7, seen_by))) == expected
+    assert people_changed(crowd(person(7, seen_by))) == expected
 
 
 def test_nobody_present_is_out_of_range() -> None:
-    assert people_changed(people()) == PeopleChanged(False, None)
+    assert people_changed(crowd()) == PeopleChanged(False, None)
 
 
 def test_the_nearest_person_shown_is_the_one_whatever_the_order() -> None:
     near, far = person(3, "CAMERA", 0.8), person(2, "BOTH", 2.5)
     missed = person(9, "NONE", 0.3)  # nearer, but held: no sensor shows them now
     for order in ((near, far, missed), (missed, far, near)):
-        assert people_changed(people(*order)) == PeopleChanged(True, 3)
+        assert people_changed(crowd(*order)) == PeopleChanged(True, 3)
     tie = (person(5, "RADAR", 1.0), person(4, "RADAR", 1.0))
-    assert people_changed(people(*tie)) == people_changed(people(*reversed(tie))) == \
+    assert people_changed(crowd(*tie)) == people_changed(crowd(*reversed(tie))) == \
         PeopleChanged(True, 4)
     # Everyone held: the one followed, else the nearest.
     held = (person(5, "NONE", 2.0), person(6, "NONE", 1.0))
-    assert people_changed(people(*held)) == PeopleChanged(False, 6, held=True)
-    assert people_changed(people(*held), follow=5) == PeopleChanged(False, 5, held=True)
+    assert people_changed(crowd(*held)) == PeopleChanged(False, 6, held=True)
+    assert people_changed(crowd(*held), follow=5) == PeopleChanged(False, 5, held=True)
 
 
 def test_the_followed_persons_name_comes_with_them_and_its_change_is_news() -> None:
     ada = msgspec.structs.replace(person(3, "BOTH"), name="Ada")
-    assert people_changed(people(ada, person(4, "RADAR", 2.0))) == PeopleChanged(True, 3, "Ada")
-    unnamed = people(person(3, "BOTH"))
+    assert people_changed(crowd(ada, person(4, "RADAR", 2.0))) == PeopleChanged(True, 3, "Ada")
+    unnamed = crowd(person(3, "BOTH"))
     assert people_changed(unnamed, follow=3) == PeopleChanged(True, 3, None)
 
 
 def test_only_a_change_of_who_is_in_range_reaches_the_inbox(
-    rig: tuple[Controller, FakeNode, Clock],
+    rig: tuple[Controller, FakeBot, Clock],
 ) -> None:
     """people/state changes with every face frame (distance, direction): the same
     presence again posts nothing; another person, the sensors losing them (held),
     or their leaving does."""
     controller, _node, _clock = rig
     for distance in (1.0, 1.1, 1.2):
-        controller._on_people(visitor(True, person_id=1, distance_m=distance), "k")
-    controller._on_people(visitor(True, person_id=2), "k")
-    controller._on_people(visitor(False, person_id=2, held=True), "k")
-    controller._on_people(people(), "k")  # then gone
+        controller._on_people(people_now(visitor(True, person_id=1, distance_m=distance)))
+    controller._on_people(people_now(visitor(True, person_id=2)))
+    controller._on_people(people_now(visitor(False, person_id=2, held=True)))
+    controller._on_people(people())  # then gone
     assert drain(controller) == [PeopleChanged(True, 1), PeopleChanged(True, 2),
                                  PeopleChanged(False, 2, held=True), PeopleChanged(False)]

@@ -23,8 +23,9 @@ from buddybot.controller.events import PeopleChanged, RadarGaze, people_changed,
 from buddybot.controller.service import Controller
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
+from buddybot.sdk.persons import PeopleNow
 
-from .fakes import Clock, FakeNode
+from .fakes import Clock, FakeBot, attached, people_now
 from .test_behaviour import Rig
 
 FUSION_DEG = 10.0
@@ -133,36 +134,37 @@ def person(pid: int, seen_by: m.SeenBy, distance_m: float = 2.0,
                     yaw_rad=bearing, pitch_rad=pitch_rad, bearing_rad=bearing)
 
 
-def people(*persons: m.Person, stamp_ns: int = 5) -> m.PeopleState:
-    return m.PeopleState(stamp_ns=stamp_ns, people=list(persons))
+def people(*persons: m.Person, stamp_ns: int = 5) -> PeopleNow:
+    """A `people/state` as the SDK hands it over."""
+    return people_now(m.PeopleState(stamp_ns=stamp_ns, people=list(persons)))
 
 
 def test_the_radar_point_is_the_bearing_at_the_distance() -> None:
     msg = people(person(1, "RADAR", 2.0, 30.0))
-    x, y, z = radar_point(msg, 1) or (0, 0, 1)
+    x, y, z = radar_point(msg.people, 1) or (0, 0, 1)
     assert (x, y, z) == pytest.approx((2.0 * math.cos(math.pi / 6), 1.0, 0.0))
-    assert radar_point(msg, 2) is None
-    assert radar_point(people(person(1, "RADAR")), 1) is None  # LD2410: no bearing
+    assert radar_point(msg.people, 2) is None
+    assert radar_point(people(person(1, "RADAR")).people, 1) is None  # LD2410: no bearing
 
 
 def test_the_followed_person_stays_the_one_while_the_radar_sees_them() -> None:
     msg = people(person(1, "RADAR", 2.0, 30.0), person(2, "RADAR", 1.0, -30.0))
-    assert people_changed(msg) == PeopleChanged(True, 2)  # nearest
-    assert people_changed(msg, follow=1) == PeopleChanged(True, 1)
-    assert people_changed(people(person(2, "RADAR")), follow=1) == PeopleChanged(True, 2)
+    assert people_changed(msg.people) == PeopleChanged(True, 2)  # nearest
+    assert people_changed(msg.people, follow=1) == PeopleChanged(True, 1)
+    assert people_changed(people(person(2, "RADAR")).people, follow=1) == PeopleChanged(True, 2)
 
 
-def controller() -> tuple[Controller, FakeNode, Clock]:
+def controller() -> tuple[Controller, FakeBot, Clock]:
     settings = msgspec.convert({"recover_s": 0.0}, ControllerSettings)
-    node, clock = FakeNode(), Clock()
-    return Controller(node, settings, clock=clock), node, clock  # type: ignore[arg-type]
+    clock = Clock()
+    return (*attached(settings, clock), clock)
 
 
 def test_a_new_radar_direction_reaches_the_inbox_and_the_eyes() -> None:
     ctl, node, _clock = controller()
-    ctl._on_people(people(person(1, "RADAR", 2.0, 40.0), stamp_ns=10), "k")
-    ctl._on_people(people(person(1, "RADAR", 2.0, 40.0), stamp_ns=11), "k")  # same: no news
-    ctl._on_people(people(person(1, "RADAR", 2.0, 35.0), stamp_ns=12), "k")
+    ctl._on_people(people(person(1, "RADAR", 2.0, 40.0), stamp_ns=10))
+    ctl._on_people(people(person(1, "RADAR", 2.0, 40.0), stamp_ns=11))  # same: no news
+    ctl._on_people(people(person(1, "RADAR", 2.0, 35.0), stamp_ns=12))
     events = list(ctl._inbox)
     assert [type(e) for e in events] == [PeopleChanged, RadarGaze, RadarGaze]
     ctl.decision_step(events, next_tick=0.0)
@@ -175,5 +177,5 @@ def test_a_new_radar_direction_reaches_the_inbox_and_the_eyes() -> None:
 
 def test_without_angle_radars_nothing_is_posted_but_presence() -> None:
     ctl, _node, _clock = controller()
-    ctl._on_people(people(person(1, "RADAR")), "k")
+    ctl._on_people(people(person(1, "RADAR")))
     assert list(ctl._inbox) == [PeopleChanged(True, 1)]

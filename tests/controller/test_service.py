@@ -31,10 +31,13 @@ from buddybot.controller.settings import ControllerSettings
 from buddybot.runtime.config import parse_config
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
+from buddybot.sdk import Refused
+from buddybot.sdk.faces import Face
+from buddybot.sdk.speaker import GoalStatus
 from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until, visitor
 
 from .conftest import FAST_CONFIG
-from .fakes import Clock, FakeNode
+from .fakes import Clock, FakeBot, people_now
 from .test_behaviour import Rig, greet, state
 
 X = m.ExpressionAction
@@ -59,9 +62,10 @@ class Scene:
                  **overrides: Any) -> None:
         params = tomllib.loads(FAST_CONFIG)["controller"] | overrides
         self.clock = Clock()
-        self.node = FakeNode(self._call)
-        self.controller = Controller(self.node, msgspec.convert(params, ControllerSettings),
-                                     clock=self.clock)  # type: ignore[arg-type]
+        self.bot = FakeBot(self._call)
+        self.controller = Controller(msgspec.convert(params, ControllerSettings),
+                                     clock=self.clock)
+        self.controller.attach(self.bot)  # type: ignore[arg-type]
         self.durations = durations or {}
         self.refuse, self.fail = refuse, fail
         self.log: list[str] = []
@@ -78,25 +82,25 @@ class Scene:
     # -- what the test sees --
 
     def expressions(self) -> list[X]:
-        return [msg.action for msg in self.node.publishers["controller/expression"].sent]
+        return [msg.action for msg in self.bot.publishers["controller/expression"].sent]
 
     def controls(self) -> list[m.EyeControl]:
-        return list(self.node.publishers["controller/eye_control"].sent)
+        return list(self.bot.publishers["controller/eye_control"].sent)
 
     def states(self) -> list[m.ControllerState]:
-        return list(self.node.publishers["controller/state"].sent)
+        return list(self.bot.publishers["controller/state"].sent)
 
     # -- the stimulus --
 
     def presence(self, in_range: bool, person_id: int = 1) -> None:
         """The people service's state: the visitor seen by the radar, or missed."""
-        self.controller._on_people(visitor(in_range, person_id), "people/state")
+        self.controller._on_people(people_now(visitor(in_range, person_id)))
         self._settle()
 
     def face(self) -> int:
         stamp = m.now_ns()
-        self.controller._on_face(m.FacePosition(stamp_ns=stamp, frame_id="front",
-                                                point=self.point, confidence=0.9), "face")
+        p = self.point
+        self.controller._on_face(Face(p.x, p.y, p.z, stamp_ns=stamp, confidence=0.9))
         self._settle()
         return stamp
 
@@ -149,11 +153,10 @@ class Scene:
     # -- the audio server --
 
     def _status(self, goal_id: str, state: str) -> None:
-        self.controller._on_status(m.PlaySoundStatus(goal_id=goal_id, state=state,  # type: ignore[arg-type]
-                                                     stamp_ns=m.now_ns()), "status")
+        self.controller._on_status(GoalStatus(goal_id, state, "", m.now_ns()))
 
     def _device_free(self, free: bool) -> None:
-        self.controller._on_device_free(m.Bool(stamp_ns=m.now_ns(), data=free), "free")
+        self.controller._on_device_free(free)
 
     def _end(self, goal_id: str, sound: str, state: str) -> None:
         del self.playing[goal_id]
@@ -161,25 +164,24 @@ class Scene:
         self._status(goal_id, state)
         self._device_free(True)
 
-    def _call(self, service: Any, request: Any, _timeout: float) -> Any:
-        if service is keys.PLAY_SOUND:
-            return self._play(request)
-        assert service is keys.PLAY_SOUND_CANCEL
-        entry = self.playing.get(request.goal_id)
+    def _call(self, what: str, arg: str) -> Any:
+        if what == "play":
+            return self._play(arg)
+        assert what == "cancel"
+        entry = self.playing.get(arg)
         self.log.append(f"cancel:{entry[0] if entry else '?'}")
         if entry is None:
-            return m.TriggerReply(success=False, message="no such goal")
-        self._end(request.goal_id, entry[0], "CANCELED")
-        return m.TriggerReply(success=True)
+            return False
+        self._end(arg, entry[0], "CANCELED")
+        return True
 
-    def _play(self, request: m.PlaySound) -> m.PlaySoundReply:
-        sound = request.sound
+    def _play(self, sound: str) -> str:
         if sound in self.fail:
             self.log.append(f"failed:{sound}")
             raise CallFailed("no answer")
         if sound in self.refuse:
             self.log.append(f"refused:{sound}")
-            return m.PlaySoundReply(goal_id="", accepted=False, message="refused by test")
+            raise Refused("refused by test")
         goal_id = f"g{len(self.sounds) + 1}"
         self.overlaps += bool(self.playing)
         self.playing[goal_id] = (sound, self.clock.t + self.durations.get(sound, 0.5))
@@ -188,7 +190,7 @@ class Scene:
         self._status(goal_id, "ACCEPTED")
         self._device_free(False)
         self._status(goal_id, "PLAYING")
-        return m.PlaySoundReply(goal_id=goal_id, accepted=True)
+        return goal_id
 
 
 def no_repeats(seq: list[X]) -> bool:
@@ -307,28 +309,21 @@ def test_refused_and_failing_audio_do_not_stop_the_controller(how: str, logged: 
     s.run(5.0)
     assert s.sounds == []  # nobody was greeted, so no farewell
     assert s.log == [logged]  # and no retry within the cooldown
-    assert s.node.diagnostics.values.get("sound_call_failures", 0) == (how == "fail")
+    assert s.bot.diagnostics.values.get("sound_call_failures", 0) == (how == "fail")
     stamp = s.face()
     assert s.controls()[-1].stamp_ns == stamp  # still following faces
 
 
-def leases_holding(*resources: m.Resource) -> m.Leases:
-    """`leases/state` with one app lease on `resources` (none: no lease)."""
-    held = [m.Lease(lease_id="L1-t", holder="app-a", instance="i1", priority="app",
-                    resources=list(resources), granted_ns=1)] if resources else []
-    return m.Leases(stamp_ns=m.now_ns(), leases=held)
-
-
 def test_while_a_lease_holds_the_speaker_no_greeting_starts_and_after_it_does() -> None:
     s = Scene()
-    s.controller._on_leases(leases_holding("audio", "gaze"), "")
+    s.controller._on_leases(("gaze", "audio"))
     s.presence(True)
     s.watch(True)
     s.run(3.0)  # well past the greeting dwell
     assert s.sounds == []
     assert (s.states()[-1].waiting, s.states()[-1].yielded) == ("yielded", ["gaze", "audio"])
     assert s.controls(), "the gaze is still wished: the eyes driver decides what is shown"
-    s.controller._on_leases(leases_holding(), "")
+    s.controller._on_leases(())
     s.until(lambda: "play:greeting" in s.log, "the greeting once the speaker is free")
     assert s.states()[-1].yielded == []
 
