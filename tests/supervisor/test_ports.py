@@ -5,6 +5,7 @@ refusing a taken eye port in one line (exit 2) with nothing started."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import socket
 from collections.abc import Iterator
@@ -107,10 +108,8 @@ def test_up_refuses_a_taken_eye_port_before_starting_anything(
     started: set[int] = set()
     try:
         def exited() -> bool:
-            try:
+            with contextlib.suppress(psutil.Error):
                 started.update(p.pid for p in psutil.Process(up.pid).children(recursive=True))
-            except psutil.Error:
-                pass
             return not up.alive()
 
         retry_until(exited, 60, 0.02, "up refusing")
