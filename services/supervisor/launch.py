@@ -36,7 +36,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import IO
 
-from buddybot.runtime import endpoints, registry
+from buddybot.runtime import enabled, endpoints, registry
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase, resolve_path
 from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
@@ -47,7 +47,7 @@ from buddybot.sim.scenario import ScenarioError, load
 from buddybot.sim.settings import SimSettings
 from buddybot.supervisor import ports
 from buddybot.supervisor.status import StatusMonitor
-from buddybot.tools import doctor, enabled
+from buddybot.tools import doctor
 
 log = logging.getLogger("buddybot.up")
 

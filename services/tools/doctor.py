@@ -32,11 +32,10 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 from urllib.parse import urlsplit
 
-from buddybot.runtime import endpoints, registry
+from buddybot.runtime import enabled, endpoints, registry
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
 from buddybot.runtime.health import FAIL, OK, WARN, Check, DoctorHooks, Rate
 from buddybot.runtime.rates import count_hz
-from buddybot.tools import enabled
 
 CLOCK_MIN_EPOCH_S = 1_704_067_200.0
 """2024-01-01T00:00:00Z: a system clock before this was never set (no RTC, no NTP)."""

@@ -1,5 +1,5 @@
-"""Which services and apps a config runs: the one rule `up` starts by and `doctor`
-expects by.
+"""Which services and apps a config runs: the one rule `up` starts by, `doctor`
+expects by and the dashboard keeps listing by.
 
 `up` starts every installed service that is not on request, the on-request
 ones whose table says `enabled = true` (foxglove, identity, ros2-bridge),
@@ -50,3 +50,10 @@ def enabled_services(config: ConfigBase, installed: Iterable[registry.Entry], *,
 def app_names(config: ConfigBase) -> list[str]:
     """The node names of the apps of `[apps] run`."""
     return [spec.default_name for spec in config.apps.specs()]
+
+
+def node_names(config: ConfigBase, installed: Iterable[registry.Entry], *,
+               sim: bool = False) -> frozenset[str]:
+    """Every node the config runs: its enabled services and its apps."""
+    return frozenset([e.name for e in enabled_services(config, installed, sim=sim)]
+                     + app_names(config))
