@@ -13,7 +13,9 @@ already runs refuses to start instead of joining it (two robots on one bus,
 with a status line counting the other robot's nodes as its own). Our router is
 ready only when it says so itself (sd_notify READY=1 on a socket of ours), so a
 port taken between the check and the bind stops `up` instead of being joined,
-and so does a port taken while the router restarts.
+and so does a port taken while the router restarts. The web services' ports
+are tried before anything starts too (`ports.py`), and their addresses are
+printed only once they say they serve.
 
 The options are validated into an `UpPlan` before anything starts: an unknown
 `--only` name is a usage error (exit 2), `--connect` joins a running router
