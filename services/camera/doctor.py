@@ -53,14 +53,14 @@ def _devices(settings: CameraSettings, sim: bool, in_use: bool) -> list[Check]:
     return [check_camera(settings.source, sim or settings.sim, in_use)]
 
 
-def _rate(settings: CameraSettings | None) -> Rate:
+def _rates(settings: CameraSettings | None, _sim: bool) -> list[Rate]:
     fps = settings.fps if settings is not None else None
-    return Rate("camera images", keys.CAMERA_IMAGE.wildcard(), fps or DEFAULT_FPS)
+    return [Rate("camera images", keys.CAMERA_IMAGE.wildcard(), fps or DEFAULT_FPS)]
 
 
 CAPTURE = DoctorHooks(
     devices=_devices,
     packages=(("opencv", ("opencv-python-headless", "opencv-python",
                           "opencv-contrib-python")),),
-    rate=_rate)
+    rates=_rates)
 DETECTOR = DoctorHooks(packages=(("ai-edge-litert", ("ai-edge-litert",)),))

@@ -32,7 +32,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--sim", action="store_true",
                         help="the robot runs simulated: no radar, camera or audio hardware")
     parser.add_argument("--expect", action="append", metavar="NODE",
-                        help="nodes that must be alive (repeatable; default: every service)")
+                        help="nodes that must be alive (repeatable; default: the services "
+                        "and apps the config runs under `up`)")
     options.add_json_argument(parser, "print the checks as JSON")
     options.add_timeout_argument(parser, 3.0, "give up on the router after S seconds",
                                  connecting=False, kind=_positive)
@@ -65,8 +66,8 @@ def main(ctx: ServiceContext) -> int:
         robot, connect = args.robot or "buddy", args.connect or [DEFAULT_ENDPOINT]
     opts = doctor.Options(
         sim=args.sim, endpoint=connect[0], robot=robot,
-        expected=args.expect or doctor.expected_here(
-            [e.name for e in registry.available_services()], config),
+        expected=args.expect or doctor.expected_nodes(
+            config or default_config(), registry.available_services(), args.sim),
         timeout=args.timeout, window_s=args.window,
         zenoh_file=config.zenoh.config_file if config is not None else None, stop=ctx.stop,
     )

@@ -9,7 +9,8 @@ a clock value; everything here is deterministic and tested on its own
 * `RateLimiter`: at most N camera images per second to the pages, on
   average, without bursts (JPEG encoding is the dashboard's main CPU cost);
 * `NodeTable`: alive/down per node from liveliness tokens, restarts counted
-  when a node comes back under a new instance id, last diagnostics;
+  when a node comes back under a new instance id, last diagnostics; the
+  nodes the config runs stay listed when down, the others leave;
 * `Latency`: capture-to-gaze latency percentiles over a sliding window;
 * `Outbox`: what one page has not been sent yet (newest per slot, radar
   frames appended), so a slow page never builds a backlog;
@@ -38,6 +39,10 @@ from buddybot.runtime.limits import BoundedDict, clip
 
 MAX_NODES = 256
 """Node names remembered (liveliness keys are chosen by whoever connects)."""
+GONE_AFTER_S = 10.0
+"""A node the config does not run (an app started by hand, a tool) is dropped from
+the list this long after it went down: long enough to see it stop, and `up`
+restarts a crashed child sooner (1 s), so a restart keeps its row."""
 MAX_SENSORS = 32
 """Radar sensors (device, radar id) remembered."""
 MAX_QUEUED_FRAMES = 200
@@ -194,17 +199,23 @@ class NodeRow:
 
 
 class NodeTable:
-    """Every node ever seen: alive or down, restarts, its last diagnostics.
+    """Every node seen: alive or down, restarts, its last diagnostics.
 
     `update` takes the complete set of live tokens (name -> instance ids),
-    as a liveliness query answers it. A node that disappears stays listed as
-    down; one that comes back under an instance id it never had before
-    counts a restart (a second instance next to a live one counts too: it is
-    a new process under that name). Names are bounded (oldest forgotten).
+    as a liveliness query answers it. A node the config runs (`keep`: its
+    enabled services and apps) that disappears stays listed as down, since
+    it should be running; any other node is dropped `gone_after_s` after it
+    went down (an app that stopped has left, it is not broken). One that
+    comes back under an instance id it never had before counts a restart
+    (a second instance next to a live one counts too: it is a new process
+    under that name). Names are bounded (oldest forgotten).
     """
 
-    def __init__(self, max_nodes: int = MAX_NODES) -> None:
+    def __init__(self, max_nodes: int = MAX_NODES, keep: frozenset[str] = frozenset(),
+                 gone_after_s: float = GONE_AFTER_S) -> None:
         self._rows: BoundedDict[str, NodeRow] = BoundedDict(max_nodes)
+        self.keep = keep
+        self.gone_after_s = gone_after_s
 
     def _row(self, name: str, now_s: float) -> NodeRow:
         row = self._rows.get(name)
@@ -233,7 +244,11 @@ class NodeTable:
                 row.instances = frozenset()
                 row.since_s = now_s
                 changed = True
-        return changed
+        gone = [name for name, row in self._rows.items() if not row.alive
+                and name not in self.keep and now_s - row.since_s >= self.gone_after_s]
+        for name in gone:
+            del self._rows[name]
+        return changed or bool(gone)
 
     def diagnostics(self, msg: m.DiagnosticStatus, now_s: float) -> bool:
         """Record a node's diagnostics; True when its level or message changed."""

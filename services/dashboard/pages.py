@@ -85,7 +85,8 @@ class Board:
     """What the pages show now, and the pages; used only on the event loop."""
 
     def __init__(self, s: DashboardSettings, eye_port: int, sounds: list[str],
-                 configured: radar_map.Configured | None = None) -> None:
+                 configured: radar_map.Configured | None = None,
+                 keep: frozenset[str] = frozenset()) -> None:
         self.s = s
         self.eye_port = eye_port
         self.pages: set[Page] = set()
@@ -93,7 +94,7 @@ class Board:
                                       "leases": model.leases_view(None, None)}
         self.radar = model.RadarHistory(s.history_s)
         self.radar_latest: BoundedDict[str, dict[str, Any]] = BoundedDict(model.MAX_SENSORS)
-        self.nodes = model.NodeTable()
+        self.nodes = model.NodeTable(keep=keep)  # the nodes the config runs stay listed
         self.latency = model.Latency()
         self.sounds = sounds
         self.map = radar_map.RadarMap()

@@ -29,6 +29,7 @@ from buddybot.dashboard import login, radar_map
 from buddybot.dashboard.bus import Bus, Mailbox
 from buddybot.dashboard.pages import App, Board
 from buddybot.dashboard.settings import DashboardSettings
+from buddybot.runtime import enabled, registry
 from buddybot.runtime.config import resolve_path
 from buddybot.runtime.endpoints import local_host, serve_failure
 from buddybot.runtime.errors import ConfigError, ServeError
@@ -118,7 +119,8 @@ def make_gate(s: DashboardSettings, secure: bool, guard: Guard) -> login.Gate | 
 async def serve(ctx: ServiceContext, s: DashboardSettings) -> None:
     """Serve the page first, then join the bus; until SIGINT/SIGTERM."""
     eye_port, sounds = _other_tables(ctx, s)
-    board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config))
+    board = Board(s, eye_port, sorted(sounds), radar_map.Configured.read(ctx.config),
+                  keep=enabled.node_names(ctx.config, registry.available_services()))
     tls = tls_context(ctx, s)
     guard = guard_for(s, s.host, log)
     accept_log = AcceptErrorLog(log).install(asyncio.get_running_loop())

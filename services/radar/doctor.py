@@ -1,4 +1,10 @@
-"""The radar bridge's part of `buddybot doctor`: its serial ports, its frame rate."""
+"""The radar bridge's part of `buddybot doctor`: its serial ports, its report rate.
+
+What the bridge publishes depends on the model of each sensor: an LD2410
+sends `frames`, an LD2450 `targets`. So the rate doctor counts follows the
+configured models (the simulated sensor's `sim_model` when simulated); a
+sensor left to be recognised at connect may send either, and both count.
+"""
 
 from __future__ import annotations
 
@@ -6,11 +12,12 @@ import os
 from collections.abc import Sequence
 
 from buddybot.contract import keys
+from buddybot.radar.models import AUTO, LD2410, LD2450
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.runtime.health import FAIL, OK, Check, DoctorHooks, Rate
 
 RADAR_HZ = 10.0
-"""An LD2410 reports about 10 times a second (the simulator too)."""
+"""An LD2410 or an LD2450 reports about 10 times a second (the simulator too)."""
 
 
 def check_serial(sensors: Sequence[str], sim: bool) -> list[Check]:
@@ -36,8 +43,30 @@ def _devices(settings: RadarBridgeSettings, sim: bool, _in_use: bool) -> list[Ch
     return check_serial(list(settings.sensors), sim or settings.sim)
 
 
-def _rate(_settings: RadarBridgeSettings | None) -> Rate:
-    return Rate("radar frames", keys.RADAR_FRAMES.wildcard(), RADAR_HZ)
+def sensor_models(settings: RadarBridgeSettings, sim: bool) -> list[str]:
+    """Each sensor's configured model (`AUTO`: recognised at connect), as the bridge
+    will run: simulated (`--sim`, `sim`, or no sensor configured), only the
+    simulated sensor, of `sim_model`."""
+    if sim or settings.sim or not settings.sensors:
+        return [settings.sim_model]
+    return [settings.models.get(str(i), AUTO) for i in range(len(settings.sensors))]
 
 
-BRIDGE = DoctorHooks(devices=_devices, rate=_rate)
+def expected_rates(models: Sequence[str]) -> list[Rate]:
+    """The streams a bridge with sensors of these models publishes (pure)."""
+    frames, targets = keys.RADAR_FRAMES.wildcard(), keys.RADAR_TARGETS.wildcard()
+    rates = []
+    if LD2410 in models:
+        rates.append(Rate("radar frames", frames, RADAR_HZ))
+    if LD2450 in models:
+        rates.append(Rate("radar targets", targets, RADAR_HZ))
+    if AUTO in models and not rates:
+        rates.append(Rate("radar reports", frames, RADAR_HZ, also=(targets,)))
+    return rates
+
+
+def _rates(settings: RadarBridgeSettings | None, sim: bool) -> list[Rate]:
+    return expected_rates(sensor_models(settings or RadarBridgeSettings(), sim))
+
+
+BRIDGE = DoctorHooks(devices=_devices, rates=_rates)

@@ -40,6 +40,9 @@ class Rate:
     name: str
     key: str
     hz: float
+    also: tuple[str, ...] = ()
+    """More keys counted under the same name (a sensor whose model is known only
+    once it reports may publish on either)."""
 
 
 DeviceChecks = Callable[[Any, bool, bool], list[Check]]
@@ -55,5 +58,7 @@ class DoctorHooks:
     """The quick checks of its devices (no running robot needed)."""
     packages: tuple[tuple[str, tuple[str, ...]], ...] = ()
     """(shown name, distribution names to try) of what it runs on, for the versions line."""
-    rate: Callable[[Any], Rate] | None = None
-    """The stream it publishes and its expected rate, from its settings."""
+    rates: Callable[[Any, bool], list[Rate]] | None = None
+    """(its settings, simulated) -> the streams it publishes and their expected
+    rates: what it publishes depends on its settings (a radar's model), so a
+    stream the robot never sends is not reported as silent."""

@@ -13,7 +13,9 @@ already runs refuses to start instead of joining it (two robots on one bus,
 with a status line counting the other robot's nodes as its own). Our router is
 ready only when it says so itself (sd_notify READY=1 on a socket of ours), so a
 port taken between the check and the bind stops `up` instead of being joined,
-and so does a port taken while the router restarts.
+and so does a port taken while the router restarts. The web services' ports
+are tried before anything starts too (`ports.py`), and their addresses are
+printed only once they say they serve.
 
 The options are validated into an `UpPlan` before anything starts: an unknown
 `--only` name is a usage error (exit 2), `--connect` joins a running router
@@ -32,11 +34,11 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import IO
 
-from buddybot.runtime import endpoints, registry
+from buddybot.runtime import enabled, endpoints, registry
 from buddybot.runtime.backoff import Backoff
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase, resolve_path
 from buddybot.runtime.errors import EXIT_FAILURE, EXIT_USAGE, UsageError
@@ -45,6 +47,7 @@ from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.supervised import SUPERVISOR_ENV
 from buddybot.sim.scenario import ScenarioError, load
 from buddybot.sim.settings import SimSettings
+from buddybot.supervisor import ports
 from buddybot.supervisor.status import StatusMonitor
 from buddybot.tools import doctor
 
@@ -127,6 +130,8 @@ class Child:
     """Give the child its own sd_notify socket: `ready` is set when it says READY=1
     (the router does once its listening socket is bound), whatever its log level."""
     ready: threading.Event = field(default_factory=threading.Event)
+    on_line: Callable[[str], None] | None = None
+    """Called with each line of the child's output (after it is shown)."""
 
     def start(self, out: IO[str], lock: threading.Lock) -> None:
         # The child's PR_SET_PDEATHSIG watches the thread that forks it: only the
@@ -147,7 +152,7 @@ class Child:
         )
         self.started = time.monotonic()
         thread = threading.Thread(
-            target=_pump, args=(self.name, self.proc, out, lock), daemon=True
+            target=_pump, args=(self.name, self.proc, out, lock, self.on_line), daemon=True
         )
         thread.start()
         self.threads = [thread]
@@ -167,7 +172,8 @@ class Child:
                 self.proc.send_signal(signum)
 
 
-def _pump(name: str, proc: subprocess.Popen[bytes], out: IO[str], lock: threading.Lock) -> None:
+def _pump(name: str, proc: subprocess.Popen[bytes], out: IO[str], lock: threading.Lock,
+          on_line: Callable[[str], None] | None = None) -> None:
     assert proc.stdout is not None
     width = 14
     for raw in iter(proc.stdout.readline, b""):
@@ -175,6 +181,8 @@ def _pump(name: str, proc: subprocess.Popen[bytes], out: IO[str], lock: threadin
         with lock:
             out.write(f"[{name:<{width}}] {line}\n")
             out.flush()
+        if on_line is not None:
+            on_line(line)
 
 
 def _await_ready(listener: socket.socket, proc: subprocess.Popen[bytes],
@@ -278,8 +286,8 @@ def requested(ctx: ServiceContext) -> list[registry.Entry]:
             continue
         flag = entry.up_flag
         asked = flag is not None and getattr(ctx.args, flag.lstrip("-").replace("-", "_"), False)
-        if not asked and entry.table is not None and not getattr(ctx.args, "only", None):
-            asked = bool(getattr(getattr(ctx.config, entry.table, None), "enabled", False))
+        if not asked and not getattr(ctx.args, "only", None):
+            asked = enabled.table_enables(entry, ctx.config)
         if not asked:
             continue
         if not entry.exists():
@@ -293,15 +301,8 @@ SIM_LEAD_S = 2.0
 
 
 def simulated(name: str, ctx: ServiceContext) -> bool:
-    """Whether `up` runs this sensor service on the simulated world: asked (`--sim`,
-    the table's `sim`) or no hardware configured."""
-    config = ctx.config
-    if name == "radar-bridge":
-        table = config.radar_bridge
-        return bool(ctx.args.sim or table.sim or not table.sensors)
-    if name == "camera":
-        return bool(ctx.args.sim or config.camera.sim or not config.camera.source)
-    return False
+    """Whether `up` runs this sensor service on the simulated world (`enabled.simulated`)."""
+    return enabled.simulated(name, ctx.config, bool(ctx.args.sim))
 
 
 def world_args(ctx: ServiceContext) -> list[str]:
@@ -398,21 +399,15 @@ def router_argv(ctx: ServiceContext, plan: UpPlan) -> list[str]:
     return argv
 
 
-def _urls(ctx: ServiceContext, plan: UpPlan) -> list[str]:
-    """Where a person looks at the robot: the eye page, the dashboard, Foxglove."""
-    names = {e.name for e in plan.entries}
-    out = []
-    if "eye-renderer" in names:
-        port = getattr(ctx.args, "eye_port", None) or ctx.config.eye_renderer.port
-        out.append(f"eyes: http://127.0.0.1:{port}/eyes?eye=both")
-    for name, scheme, option in (("dashboard", "http", "dashboard_port"),
-                                 ("foxglove", "ws", None)):
-        table = getattr(ctx.config, name, None)
-        if name in names and table is not None:
-            port = (getattr(ctx.args, option, None) if option else None) or table.port
-            host = endpoints.local_host(table.host)
-            out.append(f"{name}: {scheme}://{host}:{port}/")
-    return out
+def _announcer(name: str) -> Callable[[str], None]:
+    """Where a person looks at the robot (the eye page, the dashboard, Foxglove),
+    logged when the service itself says it serves there: a service that could
+    not listen has no address printed."""
+    def on_line(line: str) -> None:
+        address = ports.served_address(name, line)
+        if address is not None:
+            log.info("%s", address)
+    return on_line
 
 
 def _say(text: str) -> None:
@@ -490,6 +485,11 @@ def up(ctx: ServiceContext) -> int:
         if busy:
             _say(busy)
             return EXIT_FAILURE
+    taken = ports.first_taken(ports.planned_ports(ctx.config, args,
+                                                  [e.name for e in plan.entries]))
+    if taken:
+        _say(taken)
+        return EXIT_USAGE
     router: Child | None = None
     if not plan.joins:
         router = Child("router", router_argv(ctx, plan), notify=True)
@@ -507,15 +507,14 @@ def up(ctx: ServiceContext) -> int:
                 return failed
         for entry in plan.entries:
             child = Child(entry.name, service_argv(entry.name, ctx, plan.connect,
-                                                   plan.service_args.get(entry.name)))
+                                                   plan.service_args.get(entry.name)),
+                          on_line=_announcer(entry.name))
             child.start(out, lock)
             children.append(child)
         for app in plan.apps:
             child = Child(app.name, app_argv(app, ctx, plan.connect))
             child.start(out, lock)
             children.append(child)
-        for line in _urls(ctx, plan):
-            log.info("%s", line)
         monitor = _monitor(ctx, plan, [e.name for e in plan.entries]
                            + [a.name for a in plan.apps])
         try:

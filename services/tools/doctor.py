@@ -32,9 +32,9 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 from urllib.parse import urlsplit
 
-from buddybot.runtime import endpoints, registry
+from buddybot.runtime import enabled, endpoints, registry
 from buddybot.runtime.config import DEFAULT_ENDPOINT, ConfigBase
-from buddybot.runtime.health import FAIL, OK, WARN, Check, DoctorHooks
+from buddybot.runtime.health import FAIL, OK, WARN, Check, DoctorHooks, Rate
 from buddybot.runtime.rates import count_hz
 
 CLOCK_MIN_EPOCH_S = 1_704_067_200.0
@@ -345,6 +345,15 @@ def expected_here(names: Iterable[str], config: ConfigBase | None) -> list[str]:
     return [n for n in names if not (away and n == EYE_RENDERER)]
 
 
+def expected_nodes(config: ConfigBase, installed: Iterable[registry.Entry], sim: bool
+                   ) -> list[str]:
+    """The nodes doctor expects when not told (`--expect`): the services the config
+    enables (`enabled.enabled_services`, as `up` starts them) and its apps, less
+    what runs on another host (`expected_here`)."""
+    services = [e.name for e in enabled.enabled_services(config, installed, sim=sim)]
+    return expected_here(services + enabled.app_names(config), config)
+
+
 def display_check(config: ConfigBase, bus: BusReport, expected: bool, timeout: float
                   ) -> Check | None:
     """The displays check of `bus_checks`: `plan_display`, then a look at the URL."""
@@ -381,12 +390,14 @@ class BusReport:
 
 
 def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
-              window_s: float, streams: dict[str, str], *, all_robots: bool = False,
+              window_s: float, streams: Mapping[str, Sequence[str]], *,
+              all_robots: bool = False,
               stop: threading.Event | None = None,
               wait_values: Mapping[str, str] | None = None) -> BusReport:
     """Open a probe on `endpoint` (giving up after `timeout`), list the live nodes (of
     every robot, as `robot/name`, with `all_robots`) and count the samples of
-    `streams` (name -> absolute key) for `window_s` seconds.
+    `streams` (name -> absolute keys, all counted under the name) for `window_s`
+    seconds.
 
     Diagnostics values seen meanwhile are kept per node. `wait_values` (node ->
     a value name): for each such node that is alive, wait past the window (at
@@ -435,7 +446,8 @@ def probe_bus(endpoint: str, robot: str, zenoh_file: str | None, timeout: float,
                 if all(v in report.diagnostics.get(n, {}) for n, v in wanted.items()):
                     have_values.set()
 
-        subs = [node.subscribe_raw(key, counter(name)) for name, key in streams.items()]
+        subs = [node.subscribe_raw(key, counter(name)) for name, keys_ in streams.items()
+                for key in keys_]
         subs.append(node.subscribe_raw(node.key(keys.DIAGNOSTICS), on_diagnostics))
         start = time.monotonic()
         node.stop_event.wait(window_s)
@@ -505,15 +517,23 @@ def port_users(endpoint: str, zenoh_file: str | None, timeout: float,
     return (sorted(bus.live) if bus.reachable else None), endpoints.port_holder(endpoint)
 
 
+def expected_rates(config: ConfigBase, expected: Iterable[str], sim: bool) -> list[Rate]:
+    """The streams the expected services publish with this config (an LD2450 robot's
+    radar bridge `targets`, not `frames`), as each service's hook says."""
+    wanted = set(expected)
+    return [rate for entry, hooks in service_hooks()
+            if hooks.rates is not None and entry.name in wanted
+            for rate in hooks.rates(getattr(config, entry.table or "", None), sim)]
+
+
 def bus_checks(config: ConfigBase, opts: Options) -> tuple[list[Check], frozenset[str]]:
     """Checks that ask the running robot, each bounded by `opts.timeout`; and the
     names of the live nodes (whose devices the quick checks must not open again)."""
     from buddybot.contract import keys
-    rates = [hooks.rate(getattr(config, entry.table or "", None))
-             for entry, hooks in service_hooks()
-             if hooks.rate is not None and entry.name in opts.expected]
+    rates = expected_rates(config, opts.expected, opts.sim)
     prefix = keys.prefix(opts.robot)
-    streams = {rate.name: f"{prefix}/{rate.key}" for rate in rates}
+    streams = {rate.name: [f"{prefix}/{key}" for key in (rate.key, *rate.also)]
+               for rate in rates}
     bus = probe_bus(opts.endpoint, opts.robot, opts.zenoh_file, opts.timeout,
                     opts.window_s if streams else 0.0, streams, stop=opts.stop,
                     wait_values={EYE_RENDERER: "url"})

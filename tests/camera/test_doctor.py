@@ -29,11 +29,11 @@ def test_a_device_that_is_not_there_does_not_open() -> None:
 
 
 def test_the_hooks_follow_the_settings() -> None:
-    assert CAPTURE.devices is not None and CAPTURE.rate is not None
+    assert CAPTURE.devices is not None and CAPTURE.rates is not None
     [check] = CAPTURE.devices(CameraSettings(source="0", sim=True), False, False)
     assert check.level == OK and "simulated" in check.detail
-    assert CAPTURE.rate(CameraSettings(fps=12.5)).hz == 12.5
-    assert CAPTURE.rate(CameraSettings()).hz == DEFAULT_FPS
-    assert CAPTURE.rate(None).name == "camera images"
+    assert [r.hz for r in CAPTURE.rates(CameraSettings(fps=12.5), False)] == [12.5]
+    assert [r.hz for r in CAPTURE.rates(CameraSettings(), False)] == [DEFAULT_FPS]
+    assert [r.name for r in CAPTURE.rates(None, True)] == ["camera images"]
     assert [name for name, _ in CAPTURE.packages + DETECTOR.packages] == [
         "opencv", "ai-edge-litert"]

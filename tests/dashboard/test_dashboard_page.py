@@ -583,3 +583,85 @@ def test_the_operator_remembers_a_face_sees_the_name_and_forgets_it(
     page.wait_for_function("document.getElementById('reply').textContent === 'forgot Ada'",
                            timeout=15_000)
     assert page.errors == []
+
+
+# --- many nodes on a laptop screen ------------------------------------------------------
+
+MANY_NODES = ["radar-bridge", "radar-presence", "camera", "face-detector", "controller",
+              "people", "eyes", "eye-renderer", "audio", "audio-player", "kitchen-timer", "sim",
+              "foxglove", "identity", "ros2-bridge", "greeter", "love_after_10s",
+              "wizard_of_oz", "living-room-announcer-with-a-long-name", "doorbell"]
+FITS = """() => {
+    const W = window.innerWidth, H = window.innerHeight, out = [];
+    const scrolls = (el, axis) => {
+        const o = getComputedStyle(el)[axis === 'x' ? 'overflowX' : 'overflowY'];
+        return o === 'auto' || o === 'scroll';
+    };
+    for (const panel of document.querySelectorAll('.panel')) {
+        const p = panel.getBoundingClientRect();
+        const name = panel.querySelector('h2') ? panel.querySelector('h2').textContent : '?';
+        if (p.right > W + 1 || p.bottom > H + 1) out.push(`${name}: panel off the page`);
+        if (panel.scrollWidth > panel.clientWidth + 1 && !scrolls(panel, 'x'))
+            out.push(`${name}: wider than its panel`);
+        if (panel.scrollHeight > panel.clientHeight + 1 && !scrolls(panel, 'y'))
+            out.push(`${name}: taller than its panel`);
+    }
+    return out;
+}"""
+"""What overflows: a panel off the page, or content past a panel that does not scroll."""
+
+
+def test_twenty_nodes_fit_or_scroll_inside_their_panels(
+        browser: Any, spawn: Callable[..., Process], probe: Node) -> None:
+    """20 nodes with long messages, two radar sensors: at 1280x800 the page does not
+    scroll, every table fits its panel or its panel scrolls, and the last node can be
+    scrolled into view inside the Nodes panel. The screenshot is kept for a person to
+    look at (docs/images/dashboard-nodes.png is a copy of one)."""
+    port = start_dashboard(spawn)
+    tokens = [probe.declare_token(probe.key(keys.NODES, node=name, instance=f"{i:032x}"))
+              for i, name in enumerate(MANY_NODES, start=1)]
+    try:
+        page = open_page(browser, port)
+        for name in MANY_NODES:
+            probe.publisher(keys.DIAGNOSTICS, node=name).put(m.DiagnosticStatus(
+                stamp_ns=m.now_ns(), node=name, level="WARN",
+                message=f"{name}: no audio hardware (failed to init device, code -401); "
+                "playing on the null device (silent)"))
+        radar = probe.publisher(keys.RADAR_FRAMES, device="7")
+        other = probe.publisher(keys.RADAR_FRAMES, device="8")
+        gates = [50] * 9
+        radar.put(sensor_frame(gates, gates))
+        other.put(sensor_frame(gates, gates, device=8))
+        page.wait_for_function(f"""() => (window.dash.nodes || []).filter((n) => n.alive
+            && n.level === 'WARN').length >= {len(MANY_NODES)}
+            && Object.keys(window.dash.sensors).length >= 2""", timeout=30_000)
+        page.wait_for_function(f"document.querySelectorAll('#nodes tbody tr').length >= "
+                               f"{len(MANY_NODES)}", timeout=10_000)
+        SHOTS.mkdir(parents=True, exist_ok=True)
+        page.screenshot(path=str(SHOTS / "dashboard-nodes.png"))
+        size = page.evaluate("[document.documentElement.scrollWidth, "
+                             "document.documentElement.scrollHeight]")
+        assert size[0] <= W and size[1] <= H, f"the page needs scrolling at {W}x{H}: {size}"
+        assert page.evaluate(FITS) == []
+        last = f"#nodes tr[data-node='{sorted(MANY_NODES)[-1]}']"
+        seen = page.evaluate(f"""() => {{
+            const row = document.querySelector("{last}");
+            row.scrollIntoView({{block: 'nearest'}});
+            const r = row.getBoundingClientRect();
+            const p = document.querySelector('.panel.nodes').getBoundingClientRect();
+            return r.top >= p.top && r.bottom <= p.bottom + 1 && r.right <= p.right + 1;
+        }}""")
+        assert seen, "the last node cannot be scrolled into view inside the Nodes panel"
+        # An app that stops leaves the list; a service the config runs stays, down.
+        for name in ("doorbell", "camera"):
+            tokens[MANY_NODES.index(name)].close()
+        page.wait_for_function("""() => {
+            const rows = window.dash.nodes || [];
+            const camera = rows.find((n) => n.name === 'camera');
+            return !rows.some((n) => n.name === 'doorbell') && camera && !camera.alive;
+        }""", timeout=60_000)
+        assert page.locator("#nodes tr[data-node='doorbell']").count() == 0
+        assert page.errors == []
+    finally:
+        for token in tokens:
+            token.close()

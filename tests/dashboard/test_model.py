@@ -81,6 +81,36 @@ def test_node_table_alive_down_and_restarts() -> None:
     assert rows["eyes"]["alive"] and rows["eyes"]["restarts"] == 0
 
 
+def test_a_stopped_app_leaves_the_list_and_a_configured_node_stays_down() -> None:
+    """An app that stopped has left: dropped `gone_after_s` after it went down. A node
+    the config runs should be running: it stays listed as down."""
+    t = model.NodeTable(keep=frozenset({"camera", "greeter"}), gone_after_s=10.0)
+    t.update({"camera": {"a"}, "greeter": {"g"}, "doorbell": {"d"}}, 1.0)
+    assert t.update({}, 2.0)                                  # everyone stopped
+    assert {r["name"]: r["alive"] for r in t.view()} == {
+        "camera": False, "doorbell": False, "greeter": False}
+    assert not t.update({}, 11.9)                             # not yet 10 s down
+    assert t.update({}, 12.0)                                 # the doorbell app left
+    assert [r["name"] for r in t.view()] == ["camera", "greeter"]
+    assert not t.update({}, 1000.0)                           # configured: stays down
+    assert [r["alive"] for r in t.view()] == [False, False]
+
+
+def test_an_app_restarted_soon_keeps_its_row_and_counts_the_restart() -> None:
+    t = model.NodeTable(gone_after_s=10.0)
+    t.update({"doorbell": {"d1"}}, 1.0)
+    t.update({}, 2.0)
+    t.update({"doorbell": {"d2"}}, 5.0)                       # back within 10 s
+    row = t.get("doorbell")
+    assert row is not None and row.alive and row.restarts == 1
+    t.update({}, 6.0)
+    t.update({}, 16.0)
+    assert t.get("doorbell") is None
+    t.update({"doorbell": {"d3"}}, 17.0)                      # a new visit: a new row
+    again = t.get("doorbell")
+    assert again is not None and again.restarts == 0
+
+
 def test_node_table_diagnostics_and_bound() -> None:
     t = model.NodeTable(max_nodes=2)
     diag = m.DiagnosticStatus(stamp_ns=1, node="camera", level="WARN", message="x" * 500)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from buddybot.radar.doctor import BRIDGE, check_serial
+from buddybot.radar.doctor import BRIDGE, check_serial, sensor_models
 from buddybot.radar.settings import RadarBridgeSettings
 from buddybot.runtime.health import FAIL, OK
 
@@ -34,3 +34,38 @@ def test_the_settings_sim_flag_needs_no_port() -> None:
     simulated = RadarBridgeSettings(sensors=["/dev/nothing"], sim=True)
     assert [c.level for c in BRIDGE.devices(simulated, False, False)] == [OK]
     assert [c.level for c in BRIDGE.devices(gone, True, False)] == [OK]
+
+
+def rate_names(settings: RadarBridgeSettings, sim: bool = False) -> list[str]:
+    assert BRIDGE.rates is not None
+    return [r.name for r in BRIDGE.rates(settings, sim)]
+
+
+def test_an_ld2450_robot_is_counted_on_targets_not_frames() -> None:
+    """An LD2450 publishes `targets`: counting `frames` would report it silent."""
+    angle = RadarBridgeSettings(sensors=["/dev/ttyUSB0"], models={"0": "LD2450"})
+    assert rate_names(angle) == ["radar targets"]
+    assert BRIDGE.rates is not None
+    [rate] = BRIDGE.rates(angle, False)
+    assert rate.key.endswith("/targets") and rate.also == ()
+    assert rate_names(RadarBridgeSettings(sim_model="LD2450")) == ["radar targets"]
+    assert rate_names(RadarBridgeSettings(sensors=["/dev/x"], sim_model="LD2450"),
+                      sim=True) == ["radar targets"]
+
+
+def test_each_configured_model_has_its_stream() -> None:
+    assert rate_names(RadarBridgeSettings()) == ["radar frames"]  # the simulated LD2410
+    mixed = RadarBridgeSettings(sensors=["/dev/a", "/dev/b"],
+                                models={"0": "LD2410", "1": "LD2450"})
+    assert rate_names(mixed) == ["radar frames", "radar targets"]
+    assert sensor_models(mixed, sim=False) == ["LD2410", "LD2450"]
+    assert sensor_models(mixed, sim=True) == ["LD2410"]  # only the simulated sensor
+
+
+def test_a_model_recognised_at_connect_counts_either_stream() -> None:
+    auto = RadarBridgeSettings(sensors=["/dev/a"])
+    assert BRIDGE.rates is not None
+    [rate] = BRIDGE.rates(auto, False)
+    assert rate.name == "radar reports"
+    assert {rate.key.rsplit("/", 1)[1], *(k.rsplit("/", 1)[1] for k in rate.also)} == {
+        "frames", "targets"}

@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from buddybot.runtime import registry
 from buddybot.runtime.config import default_config, parse_config
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
@@ -126,6 +127,53 @@ def test_the_services_lend_their_checks_in_the_registry_order() -> None:
     assert list(doctor.versions()) == ["python", "buddybot", "zenoh", "msgspec", "numpy",
                                        "opencv", "ai-edge-litert"]
     assert "opencv" in checks[4].detail and "ai-edge-litert" in checks[4].detail
+
+
+# --- what the robot runs: no alarm for what it was never meant to run ----------------
+
+HARDWARE = b'[radar_bridge]\nsensors = ["/dev/ttyUSB0"]\n[camera]\nsource = "/dev/video0"\n'
+
+
+def test_services_the_config_does_not_enable_are_not_expected() -> None:
+    """foxglove, identity and ros2-bridge run on request: not "missing" when off."""
+    expected = doctor.expected_nodes(default_config(), registry.SERVICES, sim=True)
+    assert not {"foxglove", "identity", "ros2-bridge"} & set(expected), expected
+    assert {"radar-bridge", "camera", "eye-renderer", "dashboard", "sim"} <= set(expected)
+    check = doctor.judge_nodes(expected, {name: {"x"} for name in expected})
+    assert check.level == OK and f"{len(expected)}/{len(expected)} alive" in check.detail
+
+
+def test_a_service_the_config_enables_is_expected() -> None:
+    config = parse_config(b"[identity]\nenabled = true\n[ros2]\nenabled = true\n",
+                          "robot.toml")
+    expected = doctor.expected_nodes(config, registry.SERVICES, sim=True)
+    assert {"identity", "ros2-bridge"} <= set(expected)
+    assert "foxglove" not in expected
+
+
+def test_the_simulated_world_is_expected_only_when_a_sensor_is_simulated() -> None:
+    hardware = parse_config(HARDWARE, "robot.toml")
+    assert "sim" not in doctor.expected_nodes(hardware, registry.SERVICES, sim=False)
+    assert "sim" in doctor.expected_nodes(hardware, registry.SERVICES, sim=True)
+
+
+def test_the_configured_apps_are_expected() -> None:
+    config = parse_config(b'[apps]\nrun = ["examples/apps/greeter.py"]\n', "robot.toml")
+    assert "greeter" in doctor.expected_nodes(config, registry.SERVICES, sim=True)
+
+
+def test_an_ld2450_robot_is_not_asked_for_radar_frames() -> None:
+    """An LD2450 publishes `targets`: no "radar frames: nothing received" for it."""
+    angle = parse_config(b'[radar_bridge]\nsensors = ["/dev/ttyUSB0"]\n'
+                         b'models = {0 = "LD2450"}\n', "robot.toml")
+    names = [r.name for r in doctor.expected_rates(angle, ["radar-bridge"], sim=False)]
+    assert names == ["radar targets"]
+    simulated = parse_config(b'[radar_bridge]\nsim_model = "LD2450"\n', "robot.toml")
+    assert [r.name for r in doctor.expected_rates(simulated, ["radar-bridge"], sim=True)] \
+        == ["radar targets"]
+    assert [r.name for r in doctor.expected_rates(default_config(), ["radar-bridge"], True)] \
+        == ["radar frames"]
+    assert doctor.expected_rates(angle, ["camera"], sim=False)[0].name == "camera images"
 
 
 # --- the displays check follows the deployment ------------------------------------------
@@ -265,3 +313,20 @@ def test_doctor_warns_when_the_renderer_runs_on_another_host(
     assert line.startswith("WARN") and "eye-renderer not running here" in line, out
     assert "http://192.0.2.10:8080" in line
     assert status == 0, out  # a warning, not a failure
+
+
+@pytest.mark.integration
+def test_doctor_counts_an_ld2450_robots_targets(
+        tmp_path: Path, endpoint: str, probe: Node, spawn: Callable[..., Process]) -> None:
+    """The false alarm as a user met it: a simulated LD2450 robot, doctor's radar line."""
+    spawn("radar-bridge", "--sim", "--sim-model", "LD2450")
+    retry_until(lambda: "radar-bridge" in probe.node_instances(timeout=1), 60, 0.2,
+                "radar-bridge alive")
+    config = tmp_path / "robot.toml"
+    config.write_text('[radar_bridge]\nsim_model = "LD2450"\n')
+    status, out = run_doctor(tmp_path, "--connect", endpoint, "--config", str(config), "--sim",
+                             "--expect", "radar-bridge", "--timeout", "5", "--window", "2")
+    assert "radar frames" not in out and "radar reports" not in out, out
+    [line] = [x for x in out.splitlines() if x[6:].startswith("radar targets ")]
+    assert line.startswith("OK"), out
+    assert status == 0, out

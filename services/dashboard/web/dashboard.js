@@ -551,6 +551,7 @@ function showNodes() {
     for (const [text, cls] of cells) {
       const td = document.createElement("td"); td.textContent = text; td.className = cls; tr.appendChild(td);
     }
+    tr.firstChild.title = n.name;  // a long name is cut to its column
     tr.title = n.message || "";
     body.appendChild(tr);
   }
