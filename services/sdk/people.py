@@ -233,6 +233,8 @@ class People:
         self._attention: m.ControllerState | None = None
         """The robot's own behaviour's latest state (subscribed on first `attended`)."""
         self._states: Watchers[PeopleNow] = Watchers("people state")
+        self._watching_states = False
+        """Subscribed to `people/state` for `on_state` (inline, on its first use)."""
         self._handles = [
             node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
             node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
@@ -243,12 +245,19 @@ class People:
             self._view.on_state(msg)
             self._lock.notify_all()
             self._fire()
-        self._states.notify(PeopleNow(tuple(person_from(p) for p in msg.people), msg.stamp_ns))
 
     def on_state(self, callback: Callable[[PeopleNow], Any]) -> Watch:
         """Call `callback(now)` with every `people/state` as the people service
         published it (the latched one first), until the returned watch or the
-        bot closes: for a behaviour that decides on who is there as a whole."""
+        bot closes: for a behaviour that decides on who is there as a whole.
+        It runs on the thread that receives the state (no queue: an arrival
+        is the robot's wake-up path), so keep it quick."""
+        with self._lock:
+            if not self._watching_states:
+                self._watching_states = True
+                self._handles.append(self._node.subscribe(
+                    keys.PEOPLE_STATE, lambda msg, _key: self._states.notify(PeopleNow(
+                        tuple(person_from(p) for p in msg.people), msg.stamp_ns))))
         return self._states.add(callback)
 
     def _fire(self) -> None:

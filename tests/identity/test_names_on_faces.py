@@ -7,7 +7,8 @@ service names the tracks from a gallery of both, and the real people
 service puts the names on the person. At no instant may `people/state`
 show a person whose name is not the face in the same message: the
 direction says whose face it is (Obama's on the robot's left, + yaw).
-Marked `integration`.
+The real controller then greets by name: the name it says is the face
+the people service shows at that moment. Marked `integration`.
 """
 
 from __future__ import annotations
@@ -107,3 +108,47 @@ def test_no_person_ever_carries_the_name_of_a_face_not_theirs(
                 wrong.append((s.stamp_ns, p.id, p.name, round(p.yaw_rad, 2)))
     assert names.count("Barack") > 5 and names.count("Joe") > 5, names[-20:]
     assert wrong == [], wrong[:10]
+    greeted_by_name(spawn, probe, tmp_path, state)
+
+
+def face_at(states: list[m.PeopleState]) -> str | None:
+    """Whose face the newest of `states` showing one shows (by its direction)."""
+    for s in reversed(states):
+        for p in s.people:
+            if p.yaw_rad is not None and p.seen_by in ("CAMERA", "BOTH"):
+                return "Barack" if p.yaw_rad > 0 else "Joe"
+    return None
+
+
+def greeted_by_name(spawn: Callable[..., Process], probe: Node, tmp_path: Path,
+                    state: Collector[m.PeopleState]) -> None:
+    """Start the real controller (greeting "say:Hello {name}") while the faces go on
+    switching; a greeting's name must be the face shown when it was asked for. A
+    controller that greeted before a name came is started again (a new greeting:
+    no cooldown), up to four times, so a named greeting is checked at least once."""
+    asked: list[tuple[str, str | None]] = []  # (the sound, the face shown then)
+    goals = itertools.count(1)
+
+    def play(req: m.PlaySound) -> m.PlaySoundReply:
+        asked.append((req.sound, face_at(list(state.messages))))
+        goal = f"goal-{next(goals)}"
+        status.put(m.PlaySoundStatus(goal_id=goal, state="SUCCEEDED", stamp_ns=m.now_ns()))
+        return m.PlaySoundReply(goal_id=goal, accepted=True)
+
+    status = probe.publisher(keys.PLAY_SOUND_STATUS)
+    probe.publisher(keys.DEVICE_FREE).put(m.Bool(stamp_ns=m.now_ns(), data=True))
+    probe.serve(keys.PLAY_SOUND, play)
+    config = tmp_path / "controller.toml"
+    config.write_text('[controller]\ngreeting_named = "say:Hello {name}"\n'
+                      "greet_dwell_s = 0.3\nrecover_s = 0.3\nregreet_cooldown_s = 0.0\n")
+    for _attempt in range(4):
+        before = len(asked)
+        proc = spawn("controller", "--config", str(config))
+        retry_until(lambda: len(asked) > before, 60, 0.1, "a greeting")  # noqa: B023
+        proc.stop()
+        if asked[-1][0].startswith("say:Hello "):
+            break
+    named = [(sound.removeprefix("say:Hello "), face) for sound, face in asked
+             if sound.startswith("say:Hello ")]
+    assert named, f"no greeting by name in {asked}"
+    assert all(name == face for name, face in named), asked
