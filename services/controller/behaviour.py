@@ -179,6 +179,9 @@ class Behaviour:
         self._device_free: bool | None = None
         self._yielded = False  # a lease holds the speaker: no sound of ours starts
         self._last_face: float | None = None
+        """When a face was last looked at (the gaze's own hold)."""
+        self._face_shown = False
+        """The people service shows the followed person's face (`seen_by` CAMERA or BOTH)."""
         self._face_since: float | None = None
         self._radar_gaze: Gaze | None = None
         """The followed person's direction from an angle radar; None: not tracked."""
@@ -288,7 +291,8 @@ class Behaviour:
     # -- events --
 
     def presence(self, now: float, in_range: bool, person_id: int | None = None,
-                 name: str | None = None, held: bool = False) -> list[Command]:
+                 name: str | None = None, held: bool = False,
+                 face: bool = False) -> list[Command]:
         """A person a sensor shows now is present (`in_range`), or nobody is shown
         (latched, on change); `held`: someone is still there though nobody is
         shown (the people service holds them: LEAVING, no timer of ours). Gone
@@ -297,7 +301,8 @@ class Behaviour:
         person; it names the visit's person until another one is in range (kept
         while they leave and the farewell plays, so a tool sees whom the goodbye
         is for). `name`: who that person is, if the people service knows (the
-        greeting uses it)."""
+        greeting uses it). `face`: the people service shows that person's face
+        (the one notion of a face being seen: engaged, and the greeting's dwell)."""
         if self._recover_until is not None and self._in_range_at_start is None:
             self._in_range_at_start = in_range  # the first one is the replayed latched value
             # The latched sound status was asked for with this one, and may come just
@@ -307,15 +312,19 @@ class Behaviour:
         if held != self._held or self._in_range is None:
             self._gone_since = None if held else now
         self._in_range, self._held = in_range, held
+        shown = face and in_range
+        if shown and not self._face_shown:
+            self._face_since = now
+        self._face_shown = shown
         if in_range and person_id is not None:
             self._person_id = person_id
             self._person_name = name
         return self._step(now)
 
     def face(self, now: float, gaze: Gaze, stamp_ns: int | None = None) -> list[Command]:
-        """A face (already as a gaze in the eyes frame): look at it at once."""
-        if not self._face_visible(now):
-            self._face_since = now
+        """A face (already as a gaze in the eyes frame): look at it at once. Whether
+        a face is seen is the people service's to say (`presence(face=...)`);
+        this is the gaze's fast path."""
         self._last_face = now
         self._last_look = now
         self._gaze_centred = False
@@ -395,7 +404,8 @@ class Behaviour:
     # -- internals --
 
     def _face_visible(self, now: float) -> bool:
-        return self._last_face is not None and now - self._last_face <= self.s.face_timeout_s
+        return self._face_shown
+
 
     def _drowsy(self, now: float) -> bool:
         if self.s.sleepy_s <= 0 or self._departed_at is None:

@@ -37,6 +37,8 @@ class PeopleChanged:
     person_id: int | None = None
     name: str | None = None
     held: bool = False
+    face: bool = False
+    """The people service shows that person's face now (`seen_by` CAMERA or BOTH)."""
 
 
 def people_changed(people: Sequence[Person], follow: int | None = None) -> PeopleChanged:
@@ -56,7 +58,8 @@ def people_changed(people: Sequence[Person], follow: int | None = None) -> Peopl
     pool = shown or people
     followed = next((p for p in pool if p.id == follow), None) if follow is not None else None
     person = followed or min(pool, key=lambda p: (_distance(p), p.id))
-    return PeopleChanged(bool(shown), person.id, person.name, held=not shown)
+    return PeopleChanged(bool(shown), person.id, person.name, held=not shown,
+                         face=person.seen_by in ("CAMERA", "BOTH"))
 
 
 @dataclass(frozen=True, slots=True)

@@ -275,8 +275,8 @@ class Controller:
             # assert_never, and at run time it raises instead of being dropped.
             match event:
                 case PeopleChanged(in_range=in_range, person_id=person_id, name=name,
-                                   held=held):
-                    commands = b.presence(now, in_range, person_id, name, held)
+                                   held=held, face=face):
+                    commands = b.presence(now, in_range, person_id, name, held, face)
                 case RadarGaze(gaze=gaze, stamp_ns=stamp_ns):
                     commands = b.radar(now, gaze, stamp_ns)
                 case DeviceFree(free=free):

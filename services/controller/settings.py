@@ -56,10 +56,11 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
       comes this long after the people service says the person left; how long
       a person nobody sees is held is the people service's `absence_hold_s`
       alone, so this adds no hold of its own by default.
-    * `face_timeout_s` 0.5: a face older than this is "not seen" (a few
-      frames at any usable camera rate).
     * `gaze_hold_s` 1.0: after the last face the eyes keep looking where it
-      was (a blink, a turned head), then return to centre.
+      was (a blink, a turned head), then go to the radar's direction of the
+      person or return to centre. Whether a face is seen at all is the people
+      service's (`[people] face_timeout_s`): the controller has no timeout
+      of its own.
     * `look_around_after_s` 2.0: someone is in range but no face for this
       long -> EYE_LOOK_RANDOM (searching); `look_around = false` disables it.
     * `greet_dwell_s` 1.0: in range with a face for this long before the
@@ -104,7 +105,6 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     farewell_delay_s: Annotated[float, _s("the departure (farewell if greeted) comes this "
                                           "long after the people service says the "
                                           "person left")] = 0.0
-    face_timeout_s: Annotated[float, _s("a face older than this is not seen")] = 0.5
     gaze_hold_s: Annotated[float, _s("eyes keep looking where the last face was")] = 1.0
     look_around_after_s: Annotated[float, _s("in range with no face this long: search")] = 2.0
     greet_dwell_s: Annotated[float, _s("in range with a face this long before the "

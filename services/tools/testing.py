@@ -203,16 +203,18 @@ class Process:
 
 
 def visitor(in_range: bool, person_id: int = 1, distance_m: float = 1.2,
-            stamp_ns: int | None = None, held: bool = False) -> m.PeopleState:
+            stamp_ns: int | None = None, held: bool = False,
+            face: bool = False) -> m.PeopleState:
     """`people/state` as the people service shows one visitor: seen by the radar
-    (`in_range`), missed by every sensor and not yet gone (`held`, seen_by NONE),
-    or gone (neither: nobody present). What a test about the controller alone
-    publishes instead of running `people`."""
+    (`in_range`; by the camera too with `face`), missed by every sensor and not
+    yet gone (`held`, seen_by NONE), or gone (neither: nobody present). What a
+    test about the controller alone publishes instead of running `people`."""
     stamp = m.now_ns() if stamp_ns is None else stamp_ns
     if not (in_range or held):
         return m.PeopleState(stamp_ns=stamp, people=[])
+    seen_by: m.SeenBy = ("BOTH" if face else "RADAR") if in_range else "NONE"
     person = m.Person(id=person_id, distance_m=distance_m, zone="PERSONAL",
-                      seen_by="RADAR" if in_range else "NONE", zone_since_ns=stamp,
+                      seen_by=seen_by, zone_since_ns=stamp,
                       arrived_ns=stamp, engagement="NONE", engagement_since_ns=stamp)
     return m.PeopleState(stamp_ns=stamp, people=[person])
 

@@ -23,7 +23,6 @@ from buddybot.tools.testing import visitor
 FAST_CONFIG = """
 [controller]
 farewell_delay_s = 0.8
-face_timeout_s = 0.5
 gaze_hold_s = 0.6
 look_around_after_s = 1.5
 greet_dwell_s = 0.5
@@ -130,13 +129,16 @@ class Stimulus:
         self.face_pub = node.publisher(keys.FACE, camera=camera)
         self.point = m.Point(x=1.0, y=0.3, z=0.0)
         self._watching = threading.Event()
+        self._said: tuple[bool, float, int] | None = None
         self._stop = threading.Event()
         self.faces_sent = 0
         self._thread = threading.Thread(target=self._stream, daemon=True)
         self._thread.start()
 
     def presence(self, in_range: bool, distance_m: float = 1.2, person_id: int = 1) -> None:
-        self.people_pub.put(visitor(in_range, person_id, distance_m))
+        self._said = (in_range, distance_m, person_id)
+        self.people_pub.put(visitor(in_range, person_id, distance_m,
+                                    face=self._watching.is_set()))
 
     def face(self, stamp_ns: int | None = None) -> int:
         stamp = stamp_ns if stamp_ns is not None else m.now_ns()
@@ -146,8 +148,11 @@ class Stimulus:
         return stamp
 
     def watch(self, on: bool) -> None:
-        """Start/stop a face stream at 10 frames/s (a camera that sees someone)."""
+        """Start/stop a face stream at 10 frames/s (a camera that sees someone), and
+        say so in the people state, as the people service does for its faces."""
         (self._watching.set if on else self._watching.clear)()
+        if self._said is not None:
+            self.presence(*self._said)
 
     def _stream(self) -> None:
         while not self._stop.wait(0.1):

@@ -23,12 +23,14 @@ from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
 
 GAZE = Gaze(0.1, -0.05, 120.0)
+FACE_TIMEOUT_S = 0.5
+"""The people service's default `face_timeout_s`: a face older than this is not shown."""
 
 
 class Rig:
     """A behaviour, a fake clock and the commands it gave, for readable tests."""
 
-    def __init__(self, **overrides: object) -> None:
+    def __init__(self, face_timeout_s: float = FACE_TIMEOUT_S, **overrides: object) -> None:
         params: dict[str, object] = {"recover_s": 0.0}
         params.update(overrides)
         self.s = msgspec.convert(params, ControllerSettings)
@@ -36,6 +38,11 @@ class Rig:
         self.b = Behaviour(self.s, self.t)
         self.log: list[tuple[float, Command]] = []
         self.goal = 0
+        # The people service's part: who is in range, and whether it shows their face.
+        self.face_timeout_s = face_timeout_s
+        self.said: tuple[bool, int | None, str | None] | None = None
+        self.last_face: float | None = None
+        self.face_shown = False
 
     def _rec(self, cmds: list[Command]) -> list[Command]:
         self.log.extend((self.t, c) for c in cmds)
@@ -47,15 +54,32 @@ class Rig:
         end = self.t + dt
         while self.t < end - 1e-9:
             self.t = min(end, self.t + 0.05)
+            out += self.people_face()
             out += self._rec(self.b.tick(self.t))
         return out
 
     def presence(self, in_range: bool, person_id: int | None = None,
                  name: str | None = None) -> list[Command]:
-        return self._rec(self.b.presence(self.t, in_range, person_id, name))
+        self.said = (in_range, person_id, name)
+        return self._rec(self.b.presence(self.t, in_range, person_id, name,
+                                         face=self.face_shown))
 
-    def face(self) -> list[Command]:
-        return self._rec(self.b.face(self.t, GAZE, 42))
+    def face(self, gaze: Gaze = GAZE, stamp_ns: int | None = 42) -> list[Command]:
+        """A face: the gaze's fast path, then the people service's state showing it."""
+        self.last_face = self.t
+        return self._rec(self.b.face(self.t, gaze, stamp_ns)) + self.people_face()
+
+    def people_face(self) -> list[Command]:
+        """What the people service says of the face when that changes: shown while
+        one came within `face_timeout_s` (its `[people] face_timeout_s`)."""
+        shown = self.last_face is not None and self.t - self.last_face <= self.face_timeout_s
+        if shown == self.face_shown:
+            return []
+        self.face_shown = shown
+        if self.said is None:
+            return []  # no people state yet: only the gaze
+        in_range, person_id, name = self.said
+        return self._rec(self.b.presence(self.t, in_range, person_id, name, face=shown))
 
     def faces(self, seconds: float, period: float = 0.1) -> list[Command]:
         out: list[Command] = []
@@ -441,7 +465,7 @@ def test_lost_sound_is_forgotten_after_timeout() -> None:
 
 
 def test_seed_mode_all_timings_zero() -> None:
-    zero = {k: 0.0 for k in ("farewell_delay_s", "face_timeout_s", "gaze_hold_s",
+    zero = {k: 0.0 for k in ("farewell_delay_s", "gaze_hold_s",
                              "look_around_after_s", "greet_dwell_s", "regreet_cooldown_s",
                              "sleepy_s")}
     r = Rig(look_around=False, **zero)

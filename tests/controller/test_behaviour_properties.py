@@ -36,9 +36,11 @@ from buddybot.controller.transform import Gaze
 from tests.properties import examples
 
 COOLDOWN = 4.0
+FACE_TIMEOUT_S = 0.3
+"""The world's people service: a face older than this is not shown."""
 SETTINGS = msgspec.convert(
     {
-        "farewell_delay_s": 0.5, "face_timeout_s": 0.3, "gaze_hold_s": 0.5,
+        "farewell_delay_s": 0.5, "gaze_hold_s": 0.5,
         "look_around_after_s": 1.0, "greet_dwell_s": 0.5, "regreet_cooldown_s": COOLDOWN,
         "sleepy_s": 1.0, "farewell_max_delay_s": 2.0, "sound_timeout_s": 6.0, "recover_s": 0.3,
     },
@@ -62,6 +64,8 @@ class World(RuleBasedStateMachine):
         self.restarted = False
         self.dead = False  # between a controller's death and its restart
         self.in_range = False
+        self.last_face: float | None = None
+        self.face_shown = False  # what the world's people service says of the face
         self.playing: Playing | None = None
         self.other_busy = False
         self.device_free = True
@@ -123,7 +127,8 @@ class World(RuleBasedStateMachine):
             self.t = min(end, self.t + 0.05)
             n += 1
             if watching and n % 2 == 0:
-                self.apply(self.b.face(self.t, Gaze(yaw, 0.0, 100.0), 1))
+                self.see_face(yaw)
+            self.people_face()
             if server:
                 if self.pending and self.playing is None:
                     self.reply(accept=True, status_first=n % 3 == 0)
@@ -145,11 +150,26 @@ class World(RuleBasedStateMachine):
     @rule(in_range=st.booleans())
     def presence(self, in_range: bool) -> None:
         self.in_range = in_range
-        self.apply(self.b.presence(self.t, in_range))
+        self.apply(self.b.presence(self.t, in_range, face=self.face_shown))
+
+    def see_face(self, yaw: float) -> None:
+        """A face reaches the controller, then the people service's state saying so."""
+        self.last_face = self.t
+        if not self.dead:
+            self.apply(self.b.face(self.t, Gaze(yaw, 0.0, 100.0), 1))
+        self.people_face()
+
+    def people_face(self) -> None:
+        """The people service's word on the face, when it changes."""
+        shown = self.last_face is not None and self.t - self.last_face <= FACE_TIMEOUT_S
+        if shown != self.face_shown:
+            self.face_shown = shown
+            if not self.dead:
+                self.apply(self.b.presence(self.t, self.in_range, face=shown))
 
     @rule(yaw=st.floats(-1.0, 1.0))
     def face(self, yaw: float) -> None:
-        self.apply(self.b.face(self.t, Gaze(yaw, 0.0, 100.0), 1))
+        self.see_face(yaw)
 
     @rule(busy=st.booleans())
     def other_program(self, busy: bool) -> None:
@@ -227,7 +247,7 @@ class World(RuleBasedStateMachine):
         # The expression's latched value died with the old process: the new one
         # publishes the current state again, which may equal the last one.
         self.expressions.clear()
-        self.apply(self.b.presence(self.t, self.in_range))
+        self.apply(self.b.presence(self.t, self.in_range, face=self.face_shown))
         self.apply(self.b.device_free(self.t, self.device_free))
         if self.latched_status is not None:
             gid, state, stamp = self.latched_status

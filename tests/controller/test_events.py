@@ -72,10 +72,13 @@ def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeBot, Clock
     controller._post(PeopleChanged(True, 1))
     drain(controller)
     assert expressions(node) == [A.EYE_AWAKE]
-    # A face, decided in the callback itself, makes the greeting (and gaze at once);
-    # the goal's reply and status then end it.
+    # A face is looked at in the callback itself; the people service showing it
+    # makes the greeting; the goal's reply and status then end it.
     controller._on_face(face(1.0, 0.0, 0.0, stamp_ns=1))
     assert node.publishers["controller/eye_control"].sent[-1].stamp_ns == 1
+    assert commanded(controller) == []
+    controller._post(PeopleChanged(True, 1, face=True))
+    drain(controller)
     [play] = commanded(controller)
     assert isinstance(play, PlaySound) and play.sound == "greeting"
     assert expressions(node)[-1] == A.EYE_GRIN
@@ -133,12 +136,14 @@ def crowd(*persons: m.Person) -> tuple[Person, ...]:
 
 
 @pytest.mark.parametrize(("seen_by", "expected"), [
-    ("RADAR", PeopleChanged(True, 7)), ("BOTH", PeopleChanged(True, 7)),
-    ("CAMERA", PeopleChanged(True, 7)), ("NONE", PeopleChanged(False, 7, held=True))])
+    ("RADAR", PeopleChanged(True, 7)), ("BOTH", PeopleChanged(True, 7, face=True)),
+    ("CAMERA", PeopleChanged(True, 7, face=True)),
+    ("NONE", PeopleChanged(False, 7, held=True))])
 def test_a_person_present_is_in_range_while_shown_and_held_while_missed(
         seen_by: m.SeenBy, expected: PeopleChanged) -> None:
     """The people service's persons as they are: shown by either sensor is in range,
-    missed (`seen_by` NONE, held by the people service) is held, not gone."""
+    missed (`seen_by` NONE, held by the people service) is held, not gone; shown
+    by the camera is a face seen."""
     assert people_changed(crowd(person(7, seen_by))) == expected
 
 
@@ -150,7 +155,7 @@ def test_the_nearest_person_shown_is_the_one_whatever_the_order() -> None:
     near, far = person(3, "CAMERA", 0.8), person(2, "BOTH", 2.5)
     missed = person(9, "NONE", 0.3)  # nearer, but held: no sensor shows them now
     for order in ((near, far, missed), (missed, far, near)):
-        assert people_changed(crowd(*order)) == PeopleChanged(True, 3)
+        assert people_changed(crowd(*order)) == PeopleChanged(True, 3, face=True)
     tie = (person(5, "RADAR", 1.0), person(4, "RADAR", 1.0))
     assert people_changed(crowd(*tie)) == people_changed(crowd(*reversed(tie))) == \
         PeopleChanged(True, 4)
@@ -162,9 +167,10 @@ def test_the_nearest_person_shown_is_the_one_whatever_the_order() -> None:
 
 def test_the_followed_persons_name_comes_with_them_and_its_change_is_news() -> None:
     ada = msgspec.structs.replace(person(3, "BOTH"), name="Ada")
-    assert people_changed(crowd(ada, person(4, "RADAR", 2.0))) == PeopleChanged(True, 3, "Ada")
+    assert people_changed(crowd(ada, person(4, "RADAR", 2.0))) == PeopleChanged(
+        True, 3, "Ada", face=True)
     unnamed = crowd(person(3, "BOTH"))
-    assert people_changed(unnamed, follow=3) == PeopleChanged(True, 3, None)
+    assert people_changed(unnamed, follow=3) == PeopleChanged(True, 3, None, face=True)
 
 
 def test_only_a_change_of_who_is_in_range_reaches_the_inbox(

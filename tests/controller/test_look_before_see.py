@@ -62,7 +62,7 @@ def test_the_same_direction_again_is_not_sent_again() -> None:
 
 
 def test_a_visible_face_keeps_the_gaze_then_the_radar_comes_back() -> None:
-    rig = Rig(face_timeout_s=0.5, gaze_hold_s=1.0)
+    rig = Rig(gaze_hold_s=1.0)
     rig.presence(True, 1)
     rig.face()
     assert looks(rig._rec(rig.b.radar(rig.t, radar_gaze(5.0)))) == []
@@ -100,18 +100,19 @@ def walk_past(rig: Rig, speed_deg_s: float = 30.0) -> list[tuple[float, float, s
             cmds = []
         if abs(bearing) <= CAMERA_HALF_FOV_DEG:
             face = Gaze(math.radians(bearing + FUSION_DEG * 0.9), 0.0, 200.0)
-            cmds += rig._rec(rig.b.face(rig.t, face))
+            cmds += rig.face(face, None)
             out += [(rig.t, math.degrees(c.gaze.yaw), "face") for c in looks(cmds)
                     if c.gaze is not None]
         out += [(rig.t, math.degrees(c.gaze.yaw), "tick")
-                for c in looks(rig._rec(rig.b.tick(rig.t))) if c.gaze is not None]
+                for c in looks(rig.people_face() + rig._rec(rig.b.tick(rig.t)))
+                if c.gaze is not None]
     return out
 
 
 @pytest.mark.parametrize("speed_deg_s", [15.0, 30.0, 60.0])
 def test_a_person_walking_past_is_followed_from_first_contact_without_a_jump(
         speed_deg_s: float) -> None:
-    rig = Rig(face_timeout_s=0.5, gaze_hold_s=1.0)
+    rig = Rig(gaze_hold_s=1.0)
     seq = walk_past(rig, speed_deg_s)
     assert seq[0][1] == pytest.approx(-70.0) and seq[0][2] == "radar"  # first contact
     assert {"radar", "face"} <= {src for _, _, src in seq}

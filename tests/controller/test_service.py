@@ -38,7 +38,7 @@ from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_unti
 
 from .conftest import FAST_CONFIG
 from .fakes import Clock, FakeBot, people_now
-from .test_behaviour import Rig, greet, state
+from .test_behaviour import FACE_TIMEOUT_S, Rig, greet, state
 
 X = m.ExpressionAction
 Spawn = Callable[..., Process]
@@ -74,6 +74,9 @@ class Scene:
         self.playing: dict[str, tuple[str, float]] = {}  # goal id -> (sound, ends at)
         self.watching = False
         self.point = m.Point(x=1.0, y=0.3, z=0.0)
+        self.said: tuple[bool, int] | None = None
+        self.last_face: float | None = None
+        self.face_shown = False
         self._next_face = 0.0
         self._next_tick = 0.0
         self._device_free(True)  # latched by the audio server before the controller came
@@ -93,16 +96,29 @@ class Scene:
     # -- the stimulus --
 
     def presence(self, in_range: bool, person_id: int = 1) -> None:
-        """The people service's state: the visitor seen by the radar, or missed."""
-        self.controller._on_people(people_now(visitor(in_range, person_id)))
+        """The people service's state: the visitor seen by the radar (and the camera,
+        while a face came within its `face_timeout_s`), or missed."""
+        self.said = (in_range, person_id)
+        self.controller._on_people(people_now(visitor(in_range, person_id,
+                                                      face=self.face_shown)))
         self._settle()
 
     def face(self) -> int:
+        """A face to the controller, then the people service's state showing it."""
         stamp = m.now_ns()
         p = self.point
+        self.last_face = self.clock.t
         self.controller._on_face(Face(p.x, p.y, p.z, stamp_ns=stamp, confidence=0.9))
+        self._people_face()
         self._settle()
         return stamp
+
+    def _people_face(self) -> None:
+        shown = self.last_face is not None and self.clock.t - self.last_face <= FACE_TIMEOUT_S
+        if shown != self.face_shown:
+            self.face_shown = shown
+            if self.said is not None:
+                self.presence(*self.said)
 
     def watch(self, on: bool) -> None:
         """A face every FACE_EVERY_S from now on (a camera that sees someone), or none."""
@@ -133,6 +149,7 @@ class Scene:
         if self.watching and self.clock.t >= self._next_face - 1e-9:
             self._next_face = self.clock.t + FACE_EVERY_S
             self.face()
+        self._people_face()
         self._settle()
 
     def _settle(self) -> None:
