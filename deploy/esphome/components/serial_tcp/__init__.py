@@ -12,6 +12,7 @@ import esphome.codegen as cg
 from esphome.components import socket, uart
 import esphome.config_validation as cv
 from esphome.const import CONF_BUFFER_SIZE, CONF_ID, CONF_PORT
+from esphome.core import CORE
 
 DEPENDENCIES = ["network"]
 AUTO_LOAD = ["socket"]
@@ -60,10 +61,15 @@ CONFIG_SCHEMA = cv.All(
     _consume_sockets,
 )
 
-# Bytes go both ways: reports from the radar, commands to it.
-FINAL_VALIDATE_SCHEMA = uart.final_validate_device_schema(
-    "serial_tcp", require_tx=True, require_rx=True
-)
+def FINAL_VALIDATE_SCHEMA(config):
+    """Bytes go both ways (reports from the radar, commands to it): the UART
+    needs both pins. On the host platform (a Linux build, which the tests run)
+    a UART is a device path with no pins, so there is nothing to check."""
+    if CORE.is_host:
+        return config
+    return uart.final_validate_device_schema(
+        "serial_tcp", require_tx=True, require_rx=True
+    )(config)
 
 
 async def to_code(config):

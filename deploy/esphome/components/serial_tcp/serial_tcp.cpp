@@ -128,7 +128,7 @@ void SerialTcpServer::send_to_clients_() {
       if (would_block(written))
         break;  // the socket's send buffer is full: the rest waits in the ring
       if (written <= 0) {
-        this->drop_client_(client, "send failed");
+        this->drop_client_(client, "send failed", errno);
         break;
       }
       client.sent += (uint64_t) written;
@@ -146,11 +146,11 @@ void SerialTcpServer::receive_from_clients_() {
       if (would_block(got))
         break;
       if (got == 0) {
-        this->drop_client_(client, "closed by the client");
+        this->drop_client_(client, "closed by the client", 0);
         break;
       }
       if (got < 0) {
-        this->drop_client_(client, "receive failed");
+        this->drop_client_(client, "receive failed", errno);
         break;
       }
       this->write_array(chunk, (size_t) got);
@@ -175,9 +175,10 @@ void SerialTcpServer::remove_dropped_() {
   }
 }
 
-void SerialTcpServer::drop_client_(Client &client, const char *why) {
+void SerialTcpServer::drop_client_(Client &client, const char *why, int error) {
   (void) why;  // unused when the log level is below INFO
-  ESP_LOGI(TAG, "port %u: client gone (%s, errno %d)", this->port_, why, errno);
+  (void) error;
+  ESP_LOGI(TAG, "port %u: client gone (%s, errno %d)", this->port_, why, error);
   client.sock->close();
   client.sock.reset();
 }

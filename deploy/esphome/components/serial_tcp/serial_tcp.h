@@ -51,7 +51,7 @@ class SerialTcpServer : public Component, public uart::UARTDevice {
   void read_uart_();
   void send_to_clients_();
   void receive_from_clients_();
-  void drop_client_(Client &client, const char *why);
+  void drop_client_(Client &client, const char *why, int error);
   void remove_dropped_();
   void publish_connected_();
 
