@@ -47,6 +47,9 @@ trap report EXIT
 
 phase setup scripts/setup.sh test  # runtime + the `test` extra
 $quick || phase packages scripts/test-packages.sh || true
+# ESPHome in its own cached venv, for the ESP32 firmware's checks (skipped without).
+esphome_venv() { local exe; exe=$(scripts/esphome.sh) && export BUDDYBOT_ESPHOME="$exe"; }
+$quick || [ -n "${BUDDYBOT_ESPHOME:-}" ] || phase esphome esphome_venv || true
 phase ruff .venv/bin/ruff check services tests benchmarks
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
 phase mypy env MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
