@@ -580,7 +580,7 @@ function showControl() {
   const el = $("control-state");
   el.title = holding ? `this dashboard's operator lease ${l.own}` : "";
   if (holding) put(el, "on: you drive");
-  else if (!l.known) put(el, "no lease state: is the controller running?");
+  else if (!l.known) put(el, "no lease state: is the eyes driver running?");
   else put(el, "off: buttons locked");
   el.className = holding ? "holding" : "dim";
   for (const b of document.querySelectorAll(".needs-control button")) {
@@ -602,7 +602,7 @@ function showLeases() {
     const div = document.createElement("div");
     div.className = "none";
     div.textContent = l.known ? "none: the robot's own behaviour holds everything"
-      : "no leases/state from the controller (not running?)";
+      : "no leases/state from the eyes driver (not running?)";
     box.appendChild(div);
   }
   for (const lease of l.leases) {
