@@ -43,6 +43,7 @@ from buddybot.contract import messages as m
 from buddybot.controller.events import people_changed
 from buddybot.runtime.node import Node
 from buddybot.runtime.service import resolve
+from buddybot.sdk.persons import person_from
 from buddybot.supervisor.launch import plan_up, service_argv
 from buddybot.tools.testing import (
     Collector,
@@ -206,7 +207,7 @@ def main() -> None:
         present = [False]
 
         def on_people(msg: m.PeopleState, _key: str) -> None:
-            change = people_changed(msg)  # the controller's own reading
+            change = people_changed([person_from(p) for p in msg.people])  # the controller's
             # An arrival after nobody was there (a person held and shown again is
             # no arrival: the eyes never slept).
             if change.in_range and not present[0]:

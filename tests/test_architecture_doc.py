@@ -44,7 +44,7 @@ ROLES = {"publisher": "pub", "publisher_on": "pub", "subscribe": "sub", "subscri
 """The node's methods, by the role they give their service in a key."""
 
 SDK_CALLS: dict[str, set[tuple[str, keys.Topic | keys.Service]]] = {
-    "on_state": {("sub", keys.PEOPLE_STATE), ("sub", keys.PEOPLE_EVENTS)},
+    "on_state": {("sub", keys.PEOPLE_STATE)},
     "on_face": {("sub", keys.FACE)},
     "on_status": {("sub", keys.PLAY_SOUND_STATUS), ("sub", keys.LEASES)},
     "on_free": {("sub", keys.DEVICE_FREE)},
@@ -55,8 +55,8 @@ SDK_CALLS: dict[str, set[tuple[str, keys.Topic | keys.Service]]] = {
     "look_at": {("pub", keys.BEHAVIOUR_GAZE)},
 }
 """An SDK call (method name) made by a service's own code -> the (role, key) it
-wires: opening `bot.people` subscribes its state and events, the speaker
-follows the leases for its own; the built-in bot's `express`/`look_at` are wishes."""
+wires: the speaker follows the leases for its own; the built-in bot's
+`express`/`look_at` are wishes."""
 
 Edge = tuple[str, str, str]
 """(from service, key pattern, to service)."""

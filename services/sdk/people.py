@@ -26,6 +26,7 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.runtime.handles import Subscription
 from buddybot.runtime.node import Node
 from buddybot.sdk import identity
 from buddybot.sdk.errors import NoService, SdkError, TimedOut
@@ -235,10 +236,10 @@ class People:
         self._states: Watchers[PeopleNow] = Watchers("people state")
         self._watching_states = False
         """Subscribed to `people/state` for `on_state` (inline, on its first use)."""
-        self._handles = [
-            node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
-            node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
-        ]
+        self._handles: list[Subscription] = []
+        self._viewing = False
+        """Subscribed to `people/state` and `people/events` for the view (on the
+        first call that reads it: a program using only `on_state` pays for neither)."""
 
     def _on_state(self, msg: m.PeopleState, _key: str) -> None:
         with self._lock:
@@ -280,7 +281,13 @@ class People:
                 stream.push(event)
 
     def _wait_state(self, timeout: float | None) -> None:
-        """Block (lock held) until the first state came, or NoService."""
+        """Open the view (lock held) and block until its first state came, or NoService."""
+        if not self._viewing:
+            self._viewing = True
+            self._handles += [
+                self._node.subscribe(keys.PEOPLE_STATE, self._on_state, delivery="queue"),
+                self._node.subscribe(keys.PEOPLE_EVENTS, self._on_event, delivery="queue"),
+            ]
         limit = self.timeout if timeout is None else timeout
         if not self._lock.wait_for(lambda: self._view.has_state, limit):
             raise NoService(f"no {keys.PEOPLE_STATE.pattern} within {limit:g} s: is the "
