@@ -1,13 +1,5 @@
-"""Which services and apps a config runs: the one rule `up` starts by, `doctor`
-expects by and the dashboard keeps listing by.
-
-`up` starts every installed service that is not on request, the on-request
-ones whose table says `enabled = true` (foxglove, identity, ros2-bridge),
-the simulated world only when a sensor is simulated, and the apps of
-`[apps] run`. Doctor must expect exactly that, or it reports as "missing" a
-service the robot was never meant to run. Pure: config and registry in,
-names out.
-"""
+"""Which services and apps a config runs, the one rule of `up`, `doctor` and the
+dashboard (pure): docs/core.md, 'What a config runs'."""
 
 from __future__ import annotations
 
@@ -21,11 +13,9 @@ SIMULATED_SENSORS = ("radar-bridge", "camera")
 
 
 def simulated(name: str, config: ConfigBase, sim: bool) -> bool:
-    """Whether sensor service `name` runs on the simulated world: asked (`sim`, the
-    table's `sim`) or no hardware configured."""
+    """Whether sensor `name` is simulated: asked (`sim`, its table's) or no hardware."""
     if name == "radar-bridge":
-        table = config.radar_bridge
-        return bool(sim or table.sim or not table.sensors)
+        return bool(sim or config.radar_bridge.sim or not config.radar_bridge.sensors)
     if name == "camera":
         return bool(sim or config.camera.sim or not config.camera.source)
     return False

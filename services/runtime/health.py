@@ -41,8 +41,7 @@ class Rate:
     key: str
     hz: float
     also: tuple[str, ...] = ()
-    """More keys counted under the same name (a sensor whose model is known only
-    once it reports may publish on either)."""
+    """More keys counted under the name (a sensor whose model is not configured)."""
 
 
 DeviceChecks = Callable[[Any, bool, bool], list[Check]]
@@ -59,6 +58,4 @@ class DoctorHooks:
     packages: tuple[tuple[str, tuple[str, ...]], ...] = ()
     """(shown name, distribution names to try) of what it runs on, for the versions line."""
     rates: Callable[[Any, bool], list[Rate]] | None = None
-    """(its settings, simulated) -> the streams it publishes and their expected
-    rates: what it publishes depends on its settings (a radar's model), so a
-    stream the robot never sends is not reported as silent."""
+    """(settings, simulated) -> the streams it publishes (by its model) and rates."""
