@@ -83,7 +83,7 @@ def _time(stamp_ns: int) -> Any:
     return cls(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000)
 
 
-def _header(stamp_ns: int, frame_id: str) -> Any:
+def header(stamp_ns: int, frame_id: str) -> Any:
     cls = types.typestore().types["std_msgs/msg/Header"]
     return cls(stamp=_time(stamp_ns), frame_id=frame_id)
 
@@ -107,7 +107,7 @@ def face_to_ros(face: m.FacePosition) -> bytes:
     store = types.typestore()
     point = store.types["geometry_msgs/msg/Point"](x=face.point.x, y=face.point.y,
                                                    z=face.point.z)
-    msg = store.types[types.POINT_STAMPED](header=_header(face.stamp_ns, face.frame_id),
+    msg = store.types[types.POINT_STAMPED](header=header(face.stamp_ns, face.frame_id),
                                            point=point)
     return serialize(msg, types.POINT_STAMPED)
 

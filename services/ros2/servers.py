@@ -48,7 +48,7 @@ MAX_WAITING = 8
 """get_result queries one goal may hold open (a client asks once)."""
 COUNTERS = ("service_calls", "service_errors", "goals", "goals_refused", "cancels")
 
-Declare = Callable[[wire.Kind, bridge.Route, wire.Qos], None]
+Declare = Callable[[wire.Kind, bridge.Route, wire.Qos], object]
 """Declares one graph token of the bridge's node (kind, route, QoS)."""
 Publish = Callable[[bridge.Route, wire.Qos], Callable[[bytes], None]]
 """Declares a ROS 2 publisher (and its token); returns its put."""

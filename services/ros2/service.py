@@ -37,11 +37,11 @@ from typing import Any
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, servers, wire
+from buddybot.ros2 import bridge, convert, hri, servers, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.diagnostics import RateLimitedLog
 from buddybot.runtime.errors import ServiceError
-from buddybot.runtime.handles import RawPublisher, Subscription, Worker
+from buddybot.runtime.handles import RawPublisher, Subscription, Token, Worker
 from buddybot.runtime.leasing import LeaseHolder, LeaseRefused
 from buddybot.runtime.limits import clip
 from buddybot.runtime.node import Node
@@ -191,12 +191,16 @@ class Ros2Bridge:
             node.diagnostics.values[name] = 0
         self.servers = servers.Servers(node, settings, self._token, self._publisher)
         """The ROS 2 services and the `/play_sound` action (servers.py)."""
+        self._planner = hri.HriPlanner(settings.robot_frame)
+        self._hri: dict[str, tuple[RosPublisher, Token]] = {}
+        """The ROS4HRI publishers by topic name (relative): static ones and each
+        present person's."""
         self._last_sample: dict[str, float] = {}
         """Per resource: when its last ROS 2 command came (monotonic)."""
         node.diagnostics.values["idle_released"] = 0
 
     def _token(self, kind: wire.Kind, route: bridge.Route | None = None,
-               qos: wire.Qos = bridge.DEFAULT_QOS) -> None:
+               qos: wire.Qos = bridge.DEFAULT_QOS) -> Token:
         extra: dict[str, Any] = {}
         entity = self.node_id
         if route is not None:
@@ -207,7 +211,7 @@ class Ros2Bridge:
             domain_id=self.settings.domain_id, session_id=self.node.instance,
             node_id=self.node_id, entity_id=entity, kind=kind, enclave="",
             namespace=self.settings.namespace, node_name=bridge.NODE_NAME, **extra)
-        self.node.declare_token(token.format())
+        return self.node.declare_token(token.format())
 
     def _on_error(self, exc: BaseException) -> None:
         self.node.diagnostics.increment("callback_errors")
@@ -240,7 +244,36 @@ class Ros2Bridge:
             self.node.subscribe_raw(route.any_type_key, partial(self.on_sample, route, inbox),
                                     delivery="inline", remote_only=True)
             self._token("MS", route)  # after the subscriber: a peer seeing it is heard
+        for name, ros_type in hri.STATIC_TOPICS.items():
+            self._hri_topic(name, ros_type)
+        self.node.subscribe(keys.PEOPLE_STATE, self.on_people, delivery="latest")
         self.servers.start()
+
+    def _hri_topic(self, name: str, ros_type: str) -> None:
+        """Declare one ROS4HRI publisher (and its graph token) under `name`."""
+        route = bridge.route(self.settings, name, ros_type)
+        qos = hri.qos(name)
+        publisher = RosPublisher(self.node.raw_publisher(route.key, "application/cdr",
+                                                         cache=bridge.cache(qos)))
+        self._hri[name] = (publisher, self._token("MP", route, qos))
+
+    def on_people(self, state: m.PeopleState, _key: str) -> None:
+        """The people model as ROS4HRI: a person's topics open when they arrive
+        and close when they leave (`hri.HriPlanner` decides what is sent)."""
+        plan = self._planner.step(state)
+        for pid in plan.opened:
+            for name, ros_type in hri.PERSON_TOPICS.items():
+                self._hri_topic(hri.person_topic(pid, name), ros_type)
+        for sample in plan.samples:
+            self._hri[sample.name][0].put(sample.payload)
+            self.sent[sample.name] = self.sent.get(sample.name, 0) + 1
+        for pid in plan.closed:
+            for name in hri.PERSON_TOPICS:
+                topic = hri.person_topic(pid, name)
+                publisher, token = self._hri.pop(topic)
+                token.close()
+                publisher.publisher.close()
+                self.sent.pop(topic, None)
 
     def _publisher(self, route: bridge.Route, qos: wire.Qos) -> Callable[[bytes], None]:
         """A ROS 2 publisher of the servers (the action's topics), with its token;

@@ -29,16 +29,19 @@ from typing import Any
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
-from buddybot.ros2 import interfaces
+from buddybot.ros2 import hri_msgs, interfaces
 
 POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 BOOL = "std_msgs/msg/Bool"
+FLOAT32 = "std_msgs/msg/Float32"
+STRING = "std_msgs/msg/String"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 TRIGGER = "std_srvs/srv/Trigger"
 CANCEL_GOAL = "action_msgs/srv/CancelGoal"
 GOAL_STATUS_ARRAY = "action_msgs/msg/GoalStatusArray"
-STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL)
+STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL, FLOAT32, STRING, TF_MESSAGE)
 """Standard ROS 2 messages the bridge uses (shipped by rosbags' Jazzy store)."""
 
 OURS = interfaces.PACKAGE
@@ -145,11 +148,14 @@ def typestore() -> Typestore:
 
 
 def build_typestore() -> Typestore:
-    """A new store: Jazzy's standard types, std_srvs/srv/Trigger and buddybot_interfaces."""
+    """A new store: Jazzy's standard types, std_srvs/srv/Trigger, the hri_msgs the
+    bridge publishes and buddybot_interfaces."""
     store = get_typestore(Stores.ROS2_JAZZY)
     for name, definition in list(store.fielddefs.items()):
         store.fielddefs[name] = _char_as_uint8(definition)
     types: dict[str, Any] = {}
+    for name, text in hri_msgs.DEFINITIONS.items():
+        types.update(get_types_from_msg(text, name))
     for name, (request, response) in STANDARD_SERVICES.items():
         types.update(_service_types(name, request, response))
     for path, text in interfaces.generate().items():

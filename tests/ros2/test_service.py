@@ -18,7 +18,7 @@ import zenoh
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, service, types, wire
+from buddybot.ros2 import bridge, hri, service, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until
@@ -89,7 +89,8 @@ def test_the_graph_and_a_face_as_a_ros_2_peer_sees_them(
     kinds = sorted((t.kind, t.name or "") for t in started  # services: test_servers.py
                    if t.kind != "SS" and "/_action/" not in (t.name or ""))
     assert kinds == sorted([("NN", ""), ("MS", "/screen_expression"), ("MS", "/eye_control"),
-                            *(("MP", f"/{o.name}") for o in bridge.OUTGOING)])
+                            *(("MP", f"/{o.name}") for o in bridge.OUTGOING),
+                            *(("MP", f"/{name}") for name in hri.STATIC_TOPICS)])
     qos = {(t.kind, t.name): t.qos for t in started}
     assert qos["MP", "/eye_lid_control"] == bridge.LATCHED_QOS
     assert qos["MP", "/raw_image"] == bridge.SENSOR_QOS

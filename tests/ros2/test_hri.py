@@ -1,0 +1,196 @@
+"""The people model as ROS4HRI (services/ros2/hri.py): the plan from `people/state`
+(pure), its CDR read by mcap-ros2-support's decoder from definitions written
+here from REP-155, and the topics live on the bridge as a plain Zenoh peer
+sees them (opened when a person arrives, gone from the graph when they leave)."""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import msgspec
+import pytest
+import zenoh
+from hypothesis import given
+from hypothesis import strategies as st
+
+from buddybot.contract import keys
+from buddybot.contract import messages as m
+from buddybot.ros2 import bridge, hri, hri_msgs, types, wire
+from buddybot.ros2.settings import Ros2Settings
+from buddybot.runtime.node import Node, zenoh_config
+from buddybot.tools.testing import Process, retry_until, visitor
+
+from .test_convert import their_decoder
+from .test_service import late_sample
+
+SEPARATOR = "=" * 80
+HEADER = (f"{SEPARATOR}\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
+          f"{SEPARATOR}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n")
+SCHEMAS = {
+    hri_msgs.IDS_LIST: "std_msgs/Header header\nstring[] ids\n" + HEADER,
+    hri_msgs.ENGAGEMENT_LEVEL: ("std_msgs/Header header\nuint8 UNKNOWN=0\nuint8 DISENGAGED=1\n"
+                                "uint8 ENGAGING=2\nuint8 ENGAGED=3\nuint8 DISENGAGING=4\n"
+                                "uint8 level\n" + HEADER),
+    types.FLOAT32: "float32 data\n",
+    types.BOOL: "bool data\n",
+    types.STRING: "string data\n",
+    types.TF_MESSAGE: (
+        "geometry_msgs/TransformStamped[] transforms\n"
+        f"{SEPARATOR}\nMSG: geometry_msgs/TransformStamped\nstd_msgs/Header header\n"
+        "string child_frame_id\ngeometry_msgs/Transform transform\n"
+        f"{SEPARATOR}\nMSG: geometry_msgs/Transform\ngeometry_msgs/Vector3 translation\n"
+        "geometry_msgs/Quaternion rotation\n"
+        f"{SEPARATOR}\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n"
+        f"{SEPARATOR}\nMSG: geometry_msgs/Quaternion\nfloat64 x 0\nfloat64 y 0\nfloat64 z 0\n"
+        "float64 w 1\n" + HEADER),
+}
+"""The types as REP-155 and ROS 2 Jazzy define them: an independent reading."""
+
+
+def decode(sample: hri.Sample) -> Any:
+    return their_decoder(sample.ros_type, SCHEMAS[sample.ros_type])(sample.payload)
+
+
+def person(pid: int, **fields: Any) -> m.Person:
+    base = visitor(True, pid, 2.0).people[0]
+    return msgspec.structs.replace(base, **fields)
+
+
+def state(*people: m.Person, stamp_ns: int = 1_700_000_000_000_000_000) -> m.PeopleState:
+    return m.PeopleState(stamp_ns=stamp_ns, people=list(people))
+
+
+def by_name(plan: hri.Plan) -> dict[str, Any]:
+    return {s.name: decode(s) for s in plan.samples}
+
+
+def test_a_visit_opens_its_topics_sends_changes_only_and_closes_them() -> None:
+    planner = hri.HriPlanner(robot_frame="base_link")
+    ada = person(7, engagement="ENGAGED", yaw_rad=0.5, pitch_rad=0.0, seen_by="BOTH",
+                 name="Ada Lovelace")
+    first = planner.step(state(ada))
+    assert (first.opened, first.closed) == (("p7",), ())
+    got = by_name(first)
+    assert got["humans/persons/tracked"].ids == ["p7"]
+    assert got["humans/persons/known"].ids == ["p7", "known_ada_lovelace"]
+    assert got["humans/persons/p7/engagement_status"].level == 3  # ENGAGED
+    assert got["humans/persons/p7/location_confidence"].data == 1.0
+    assert got["humans/persons/p7/anonymous"].data is False
+    assert got["humans/persons/p7/alias"].data == "known_ada_lovelace"
+    [frame] = got["tf"].transforms
+    assert (frame.header.frame_id, frame.child_frame_id) == ("base_link", "person_p7")
+    t = frame.transform.translation
+    assert (t.x, t.y, t.z) == pytest.approx((2 * math.cos(0.5), 2 * math.sin(0.5), 0.0))
+    assert frame.header.stamp.sec == 1_700_000_000
+
+    again = planner.step(state(ada, stamp_ns=1_700_000_001_000_000_000))
+    assert [s.name for s in again.samples] == ["tf"]  # nothing else changed
+    looked_away = planner.step(state(msgspec.structs.replace(ada, engagement="DISENGAGING")))
+    assert [s.name for s in looked_away.samples] == ["humans/persons/p7/engagement_status", "tf"]
+
+    gone = planner.step(state())
+    assert (gone.opened, gone.closed) == ((), ("p7",))
+    assert {s.name: decode(s).ids for s in gone.samples} == {
+        "humans/persons/tracked": [], "humans/persons/known": []}
+
+
+def test_a_person_without_a_direction_has_no_frame_and_no_confidence() -> None:
+    planner = hri.HriPlanner()
+    plan = by_name(planner.step(state(person(2, engagement="NONE"))))  # an LD2410's distance
+    assert plan["humans/persons/p2/location_confidence"].data == 0.0
+    assert plan["humans/persons/p2/engagement_status"].level == 1  # DISENGAGED
+    assert plan["humans/persons/p2/anonymous"].data is True
+    assert "tf" not in plan and "humans/persons/p2/alias" not in plan
+    held = by_name(planner.step(state(person(2, bearing_rad=-0.2, seen_by="NONE"))))
+    assert held["humans/persons/p2/location_confidence"].data == 0.5
+
+
+@given(st.text(max_size=40))
+def test_an_identity_id_is_a_ros_name_token(name: str) -> None:
+    ident = hri.identity_id(name)
+    assert ident.startswith("known_") and ident.replace("_", "").isalnum()
+    assert ident.isascii() and ident == ident.lower()
+
+
+def test_the_hri_types_hash_as_pinned() -> None:
+    """The RIHS01 hashes of the two hri_msgs definitions written here (a change of
+    the text changes what every ROS 2 peer must match)."""
+    assert types.type_hash(hri_msgs.IDS_LIST) == (
+        "RIHS01_7e0812d1ac945c98fd3e393568d581ad0ab567f37b24eff633eab778c1bfe62d")
+    assert types.type_hash(hri_msgs.ENGAGEMENT_LEVEL) == (
+        "RIHS01_275391f46d2e6cc0d21085f8e02dce6a8150baa57539ec99bd9f4e0321443788")
+
+
+def test_every_topic_has_its_qos() -> None:
+    assert hri.qos(hri.TRACKED) == hri.qos("humans/persons/p1/alias") == bridge.LATCHED_QOS
+    assert hri.qos(hri.TF) == hri.qos("humans/persons/p1/location_confidence") == \
+        bridge.DEFAULT_QOS
+
+
+# --- live, on the bridge ----------------------------------------------------------------
+
+SETTINGS = Ros2Settings(domain_id=5)
+
+
+@pytest.fixture
+def peer(endpoint: str) -> Iterator[zenoh.Session]:
+    session = zenoh.open(zenoh_config(connect=[endpoint]))
+    yield session
+    session.close()
+
+
+def publishers(peer: zenoh.Session) -> set[str]:
+    names = set()
+    for reply in peer.liveliness().get(f"{wire.PREFIX}/{SETTINGS.domain_id}/**", timeout=2.0):
+        if reply.ok is not None:
+            token = wire.GraphToken.parse(str(reply.ok.key_expr))
+            if token.kind == "MP" and token.name:
+                names.add(token.name)
+    return names
+
+
+@pytest.mark.integration
+def test_persons_as_a_ros_2_peer_sees_them(spawn: Callable[..., Process], peer: zenoh.Session,
+                                           probe: Node) -> None:
+    spawn("ros2-bridge", "--domain-id", str(SETTINGS.domain_id))
+    retry_until(lambda: "/humans/persons/tracked" in publishers(peer), 30, 0.2,
+                "the bridge's ROS4HRI publishers")
+    tracked = bridge.route(SETTINGS, hri.TRACKED, hri_msgs.IDS_LIST)
+    lists: list[list[str]] = []
+    came = threading.Condition()
+
+    def on_tracked(sample: zenoh.Sample) -> None:
+        ids = their_decoder(hri_msgs.IDS_LIST, SCHEMAS[hri_msgs.IDS_LIST])(
+            sample.payload.to_bytes()).ids
+        with came:
+            lists.append(ids)
+            came.notify_all()
+
+    peer.declare_subscriber(tracked.key, on_tracked)
+    people = probe.publisher(keys.PEOPLE_STATE)
+    ada = person(4, engagement="ENGAGED", yaw_rad=0.2, seen_by="BOTH")
+
+    def seen(ids: list[str]) -> Callable[[], bool]:
+        def check() -> bool:
+            with came:
+                return bool(lists) and lists[-1] == ids
+        return check
+
+    retry_until(lambda: people.put(state(ada, stamp_ns=m.now_ns())) or seen(["p4"])(), 30, 0.3,
+                "p4 tracked")
+    engagement = bridge.route(SETTINGS, "humans/persons/p4/engagement_status",
+                              hri_msgs.ENGAGEMENT_LEVEL)
+    latched = late_sample(peer, engagement.key)
+    assert their_decoder(hri_msgs.ENGAGEMENT_LEVEL, SCHEMAS[hri_msgs.ENGAGEMENT_LEVEL])(
+        latched).level == 3
+    assert {"/humans/persons/p4/engagement_status", "/humans/persons/p4/alias",
+            "/tf"} <= publishers(peer)
+
+    retry_until(lambda: people.put(state(stamp_ns=m.now_ns())) or seen([])(), 30, 0.3,
+                "nobody tracked")
+    retry_until(lambda: not any(n.startswith("/humans/persons/p4/") for n in publishers(peer)),
+                15, 0.2, "p4's topics gone from the graph")
+
