@@ -12,8 +12,10 @@
 2. CPU of `ros2-bridge` (utime + stime over the window, via psutil) with
    faces at `--fps` and 640x480 bgr8 frames on `camera/front/image` at
    `--fps`: first with no ROS 2 subscriber of `/raw_image` (the bridge does
-   not read the frames), then with one (an `MS` graph token and a
-   subscriber on the key: every frame encoded as sensor_msgs/msg/Image).
+   not read the frames), then with `people/state` at `--fps` as well (one
+   visitor: the ROS4HRI topics and /tf), then with a subscriber of
+   `/raw_image` (an `MS` graph token and a subscriber on the key: every
+   frame encoded as sensor_msgs/msg/Image).
 3. CDR encode and decode rates of every type of the bridge's tables, in
    this process (`convert`: rosbags' serializer, our own writer for the two image
    types; our bounds on the way in).
@@ -48,6 +50,16 @@ from buddybot.tools.testing import Collector, Process, Router, retry_until, run_
 SETTINGS = Ros2Settings()
 FACE = bridge.route(SETTINGS, "face_position", types.POINT_STAMPED)
 RAW_IMAGE = bridge.route(SETTINGS, "raw_image", types.IMAGE)
+
+
+def visitor_state(stamp: int) -> m.PeopleState:
+    """One visitor in front of the camera, moving a little each frame (a new
+    frame on /tf every time, the rest on change)."""
+    person = m.Person(id=1, distance_m=1.2 + (stamp // 10**7 % 10) / 100, zone="PERSONAL",
+                      seen_by="BOTH", zone_since_ns=stamp, arrived_ns=stamp,
+                      engagement="ENGAGED", engagement_since_ns=stamp, yaw_rad=0.1,
+                      pitch_rad=0.0, name="Ada")
+    return m.PeopleState(stamp_ns=stamp, people=[person])
 
 
 def face(stamp: int) -> m.FacePosition:
@@ -160,6 +172,9 @@ def bench_cpu(proc: Process, probe: Node, peer: zenoh.Session, seconds: float,
 
     try:
         window("no ROS 2 subscriber of /raw_image")
+        people = probe.publisher(keys.PEOPLE_STATE)
+        pacers.append(Paced(lambda s: people.put(visitor_state(s)), fps))
+        window("no ROS 2 subscriber of /raw_image, people/state as well (ROS4HRI, /tf)")
         sub = peer.declare_subscriber(RAW_IMAGE.key, on_image)
         token = peer.liveliness().declare_token(wire.GraphToken(
             domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0,
