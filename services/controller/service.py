@@ -156,9 +156,12 @@ class Controller:
             self._stop = stop_event
         with self._lock:
             self._publish_state(self.clock())  # the first one, even before any input
-        bot.people.on_state(self._on_people)
-        bot.speaker.on_free(self._on_device_free)
+        # The speaker first: after a restart its latched status must come before the
+        # recovery that the first (latched) presence starts is over, or the visitor
+        # still there would be greeted again; asked first, it is answered first.
         bot.speaker.on_status(self._on_status)
+        bot.speaker.on_free(self._on_device_free)
+        bot.people.on_state(self._on_people)
         bot.on_face(self._on_face, camera=self.settings.camera)
         bot.leases.on_held(self._on_leases)
         for target, name in ((self._decide, "decide"), (self._sound_worker, "sound")):
