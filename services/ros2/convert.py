@@ -191,11 +191,27 @@ def image_to_ros(image: m.Image) -> tuple[str, bytes]:
 
 
 def raw_image_to_ros(image: m.Image) -> bytes:
-    """sensor_msgs/msg/Image of a `bgr8` frame; a JPEG frame is refused (it is
-    not raw: `compressed_image_to_ros`)."""
+    """sensor_msgs/msg/Image (`bgr8`) of a frame. A JPEG frame (a camera set to
+    `jpeg`, every frame of a recording) is decoded first, so `/raw_image`
+    has one type whatever the camera sends, live and in an exported bag."""
     if image.encoding != "bgr8":
-        raise ConvertError(f"a {image.encoding} image is not a raw sensor_msgs/msg/Image")
+        image = decoded_image(image)
     return image_to_ros(image)[1]
+
+
+def decoded_image(image: m.Image) -> m.Image:
+    """A JPEG frame as `bgr8`, its header checked against the message and the
+    contract's largest frame before it is decoded (contract/images.py, which
+    loads OpenCV: imported here, so a bridge fed bgr8 frames never loads it)."""
+    from buddybot.contract import images
+
+    try:
+        bgr = images.decode_image(image, m.MAX_SIDE * m.MAX_SIDE)
+    except images.FrameRefused as exc:
+        raise ConvertError(f"a {image.encoding} frame that does not decode: {exc.text}"
+                           ) from None
+    return m.Image(stamp_ns=image.stamp_ns, frame_id=image.frame_id, width=image.width,
+                   height=image.height, encoding="bgr8", data=bgr.tobytes())
 
 
 def compressed_image_to_ros(image: m.Image) -> bytes:

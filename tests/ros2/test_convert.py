@@ -12,6 +12,7 @@ import struct
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import pytest
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
@@ -332,11 +333,33 @@ def test_a_bgr8_frame_becomes_a_compressed_image_they_can_read() -> None:
     assert convert.compressed_image_to_ros(jpeg_image) == payload  # JPEG passes as it is
 
 
-def test_raw_image_takes_bgr8_only_and_checks_the_pixels() -> None:
+def test_raw_image_refuses_a_jpeg_that_does_not_decode_and_checks_the_pixels() -> None:
     jpeg_image = m.Image(stamp_ns=1, frame_id="c", width=1, height=1, encoding="jpeg",
                          data=b"\xff\xd8")
-    with pytest.raises(ConvertError, match="jpeg"):
+    with pytest.raises(ConvertError, match="jpeg frame that does not decode"):
         convert.raw_image_to_ros(jpeg_image)
     short = m.Image(stamp_ns=1, frame_id="c", width=4, height=4, encoding="bgr8", data=bytes(5))
     with pytest.raises(ConvertError):
         convert.compressed_image_to_ros(short)
+
+
+def test_raw_image_decodes_a_jpeg_frame_to_its_pixels() -> None:
+    """A camera set to `jpeg` (and every recorded frame) still gives /raw_image an
+    Image: the pixels OpenCV decodes, the header's stamp and frame id."""
+    import cv2
+
+    pixels = np.zeros((6, 10, 3), np.uint8)
+    pixels[:, 5:] = (200, 40, 10)
+    ok, buf = cv2.imencode(".jpg", pixels)
+    assert ok
+    image = m.Image(stamp_ns=4_000_000_009, frame_id="front", width=10, height=6,
+                    encoding="jpeg", data=buf.tobytes())
+    decoded = their_decoder(types.IMAGE, STANDARD[types.IMAGE] + DEPENDENCIES)(
+        convert.raw_image_to_ros(image))
+    assert (decoded.width, decoded.height, decoded.encoding, decoded.step) == (10, 6, "bgr8", 30)
+    assert (decoded.header.frame_id, decoded.header.stamp.nanosec) == ("front", 9)
+    expected = cv2.imdecode(np.frombuffer(buf, np.uint8), cv2.IMREAD_COLOR)
+    assert bytes(decoded.data) == expected.tobytes()
+    liar = msgspec.structs.replace(image, width=20)  # the header says 10x6
+    with pytest.raises(ConvertError, match="does not decode: jpeg header says 10x6"):
+        convert.raw_image_to_ros(liar)
