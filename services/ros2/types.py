@@ -1,7 +1,7 @@
 """The ROS 2 types the bridge speaks, in one rosbags typestore, with RIHS01 hashes.
 
-rosbags ships Jazzy's standard messages (geometry_msgs/msg/PointStamped,
-sensor_msgs/msg/Image and CompressedImage, std_msgs/msg/Bool, ...) but no
+rosbags ships Jazzy's standard messages (geometry_msgs/msg/PointStamped and
+PoseArray, sensor_msgs/msg/Image and CompressedImage, std_msgs/msg/Bool, ...) but no
 services; `std_srvs/srv/Trigger` and our `buddybot_interfaces` (generated
 from the contract by `interfaces`, the same text as the checked-in files)
 are registered here. rmw_zenoh puts a type's RIHS01 hash (REP-2016) in
@@ -35,10 +35,11 @@ POINT_STAMPED = "geometry_msgs/msg/PointStamped"
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 BOOL = "std_msgs/msg/Bool"
+POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 TRIGGER = "std_srvs/srv/Trigger"
 CANCEL_GOAL = "action_msgs/srv/CancelGoal"
 GOAL_STATUS_ARRAY = "action_msgs/msg/GoalStatusArray"
-STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL)
+STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL, POSE_ARRAY)
 """Standard ROS 2 messages the bridge uses (shipped by rosbags' Jazzy store)."""
 
 OURS = interfaces.PACKAGE
