@@ -4,7 +4,7 @@
     buddybot bag play visit.mcap [--rate R] [--loop] [--start S] [--keys KEY ...] [--robot ID]
     buddybot bag info visit.mcap [--json]
     buddybot bag recover cut.mcap -o visit.mcap
-    buddybot bag export --ros2 visit.mcap visit_ros2
+    buddybot bag export --ros2 visit.mcap visit_ros2 [--raw-image raw|compressed]
     buddybot bag import ros2_visit visit.mcap [--camera NAME]
 
 `record` writes one MCAP channel per concrete key of the catalogue's
@@ -38,9 +38,11 @@ from typing import Any
 from buddybot.cli import subverbs
 from buddybot.cli.subverbs import SubVerb
 from buddybot.contract import channels, keys
+from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime import options
 from buddybot.runtime.errors import UsageError
 from buddybot.runtime.node import Node, Publisher
+from buddybot.runtime.overrides import settings_option
 from buddybot.runtime.service import ServiceContext
 from buddybot.runtime.session import CONNECT_TIMEOUT_S, RouterUnreachable, zenoh_config
 from buddybot.tools import bag, bag_recover, probing
@@ -414,6 +416,10 @@ def _add_export(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("output", metavar="OUT",
                         help="the rosbag2 directory to write (new or empty): "
                              "OUT/metadata.yaml and OUT/OUT_0.mcap")
+    settings_option(parser, "--raw-image", struct=Ros2Settings, field="raw_image",
+                    help="/raw_image as the bridge publishes it: sensor_msgs/msg/Image "
+                         "(`raw`, bgr8, the recorded JPEG decoded) or CompressedImage "
+                         "(`compressed`, the JPEG as recorded)")
 
 
 def export(ctx: ServiceContext) -> int:

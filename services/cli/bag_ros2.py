@@ -1,6 +1,7 @@
 """`buddybot bag export --ros2` and `bag import`: our recordings to and from rosbag2.
 
     buddybot bag export --ros2 visit.mcap visit_ros2      # a rosbag2 directory
+    buddybot bag export --ros2 visit.mcap small --raw-image compressed
     buddybot bag import ros2_visit visit.mcap             # a rosbag2 directory or .mcap file
 
 The conversion is `ros2/rosbag.py`'s; our recordings are `tools/bag.py`'s;
@@ -8,12 +9,14 @@ this module only joins the two (the CLI is the one layer that sees both).
 
 `export` checks the whole recording first, as `play` does (a damaged file
 writes nothing), then writes each message of a mapped key on its ROS 2
-topic at its recorded time. `import` walks the ROS 2 file with the bounds
-every recording gets (`tools/mcap_records.py`: record, chunk and message
-sizes checked before anything is read or unpacked, CRCs), takes only the
-channels `rosbag.accept_channel` takes, converts each message with its
-checks, and writes a recording `bag play` replays; a message that does not
-decode is counted and skipped. A file too large or damaged is refused
+topic at its recorded time, as the bridge under the same `[ros2]` settings
+(`--raw-image` on top) publishes it: the same type and QoS. `import`
+walks the ROS 2 file with the bounds every recording gets
+(`tools/mcap_records.py`: record, chunk and message sizes checked before
+anything is read or unpacked, CRCs), takes only the channels
+`rosbag.accept_channel` takes, converts each message with its checks, and
+writes a recording `bag play` replays; a message that does not decode is
+counted and skipped. A file too large or damaged is refused
 whole (exit 1) and the output removed.
 """
 
@@ -27,6 +30,8 @@ from mcap.records import Channel, Message, Schema
 
 from buddybot.contract import channels, keys
 from buddybot.ros2 import convert, rosbag
+from buddybot.ros2.settings import Ros2Settings
+from buddybot.runtime.overrides import merge
 from buddybot.runtime.service import ServiceContext
 from buddybot.tools import bag, mcap_records
 
@@ -39,8 +44,9 @@ def export(ctx: ServiceContext) -> int:
     """Write a rosbag2 directory from one of our recordings."""
     args = ctx.args
     recording = bag.open_recording(args.file)
+    settings = merge(ctx.config.section(Ros2Settings), args)
     try:
-        writer = rosbag.Rosbag2Writer(args.output)
+        writer = rosbag.Rosbag2Writer(args.output, settings)
     except rosbag.Ros2BagError as exc:
         raise bag.BagError(str(exc)) from None
     try:
@@ -55,6 +61,9 @@ def export(ctx: ServiceContext) -> int:
         _note(f"skipping {channel.key}: {channel.skipped}")
     for key, why in sorted(writer.stats.skipped.items()):
         _note(f"skipping {key}: {why}")
+    if "/raw_image" in writer.stats.per_topic:
+        _note(f"/raw_image as {rosbag.live(settings)['raw_image'].ros_type} "
+              f"(raw_image = {settings.raw_image!r}, as the bridge publishes it)")
     topics = ", ".join(f"{name} {n}" for name, n in sorted(writer.stats.per_topic.items()))
     print(f"exported {writer.stats.messages} messages on {len(writer.stats.per_topic)} ROS 2 "
           f"topics ({topics or 'none'}) -> {writer.directory}/ (metadata.yaml, "

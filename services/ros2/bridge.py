@@ -7,8 +7,9 @@ Two tables, the bridge's whole contract with ROS 2:
   `/face_position` (geometry_msgs/msg/PointStamped), the camera's frames ->
   `/raw_image` (Image, or CompressedImage with `[ros2] raw_image =
   "compressed"`: `outgoing`), `/debug_image`, `/ld2410_target_frames`,
-  `/radar_presence`, the eye topics (buddybot_interfaces) and
-  `/audio_device_is_free` (std_msgs/msg/Bool);
+  `/ld2450_targets` (geometry_msgs/msg/PoseArray), `/radar_presence`, the
+  eye topics (buddybot_interfaces) and `/audio_device_is_free`
+  (std_msgs/msg/Bool);
 * `INCOMING`: a sample of a ROS 2 node -> a request to the robot:
   `/screen_expression` and `/eye_control` -> the controller (a lease on
   `expression` or `gaze`, then `eyes/command`), never our keys directly
@@ -16,11 +17,11 @@ Two tables, the bridge's whole contract with ROS 2:
 
 Each outgoing entry carries the QoS its graph token announces (latched
 keys transient-local depth 1, images best effort depth 5, the rest
-rmw_zenoh's default); images are `on_demand`, taken from the robot only
-while a ROS 2 subscription to the topic is in the graph (service.py).
-`Route` spells an entry's topic name (in the settings' namespace) and key
-expression (in their domain); `split_key` reads the type and hash back
-from a peer's key, so a sample of the wrong type or hash is counted.
+rmw_zenoh's default), also what an exported bag offers (rosbag.py: a bag
+replays as the bridge ran); images are `on_demand`, taken only while a
+ROS 2 subscription to the topic is in the graph (service.py). `Route`
+spells an entry's topic name and key expression; `split_key` reads the
+type and hash back from a peer's key, so a wrong one is counted.
 The whole table and the QoS, why: docs/ros2.md, 'The bridge service'.
 """
 
@@ -105,6 +106,8 @@ OUTGOING: tuple[Outgoing, ...] = (
              convert.compressed_image_to_ros, SENSOR_QOS, on_demand=True),
     Outgoing(keys.RADAR_FRAMES, "ld2410_target_frames",
              f"{types.OURS}/msg/LD2410TargetDataFrameArray", _ours),
+    Outgoing(keys.RADAR_TARGETS, "ld2450_targets", types.POSE_ARRAY,
+             convert.radar_targets_to_ros),
     Outgoing(keys.PRESENCE, "radar_presence", PRESENCE, _ours, LATCHED_QOS),
     Outgoing(keys.EXPRESSION, "screen_expression", EXPRESSION, _ours, LATCHED_QOS),
     Outgoing(keys.EYE_CONTROL, "eye_control", EYE_CONTROL, _ours),

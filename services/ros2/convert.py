@@ -3,7 +3,8 @@
 Outgoing (our message -> CDR): `FacePosition` -> geometry_msgs/msg/PointStamped
 (header.stamp from `stamp_ns`, header.frame_id from `frame_id`; the
 confidence has no field there), `Image` -> sensor_msgs/msg/Image (`bgr8`)
-or sensor_msgs/msg/CompressedImage (`jpeg`), `Bool` -> std_msgs/msg/Bool,
+or sensor_msgs/msg/CompressedImage (`jpeg`), `RadarTargets` ->
+geometry_msgs/msg/PoseArray in the radar's frame, `Bool` -> std_msgs/msg/Bool,
 and every message of `interfaces.MESSAGES` -> its `buddybot_interfaces`
 twin (same field names; an optional value is a sequence of at most one).
 
@@ -191,11 +192,27 @@ def image_to_ros(image: m.Image) -> tuple[str, bytes]:
 
 
 def raw_image_to_ros(image: m.Image) -> bytes:
-    """sensor_msgs/msg/Image of a `bgr8` frame; a JPEG frame is refused (it is
-    not raw: `compressed_image_to_ros`)."""
+    """sensor_msgs/msg/Image (`bgr8`) of a frame. A JPEG frame (a camera set to
+    `jpeg`, every frame of a recording) is decoded first, so `/raw_image`
+    has one type whatever the camera sends, live and in an exported bag."""
     if image.encoding != "bgr8":
-        raise ConvertError(f"a {image.encoding} image is not a raw sensor_msgs/msg/Image")
+        image = decoded_image(image)
     return image_to_ros(image)[1]
+
+
+def decoded_image(image: m.Image) -> m.Image:
+    """A JPEG frame as `bgr8`, its header checked against the message and the
+    contract's largest frame before it is decoded (contract/images.py, which
+    loads OpenCV: imported here, so a bridge fed bgr8 frames never loads it)."""
+    from buddybot.contract import images
+
+    try:
+        bgr = images.decode_image(image, m.MAX_SIDE * m.MAX_SIDE)
+    except images.FrameRefused as exc:
+        raise ConvertError(f"a {image.encoding} frame that does not decode: {exc.text}"
+                           ) from None
+    return m.Image(stamp_ns=image.stamp_ns, frame_id=image.frame_id, width=image.width,
+                   height=image.height, encoding="bgr8", data=bgr.tobytes())
 
 
 def compressed_image_to_ros(image: m.Image) -> bytes:
@@ -238,6 +255,34 @@ def image_from_ros(payload: bytes | memoryview, ros_type: str) -> m.Image:
         raise ConvertError(f"{ros_type} is not an image type")
     return _checked(m.Image, {"stamp_ns": stamp, "frame_id": frame_id,
                               "data": msg.data.tobytes(), **fields}, ros_type)
+
+
+def radar_frame(targets: m.RadarTargets) -> str:
+    """The TF frame of one angle radar, `radar_<device_id>_<radar_id>`: a radar
+    bridge may hold several sensors, each mounted on its own."""
+    return f"radar_{targets.device_id}_{targets.radar_id}"
+
+
+def radar_point(target: m.RadarTarget) -> tuple[float, float]:
+    """(x forward, y left) in metres of a target in its sensor's own frame with
+    ROS axes: the datasheet's y is forward, its +x the sensor's right (as
+    radar/mounting.py reads it). The mount is left out on purpose: where the
+    sensor sits is the TF from the robot to its frame (docs/ros2.md)."""
+    return target.y_m, -target.x_m
+
+
+def radar_targets_to_ros(targets: m.RadarTargets) -> bytes:
+    """geometry_msgs/msg/PoseArray of one angle-radar report: the radar's frame,
+    one pose per target (z 0), oriented as the frame (the LD2450 measures a
+    radial speed, no heading); a report without targets has no pose (nobody)."""
+    store = types.typestore()
+    point, pose = store.types["geometry_msgs/msg/Point"], store.types["geometry_msgs/msg/Pose"]
+    identity = store.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)
+    poses = [pose(position=point(x=x, y=y, z=0.0), orientation=identity)
+             for x, y in map(radar_point, targets.targets)]
+    msg = store.types[types.POSE_ARRAY](header=header(targets.stamp_ns, radar_frame(targets)),
+                                        poses=poses)
+    return serialize(msg, types.POSE_ARRAY)
 
 
 def bool_to_ros(value: m.Bool) -> bytes:

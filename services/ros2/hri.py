@@ -10,7 +10,7 @@ One ROS4HRI person per visit of the people service, id `p<person id>`:
   are, 0.5 while held, 0 without a direction), `anonymous` (std_msgs/Bool)
   and, once the identity service named them (with their consent), `alias`
   (std_msgs/String: the id of that identity, `known_<name>`);
-* `/tf` (tf2_msgs/TFMessage): the frame `person_<id>` in the robot's frame
+* `/tf` (tf2_msgs/TFMessage): the frame `person_<id>` in the camera's frame
   for each person whose direction is known.
 
 `HriPlanner.step` turns one `people/state` into the samples to send and the
@@ -78,7 +78,7 @@ def confidence(person: m.Person) -> float:
 
 
 def position(person: m.Person) -> tuple[float, float, float] | None:
-    """Where a person is in the robot's frame (x ahead, y left, z up), metres;
+    """Where a person is in the camera's frame (x ahead, y left, z up), metres;
     None without a direction (a presence radar gives a distance only)."""
     yaw = person.yaw_rad if person.yaw_rad is not None else person.bearing_rad
     if yaw is None:
@@ -112,7 +112,7 @@ class Plan:
 class HriPlanner:
     """The values last sent, per topic, so that only changes are sent again."""
 
-    robot_frame: str = "base_link"
+    robot_frame: str = "camera_front"
     sent: dict[str, Any] = field(default_factory=dict)
     present: tuple[str, ...] = ()
 

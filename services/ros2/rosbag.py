@@ -5,10 +5,13 @@ and writing our own recordings stays in `tools/bag.py` (the CLI joins the
 two, as the layers say).
 
 * `TABLE`: which of our topics becomes which ROS 2 topic, the original
-  robot's names and types (`/face_position` geometry_msgs/msg/PointStamped,
-  ...); our keys without an entry (people, leases, ...) are skipped. The
-  bridge's `bridge.OUTGOING` uses the same names and types (a test holds
-  the two together).
+  robot's names (`/face_position`, ...), and the types `bag import` takes
+  on it; our keys without an entry (people, leases, ...) are skipped. What
+  is written is what the bridge publishes (`bridge.outgoing` of the same
+  `[ros2]` settings): each topic's type, CDR and offered QoS, so a bag
+  replays into the subscribers the live robot serves (`/raw_image` an
+  Image unless `raw_image = "compressed"`; a test holds every topic's QoS
+  equal to the bridge's).
 * `message_definition`: the `ros2msg` schema text rosbag2 stores (the
   type's `.msg` text, then every dependency under a line of 80 `=`).
 * `Rosbag2Writer`: a rosbag2 directory (`metadata.yaml` version 9 and one
@@ -37,7 +40,8 @@ from rosbags.typesys.store import Typestore
 from buddybot import __version__
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import convert, interfaces, types
+from buddybot.ros2 import bridge, convert, interfaces, types, wire
+from buddybot.ros2.settings import Ros2Settings
 
 PROFILE = "ros2"
 SCHEMA_ENCODING = "ros2msg"
@@ -62,12 +66,14 @@ class Ros2BagError(ValueError):
 
 @dataclass(frozen=True)
 class BagTopic:
-    """Our topic `topic` as the ROS 2 topic `/name`, of one of `ros_types`
-    (the first is the one written, but for images: the frame's own)."""
+    """Our topic `topic` as the ROS 2 topic `/name`; `bag import` takes it as
+    one of `ros_types`, unless `not_taken` says why it cannot be read back.
+    The type written is the bridge's."""
 
     topic: keys.Topic
     name: str
     ros_types: tuple[str, ...]
+    not_taken: str = ""
 
     @property
     def ros_name(self) -> str:
@@ -84,6 +90,8 @@ TABLE: tuple[BagTopic, ...] = (
     BagTopic(keys.CAMERA_IMAGE, "raw_image", _IMAGES),
     BagTopic(keys.DEBUG_IMAGE, "debug_image", _IMAGES),
     BagTopic(keys.RADAR_FRAMES, "ld2410_target_frames", _ours(m.LD2410TargetDataFrameArray)),
+    BagTopic(keys.RADAR_TARGETS, "ld2450_targets", (types.POSE_ARRAY,),
+             "written only: a PoseArray lacks the targets' slot, speed and resolution"),
     BagTopic(keys.PRESENCE, "radar_presence", _ours(m.PresenceDetection)),
     BagTopic(keys.EXPRESSION, "screen_expression", _ours(m.ScreenExpression)),
     BagTopic(keys.EYE_CONTROL, "eye_control", _ours(m.EyeControl)),
@@ -96,21 +104,25 @@ BY_TOPIC: dict[keys.Topic, BagTopic] = {t.topic: t for t in TABLE}
 BY_NAME: dict[str, BagTopic] = {t.ros_name: t for t in TABLE}
 
 
-def to_ros(entry: BagTopic, message: m.Message) -> tuple[str, bytes]:
-    """(ROS type, CDR payload) of one of our messages on `entry`'s topic."""
-    if isinstance(message, m.FacePosition):
-        return types.POINT_STAMPED, convert.face_to_ros(message)
-    if isinstance(message, m.Image):
-        return convert.image_to_ros(message)
-    if isinstance(message, m.Bool):
-        return types.BOOL, convert.bool_to_ros(message)
-    return convert.to_ros(message)
+def live(settings: Ros2Settings) -> dict[str, bridge.Outgoing]:
+    """The bridge's publishers under `settings`, by ROS 2 name (relative)."""
+    return {out.name: out for out in bridge.outgoing(settings)}
+
+
+def to_ros(entry: BagTopic, message: m.Message, settings: Ros2Settings | None = None
+           ) -> tuple[str, bytes]:
+    """(ROS type, CDR payload) of one of our messages on `entry`'s topic, as
+    the bridge under `settings` (default: `[ros2]`'s defaults) publishes it."""
+    out = live(settings or Ros2Settings())[entry.name]
+    return out.ros_type, out.encode(message)
 
 
 def from_ros(entry: BagTopic, ros_type: str, payload: bytes | memoryview,
              log_time_ns: int) -> m.Message:
     """Our message from a ROS 2 payload of `entry`'s topic, checked
     (`convert.ConvertError` says why not). A Bool has no stamp: the log time."""
+    if entry.not_taken:
+        raise convert.ConvertError(f"{entry.ros_name}: {entry.not_taken}")
     if ros_type not in entry.ros_types:
         raise convert.ConvertError(f"{entry.ros_name}: type {ros_type} is not taken here")
     if ros_type == types.POINT_STAMPED:
@@ -244,13 +256,25 @@ _INFINITE = {"sec": 9223372036, "nsec": 854775807}
 """RMW_DURATION_INFINITE as rosbag2 (Iron and later) writes it."""
 
 
-def qos_profile(topic: keys.Topic) -> dict[str, Any]:
-    """The QoS a publisher of `topic` offers: reliable, depth 10; transient
-    local for latched topics (a late subscriber of any durability still
-    gets the value on replay)."""
+_RELIABILITY = {None: "reliable", wire.RELIABLE: "reliable", wire.BEST_EFFORT: "best_effort"}
+_DURABILITY = {None: "volatile", wire.VOLATILE: "volatile",
+               wire.TRANSIENT_LOCAL: "transient_local"}
+_HISTORY = {None: "keep_last", 1: "keep_last", 2: "keep_all"}
+
+
+def qos_profile(qos: wire.Qos) -> dict[str, Any]:
+    """rosbag2's offered QoS profile of a publisher that announces `qos` in its
+    graph token (an empty component is rmw's default: reliable, volatile,
+    keep last, no deadline, lifespan or lease). `ros2 bag play` offers it
+    again, so a replay matches the subscribers the live topic matched."""
+    unset = (qos.deadline_sec, qos.deadline_nsec, qos.lifespan_sec, qos.lifespan_nsec,
+             qos.liveliness, qos.liveliness_lease_sec, qos.liveliness_lease_nsec)
+    if any(x is not None for x in unset):
+        raise ValueError(f"QoS {qos.format()}: deadline, lifespan and liveliness are "
+                         "not written to a bag")
     return {
-        "history": "keep_last", "depth": 10, "reliability": "reliable",
-        "durability": "transient_local" if topic.latched else "volatile",
+        "history": _HISTORY[qos.history], "depth": 10 if qos.depth is None else qos.depth,
+        "reliability": _RELIABILITY[qos.reliability], "durability": _DURABILITY[qos.durability],
         "deadline": dict(_INFINITE), "lifespan": dict(_INFINITE), "liveliness": "automatic",
         "liveliness_lease_duration": dict(_INFINITE), "avoid_ros_namespace_conventions": False,
     }
@@ -300,7 +324,7 @@ class _Channel:
     id: int
     entry: BagTopic
     ros_type: str
-    qos: str
+    qos: dict[str, Any]
     count: int = 0
 
 
@@ -319,11 +343,15 @@ class Rosbag2Writer:
     """Writes a rosbag2 directory: `DIR/metadata.yaml` and `DIR/DIR_0.mcap`.
 
     `DIR` must not exist or be empty (as `ros2 bag record` refuses to
-    overwrite). Not thread-safe; `close()` writes the summary and the
-    metadata, without which `ros2 bag play` refuses the directory."""
+    overwrite). Each topic is written as the bridge under `settings`
+    publishes it (type, CDR, QoS). Not thread-safe; `close()` writes the
+    summary and the metadata, without which `ros2 bag play` refuses the
+    directory."""
 
-    def __init__(self, directory: str | Path) -> None:
+    def __init__(self, directory: str | Path, settings: Ros2Settings | None = None) -> None:
         self.directory = Path(directory)
+        self.settings = settings or Ros2Settings()
+        self._live = live(self.settings)
         self._made = not self.directory.exists()
         if self.directory.exists() and (not self.directory.is_dir()
                                         or any(self.directory.iterdir())):
@@ -351,13 +379,15 @@ class Rosbag2Writer:
                 ros_type, SCHEMA_ENCODING, message_definition(ros_type).encode())
         return found
 
-    def _channel(self, entry: BagTopic, ros_type: str) -> _Channel:
+    def _channel(self, entry: BagTopic, out: bridge.Outgoing) -> _Channel:
+        ros_type = out.ros_type
         found = self._channels.get((entry.ros_name, ros_type))
         if found is None:
-            qos = yaml_text([qos_profile(entry.topic)]).rstrip("\n")
+            qos = qos_profile(out.qos)
             cid = self._writer.register_channel(
                 entry.ros_name, MESSAGE_ENCODING, self._schema(ros_type),
-                {"offered_qos_profiles": qos, "topic_type_hash": types.type_hash(ros_type)})
+                {"offered_qos_profiles": yaml_text([qos]).rstrip("\n"),
+                 "topic_type_hash": types.type_hash(ros_type)})
             found = self._channels[(entry.ros_name, ros_type)] = _Channel(cid, entry,
                                                                          ros_type, qos)
         return found
@@ -366,16 +396,18 @@ class Rosbag2Writer:
         """Write one of our messages (recorded on `key` at `log_time_ns`) on its
         ROS 2 topic; False when its topic has none (noted in `stats.skipped`)."""
         entry = BY_TOPIC.get(topic)
-        if entry is None:
-            self.stats.skipped.setdefault(key, "no ROS 2 topic")
+        out = None if entry is None else self._live.get(entry.name)
+        if entry is None or out is None:
+            self.stats.skipped.setdefault(key, "no ROS 2 topic" if entry is None
+                                          else "the bridge does not publish it")
             return False
         try:
-            ros_type, payload = to_ros(entry, message)
+            payload = out.encode(message)
         except (convert.ConvertError, ValueError, OverflowError) as exc:
             self.stats.refused += 1
             self.stats.skipped.setdefault(key, f"not convertible: {str(exc)[:120]}")
             return False
-        channel = self._channel(entry, ros_type)
+        channel = self._channel(entry, out)
         stamp = getattr(message, "stamp_ns", None)
         self._writer.add_message(channel.id, log_time=log_time_ns, data=payload,
                                  publish_time=int(stamp) if stamp else log_time_ns,
@@ -396,7 +428,7 @@ class Rosbag2Writer:
             "topic_metadata": {
                 "name": c.entry.ros_name, "type": c.ros_type,
                 "serialization_format": MESSAGE_ENCODING,
-                "offered_qos_profiles": [qos_profile(c.entry.topic)],
+                "offered_qos_profiles": [c.qos],
                 "type_description_hash": types.type_hash(c.ros_type),
             },
             "message_count": c.count,
@@ -477,6 +509,8 @@ def accept_channel(topic: str, schema_name: str, schema_encoding: str, schema_te
     entry = BY_NAME.get(topic)
     if entry is None:
         return "no BuddyBot key for this topic"
+    if entry.not_taken:
+        return entry.not_taken
     if message_encoding != MESSAGE_ENCODING:
         return f"message encoding {message_encoding[:32]!r} (only cdr)"
     if schema_name not in entry.ros_types:

@@ -30,7 +30,7 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     robot_frame: Annotated[str, msgspec.Meta(
         pattern=r"^[A-Za-z_][A-Za-z0-9_/]*$", max_length=200,
         description="the TF frame the persons' frames (`person_<id>` on /tf) hang "
-        "from: the robot's, where the radars and camera measure from")] = "base_link"
+        "from: the camera's, where the people model measures from")] = "camera_front"
     raw_image: Annotated[Literal["raw", "compressed"], msgspec.Meta(
         description="/raw_image as sensor_msgs/msg/Image (`raw`, bgr8) or as "
         "sensor_msgs/msg/CompressedImage (`compressed`, JPEG)")] = "raw"

@@ -1,7 +1,7 @@
 """The ROS 2 types the bridge speaks, in one rosbags typestore, with RIHS01 hashes.
 
-rosbags ships Jazzy's standard messages (geometry_msgs/msg/PointStamped,
-sensor_msgs/msg/Image and CompressedImage, std_msgs/msg/Bool, ...) but no
+rosbags ships Jazzy's standard messages (geometry_msgs/msg/PointStamped and
+PoseArray, sensor_msgs/msg/Image and CompressedImage, std_msgs/msg/Bool, ...) but no
 services; `std_srvs/srv/Trigger` and our `buddybot_interfaces` (generated
 from the contract by `interfaces`, the same text as the checked-in files)
 are registered here. rmw_zenoh puts a type's RIHS01 hash (REP-2016) in
@@ -38,10 +38,12 @@ BOOL = "std_msgs/msg/Bool"
 FLOAT32 = "std_msgs/msg/Float32"
 STRING = "std_msgs/msg/String"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+POSE_ARRAY = "geometry_msgs/msg/PoseArray"
 TRIGGER = "std_srvs/srv/Trigger"
 CANCEL_GOAL = "action_msgs/srv/CancelGoal"
 GOAL_STATUS_ARRAY = "action_msgs/msg/GoalStatusArray"
-STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL, FLOAT32, STRING, TF_MESSAGE)
+STANDARD_MESSAGES = (POINT_STAMPED, IMAGE, COMPRESSED_IMAGE, BOOL, FLOAT32, STRING, TF_MESSAGE,
+                     POSE_ARRAY)
 """Standard ROS 2 messages the bridge uses (shipped by rosbags' Jazzy store)."""
 
 OURS = interfaces.PACKAGE

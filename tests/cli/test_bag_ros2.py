@@ -11,6 +11,7 @@ from types import SimpleNamespace
 from typing import Any
 
 import msgspec
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer as McapWriter
@@ -21,7 +22,9 @@ from rosbags.rosbag2 import Reader as RosbagsReader
 from buddybot import cli
 from buddybot.contract import channels, keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import convert, rosbag, types
+from buddybot.ros2 import bridge, convert, rosbag, types
+from buddybot.ros2.settings import Ros2Settings
+from buddybot.runtime.config import ConfigBase, default_config, parse_config
 from buddybot.tools import bag
 from tests.tools.mcap_bomb import write_bomb
 from tests.tools.test_bag import samples, write_recording
@@ -29,10 +32,11 @@ from tests.tools.test_bag import samples, write_recording
 ROBOT = "buddy"
 
 
-def run(*argv: str) -> int:
+def run(*argv: str, config: ConfigBase | None = None) -> int:
     """One `buddybot bag ...` action in-process (no router is needed)."""
     args: argparse.Namespace = cli.build_parser().parse_args(["bag", *argv])
-    return int(args.subverb_main(SimpleNamespace(args=args, robot=ROBOT)))
+    return int(args.subverb_main(SimpleNamespace(args=args, robot=ROBOT,
+                                                 config=config or default_config())))
 
 
 @pytest.fixture
@@ -89,7 +93,8 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
     assert run("export", "--ros2", str(path), str(tmp_path / "out")) == 0
     err = capsys.readouterr().err
     assert "skipping buddybot/buddy/people/state: no ROS 2 topic" in err
-    assert "exported 11 messages on 11 ROS 2 topics" in err
+    assert "exported 12 messages on 12 ROS 2 topics" in err
+    assert "/raw_image as sensor_msgs/msg/Image (raw_image = 'raw'" in err
     recorded = {c.key: c for c in bag.read_info(path).channels}
     log_times = {}
     for item in bag.open_recording(path).messages():
@@ -114,14 +119,21 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
             assert ros.header.stamp.sec * 10**9 + ros.header.stamp.nanosec == ours.stamp_ns
         elif schema.name == types.COMPRESSED_IMAGE:
             assert ros.format == "jpeg" and bytes(ros.data) == ours.data
+        elif schema.name == types.IMAGE:  # the recorded JPEG, decoded as the bridge does
+            assert (ros.width, ros.height, ros.encoding) == (ours.width, ours.height, "bgr8")
+            assert bytes(ros.data) == _pixels(ours)
+        elif schema.name == types.POSE_ARRAY:
+            assert ros.header.frame_id == f"radar_{ours.device_id}_{ours.radar_id}"
+            assert [(p.position.x, p.position.y) for p in ros.poses] == [
+                (t.y_m, -t.x_m) for t in ours.targets]
         elif schema.name == types.BOOL:
             assert ros.data is ours.data
         else:
             assert _same(_plain(ros), _expected(ours)), (key, _plain(ros), _expected(ours))
         seen.add(key)
-    assert len(seen) == 11 and all(k in recorded for k in seen)
+    assert len(seen) == 12 and all(k in recorded for k in seen)
     with RosbagsReader(tmp_path / "out") as reader:  # rosbags: metadata.yaml and the MCAP
-        assert reader.message_count == 11
+        assert reader.message_count == 12
         assert {c.topic for c in reader.connections} == {e.ros_name for e in rosbag.TABLE}
         for connection, _t, raw in reader.messages():
             types.typestore().deserialize_cdr(raw, connection.msgtype)
@@ -185,13 +197,17 @@ def test_import_of_mcap_ros2s_file_plays_with_the_same_values(
 
 def test_export_then_import_gives_back_the_mapped_keys(
         recording: tuple[Path, dict[str, tuple[keys.Topic, bytes]], int],
-        tmp_path: Path) -> None:
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Byte for byte with the JPEG kept (`compressed`); the radar targets,
+    written only, are named as skipped."""
     path, _found, _base = recording
-    assert run("export", "--ros2", str(path), str(tmp_path / "ros")) == 0
+    assert run("export", "--ros2", str(path), str(tmp_path / "ros"),
+               "--raw-image", "compressed") == 0
     assert run("import", str(tmp_path / "ros"), str(tmp_path / "back.mcap")) == 0
+    assert "skipping /ld2450_targets: written only" in capsys.readouterr().err
     before = {i.key: (i.log_time_ns, channels.decode(i.topic, i.payload))
               for i in bag.open_recording(path).messages()
-              if i.topic in rosbag.BY_TOPIC}
+              if i.topic in rosbag.BY_TOPIC and not rosbag.BY_TOPIC[i.topic].not_taken}
     after = {i.key: (i.log_time_ns, channels.decode(i.topic, i.payload))
              for i in bag.open_recording(tmp_path / "back.mcap").messages()}
     assert after.keys() == before.keys()
@@ -266,3 +282,53 @@ def test_a_truncated_file_and_a_damaged_recording_are_refused(
 def test_export_needs_its_format() -> None:
     with pytest.raises(SystemExit):
         cli.build_parser().parse_args(["bag", "export", "in.mcap", "out"])
+
+
+def _pixels(image: m.Image) -> bytes:
+    """The bgr8 pixels OpenCV decodes from a JPEG frame (what a raw Image holds)."""
+    import cv2
+
+    bgr = cv2.imdecode(np.frombuffer(image.data, np.uint8), cv2.IMREAD_COLOR)
+    return bytes(bgr.tobytes())
+
+
+def _raw_images(directory: Path) -> list[tuple[str, Any]]:
+    """(schema name, decoded message) of every /raw_image message, read by
+    mcap-ros2-support."""
+    with open(directory / f"{directory.name}_0.mcap", "rb") as stream:
+        reader = make_reader(stream, decoder_factories=[DecoderFactory()])
+        return [(schema.name, ros) for schema, channel, _r, ros
+                in reader.iter_decoded_messages(topics=["/raw_image"]) if schema is not None]
+
+
+def test_raw_image_in_a_bag_is_the_live_type_for_the_same_settings(
+        recording: tuple[Path, dict[str, tuple[keys.Topic, bytes]], int],
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`[ros2] raw_image` decides /raw_image's type in a bag as it does live
+    (`--raw-image` on top), and `bag import` takes both back."""
+    path, _found, _base = recording
+    frame = next(channels.decode(i.topic, i.payload) for i in bag.open_recording(path).messages()
+                 if i.topic is keys.CAMERA_IMAGE)  # as recorded: JPEG
+    compressed = parse_config('[ros2]\nraw_image = "compressed"\n')
+    assert run("export", "--ros2", str(path), str(tmp_path / "small"), config=compressed) == 0
+    assert run("export", "--ros2", str(path), str(tmp_path / "big"), "--raw-image", "raw",
+               config=compressed) == 0
+    assert run("export", "--ros2", str(path), str(tmp_path / "plain")) == 0
+    capsys.readouterr()
+    for name, setting in (("small", "compressed"), ("big", "raw"), ("plain", "raw")):
+        live = {o.name: o for o in bridge.outgoing(Ros2Settings(raw_image=setting))}
+        ((schema, ros),) = _raw_images(tmp_path / name)
+        assert schema == live["raw_image"].ros_type, name
+        if schema == types.IMAGE:
+            assert (ros.encoding, ros.width, ros.height) == ("bgr8", frame.width, frame.height)
+            assert bytes(ros.data) == _pixels(frame)
+        else:
+            assert (ros.format, bytes(ros.data)) == ("jpeg", frame.data)
+    for name in ("small", "big"):
+        assert run("import", str(tmp_path / name), str(tmp_path / f"{name}.mcap")) == 0
+        back = [channels.decode(i.topic, i.payload)
+                for i in bag.open_recording(tmp_path / f"{name}.mcap").messages()
+                if i.topic is keys.CAMERA_IMAGE]
+        assert [(b.width, b.height, b.stamp_ns, b.frame_id) for b in back] == [
+            (frame.width, frame.height, frame.stamp_ns, frame.frame_id)], name
+    assert "imported 11 messages from 11 ROS 2 topics" in capsys.readouterr().err

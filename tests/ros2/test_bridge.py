@@ -18,6 +18,7 @@ def test_outgoing_is_the_seeds_names_and_types() -> None:
         ("camera/{camera}/image", "raw_image", "sensor_msgs/msg/Image"),
         ("camera/{camera}/debug_image", "debug_image", "sensor_msgs/msg/CompressedImage"),
         ("radar/{device}/frames", "ld2410_target_frames", ours + "LD2410TargetDataFrameArray"),
+        ("radar/{device}/targets", "ld2450_targets", "geometry_msgs/msg/PoseArray"),
         ("radar/presence", "radar_presence", ours + "PresenceDetection"),
         ("eyes/expression", "screen_expression", ours + "ScreenExpression"),
         ("eyes/control", "eye_control", ours + "EyeControl"),
@@ -70,6 +71,10 @@ SAMPLES: dict[str, m.Message] = {
     "camera/{camera}/image": BGR,
     "camera/{camera}/debug_image": BGR,
     "radar/{device}/frames": m.LD2410TargetDataFrameArray(stamp_ns=5, device_id=0, sensors=[]),
+    "radar/{device}/targets": m.RadarTargets(stamp_ns=5, device_id=0, radar_id=1, targets=[
+        m.RadarTarget(slot=0, x_m=-0.4, y_m=1.5, speed_mps=0.0, resolution_m=0.32,
+                      position=m.Point(x=1.5, y=0.4, z=0.0), bearing_rad=0.26,
+                      distance_m=1.55)]),
     "radar/presence": m.PresenceDetection(
         stamp_ns=5, target_state=m.PresenceTarget.STANDING,
         presence_state=m.PresenceState.IN_RANGE, distance_m=1.5),

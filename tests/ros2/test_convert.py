@@ -8,12 +8,16 @@ of ros2/buddybot_interfaces; for the standard ones the standard definitions.
 
 from __future__ import annotations
 
+import math
 import struct
 from pathlib import Path
 from typing import Any
 
+import msgspec
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
 from buddybot.contract import messages as m
@@ -38,12 +42,18 @@ STANDARD = {
                   "uint8 is_bigendian\nuint32 step\nuint8[] data\n"),
     types.COMPRESSED_IMAGE: "std_msgs/Header header\nstring format\nuint8[] data\n",
     types.BOOL: "bool data\n",
+    types.POSE_ARRAY: "std_msgs/Header header\ngeometry_msgs/Pose[] poses\n",
 }
 """The standard definitions as ROS 2 Jazzy ships them (field lines only)."""
 DEPENDENCIES = (f"{SEPARATOR}\nMSG: std_msgs/Header\n"
                 "builtin_interfaces/Time stamp\nstring frame_id\n"
                 f"{SEPARATOR}\nMSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
                 f"{SEPARATOR}\nMSG: geometry_msgs/Point\nfloat64 x\nfloat64 y\nfloat64 z\n")
+POSES = (f"{SEPARATOR}\nMSG: geometry_msgs/Pose\ngeometry_msgs/Point position\n"
+         f"geometry_msgs/Quaternion orientation\n"
+         f"{SEPARATOR}\nMSG: geometry_msgs/Quaternion\nfloat64 x\nfloat64 y\nfloat64 z\n"
+         "float64 w\n")
+"""geometry_msgs/msg/PoseArray's own dependencies (after DEPENDENCIES)."""
 
 
 def their_decoder(ros_type: str, schema: str) -> Any:
@@ -332,11 +342,93 @@ def test_a_bgr8_frame_becomes_a_compressed_image_they_can_read() -> None:
     assert convert.compressed_image_to_ros(jpeg_image) == payload  # JPEG passes as it is
 
 
-def test_raw_image_takes_bgr8_only_and_checks_the_pixels() -> None:
+def test_raw_image_refuses_a_jpeg_that_does_not_decode_and_checks_the_pixels() -> None:
     jpeg_image = m.Image(stamp_ns=1, frame_id="c", width=1, height=1, encoding="jpeg",
                          data=b"\xff\xd8")
-    with pytest.raises(ConvertError, match="jpeg"):
+    with pytest.raises(ConvertError, match="jpeg frame that does not decode"):
         convert.raw_image_to_ros(jpeg_image)
     short = m.Image(stamp_ns=1, frame_id="c", width=4, height=4, encoding="bgr8", data=bytes(5))
     with pytest.raises(ConvertError):
         convert.compressed_image_to_ros(short)
+
+
+def test_raw_image_decodes_a_jpeg_frame_to_its_pixels() -> None:
+    """A camera set to `jpeg` (and every recorded frame) still gives /raw_image an
+    Image: the pixels OpenCV decodes, the header's stamp and frame id."""
+    import cv2
+
+    pixels = np.zeros((6, 10, 3), np.uint8)
+    pixels[:, 5:] = (200, 40, 10)
+    ok, buf = cv2.imencode(".jpg", pixels)
+    assert ok
+    image = m.Image(stamp_ns=4_000_000_009, frame_id="front", width=10, height=6,
+                    encoding="jpeg", data=buf.tobytes())
+    decoded = their_decoder(types.IMAGE, STANDARD[types.IMAGE] + DEPENDENCIES)(
+        convert.raw_image_to_ros(image))
+    assert (decoded.width, decoded.height, decoded.encoding, decoded.step) == (10, 6, "bgr8", 30)
+    assert (decoded.header.frame_id, decoded.header.stamp.nanosec) == ("front", 9)
+    expected = cv2.imdecode(np.frombuffer(buf, np.uint8), cv2.IMREAD_COLOR)
+    assert bytes(decoded.data) == expected.tobytes()
+    liar = msgspec.structs.replace(image, width=20)  # the header says 10x6
+    with pytest.raises(ConvertError, match="does not decode: jpeg header says 10x6"):
+        convert.raw_image_to_ros(liar)
+
+
+SENSOR_M = st.floats(-32.768, 32.768, allow_nan=False)
+
+
+@st.composite
+def radar_targets(draw: st.DrawFn) -> m.RadarTargets:
+    targets = [m.RadarTarget(slot=slot, x_m=draw(SENSOR_M), y_m=draw(SENSOR_M), speed_mps=-0.2,
+                             resolution_m=0.32, position=m.Point(x=0.0, y=0.0, z=0.0),
+                             bearing_rad=0.0, distance_m=0.0)
+               for slot in range(draw(st.integers(0, m.MAX_RADAR_TARGETS)))]
+    return m.RadarTargets(stamp_ns=draw(st.integers(0, 2**31 * 10**9 - 1)),
+                          device_id=draw(st.integers(0, 65535)),
+                          radar_id=draw(st.integers(0, 255)), targets=targets)
+
+
+@settings(max_examples=80, deadline=None)
+@given(radar_targets())
+def test_radar_targets_are_a_pose_array_in_the_radars_frame(report: m.RadarTargets) -> None:
+    """One pose per target, in the radar's own frame with ROS axes (forward =
+    the datasheet's y, left = -x), z 0 and the frame's orientation; read by
+    mcap-ros2-support from the standard definition."""
+    decoded = their_decoder(types.POSE_ARRAY, STANDARD[types.POSE_ARRAY] + DEPENDENCIES + POSES)(
+        convert.radar_targets_to_ros(report))
+    assert decoded.header.frame_id == f"radar_{report.device_id}_{report.radar_id}"
+    assert (decoded.header.stamp.sec * 10**9 + decoded.header.stamp.nanosec) == report.stamp_ns
+    assert [(p.position.x, p.position.y, p.position.z) for p in decoded.poses] == [
+        (t.y_m, -t.x_m, 0.0) for t in report.targets]
+    assert all((p.orientation.x, p.orientation.y, p.orientation.z, p.orientation.w)
+               == (0.0, 0.0, 0.0, 1.0) for p in decoded.poses)
+
+
+ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
+OFFSET = st.floats(-10.0, 10.0, allow_nan=False)
+
+
+@settings(max_examples=200, deadline=None)
+@given(x_m=SENSOR_M, y_m=SENSOR_M, x=OFFSET, y=OFFSET, z=OFFSET, yaw=ANGLE,
+       mirror_x=st.booleans())
+def test_the_documented_static_tf_places_a_pose_where_the_radar_places_it(
+        x_m: float, y_m: float, x: float, y: float, z: float, yaw: float,
+        mirror_x: bool) -> None:
+    """docs/ros2.md's TF from the camera to `radar_<device>_<radar_id>` (the
+    mount's x, y, z, yaw; roll pi when mirror_x) applied to the pose gives the
+    point the radar bridge computes in the camera's frame (radar/mounting.py)."""
+    from buddybot.radar.mounting import Mount, place
+
+    forward, left = convert.radar_point(m.RadarTarget(
+        slot=0, x_m=x_m, y_m=y_m, speed_mps=0.0, resolution_m=0.0,
+        position=m.Point(x=0.0, y=0.0, z=0.0), bearing_rad=0.0, distance_m=0.0))
+    roll = math.pi if mirror_x else 0.0
+    # static_transform_publisher's rotation: R = Rz(yaw) Ry(0) Rx(roll)
+    ry, rz = left * math.cos(roll), left * math.sin(roll)
+    px = x + math.cos(yaw) * forward - math.sin(yaw) * ry
+    py = y + math.sin(yaw) * forward + math.cos(yaw) * ry
+    pz = z + rz
+    placed = place(x_m, y_m, Mount(x=x, y=y, z=z, yaw=yaw, mirror_x=mirror_x))
+    assert px == pytest.approx(placed.x, abs=1e-9)
+    assert py == pytest.approx(placed.y, abs=1e-9)
+    assert pz == pytest.approx(placed.z, abs=1e-9)

@@ -1,5 +1,6 @@
 """`ros2/rosbag.py`: the bag table, ros2msg definitions (parsed by mcap-ros2-support,
-an implementation that is not ours), the schema check on import, QoS and metadata."""
+an implementation that is not ours), the schema check on import, QoS and metadata
+(read back by rosbags' rosbag2 reader and held equal to the live bridge's)."""
 
 from __future__ import annotations
 
@@ -7,11 +8,15 @@ from pathlib import Path
 
 import pytest
 import yaml
+from mcap.reader import make_reader
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.rosbag2 import Reader as RosbagsReader
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, rosbag, types
+from buddybot.ros2 import bridge, convert, rosbag, types, wire
+from buddybot.ros2.settings import Ros2Settings
 from tests.contract.test_messages import sample_messages
 
 
@@ -36,6 +41,10 @@ def test_every_mapped_type_has_a_definition_mcap_ros2_round_trips() -> None:
             assert decoded.data is message.data  # type: ignore[attr-defined]
         elif ros_type == types.IMAGE:
             assert (decoded.width, decoded.encoding) == (2, "bgr8")
+        elif ros_type == types.COMPRESSED_IMAGE:  # /debug_image: compressed, as the bridge
+            assert entry.name == "debug_image" and decoded.format == "jpeg"
+        elif ros_type == types.POSE_ARRAY:
+            assert decoded.header.frame_id == "radar_0_1" and len(decoded.poses) == 1
         else:
             assert decoded.stamp_ns == message.stamp_ns  # type: ignore[attr-defined]
         assert rosbag.check_definition(text, ros_type) == ""
@@ -80,6 +89,9 @@ def test_channels_are_told_apart_before_any_message() -> None:
                                                        "ros2idl", good, "cdr"))
     assert "UTF-8" in str(rosbag.accept_channel("/audio_device_is_free", types.BOOL,
                                                 "ros2msg", b"\xff\xfe", "cdr"))
+    poses = rosbag.message_definition(types.POSE_ARRAY).encode()
+    assert "written only" in str(rosbag.accept_channel("/ld2450_targets", types.POSE_ARRAY,
+                                                       "ros2msg", poses, "cdr"))
 
 
 def test_imported_messages_are_checked_and_keyed() -> None:
@@ -103,8 +115,13 @@ def test_imported_messages_are_checked_and_keyed() -> None:
 
 
 def test_qos_and_metadata_read_as_yaml(tmp_path: Path) -> None:
-    assert rosbag.qos_profile(keys.PRESENCE)["durability"] == "transient_local"
-    assert rosbag.qos_profile(keys.FACE)["durability"] == "volatile"
+    latched = rosbag.qos_profile(bridge.LATCHED_QOS)
+    assert (latched["durability"], latched["depth"]) == ("transient_local", 1)
+    assert rosbag.qos_profile(bridge.DEFAULT_QOS)["durability"] == "volatile"
+    sensor = rosbag.qos_profile(bridge.SENSOR_QOS)
+    assert (sensor["reliability"], sensor["depth"]) == ("best_effort", 5)
+    with pytest.raises(ValueError, match="not written to a bag"):
+        rosbag.qos_profile(wire.Qos(deadline_sec=1))
     writer = rosbag.Rosbag2Writer(tmp_path / "visit")
     writer.write("buddybot/buddy/audio/device_free", keys.DEVICE_FREE,
                  m.Bool(stamp_ns=5, data=True), 1_000)
@@ -139,3 +156,100 @@ def test_split_bags_are_read_in_order(tmp_path: Path) -> None:
     (tmp_path / "empty").mkdir()
     with pytest.raises(rosbag.Ros2BagError, match=r"without \.mcap"):
         rosbag.mcap_files(tmp_path / "empty")
+
+
+SETTINGS = [Ros2Settings(), Ros2Settings(raw_image="compressed")]
+RMW_DEFAULT = {"reliability": wire.RELIABLE, "durability": wire.VOLATILE, "history": 1,
+               "depth": 10}
+"""What an empty component of a graph token's QoS means (rmw's default profile)."""
+
+
+def _jpeg_frame() -> m.Image:
+    """A camera frame as a recording holds it (JPEG)."""
+    import cv2
+    import numpy as np
+
+    pixels = np.full((4, 6, 3), (30, 120, 220), np.uint8)
+    ok, buf = cv2.imencode(".jpg", pixels)
+    assert ok
+    return m.Image(stamp_ns=m.now_ns(), frame_id="camera_front", width=6, height=4,
+                   encoding="jpeg", data=buf.tobytes())
+
+
+def _bag_of_every_topic(directory: Path, settings: Ros2Settings) -> Path:
+    by_type: dict[type, m.Message] = {type(x): x for x in sample_messages()}
+    by_type[m.Image] = _jpeg_frame()
+    writer = rosbag.Rosbag2Writer(directory, settings)
+    for i, entry in enumerate(rosbag.TABLE):
+        assert writer.write(f"buddybot/buddy/{entry.name}", entry.topic,
+                            by_type[entry.topic.type], 1_000 + i), writer.stats.skipped
+    writer.close()
+    return directory
+
+
+@pytest.mark.parametrize("settings", SETTINGS, ids=lambda s: s.raw_image)
+def test_a_bag_offers_every_topic_with_the_bridges_type_and_qos(
+        tmp_path: Path, settings: Ros2Settings) -> None:
+    """rosbags reads metadata.yaml; each topic's type and offered QoS are the
+    ones the live bridge's publisher announces under the same settings (its
+    graph token's QoS, an empty component being rmw's default). A QoS or a
+    type defined apart from the bridge's table fails here."""
+    path = _bag_of_every_topic(tmp_path / "bag", settings)
+    live = {f"/{o.name}": o for o in bridge.outgoing(settings)}
+    with RosbagsReader(path) as reader:
+        connections = {c.topic: c for c in reader.connections}
+    assert set(connections) == {e.ros_name for e in rosbag.TABLE}
+    assert set(connections) <= set(live), "a bag topic the bridge does not publish"
+    for name, connection in connections.items():
+        out = live[name]
+        assert connection.msgtype == out.ros_type, name
+        (qos,) = connection.ext.offered_qos_profiles
+        want = {k: RMW_DEFAULT[k] if getattr(out.qos, k) is None else getattr(out.qos, k)
+                for k in RMW_DEFAULT}
+        got = {"reliability": qos.reliability.value, "durability": qos.durability.value,
+               "history": qos.history.value, "depth": qos.depth}
+        assert got == want, name
+        assert qos.liveliness == QosLiveliness.AUTOMATIC
+        assert qos.deadline == qos.lifespan == qos.liveliness_lease_duration == (
+            9223372036, 854775807)
+    profile = {n: c.ext.offered_qos_profiles[0] for n, c in connections.items()}
+    for name in ("/radar_presence", "/screen_expression", "/eye_lid_control",
+                 "/audio_device_is_free"):  # as the bridge offers them: depth 1
+        assert (profile[name].durability, profile[name].depth) == (
+            QosDurability.TRANSIENT_LOCAL, 1)
+    for name in ("/raw_image", "/debug_image"):  # the sensor profile
+        assert (profile[name].reliability, profile[name].depth) == (
+            QosReliability.BEST_EFFORT, 5)
+    assert profile["/face_position"].history == QosHistory.KEEP_LAST
+
+
+@pytest.mark.parametrize("settings", SETTINGS, ids=lambda s: s.raw_image)
+def test_each_mcap_channel_carries_the_metadata_yamls_qos(tmp_path: Path,
+                                                          settings: Ros2Settings) -> None:
+    """`ros2 bag play DIR/DIR_0.mcap` reads the channel's own profile: the same."""
+    path = _bag_of_every_topic(tmp_path / "bag", settings)
+    info = yaml.safe_load((path / "metadata.yaml").read_text())["rosbag2_bagfile_information"]
+    from_yaml = {t["topic_metadata"]["name"]: t["topic_metadata"]["offered_qos_profiles"]
+                 for t in info["topics_with_message_count"]}
+    with open(path / "bag_0.mcap", "rb") as stream:
+        summary = make_reader(stream).get_summary()
+    assert summary is not None
+    channels = {c.topic: yaml.safe_load(c.metadata["offered_qos_profiles"])
+                for c in summary.channels.values()}
+    assert channels == from_yaml and len(channels) == len(rosbag.TABLE)
+
+
+def test_raw_image_follows_the_setting_and_import_takes_both(tmp_path: Path) -> None:
+    """The recorded JPEG is an Image (decoded) or a CompressedImage (as it is),
+    as the bridge would publish it; `bag import` takes either back."""
+    frame = _jpeg_frame()
+    entry = rosbag.BY_NAME["/raw_image"]
+    raw_type, raw = rosbag.to_ros(entry, frame)
+    small_type, small = rosbag.to_ros(entry, frame, Ros2Settings(raw_image="compressed"))
+    assert (raw_type, small_type) == (types.IMAGE, types.COMPRESSED_IMAGE)
+    pixels = rosbag.from_ros(entry, raw_type, raw, 0)
+    assert (pixels.encoding, pixels.width, pixels.height, len(pixels.data)) == (
+        "bgr8", 6, 4, 72)
+    assert pixels.data == convert.decoded_image(frame).data
+    assert rosbag.from_ros(entry, small_type, small, 0) == frame
+    assert set(entry.ros_types) == {types.IMAGE, types.COMPRESSED_IMAGE}

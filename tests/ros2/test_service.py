@@ -18,12 +18,19 @@ import zenoh
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, hri, service, types, wire
+from buddybot.ros2 import bridge, hri, rosbag, service, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until
 
-from .test_convert import DEPENDENCIES, STANDARD, schema_of_ours, their_decoder, their_encoder
+from .test_convert import (
+    DEPENDENCIES,
+    POSES,
+    STANDARD,
+    schema_of_ours,
+    their_decoder,
+    their_encoder,
+)
 
 SETTINGS = Ros2Settings(domain_id=3)
 FACE = bridge.route(SETTINGS, "face_position", types.POINT_STAMPED)
@@ -31,6 +38,7 @@ EXPRESSION = bridge.route(SETTINGS, "screen_expression", bridge.EXPRESSION)
 EYE_CONTROL = bridge.route(SETTINGS, "eye_control", bridge.EYE_CONTROL)
 RAW_IMAGE = bridge.route(SETTINGS, "raw_image", types.IMAGE)
 LIDS = bridge.route(SETTINGS, "eye_lid_control", f"{types.OURS}/msg/EyeLidControl")
+TARGETS = bridge.route(SETTINGS, "ld2450_targets", types.POSE_ARRAY)
 
 
 @pytest.fixture
@@ -160,6 +168,47 @@ def test_a_ros_2_expression_reaches_the_eyes_and_garbage_is_counted(
                          "EYE_GRIN from the ROS 2 peer")
     retry_until(lambda: counter(diag, "commands") >= 1, 30, 0.2, "the command counted")
     assert counter(diag, "malformed") == 1 and counter(diag, "wrong_type") == 1
+
+
+@pytest.mark.integration
+def test_radar_targets_reach_a_ros_2_peer_as_a_pose_array(
+        started: list[wire.GraphToken], peer: zenoh.Session, probe: Node) -> None:
+    """An LD2450 report on `radar/<device>/targets` arrives on `/ld2450_targets`
+    as a PoseArray in the radar's frame, the same bytes an exported bag holds."""
+    token = next(t for t in started if t.name == "/ld2450_targets")
+    assert (token.kind, token.type_name, token.type_hash, token.qos) == (
+        "MP", "geometry_msgs::msg::dds_::PoseArray_", TARGETS.type_hash, bridge.DEFAULT_QOS)
+    got: list[bytes] = []
+    arrived = threading.Event()
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        got.append(sample.payload.to_bytes())
+        arrived.set()
+
+    peer.declare_subscriber(TARGETS.key, on_sample)
+    publisher = probe.publisher(keys.RADAR_TARGETS, device="2")
+
+    def target(slot: int, x_m: float, y_m: float) -> m.RadarTarget:
+        return m.RadarTarget(slot=slot, x_m=x_m, y_m=y_m, speed_mps=0.1, resolution_m=0.3,
+                             position=m.Point(x=y_m, y=-x_m, z=0.0), bearing_rad=0.0,
+                             distance_m=1.0)
+
+    report = m.RadarTargets(stamp_ns=m.now_ns(), device_id=2, radar_id=1,
+                            targets=[target(0, -0.4, 1.5), target(2, 1.0, 2.0)])
+
+    def sent() -> bool:
+        publisher.put(report)
+        return arrived.wait(0.2)
+
+    retry_until(sent, 30, 0.0, "/ld2450_targets at the raw peer")
+    decoded = their_decoder(types.POSE_ARRAY,
+                            STANDARD[types.POSE_ARRAY] + DEPENDENCIES + POSES)(got[0])
+    assert decoded.header.frame_id == "radar_2_1"
+    assert (decoded.header.stamp.sec, decoded.header.stamp.nanosec) == divmod(
+        report.stamp_ns, 10**9)
+    assert [(p.position.x, p.position.y, p.position.z, p.orientation.w)
+            for p in decoded.poses] == [(1.5, 0.4, 0.0, 1.0), (2.0, -1.0, 0.0, 1.0)]
+    assert got[0] == rosbag.to_ros(rosbag.BY_NAME["/ld2450_targets"], report)[1]
 
 
 def subscription_token(peer: zenoh.Session, route: bridge.Route) -> str:

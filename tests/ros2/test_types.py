@@ -34,6 +34,13 @@ def test_a_service_hash_equals_rmw_zenohs_design_doc() -> None:
     assert store.hash_rihs01("example_interfaces/srv/AddTwoInts") == ADD_TWO_INTS_HASH
 
 
+def test_pose_array_hash_is_the_one_public_type_tables_carry() -> None:
+    """/ld2450_targets' type: the value public ROS 2 projects list for
+    geometry_msgs/msg/PoseArray (corroboration, not an authority)."""
+    assert types.type_hash(types.POSE_ARRAY) == (
+        "RIHS01_af0cc36d190e104d546d168d6b39df04fa4b4ccecf59cb4c9ed328d3d5004aa0")
+
+
 def test_char_is_hashed_as_uint8() -> None:
     fields = dict(types.typestore().fielddefs["service_msgs/msg/ServiceEventInfo"][1])
     assert fields["client_gid"] == (Nodetype.ARRAY, ((Nodetype.BASE, ("uint8", 0)), 16))
