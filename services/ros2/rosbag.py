@@ -6,7 +6,8 @@ two, as the layers say).
 
 * `TABLE`: which of our topics becomes which ROS 2 topic, the original
   robot's names (`/face_position`, ...), and the types `bag import` takes
-  on it; our keys without an entry (people, leases, ...) are skipped. What
+  on it; `people/state` becomes the ROS4HRI topics (hri.py), our other keys
+  without an entry (leases, ...) are skipped. What
   is written is what the bridge publishes (`bridge.outgoing` of the same
   `[ros2]` settings): each topic's type, CDR and offered QoS, so a bag
   replays into the subscribers the live robot serves (`/raw_image` an
@@ -40,7 +41,7 @@ from rosbags.typesys.store import Typestore
 from buddybot import __version__
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, interfaces, types, wire
+from buddybot.ros2 import bridge, convert, hri, interfaces, types, wire
 from buddybot.ros2.settings import Ros2Settings
 
 PROFILE = "ros2"
@@ -322,7 +323,7 @@ def yaml_text(value: Any) -> str:
 @dataclass
 class _Channel:
     id: int
-    entry: BagTopic
+    ros_name: str
     ros_type: str
     qos: dict[str, Any]
     count: int = 0
@@ -352,6 +353,8 @@ class Rosbag2Writer:
         self.directory = Path(directory)
         self.settings = settings or Ros2Settings()
         self._live = live(self.settings)
+        self._hri = hri.HriPlanner(self.settings.robot_frame)
+        """The people as ROS4HRI, sent on change as the bridge does."""
         self._made = not self.directory.exists()
         if self.directory.exists() and (not self.directory.is_dir()
                                         or any(self.directory.iterdir())):
@@ -379,22 +382,43 @@ class Rosbag2Writer:
                 ros_type, SCHEMA_ENCODING, message_definition(ros_type).encode())
         return found
 
-    def _channel(self, entry: BagTopic, out: bridge.Outgoing) -> _Channel:
-        ros_type = out.ros_type
-        found = self._channels.get((entry.ros_name, ros_type))
+    def _channel(self, ros_name: str, ros_type: str, offered: wire.Qos) -> _Channel:
+        found = self._channels.get((ros_name, ros_type))
         if found is None:
-            qos = qos_profile(out.qos)
+            qos = qos_profile(offered)
             cid = self._writer.register_channel(
-                entry.ros_name, MESSAGE_ENCODING, self._schema(ros_type),
+                ros_name, MESSAGE_ENCODING, self._schema(ros_type),
                 {"offered_qos_profiles": yaml_text([qos]).rstrip("\n"),
                  "topic_type_hash": types.type_hash(ros_type)})
-            found = self._channels[(entry.ros_name, ros_type)] = _Channel(cid, entry,
-                                                                         ros_type, qos)
+            found = self._channels[(ros_name, ros_type)] = _Channel(cid, ros_name, ros_type,
+                                                                    qos)
         return found
+
+    def _add(self, channel: _Channel, payload: bytes, stamp_ns: int | None,
+             log_time_ns: int) -> None:
+        self._writer.add_message(channel.id, log_time=log_time_ns, data=payload,
+                                 publish_time=int(stamp_ns) if stamp_ns else log_time_ns,
+                                 sequence=channel.count)
+        channel.count += 1
+        self.stats.messages += 1
+        name = channel.ros_name
+        self.stats.per_topic[name] = self.stats.per_topic.get(name, 0) + 1
+        self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns,
+                                                                       log_time_ns)
+        self.end_ns = max(self.end_ns, log_time_ns)
+
+    def _people(self, state: m.PeopleState, log_time_ns: int) -> bool:
+        """`people/state` as the bridge publishes it: the ROS4HRI topics (hri.py)."""
+        for sample in self._hri.step(state).samples:
+            channel = self._channel(f"/{sample.name}", sample.ros_type, hri.qos(sample.name))
+            self._add(channel, sample.payload, state.stamp_ns, log_time_ns)
+        return True
 
     def write(self, key: str, topic: keys.Topic, message: m.Message, log_time_ns: int) -> bool:
         """Write one of our messages (recorded on `key` at `log_time_ns`) on its
         ROS 2 topic; False when its topic has none (noted in `stats.skipped`)."""
+        if topic is keys.PEOPLE_STATE and isinstance(message, m.PeopleState):
+            return self._people(message, log_time_ns)
         entry = BY_TOPIC.get(topic)
         out = None if entry is None else self._live.get(entry.name)
         if entry is None or out is None:
@@ -407,17 +431,8 @@ class Rosbag2Writer:
             self.stats.refused += 1
             self.stats.skipped.setdefault(key, f"not convertible: {str(exc)[:120]}")
             return False
-        channel = self._channel(entry, out)
-        stamp = getattr(message, "stamp_ns", None)
-        self._writer.add_message(channel.id, log_time=log_time_ns, data=payload,
-                                 publish_time=int(stamp) if stamp else log_time_ns,
-                                 sequence=channel.count)
-        channel.count += 1
-        self.stats.messages += 1
-        self.stats.per_topic[entry.ros_name] = self.stats.per_topic.get(entry.ros_name, 0) + 1
-        self.start_ns = log_time_ns if self.start_ns is None else min(self.start_ns,
-                                                                       log_time_ns)
-        self.end_ns = max(self.end_ns, log_time_ns)
+        channel = self._channel(entry.ros_name, out.ros_type, out.qos)
+        self._add(channel, payload, getattr(message, "stamp_ns", None), log_time_ns)
         return True
 
     def metadata(self) -> dict[str, Any]:
@@ -426,7 +441,7 @@ class Rosbag2Writer:
         duration = max(0, self.end_ns - start)
         topics = [{
             "topic_metadata": {
-                "name": c.entry.ros_name, "type": c.ros_type,
+                "name": c.ros_name, "type": c.ros_type,
                 "serialization_format": MESSAGE_ENCODING,
                 "offered_qos_profiles": [c.qos],
                 "type_description_hash": types.type_hash(c.ros_type),

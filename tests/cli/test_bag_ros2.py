@@ -50,6 +50,11 @@ def recording(tmp_path: Path) -> tuple[Path, dict[str, tuple[keys.Topic, bytes]]
     return tmp_path / "visit.mcap", found, base
 
 
+def found_people(found: dict[str, tuple[keys.Topic, bytes]]) -> tuple[keys.Topic, bytes]:
+    """The recording's `people/state` (topic, payload)."""
+    return next(v for v in found.values() if v[0] is keys.PEOPLE_STATE)
+
+
 def _plain(value: Any) -> Any:
     """An mcap-ros2-support message as builtins (uint8 arrays as lists)."""
     if isinstance(value, bytes | bytearray):
@@ -92,8 +97,8 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
     path, found, _base = recording
     assert run("export", "--ros2", str(path), str(tmp_path / "out")) == 0
     err = capsys.readouterr().err
-    assert "skipping buddybot/buddy/people/state: no ROS 2 topic" in err
-    assert "exported 12 messages on 12 ROS 2 topics" in err
+    assert "skipping buddybot/buddy/leases/state: no ROS 2 topic" in err
+    assert "exported 18 messages on 18 ROS 2 topics" in err  # people/state: 6 ROS4HRI
     assert "/raw_image as sensor_msgs/msg/Image (raw_image = 'raw'" in err
     recorded = {c.key: c for c in bag.read_info(path).channels}
     log_times = {}
@@ -104,6 +109,11 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
         reader = make_reader(stream, decoder_factories=[DecoderFactory()])
         assert reader.get_header().profile == "ros2"
         decoded = list(reader.iter_decoded_messages())
+    people = {channel.topic: ros for _s, channel, _r, ros in decoded
+              if channel.topic.startswith("/humans/") or channel.topic == "/tf"}
+    (person,) = channels.decode(*found_people(found)).people
+    assert people["/humans/persons/tracked"].ids == [f"p{person.id}"]
+    decoded = [d for d in decoded if d[1].topic not in people]
     for schema, channel, record, ros in decoded:
         entry = rosbag.BY_NAME[channel.topic]
         key = next(k for k, (t, _p) in found.items() if t is entry.topic)
@@ -133,8 +143,9 @@ def test_export_decodes_with_mcap_ros2_to_the_recorded_values(
         seen.add(key)
     assert len(seen) == 12 and all(k in recorded for k in seen)
     with RosbagsReader(tmp_path / "out") as reader:  # rosbags: metadata.yaml and the MCAP
-        assert reader.message_count == 12
-        assert {c.topic for c in reader.connections} == {e.ros_name for e in rosbag.TABLE}
+        assert reader.message_count == 12 + len(people)
+        assert {c.topic for c in reader.connections} == {e.ros_name for e in rosbag.TABLE} \
+            | set(people)
         for connection, _t, raw in reader.messages():
             types.typestore().deserialize_cdr(raw, connection.msgtype)
 

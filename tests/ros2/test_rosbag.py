@@ -6,17 +6,20 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import msgspec
 import pytest
 import yaml
 from mcap.reader import make_reader
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+from mcap_ros2.decoder import DecoderFactory
 from rosbags.interfaces import QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.rosbag2 import Reader as RosbagsReader
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, rosbag, types, wire
+from buddybot.ros2 import bridge, convert, hri, rosbag, types, wire
 from buddybot.ros2.settings import Ros2Settings
+from buddybot.tools.testing import visitor
 from tests.contract.test_messages import sample_messages
 
 
@@ -125,8 +128,8 @@ def test_qos_and_metadata_read_as_yaml(tmp_path: Path) -> None:
     writer = rosbag.Rosbag2Writer(tmp_path / "visit")
     writer.write("buddybot/buddy/audio/device_free", keys.DEVICE_FREE,
                  m.Bool(stamp_ns=5, data=True), 1_000)
-    writer.write("buddybot/buddy/people/state", keys.PEOPLE_STATE,
-                 m.PeopleState(stamp_ns=5, people=[]), 2_000)
+    writer.write("buddybot/buddy/leases/state", keys.LEASES,
+                 m.Leases(stamp_ns=5, leases=[]), 2_000)
     writer.close()
     info = yaml.safe_load((tmp_path / "visit" / "metadata.yaml").read_text())
     bag = info["rosbag2_bagfile_information"]
@@ -135,7 +138,36 @@ def test_qos_and_metadata_read_as_yaml(tmp_path: Path) -> None:
     (topic,) = bag["topics_with_message_count"]
     assert topic["topic_metadata"]["type_description_hash"] == types.type_hash(types.BOOL)
     assert topic["topic_metadata"]["offered_qos_profiles"][0]["reliability"] == "reliable"
-    assert writer.stats.skipped == {"buddybot/buddy/people/state": "no ROS 2 topic"}
+    assert writer.stats.skipped == {"buddybot/buddy/leases/state": "no ROS 2 topic"}
+
+
+def test_people_are_written_as_the_bridge_publishes_them(tmp_path: Path) -> None:
+    """`people/state` becomes the ROS4HRI topics, on change, with the bridge's QoS;
+    read back by mcap-ros2-support's decoder from the bag's own schemas."""
+    writer = rosbag.Rosbag2Writer(tmp_path / "visit")
+    ada = visitor(True, 3, 1.5, face=True).people[0]
+    ada = msgspec.structs.replace(ada, yaw_rad=0.2, engagement="ENGAGED", name="Ada")
+    for i, people in enumerate(([ada], [ada], [])):
+        writer.write("buddybot/buddy/people/state", keys.PEOPLE_STATE,
+                     m.PeopleState(stamp_ns=1_700_000_000_000_000_000 + i, people=people),
+                     1_000 + i)
+    writer.close()
+    info = yaml.safe_load((tmp_path / "visit" / "metadata.yaml").read_text())
+    topics = {t["topic_metadata"]["name"]: t for t in
+              info["rosbag2_bagfile_information"]["topics_with_message_count"]}
+    assert topics["/humans/persons/tracked"]["message_count"] == 2  # [p3], then []
+    assert topics["/humans/persons/p3/engagement_status"]["message_count"] == 1
+    assert topics["/tf"]["message_count"] == 2
+    for name, topic in topics.items():
+        assert topic["topic_metadata"]["offered_qos_profiles"] == [
+            rosbag.qos_profile(hri.qos(name[1:]))], name
+    with (tmp_path / "visit" / "visit_0.mcap").open("rb") as stream:
+        read = [(c.topic, msg) for _s, c, _m, msg in make_reader(
+            stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages()]
+    tracked = [msg.ids for topic, msg in read if topic == "/humans/persons/tracked"]
+    assert tracked == [["p3"], []]
+    assert [msg.data for topic, msg in read if topic == "/humans/persons/p3/alias"] == [
+        "known_ada"]
 
 
 def test_an_existing_output_is_not_overwritten(tmp_path: Path) -> None:
