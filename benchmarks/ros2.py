@@ -13,7 +13,8 @@
    faces at `--fps` and 640x480 bgr8 frames on `camera/front/image` at
    `--fps`: first with no ROS 2 subscriber of `/raw_image` (the bridge does
    not read the frames), then with `people/state` at `--fps` as well (one
-   visitor: the ROS4HRI topics and /tf), then with a subscriber of
+   visitor), without and with a ROS4HRI reader of /humans/persons/tracked
+   (the bridge reads the people only then), then with a subscriber of
    `/raw_image` (an `MS` graph token and a subscriber on the key: every
    frame encoded as sensor_msgs/msg/Image).
 3. CDR encode and decode rates of every type of the bridge's tables, in
@@ -42,7 +43,7 @@ from common import host, options, percentile
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, convert, types, wire
+from buddybot.ros2 import bridge, convert, hri, hri_msgs, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, Router, retry_until, run_service
@@ -50,6 +51,7 @@ from buddybot.tools.testing import Collector, Process, Router, retry_until, run_
 SETTINGS = Ros2Settings()
 FACE = bridge.route(SETTINGS, "face_position", types.POINT_STAMPED)
 RAW_IMAGE = bridge.route(SETTINGS, "raw_image", types.IMAGE)
+TRACKED = bridge.route(SETTINGS, hri.TRACKED, hri_msgs.IDS_LIST)
 
 
 def visitor_state(stamp: int) -> m.PeopleState:
@@ -92,6 +94,23 @@ class Paced:
     def stop(self) -> None:
         self._stop.set()
         self._thread.join(timeout=5)
+
+
+def reader(peer: zenoh.Session, route: bridge.Route,
+           on_sample: Callable[[zenoh.Sample], None] = lambda _s: None) -> Callable[[], None]:
+    """A ROS 2 subscription of `route` as the graph sees it (its `MS` token and a
+    subscriber on the key); returns what ends it."""
+    sub = peer.declare_subscriber(route.key, on_sample)
+    token = peer.liveliness().declare_token(wire.GraphToken(
+        domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0,
+        entity_id=1, kind="MS", enclave="", namespace="/", node_name="viewer",
+        name=route.ros_name, type_name=wire.dds_type_name(route.ros_type),
+        type_hash=route.type_hash, qos=bridge.SENSOR_QOS).format())
+
+    def end() -> None:
+        token.undeclare()
+        sub.undeclare()
+    return end
 
 
 def _bridge_ready(probe: Node, peer: zenoh.Session) -> None:
@@ -174,17 +193,14 @@ def bench_cpu(proc: Process, probe: Node, peer: zenoh.Session, seconds: float,
         window("no ROS 2 subscriber of /raw_image")
         people = probe.publisher(keys.PEOPLE_STATE)
         pacers.append(Paced(lambda s: people.put(visitor_state(s)), fps))
-        window("no ROS 2 subscriber of /raw_image, people/state as well (ROS4HRI, /tf)")
-        sub = peer.declare_subscriber(RAW_IMAGE.key, on_image)
-        token = peer.liveliness().declare_token(wire.GraphToken(
-            domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0,
-            entity_id=1, kind="MS", enclave="", namespace="/", node_name="viewer",
-            name=RAW_IMAGE.ros_name, type_name=wire.dds_type_name(RAW_IMAGE.ros_type),
-            type_hash=RAW_IMAGE.type_hash, qos=bridge.SENSOR_QOS).format())
+        window("no ROS 2 subscriber of /raw_image, people/state as well, no ROS4HRI reader")
+        hri_reader = reader(peer, TRACKED)
+        window("no ROS 2 subscriber of /raw_image, people/state read as ROS4HRI")
+        hri_reader()
+        image_reader = reader(peer, RAW_IMAGE, on_image)
         retry_until(lambda: received[0] > 0, 30, 0.1, "the first /raw_image")
         window("one ROS 2 subscriber of /raw_image")
-        token.undeclare()
-        sub.undeclare()
+        image_reader()
         last = diag.messages[-1].values if diag.messages else {}
         print(f"  bridge counters: encode_errors {last.get('encode_errors')}, "
               f"callback_errors {last.get('callback_errors', 0)}")

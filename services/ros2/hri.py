@@ -15,8 +15,9 @@ One ROS4HRI person per visit of the people service, id `p<person id>`:
 
 `HriPlanner.step` turns one `people/state` into the samples to send and the
 persons whose topics open or close; a value is re-sent only when it
-changed (the latched topics keep it for late joiners), the frames every
-time. The mapping, and what a ROS user adds: docs/ros2.md, 'People as ROS4HRI'.
+changed (the latched topics keep it for late joiners), the frames at most
+every 0.1 s. The mapping, and what a ROS user adds: docs/ros2.md,
+'People as ROS4HRI'.
 """
 
 from __future__ import annotations
@@ -44,6 +45,13 @@ PERSON_TOPICS: dict[str, str] = {
 STATIC_TOPICS: dict[str, str] = {TRACKED: hri_msgs.IDS_LIST, KNOWN: hri_msgs.IDS_LIST,
                                   TF: types.TF_MESSAGE}
 """The topics there while the bridge runs, whoever is present."""
+DEMAND_TOPICS = (TRACKED, TF)
+"""The people are read (and these topics fed) only while a ROS 2 node subscribes to
+one of these: a ROS4HRI client always reads the tracked list, a TF listener /tf."""
+TF_PERIOD_NS = 100_000_000
+"""Frames at most every 0.1 s (and at once for a new person): `people/state` changes
+with every camera frame, and a TF listener interpolates between stamps."""
+TF_PERIOD_NS_MAX = 2**62
 LEVELS: dict[str, int] = {"NONE": 1, "ENGAGING": 2, "ENGAGED": 3, "DISENGAGING": 4}
 """Our engagement -> REP-155's level (DISENGAGED=1 ... DISENGAGING=4; else UNKNOWN=0)."""
 
@@ -115,6 +123,8 @@ class HriPlanner:
     robot_frame: str = "camera_front"
     sent: dict[str, Any] = field(default_factory=dict)
     present: tuple[str, ...] = ()
+    frames_at: int = -TF_PERIOD_NS_MAX
+    """The stamp of the frames last sent (ns)."""
 
     def step(self, state: m.PeopleState) -> Plan:
         stamp = state.stamp_ns
@@ -141,7 +151,9 @@ class HriPlanner:
                 send(person_topic(pid, "alias"), types.STRING, identity_id(p.name), string)
         frames = [(f"person_{person_id(p)}", where) for p in state.people
                   if (where := position(p)) is not None]
-        if frames:
+        due = opened or stamp - self.frames_at >= TF_PERIOD_NS or stamp < self.frames_at
+        if frames and due:
+            self.frames_at = stamp
             samples.append(Sample(TF, types.TF_MESSAGE,
                                   tf_message(stamp, self.robot_frame, frames)))
         return Plan(opened, tuple(samples), closed)

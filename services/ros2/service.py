@@ -246,7 +246,14 @@ class Ros2Bridge:
             self._token("MS", route)  # after the subscriber: a peer seeing it is heard
         for name, ros_type in hri.STATIC_TOPICS.items():
             self._hri_topic(name, ros_type)
-        self.node.subscribe(keys.PEOPLE_STATE, self.on_people, delivery="latest")
+        people = OnDemand("people", partial(self.node.subscribe, keys.PEOPLE_STATE,
+                                            self.on_people, delivery="latest"), self._on_error)
+        for name in hri.DEMAND_TOPICS:  # every ROS4HRI client reads the tracked list
+            route = bridge.route(self.settings, name, hri.STATIC_TOPICS[name])
+            self.on_demand[route.ros_name] = people
+            self.node.watch_tokens(wire.entities_key(
+                self.settings.domain_id, "MS", route.ros_name,
+                wire.dds_type_name(route.ros_type), route.type_hash), people.on_token)
         self.servers.start()
 
     def _hri_topic(self, name: str, ros_type: str) -> None:
@@ -377,7 +384,7 @@ class Ros2Bridge:
 
     def close(self) -> None:
         self.servers.close()
-        for demand in self.on_demand.values():
+        for demand in set(self.on_demand.values()):
             demand.close()
         for inbox in self._inboxes:
             inbox.worker.close(drop_pending=True)

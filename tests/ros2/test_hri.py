@@ -21,7 +21,7 @@ from buddybot.contract import messages as m
 from buddybot.ros2 import bridge, hri, hri_msgs, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
-from buddybot.tools.testing import Process, retry_until, visitor
+from buddybot.tools.testing import Collector, Process, retry_until, visitor
 
 from .test_convert import their_decoder
 from .test_service import late_sample
@@ -95,6 +95,19 @@ def test_a_visit_opens_its_topics_sends_changes_only_and_closes_them() -> None:
     assert (gone.opened, gone.closed) == ((), ("p7",))
     assert {s.name: decode(s).ids for s in gone.samples} == {
         "humans/persons/tracked": [], "humans/persons/known": []}
+
+
+def test_frames_come_at_most_every_tenth_of_a_second_and_at_once_for_a_newcomer() -> None:
+    planner = hri.HriPlanner()
+    ada = person(1, yaw_rad=0.1, seen_by="BOTH")
+    bob = person(2, yaw_rad=-0.3, seen_by="BOTH")
+    t0 = 1_700_000_000_000_000_000
+    sent = []
+    for i, people in enumerate([(ada,)] * 4 + [(ada, bob)] + [(ada, bob)] * 6):
+        plan = planner.step(state(*people, stamp_ns=t0 + i * 33_000_000))
+        sent.append(any(s.name == "tf" for s in plan.samples))
+    # every 33 ms: the first; bob at once (132 ms); then not before 0.1 s after him
+    assert sent == [True, False, False, False, True, False, False, False, True, False, False]
 
 
 def test_a_person_without_a_direction_has_no_frame_and_no_confidence() -> None:
@@ -171,6 +184,16 @@ def test_persons_as_a_ros_2_peer_sees_them(spawn: Callable[..., Process], peer: 
 
     peer.declare_subscriber(tracked.key, on_tracked)
     people = probe.publisher(keys.PEOPLE_STATE)
+    people.put(state(person(9), stamp_ns=m.now_ns()))
+    diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
+    diag.wait_for(lambda d: "readers /humans/persons/tracked" in d.values, 30,
+                  "the bridge's diagnostics")
+    assert lists == []  # no ROS 2 node reads the people yet: the bridge does not either
+    token = peer.liveliness().declare_token(wire.GraphToken(
+        domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0, entity_id=1,
+        kind="MS", enclave="", namespace="/", node_name="hri_listener",
+        name=tracked.ros_name, type_name=wire.dds_type_name(tracked.ros_type),
+        type_hash=tracked.type_hash, qos=bridge.LATCHED_QOS).format())
     ada = person(4, engagement="ENGAGED", yaw_rad=0.2, seen_by="BOTH")
 
     def seen(ids: list[str]) -> Callable[[], bool]:
@@ -193,4 +216,5 @@ def test_persons_as_a_ros_2_peer_sees_them(spawn: Callable[..., Process], peer: 
                 "nobody tracked")
     retry_until(lambda: not any(n.startswith("/humans/persons/p4/") for n in publishers(peer)),
                 15, 0.2, "p4's topics gone from the graph")
+    token.undeclare()
 

@@ -149,7 +149,8 @@ def test_people_are_written_as_the_bridge_publishes_them(tmp_path: Path) -> None
     ada = msgspec.structs.replace(ada, yaw_rad=0.2, engagement="ENGAGED", name="Ada")
     for i, people in enumerate(([ada], [ada], [])):
         writer.write("buddybot/buddy/people/state", keys.PEOPLE_STATE,
-                     m.PeopleState(stamp_ns=1_700_000_000_000_000_000 + i, people=people),
+                     m.PeopleState(stamp_ns=1_700_000_000_000_000_000 + i * 200_000_000,
+                                   people=people),
                      1_000 + i)
     writer.close()
     info = yaml.safe_load((tmp_path / "visit" / "metadata.yaml").read_text())
