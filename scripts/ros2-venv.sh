@@ -31,6 +31,14 @@ packages=(
     ros-jazzy-std-srvs==5.3.6
     ros-jazzy-geometry-msgs==5.3.6
     ros-jazzy-sensor-msgs==5.3.6
+    # the rest of the standard types rosbags' store holds, for their hashes
+    ros-jazzy-actionlib-msgs==5.3.6
+    ros-jazzy-diagnostic-msgs==5.3.6
+    ros-jazzy-nav-msgs==5.3.6
+    ros-jazzy-shape-msgs==5.3.6
+    ros-jazzy-stereo-msgs==5.3.6
+    ros-jazzy-trajectory-msgs==5.3.6
+    ros-jazzy-visualization-msgs==5.3.6
 )
 # the venv's name changes with the list, so a changed pin makes a new one
 tag=$(printf '%s\n' "${packages[@]}" | cksum | cut -d' ' -f1)
