@@ -17,8 +17,8 @@ build` would, and `EXTRA_DIR/<pkg>/msg/*.msg` (definitions of packages no
 wheel ships, written by the test from our typestore) the same way. Out:
 `{"hashes": {type: [hash, source]}, "errors": [...]}`.
 
-`cdr`: for each item `{"type", "cdr" (hex), "fields" (optional)}`, rclpy's
-`deserialize_message` of the bytes (as plain JSON values), its
+`cdr`: for each item `{"type", "cdr" (hex or null), "fields" (optional)}`,
+rclpy's `deserialize_message` of the bytes (as plain JSON values), its
 `serialize_message` of that message again, and of a message built from
 `fields`; or why the type has no Python typesupport here.
 """
@@ -218,12 +218,12 @@ def cdr_command(in_file: Path, out_file: Path) -> None:
             results.append({"type": item["type"], "available": False,
                             "reason": f"no Python typesupport in the wheels ({e})"})
             continue
-        payload = bytes.fromhex(item["cdr"])
         result: dict[str, Any] = {"type": item["type"], "available": True}
         try:
-            message = deserialize_message(payload, cls)
-            result["decoded"] = plain(message)
-            result["reserialized"] = bytes(serialize_message(message)).hex()
+            if item["cdr"] is not None:
+                message = deserialize_message(bytes.fromhex(item["cdr"]), cls)
+                result["decoded"] = plain(message)
+                result["reserialized"] = bytes(serialize_message(message)).hex()
             if item.get("fields") is not None:
                 result["from_fields"] = bytes(serialize_message(
                     build(cls, item["fields"]))).hex()

@@ -321,6 +321,23 @@ def test_rclpy_reads_and_writes_every_message_we_publish_as_we_do(
     assert any("rclpy decodes" in p for p in found), found
 
 
+def test_the_bridge_takes_the_requests_rclpy_writes(python: str, tmp_path: Path) -> None:
+    """The standard requests a ROS 2 client sends (a Trigger, a cancel), as
+    rclpy's Fast-CDR writes them (rmw_zenoh_cpp serialises with Fast-CDR too:
+    its padding unwritten, the end padded to 4 bytes), read by the bridge's own
+    decoders."""
+    uuid, stamp_ns = bytes(range(16)), 1_700_000_000_000_000_005
+    got = rclpy_cdr(python, tmp_path, [
+        {"type": f"{types.TRIGGER}_Request", "cdr": None, "fields": {}},
+        {"type": f"{action.CANCEL_GOAL}_Request", "cdr": None, "fields": {
+            "goal_info": {"goal_id": {"uuid": list(uuid)}, "stamp": _stamp(stamp_ns)}}}])
+    trigger, cancel = (bytes.fromhex(g["from_fields"]) for g in got)
+    assert len(trigger) == 8  # one byte of the empty struct, three of padding
+    stop = next(s for s in services.SERVICES if s.ros_type == types.TRIGGER)
+    assert isinstance(services.request_from_ros(trigger, stop), stop.service.request)
+    assert action.decode_cancel(cancel) == (uuid, stamp_ns)
+
+
 # --- an exported bag ---------------------------------------------------------------
 
 
