@@ -39,22 +39,15 @@ KINDS = ("msg", "srv", "action")
 
 def share_dirs() -> dict[str, Path]:
     """package -> its `share/<package>` folder holding type description `.json` files."""
-    roots = {Path(p) for p in sys.path if p} | {Path(sys.prefix)}
+    prefixes = [sys.prefix, *os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)]
     found: dict[str, Path] = {}
-    for root in sorted(roots):
-        share = root / "share"
+    for prefix in filter(None, prefixes):
+        share = Path(prefix) / "share"
         if not share.is_dir():
             continue
         for package in sorted(share.iterdir()):
-            if any(package.glob(f"{kind}/*.json") for kind in KINDS):
+            if any(next(package.glob(f"{kind}/*.json"), None) for kind in KINDS):
                 found.setdefault(package.name, package)
-    prefixes = os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep)
-    for prefix in filter(None, prefixes):
-        share = Path(prefix) / "share"
-        if share.is_dir():
-            for package in sorted(share.iterdir()):
-                if any(package.glob(f"{kind}/*.json") for kind in KINDS):
-                    found.setdefault(package.name, package)
     return found
 
 
