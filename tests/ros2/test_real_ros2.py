@@ -371,9 +371,10 @@ def test_rclpy_reads_every_message_of_an_exported_bag(
         for schema, channel, record in make_reader(stream).iter_messages():
             assert schema is not None
             assert channel.metadata["topic_type_hash"] == real[schema.name][0], channel
+            source = recorded.get(channel.topic)  # None: a topic named per person, ...
             messages.append((channel.topic, schema.name, bytes(record.data),
-                             intended(schema.name, recorded[channel.topic])))
-    assert {w for w, _n, _d, _m in messages} == {e.ros_name for e in rosbag.TABLE}
+                             None if source is None else intended(schema.name, source)))
+    assert {e.ros_name for e in rosbag.TABLE} <= {w for w, _n, _d, _m in messages}
     problems, checked = cdr_problems(python, tmp_path, messages,
                                      set(real_hashes["packages"]))
     assert problems == []
