@@ -14,21 +14,8 @@
 set -euo pipefail
 version=2026.6.5
 venv="${XDG_CACHE_HOME:-$HOME/.cache}/buddybot/esphome-$version"
-if [ ! -f "$venv/.complete" ]; then
-    echo "buddybot: installing ESPHome $version in $venv (once, ~1 min)..." >&2
-    rm -rf "$venv"
-    mkdir -p "$(dirname "$venv")"
-    python=$(command -v python3.11 || command -v python3)
-    log="$(dirname "$venv")/esphome-install.log"
-    if ! { "$python" -m venv "$venv" &&
-           "$venv/bin/pip" install -q --disable-pip-version-check "esphome==$version"; } \
-           >"$log" 2>&1; then
-        tail -n 5 "$log" >&2
-        rm -rf "$venv"
-        echo "buddybot: ESPHome $version could not be installed (offline?), see $log:" \
-             "the ESPHome checks of tests/deploy/test_esphome.py skip" >&2
-        exit 1
-    fi
-    touch "$venv/.complete"  # written last: a half-made venv is made again
-fi
+. "$(dirname "$0")/cached-venv.sh"
+cached_venv "$venv" "ESPHome $version" \
+    "the ESPHome checks of tests/deploy/test_esphome.py skip" \
+    "import esphome" "esphome==$version"
 echo "$venv/bin/esphome"

