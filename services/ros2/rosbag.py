@@ -6,10 +6,10 @@ two, as the layers say).
 
 * `TABLE`: which of our topics becomes which ROS 2 topic, the original
   robot's names (`/face_position`, ...), and the types `bag import` takes
-  on it; `people/state` becomes the ROS4HRI topics (hri.py), our other keys
-  without an entry (leases, ...) are skipped. What
-  is written is what the bridge publishes (`bridge.outgoing` of the same
-  `[ros2]` settings): each topic's type, CDR and offered QoS, so a bag
+  on it; `people/state` becomes the ROS4HRI topics (hri.py), other keys
+  without an entry are skipped. What is written is what the bridge
+  publishes (`bridge.outgoing` of the same `[ros2]` settings): each
+  topic's type, CDR and offered QoS, so a bag
   replays into the subscribers the live robot serves (`/raw_image` an
   Image unless `raw_image = "compressed"`; a test holds every topic's QoS
   equal to the bridge's).

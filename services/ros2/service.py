@@ -246,8 +246,7 @@ class Ros2Bridge:
             self._token("MS", route)  # after the subscriber: a peer seeing it is heard
         for name, ros_type in hri.STATIC_TOPICS.items():
             self._hri_topic(name, ros_type)
-        people = OnDemand("people", partial(self.node.subscribe, keys.PEOPLE_STATE,
-                                            self.on_people, delivery="latest"), self._on_error)
+        people = OnDemand("people", self._subscribe_people, self._on_error)
         for name in hri.DEMAND_TOPICS:  # every ROS4HRI client reads the tracked list
             route = bridge.route(self.settings, name, hri.STATIC_TOPICS[name])
             self.on_demand[route.ros_name] = people
@@ -255,6 +254,9 @@ class Ros2Bridge:
                 self.settings.domain_id, "MS", route.ros_name,
                 wire.dds_type_name(route.ros_type), route.type_hash), people.on_token)
         self.servers.start()
+
+    def _subscribe_people(self) -> Subscription:
+        return self.node.subscribe(keys.PEOPLE_STATE, self.on_people, delivery="latest")
 
     def _hri_topic(self, name: str, ros_type: str) -> None:
         """Declare one ROS4HRI publisher (and its graph token) under `name`."""

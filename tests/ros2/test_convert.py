@@ -23,6 +23,7 @@ from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 from buddybot.contract import messages as m
 from buddybot.ros2 import convert, interfaces, types
 from buddybot.ros2.convert import ConvertError
+from tests.properties import examples
 
 MSG = interfaces.ROOT / "msg"
 SEPARATOR = "=" * 80
@@ -388,7 +389,7 @@ def radar_targets(draw: st.DrawFn) -> m.RadarTargets:
                           radar_id=draw(st.integers(0, 255)), targets=targets)
 
 
-@settings(max_examples=80, deadline=None)
+@settings(max_examples=examples(80))
 @given(radar_targets())
 def test_radar_targets_are_a_pose_array_in_the_radars_frame(report: m.RadarTargets) -> None:
     """One pose per target, in the radar's own frame with ROS axes (forward =
@@ -408,7 +409,7 @@ ANGLE = st.floats(-math.pi, math.pi, allow_nan=False)
 OFFSET = st.floats(-10.0, 10.0, allow_nan=False)
 
 
-@settings(max_examples=200, deadline=None)
+@settings(max_examples=examples(200))
 @given(x_m=SENSOR_M, y_m=SENSOR_M, x=OFFSET, y=OFFSET, z=OFFSET, yaw=ANGLE,
        mirror_x=st.booleans())
 def test_the_documented_static_tf_places_a_pose_where_the_radar_places_it(

@@ -50,6 +50,7 @@ from buddybot import cli
 from buddybot.contract import channels
 from buddybot.contract import messages as m
 from buddybot.ros2 import action, bridge, convert, rosbag, services, types
+from buddybot.runtime.config import default_config
 from tests.contract.test_messages import sample_messages
 from tests.tools.test_bag import samples, write_recording
 
@@ -351,7 +352,8 @@ def export(tmp_path: Path) -> tuple[Path, dict[str, m.Message]]:
     write_recording(tmp_path / "visit.mcap", items)
     args: argparse.Namespace = cli.build_parser().parse_args(
         ["bag", "export", "--ros2", str(tmp_path / "visit.mcap"), str(tmp_path / "ros")])
-    assert int(args.subverb_main(SimpleNamespace(args=args, robot="buddy"))) == 0
+    assert int(args.subverb_main(SimpleNamespace(args=args, robot="buddy",
+                                                 config=default_config()))) == 0
     recorded = {entry.ros_name: channels.decode(topic, payload)
                 for topic, payload in found.values()
                 for entry in rosbag.TABLE if entry.topic is topic}
