@@ -1,8 +1,7 @@
 """Recordings for ROS 2 tools: our messages <-> rosbag2 MCAP channels (pure, no Zenoh).
 
-`buddybot bag export --ros2` and `bag import` stand on this module; reading
-and writing our own recordings stays in `tools/bag.py` (the CLI joins the
-two, as the layers say).
+`bag export --ros2` and `bag import` stand on it; our own recordings are
+`tools/bag.py`'s (the CLI joins the two, as the layers say).
 
 * `TABLE`: which of our topics becomes which ROS 2 topic, the original
   robot's names (`/face_position`, ...), and the types `bag import` takes
