@@ -29,6 +29,7 @@ class Ros2Settings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
         "ROS 2 names, /face_position ...)")] = "/"
     robot_frame: Annotated[str, msgspec.Meta(
         pattern=r"^[A-Za-z_][A-Za-z0-9_/]*$", max_length=200,
+        examples=["camera_front", "base_link"],
         description="the TF frame the persons' frames (`person_<id>` on /tf) hang "
         "from: the camera's, where the people model measures from")] = "camera_front"
     raw_image: Annotated[Literal["raw", "compressed"], msgspec.Meta(
