@@ -375,20 +375,27 @@ def test_malformed_samples_are_skipped_and_the_pages_still_get_the_good_ones(
         async with aiohttp.ClientSession() as http, http.ws_connect(
                 f"http://{LOOPBACK}:{port}/ws") as ws:
             await _next(ws, "hello")
-            for payload in (b"{", b'{"stamp_ns": -1}', b"\xff" * 100):
-                bad.put(payload)
-            radar.put(frame)
-            async with asyncio.timeout(15):
-                while True:
-                    msg = await ws.receive()
-                    if msg.type == aiohttp.WSMsgType.TEXT and msg.json()["t"] == "radar":
-                        frames: list[dict[str, Any]] = msg.json()["v"]
-                        return frames
+            async with asyncio.timeout(30):
+                while True:  # a stream's sample may be dropped on a busy machine: again
+                    for payload in (b"{", b'{"stamp_ns": -1}', b"\xff" * 100):
+                        bad.put(payload)
+                    radar.put(frame)
+                    try:
+                        async with asyncio.timeout(1.0):
+                            while True:
+                                msg = await ws.receive()
+                                if msg.type == aiohttp.WSMsgType.TEXT and \
+                                        msg.json()["t"] == "radar":
+                                    frames: list[dict[str, Any]] = msg.json()["v"]
+                                    return frames
+                    except TimeoutError:
+                        continue
 
     frames = asyncio.run(watch())
     assert [(f["sensor"], f["moving_cm"]) for f in frames] == [("9/0", 123)]
     diagnostics = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="dashboard")
-    diagnostics.wait_for(lambda d: d.values.get("malformed") == 3, 15, "3 malformed counted")
+    diagnostics.wait_for(lambda d: d.values.get("malformed", 0) >= 3, 15,
+                         "the malformed samples counted")
     assert proc.alive()
 
 
