@@ -13,7 +13,7 @@
 # a fresh clone (CI) installs it once per machine, not once per run.
 set -euo pipefail
 version=2026.6.5
-venv="${XDG_CACHE_HOME:-$HOME/.cache}/buddybot/esphome-$version"
+venv="${BUDDYBOT_CACHE:-$HOME/.cache/buddybot}/esphome-$version"
 . "$(dirname "$0")/cached-venv.sh"
 cached_venv "$venv" "ESPHome $version" \
     "the ESPHome checks of tests/deploy/test_esphome.py skip" \

@@ -42,7 +42,7 @@ packages=(
 )
 # the venv's name changes with the list, so a changed pin makes a new one
 tag=$(printf '%s\n' "${packages[@]}" | cksum | cut -d' ' -f1)
-venv="${XDG_CACHE_HOME:-$HOME/.cache}/buddybot/ros2-jazzy-$tag"
+venv="${BUDDYBOT_CACHE:-$HOME/.cache/buddybot}/ros2-jazzy-$tag"
 . "$(dirname "$0")/cached-venv.sh"
 cached_venv "$venv" "ROS 2 Jazzy's wheels" \
     "the real ROS 2 checks of tests/ros2/test_real_ros2.py skip" \

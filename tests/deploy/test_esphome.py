@@ -29,6 +29,8 @@ from typing import Any
 import pytest
 import yaml
 
+from buddybot.tools.testing import cache_root
+
 ROOT = Path(__file__).resolve().parents[2]
 FOLDER = ROOT / "deploy" / "esphome"
 CONFIG = FOLDER / "radar-esp32.yaml"
@@ -246,8 +248,7 @@ def esphome_command() -> str | None:
         return os.environ["BUDDYBOT_ESPHOME"]
     version = re.search(r'^version=(\S+)$', INSTALLER.read_text(), re.M)
     assert version, "scripts/esphome.sh names the ESPHome version it installs"
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
-    venv = cache / "buddybot" / f"esphome-{version.group(1)}"
+    venv = cache_root() / f"esphome-{version.group(1)}"
     if (venv / ".complete").is_file():
         return str(venv / "bin" / "esphome")
     return shutil.which("esphome")

@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import tarfile
@@ -25,6 +24,7 @@ import numpy as np
 from buddybot.camera import blazeface as bf
 from buddybot.camera import models
 from buddybot.camera.facenet import FaceNet
+from buddybot.tools.testing import cache_root
 
 ROOT = Path(__file__).resolve().parents[2]
 SDIST = "face_recognition==1.3.0"
@@ -50,8 +50,7 @@ class Photo:
 
 def cache_dir() -> Path:
     """$BUDDYBOT_CACHE, else ~/.cache/buddybot: outside the repository."""
-    base = os.environ.get("BUDDYBOT_CACHE") or Path.home() / ".cache" / "buddybot"
-    return Path(base) / "identity-photos"
+    return cache_root() / "identity-photos"
 
 
 def fetch(folder: Path | None = None) -> Path:

@@ -51,6 +51,7 @@ from buddybot.contract import channels
 from buddybot.contract import messages as m
 from buddybot.ros2 import action, bridge, convert, rosbag, services, types
 from buddybot.runtime.config import default_config
+from buddybot.tools.testing import cache_root
 from tests.contract.test_messages import sample_messages
 from tests.tools.test_bag import samples, write_recording
 
@@ -67,8 +68,7 @@ def ros_python() -> str:
     without (installing it is scripts/test.sh's work, not a test's)."""
     if os.environ.get("BUDDYBOT_ROS2_PYTHON"):
         return os.environ["BUDDYBOT_ROS2_PYTHON"]
-    cache = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "buddybot"
-    made = sorted(cache.glob("ros2-jazzy-*/.complete"), key=lambda p: p.stat().st_mtime)
+    made = sorted(cache_root().glob("ros2-jazzy-*/.complete"), key=lambda p: p.stat().st_mtime)
     if made:  # the newest: the script names a venv by its pins
         return str(made[-1].parent / "bin" / "python")
     pytest.skip("ROS 2 Jazzy's wheels are not installed (not a test dependency): "
