@@ -24,7 +24,7 @@ from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until, visitor
 
 from .test_convert import their_decoder
-from .test_service import late_sample
+from .test_service import late_sample, subscription_token
 
 SEPARATOR = "=" * 80
 HEADER = (f"{SEPARATOR}\nMSG: std_msgs/Header\nbuiltin_interfaces/Time stamp\nstring frame_id\n"
@@ -189,11 +189,8 @@ def test_persons_as_a_ros_2_peer_sees_them(spawn: Callable[..., Process], peer: 
     diag.wait_for(lambda d: "readers /humans/persons/tracked" in d.values, 30,
                   "the bridge's diagnostics")
     assert lists == []  # no ROS 2 node reads the people yet: the bridge does not either
-    token = peer.liveliness().declare_token(wire.GraphToken(
-        domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0, entity_id=1,
-        kind="MS", enclave="", namespace="/", node_name="hri_listener",
-        name=tracked.ros_name, type_name=wire.dds_type_name(tracked.ros_type),
-        type_hash=tracked.type_hash, qos=bridge.LATCHED_QOS).format())
+    token = peer.liveliness().declare_token(
+        subscription_token(peer, tracked, SETTINGS.domain_id, bridge.LATCHED_QOS))
     ada = person(4, engagement="ENGAGED", yaw_rad=0.2, seen_by="BOTH")
 
     def seen(ids: list[str]) -> Callable[[], bool]:

@@ -211,13 +211,15 @@ def test_radar_targets_reach_a_ros_2_peer_as_a_pose_array(
     assert got[0] == rosbag.to_ros(rosbag.BY_NAME["/ld2450_targets"], report)[1]
 
 
-def subscription_token(peer: zenoh.Session, route: bridge.Route) -> str:
+def subscription_token(peer: zenoh.Session, route: bridge.Route,
+                       domain_id: int = SETTINGS.domain_id,
+                       qos: wire.Qos = bridge.SENSOR_QOS) -> str:
     """The `MS` graph token a ROS 2 node subscribing to `route` would declare."""
     return wire.GraphToken(
-        domain_id=SETTINGS.domain_id, session_id=str(peer.info.zid()), node_id=0, entity_id=1,
+        domain_id=domain_id, session_id=str(peer.info.zid()), node_id=0, entity_id=1,
         kind="MS", enclave="", namespace="/", node_name="viewer", name=route.ros_name,
         type_name=wire.dds_type_name(route.ros_type), type_hash=route.type_hash,
-        qos=bridge.SENSOR_QOS).format()
+        qos=qos).format()
 
 
 @pytest.mark.integration
