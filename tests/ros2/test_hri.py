@@ -191,6 +191,10 @@ def test_persons_as_a_ros_2_peer_sees_them(spawn: Callable[..., Process], peer: 
     assert lists == []  # no ROS 2 node reads the people yet: the bridge does not either
     token = peer.liveliness().declare_token(
         subscription_token(peer, tracked, SETTINGS.domain_id, bridge.LATCHED_QOS))
+    garbage = probe.raw_publisher(probe.key(keys.PEOPLE_STATE), keys.PEOPLE_STATE.encoding)
+    for payload in (b"{", b'{"stamp_ns": -1, "people": []}', b"\xff" * 100,
+                    b'{"stamp_ns": 1, "people": [' + b"{}," * 100 + b"{}]}"):
+        garbage.put(payload)  # dropped and counted by the node: the bridge goes on
     ada = person(4, engagement="ENGAGED", yaw_rad=0.2, seen_by="BOTH")
 
     def seen(ids: list[str]) -> Callable[[], bool]:
