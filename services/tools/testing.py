@@ -202,12 +202,6 @@ class Process:
         return retry_until(printed, timeout, what=f"{self.name} printing {text!r}")
 
 
-def cache_root() -> Path:
-    """Where tests and the tool venvs keep what is fetched once per machine:
-    $BUDDYBOT_CACHE, else ~/.cache/buddybot (outside the repository)."""
-    return Path(os.environ.get("BUDDYBOT_CACHE") or Path.home() / ".cache" / "buddybot")
-
-
 def visitor(in_range: bool, person_id: int = 1, distance_m: float = 1.2,
             stamp_ns: int | None = None, held: bool = False,
             face: bool = False) -> m.PeopleState:

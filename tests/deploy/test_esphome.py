@@ -29,7 +29,7 @@ from typing import Any
 import pytest
 import yaml
 
-from buddybot.tools.testing import cache_root
+from tests.cache import cache_root
 
 ROOT = Path(__file__).resolve().parents[2]
 FOLDER = ROOT / "deploy" / "esphome"

@@ -24,7 +24,7 @@ import numpy as np
 from buddybot.camera import blazeface as bf
 from buddybot.camera import models
 from buddybot.camera.facenet import FaceNet
-from buddybot.tools.testing import cache_root
+from tests.cache import cache_root
 
 ROOT = Path(__file__).resolve().parents[2]
 SDIST = "face_recognition==1.3.0"

@@ -51,7 +51,7 @@ from buddybot.contract import channels
 from buddybot.contract import messages as m
 from buddybot.ros2 import action, bridge, convert, rosbag, services, types
 from buddybot.runtime.config import default_config
-from buddybot.tools.testing import cache_root
+from tests.cache import cache_root
 from tests.contract.test_messages import sample_messages
 from tests.tools.test_bag import samples, write_recording
 
