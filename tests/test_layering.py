@@ -129,7 +129,7 @@ def test_the_controllers_decisions_load_neither_the_sdk_nor_the_runtime() -> Non
     """The behaviour's state machine, its geometry and its settings are pure: loading
     them loads the contract and nothing else (the SDK, and the runtime under it,
     come only with the service module that wires them to the bus)."""
-    out = loaded_after("import buddybot.controller.behaviour, "
+    out = loaded_after("import buddybot.controller.behaviour, buddybot.controller.attention, "
                        "buddybot.controller.transform, buddybot.controller.settings")
     assert "buddybot.controller.behaviour" in out
     assert {layer_of_module(n) for n in out} == {"contract", "controller"}

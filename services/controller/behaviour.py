@@ -16,6 +16,9 @@ recovery after a restart: docs/controller.md, 'The state machine in detail'.
 from __future__ import annotations
 
 import enum
+import math
+import random
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from buddybot.contract.messages import (
@@ -24,6 +27,8 @@ from buddybot.contract.messages import (
     Waiting,
     spoken_text,
 )
+from buddybot.controller.attention import Attention, Focus
+from buddybot.controller.kinematics import Kinematics, Moving, Person
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
 
@@ -158,13 +163,21 @@ def greeting_for(settings: ControllerSettings, name: str | None) -> str:
     return sound if len(sound) <= _MAX_SOUND else settings.greeting_sound
 
 
+def _aside(gaze: Gaze, offset: tuple[float, float]) -> Gaze:
+    """`gaze` turned by a gaze aversion's (yaw, pitch) offset."""
+    if offset == (0.0, 0.0):
+        return gaze
+    return Gaze(gaze.yaw + offset[0], gaze.pitch + offset[1], gaze.distance_cm)
+
+
 # --- the machine -----------------------------------------------------------------------
 
 
 class Behaviour:
     """The interaction controller's decisions; single-threaded, clock injected."""
 
-    def __init__(self, settings: ControllerSettings, now: float) -> None:
+    def __init__(self, settings: ControllerSettings, now: float,
+                 rng: random.Random | None = None) -> None:
         self.s = settings
         self._recover_until: float | None = now + settings.recover_s
         # inputs
@@ -190,6 +203,22 @@ class Behaviour:
         """The radar direction last sent as a `Look` (None: the face or centre since)."""
         self._last_look: float | None = None
         """When a face or radar direction was last looked at (the centring hold)."""
+        self._crowd: tuple[Person, ...] = ()
+        """Everyone the people service lists now (`people`), for attention and motion."""
+        self._gazes: Mapping[int, Gaze] = {}
+        """Where each of them is, as a gaze (the service transforms their positions)."""
+        self._crowd_stamp: int | None = None
+        self._kinematics = Kinematics()
+        self._moving: dict[int, Moving] = {}
+        self._attention = Attention(rng if rng is not None else random.Random())
+        self._focus = Focus(None, "main")
+        self._face_gaze: tuple[Gaze, int | None] | None = None
+        """The last face's gaze and stamp (aversions re-aim at it between faces)."""
+        self._aimed: tuple[int | None, Gaze] | None = None
+        """(person, gaze) last sent for a glance or an aversion."""
+        self._still_since: float | None = -math.inf
+        """Since when the visit's person has not been walking (None: walking now;
+        -inf: never seen walking)."""
         # derived state
         self._present = False
         self._noticed_at = now
@@ -211,6 +240,7 @@ class Behaviour:
         self.counters: dict[str, int] = {
             "greetings": 0, "farewells": 0, "cancels": 0, "farewells_dropped": 0,
             "sounds_lost": 0, "sounds_refused": 0,
+            "farewells_early": 0,
         }
 
     # -- queries --
@@ -274,7 +304,9 @@ class Behaviour:
         if not self._face_visible(now):
             return "face", 0.0
         face_since = self._face_since if self._face_since is not None else now
-        dwell_left = self.s.greet_dwell_s - (now - max(self._noticed_at, face_since))
+        still_since = now if self._still_since is None else self._still_since
+        dwell_left = self.s.greet_dwell_s - (now - max(self._noticed_at, face_since,
+                                                        still_since))
         if dwell_left > 0:
             return "dwell", dwell_left
         if self._last_greet is not None:
@@ -317,6 +349,8 @@ class Behaviour:
             self._face_since = now
         self._face_shown = shown
         if in_range and person_id is not None:
+            if person_id != self._person_id:
+                self._still_since = -math.inf  # nothing known yet of how they move
             self._person_id = person_id
             self._person_name = name
         return self._step(now)
@@ -326,10 +360,33 @@ class Behaviour:
         a face is seen is the people service's to say (`presence(face=...)`);
         this is the gaze's fast path."""
         self._last_face = now
+        self._face_gaze = (gaze, stamp_ns)
+        out = self._step(now)
+        if self._glancing():
+            return out  # the eyes are on someone else for a moment
         self._last_look = now
         self._gaze_centred = False
         self._radar_looked = None
-        return [Look(gaze, stamp_ns), *self._step(now)]
+        self._aimed = None
+        return [Look(_aside(gaze, self._focus.offset), stamp_ns), *out]
+
+    def people(self, now: float, people: Sequence[Person], gazes: Mapping[int, Gaze],
+               stamp_ns: int | None = None) -> list[Command]:
+        """Everyone the people service lists (each `people/state`), with where each is
+        as a gaze: whom to attend to, and how the visit's person moves (passing by,
+        walking away)."""
+        self._crowd, self._gazes, self._crowd_stamp = tuple(people), gazes, stamp_ns
+        self._moving = self._kinematics.update(now, people)
+        moving = self._moving.get(self._person_id) if self._person_id is not None else None
+        if moving is not None and moving.speed_mps >= self.s.linger_speed_mps:
+            self._still_since = None
+        elif self._still_since is None:
+            self._still_since = now
+        if moving is not None and self._walking_away(moving):
+            self._visit.farewell_done = True
+            self._farewell_since = now
+            self.counters["farewells_early"] += 1
+        return self._step(now)
 
     def radar(self, now: float, gaze: Gaze | None, stamp_ns: int | None = None
               ) -> list[Command]:
@@ -406,6 +463,25 @@ class Behaviour:
     def _face_visible(self, now: float) -> bool:
         return self._face_shown
 
+    def _glancing(self) -> bool:
+        """The eyes are on someone other than the person whose face is followed."""
+        focus = self._focus
+        if focus.person_id is None or focus.reason == "main":
+            return False
+        face = next((p.id for p in self._crowd if p.seen_by in ("CAMERA", "BOTH")), None)
+        return focus.person_id != face
+
+    def _walking_away(self, moving: Moving) -> bool:
+        """The greeted visitor, alone, moves away: their goodbye is due now, not only
+        once the people service lets them go (the whole hold later)."""
+        if not self._present or not self._visit.greeted or self._visit.farewell_done:
+            return False
+        shown = [p for p in self._crowd if p.seen_by != "NONE"]
+        if len(shown) > 1:
+            return False  # someone else stays: the goodbye is for when the room empties
+        return (moving.radial_mps >= self.s.leave_speed_mps
+                and moving.distance_m - moving.nearest_m >= self.s.leave_distance_m)
+
 
     def _drowsy(self, now: float) -> bool:
         if self.s.sleepy_s <= 0 or self._departed_at is None:
@@ -449,6 +525,8 @@ class Behaviour:
         self._watchdog(now)
         self._farewell(now, out)
         self._greeting(now, out)
+        main = self._person_id if self._present else None
+        self._focus = self._attention.update(self.s, now, self._crowd, main)
         self._gaze(now, out)
         self._express(now, out)
         return out
@@ -519,7 +597,9 @@ class Behaviour:
         if self.phase(now) is not Phase.ENGAGED:
             return
         face_since = self._face_since if self._face_since is not None else now
-        if now - max(self._noticed_at, face_since) < self.s.greet_dwell_s:
+        if self._still_since is None:
+            return  # walking past, or not yet slowed down
+        if now - max(self._noticed_at, face_since, self._still_since) < self.s.greet_dwell_s:
             return
         if self._last_greet is not None and now - self._last_greet < self.s.regreet_cooldown_s:
             return
@@ -542,7 +622,25 @@ class Behaviour:
             out.append(Look(gaze, self._radar_stamp))
         return True
 
+    def _glance(self, now: float, out: list[Command]) -> bool:
+        """Look at the person attention chose if it is not the followed face (a
+        newcomer, a shared glance); True while such a glance holds the gaze."""
+        pid = self._focus.person_id
+        gaze = self._gazes.get(pid) if pid is not None and self._glancing() else None
+        if gaze is None:
+            return False
+        if (pid, gaze) != self._aimed:
+            self._aimed = (pid, gaze)
+            self._last_look = now
+            self._gaze_centred = False
+            self._radar_looked = None
+            out.append(Look(gaze, self._crowd_stamp))
+        return True
+
     def _gaze(self, now: float, out: list[Command]) -> None:
+        if self._glance(now, out):
+            return
+        self._aimed = None
         if self._radar_look(now, out):
             return
         if self._gaze_centred or self._last_look is None:

@@ -89,6 +89,29 @@ def radar_point(people: Sequence[Person],
 
 
 @dataclass(frozen=True, slots=True)
+class Crowd:
+    """Everyone `people/state` lists, and where each one with a direction is as a
+    gaze in the eyes frame: attention and motion read every state (the inbox
+    keeps only the newest one not yet handled)."""
+
+    people: tuple[Person, ...]
+    gazes: dict[int, Gaze]
+    stamp_ns: int
+
+
+def person_point(person: Person) -> tuple[float, float, float] | None:
+    """Where a person is in the camera's frame: by their face's direction when the
+    people service has one, else by their angle-radar track (`radar_point`)."""
+    if person.distance_m is None:
+        return None
+    if person.yaw_rad is None:
+        return radar_point((person,), person.id)
+    d, yaw, pitch = person.distance_m, person.yaw_rad, person.pitch_rad or 0.0
+    return (d * math.cos(pitch) * math.cos(yaw), d * math.cos(pitch) * math.sin(yaw),
+            d * math.sin(pitch))
+
+
+@dataclass(frozen=True, slots=True)
 class DeviceFree:
     """`audio/device_free`: the player is idle (it may be busy with another program)."""
 
@@ -130,5 +153,5 @@ class Yielded:
     resources: tuple[m.Resource, ...]
 
 
-Event = (PeopleChanged | RadarGaze | DeviceFree | SoundStatus | GoalReply | CancelReply
+Event = (PeopleChanged | RadarGaze | Crowd | DeviceFree | SoundStatus | GoalReply | CancelReply
          | Yielded)

@@ -38,6 +38,7 @@ from buddybot.controller.behaviour import (
 )
 from buddybot.controller.events import (
     CancelReply,
+    Crowd,
     DeviceFree,
     Event,
     GoalReply,
@@ -46,14 +47,15 @@ from buddybot.controller.events import (
     SoundStatus,
     Yielded,
     people_changed,
+    person_point,
     radar_point,
 )
 from buddybot.controller.settings import ControllerSettings
-from buddybot.controller.transform import RigidTransform, face_gaze
+from buddybot.controller.transform import Gaze, RigidTransform, face_gaze
 from buddybot.sdk import Bot, Refused
 from buddybot.sdk.faces import Face
 from buddybot.sdk.leases import Parts
-from buddybot.sdk.persons import PeopleNow
+from buddybot.sdk.persons import PeopleNow, Person
 from buddybot.sdk.service import (
     ConfigError,
     RateLimitedLog,
@@ -193,9 +195,9 @@ class Controller:
             self._cond.notify()
 
     def _on_people(self, now: PeopleNow) -> None:
-        # `people/state` changes with every face frame of a visitor (distance,
-        # direction); only a change of who is in range, or of the followed
-        # person's radar direction, is news for the behaviour.
+        # `people/state` changes with every face frame of a visitor. Presence and
+        # the followed person's radar direction are posted on change; the whole
+        # crowd (attention, motion) always, the newest replacing one not yet handled.
         with self._cond:
             follow = None if self._last_people is None else self._last_people.person_id
             change = people_changed(now.people, follow)
@@ -207,17 +209,31 @@ class Controller:
                 except ValueError:  # cannot happen with a valid message; never NaN gaze
                     gaze = None
             radar = RadarGaze(gaze, now.stamp_ns if gaze is not None else None)
-            news = False
             if change != self._last_people:
                 self._last_people = change
                 self._inbox.append(change)
-                news = True
             if radar.gaze != (None if self._last_radar is None else self._last_radar.gaze):
                 self._last_radar = radar
                 self._inbox.append(radar)
-                news = True
-            if news:
-                self._cond.notify()
+            crowd = Crowd(now.people, self._gazes(now.people), now.stamp_ns)
+            if self._inbox and isinstance(self._inbox[-1], Crowd):
+                self._inbox[-1] = crowd  # only the newest matters
+            else:
+                self._inbox.append(crowd)
+            self._cond.notify()
+
+    def _gazes(self, people: tuple[Person, ...]) -> dict[int, Gaze]:
+        """Each person with a direction, as a gaze in the eyes frame."""
+        out: dict[int, Gaze] = {}
+        for person in people:
+            point = person_point(person)
+            if point is None:
+                continue
+            try:
+                out[person.id] = face_gaze(self.transform, point)
+            except ValueError:  # cannot happen with a valid message; never NaN gaze
+                continue
+        return out
 
     def _on_device_free(self, free: bool) -> None:
         self._post(DeviceFree(free))
@@ -282,6 +298,8 @@ class Controller:
                     commands = b.presence(now, in_range, person_id, name, held, face)
                 case RadarGaze(gaze=gaze, stamp_ns=stamp_ns):
                     commands = b.radar(now, gaze, stamp_ns)
+                case Crowd(people=people, gazes=gazes, stamp_ns=stamp_ns):
+                    commands = b.people(now, people, gazes, stamp_ns)
                 case DeviceFree(free=free):
                     commands = b.device_free(now, free)
                 case SoundStatus(goal_id=goal_id, state=state, age_s=age_s):

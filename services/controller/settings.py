@@ -81,6 +81,14 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
       sound status, device free) before deciding, so a restart neither repeats
       an expression nor re-greets, even when the latched values come late.
     * `tick_s` 0.05: the decision loop's period for timers.
+
+    Attention and motion (docs/controller.md, 'Attention'): a newcomer gets a
+    glance of `glance_s`; another engaged person one every `share_every_s`;
+    eye contact breaks for `aversion_s` by `aversion_deg` every
+    `aversion_every_s`; walking faster than `linger_speed_mps` is passing
+    (the greeting's dwell waits for them to slow down); a greeted visitor
+    moving away at `leave_speed_mps`, `leave_distance_m` beyond the nearest
+    they came, gets the farewell as they go.
     """
 
     camera: Annotated[str, msgspec.Meta(
@@ -121,5 +129,24 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
                                    "greeting)", live=False)] = 0.5
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the decision loop's timers")] = 0.05
+    glance_s: Annotated[float, _s("a glance at a newcomer or another engaged person "
+                                  "lasts this long")] = 1.2
+    share_every_s: Annotated[float, _s("with another engaged person, a glance at them this "
+                                       "often (0: never)")] = 4.0
+    aversion_every_s: Annotated[float, _s("eye contact broken this often (0: never)")] = 3.0
+    aversion_s: Annotated[float, _s("a gaze aversion lasts this long")] = 0.6
+    aversion_deg: Annotated[float, msgspec.Meta(
+        ge=0.0, le=30.0, extra=LIVE,
+        description="degrees: how far a gaze aversion looks aside (0: never)")] = 7.0
+    linger_speed_mps: Annotated[float, msgspec.Meta(
+        gt=0.0, le=10.0, extra=LIVE,
+        description="m/s: walking faster than this is passing by (no greeting yet)")] = 0.45
+    leave_speed_mps: Annotated[float, msgspec.Meta(
+        gt=0.0, le=10.0, extra=LIVE,
+        description="m/s: a greeted visitor moving away this fast is leaving")] = 0.3
+    leave_distance_m: Annotated[float, msgspec.Meta(
+        ge=0.0, le=10.0, extra=LIVE,
+        description="metres: a visitor moving away is leaving once this far beyond "
+                    "the nearest they came")] = 0.3
     call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",
                                         positive=True, live=False)] = 3.0

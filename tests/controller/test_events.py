@@ -14,6 +14,7 @@ from buddybot.contract import messages as m
 from buddybot.controller.behaviour import CancelSound, PlaySound
 from buddybot.controller.events import (
     CancelReply,
+    Crowd,
     DeviceFree,
     GoalReply,
     PeopleChanged,
@@ -63,8 +64,20 @@ def test_callbacks_post_typed_events(rig: tuple[Controller, FakeBot, Clock]) -> 
     controller._on_people(people_now(visitor(True, person_id=4)))
     controller._on_device_free(False)
     controller._on_status(GoalStatus("g", "PLAYING", "", 0))
-    assert drain(controller) == [PeopleChanged(True, 4), DeviceFree(False),
-                                 SoundStatus("g", "PLAYING", None)]
+    events = drain(controller)
+    assert [e for e in events if not isinstance(e, Crowd)] == [
+        PeopleChanged(True, 4), DeviceFree(False), SoundStatus("g", "PLAYING", None)]
+    [crowd] = [e for e in events if isinstance(e, Crowd)]
+    assert [p.id for p in crowd.people] == [4] and crowd.gazes == {}  # no direction known
+
+
+def test_only_the_newest_crowd_waits_in_the_inbox(
+        rig: tuple[Controller, FakeBot, Clock]) -> None:
+    controller, _node, _clock = rig
+    for distance in (2.0, 1.9, 1.8):
+        controller._on_people(people_now(visitor(True, person_id=4, distance_m=distance)))
+    crowds = [e for e in controller._inbox if isinstance(e, Crowd)]
+    assert [c.people[0].distance_m for c in crowds] == [1.8]
 
 
 def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeBot, Clock]) -> None:
@@ -177,13 +190,14 @@ def test_only_a_change_of_who_is_in_range_reaches_the_inbox(
     rig: tuple[Controller, FakeBot, Clock],
 ) -> None:
     """people/state changes with every face frame (distance, direction): the same
-    presence again posts nothing; another person, the sensors losing them (held),
-    or their leaving does."""
+    presence again posts no presence; another person, the sensors losing them
+    (held), or their leaving does (the crowd is posted each time, for attention)."""
     controller, _node, _clock = rig
     for distance in (1.0, 1.1, 1.2):
         controller._on_people(people_now(visitor(True, person_id=1, distance_m=distance)))
     controller._on_people(people_now(visitor(True, person_id=2)))
     controller._on_people(people_now(visitor(False, person_id=2, held=True)))
     controller._on_people(people())  # then gone
-    assert drain(controller) == [PeopleChanged(True, 1), PeopleChanged(True, 2),
-                                 PeopleChanged(False, 2, held=True), PeopleChanged(False)]
+    presence = [e for e in drain(controller) if not isinstance(e, Crowd)]
+    assert presence == [PeopleChanged(True, 1), PeopleChanged(True, 2),
+                        PeopleChanged(False, 2, held=True), PeopleChanged(False)]
