@@ -2,7 +2,7 @@
 
 The rule, in order: a glance at a newcomer (someone who arrived within
 `NEWCOMER_S` and has a direction), then a glance shared with another
-person who is engaging or engaged while the main person is attended,
+person who is engaging, engaged or near while the main person is attended,
 else the main person (the visit's person the behaviour follows). Glances
 last `glance_s`; the next shared glance comes `share_every_s` (jittered)
 after the last, to whoever was looked at longest ago. While the main
@@ -30,7 +30,9 @@ them (a glance within about a second of their arrival)."""
 JITTER = 0.3
 """Intervals and durations vary by up to this fraction either way (irregular, alive)."""
 INTERACTING = frozenset({"ENGAGING", "ENGAGED"})
-"""Engagements that earn a shared glance."""
+NEAR = frozenset({"INTIMATE", "PERSONAL", "SOCIAL"})
+"""A person engaging or engaged, or this near, earns shared glances: the camera
+follows one face, so a second visitor standing close may never be ENGAGED."""
 
 Reason = Literal["main", "newcomer", "share"]
 
@@ -89,7 +91,7 @@ class Attention:
                 self._glance = glance = (newcomer, "newcomer", now + s.glance_s)
         if glance is None and main in lookable and s.share_every_s > 0:
             others = [pid for pid, p in lookable.items()
-                      if pid != main and p.engagement in INTERACTING]
+                      if pid != main and (p.engagement in INTERACTING or p.zone in NEAR)]
             if not others:
                 self._next_share = None
             elif self._next_share is None:

@@ -22,8 +22,9 @@ S = msgspec.convert({"recover_s": 0.0}, ControllerSettings)
 
 
 def person(pid: int, yaw_deg: float | None = 0.0, distance: float = 1.2,
-           seen_by: str = "BOTH", engagement: str = "ENGAGED") -> Person:
-    return Person(id=pid, zone="PERSONAL", engagement=engagement, distance_m=distance,
+           seen_by: str = "BOTH", engagement: str = "ENGAGED", zone: str = "PERSONAL"
+           ) -> Person:
+    return Person(id=pid, zone=zone, engagement=engagement, distance_m=distance,
                   seen_by=seen_by, yaw_rad=None if yaw_deg is None else math.radians(yaw_deg))
 
 
@@ -44,14 +45,14 @@ def test_a_newcomer_is_glanced_at_within_a_second_then_the_main_person_again() -
     att = Attention(random.Random(1))
     alone = run(att, [person(1)], 1, 0.0, 3.0)
     assert {pid for _t, pid, _r in alone} == {1}
-    both = [person(1), person(2, 30.0, 2.5, "RADAR", "NONE")]
+    both = [person(1), person(2, 30.0, 4.0, "RADAR", "NONE", "PUBLIC")]
     seen = run(att, both, 1, 3.0, 3.0)
     glance = [t for t, pid, _r in seen if pid == 2]
     assert glance and glance[0] - 3.0 < NEWCOMER_S
     assert {r for _t, pid, r in seen if pid == 2} == {"newcomer"}
     assert glance[-1] - glance[0] == pytest.approx(S.glance_s, abs=0.06)
     assert seen[-1][1] == 1  # back to the main person
-    # A passer-by who is not engaging is not glanced at again.
+    # Someone far who is not engaging is not glanced at again.
     assert [pid for _t, pid, _r in run(att, both, 1, 6.0, 10.0)] == [1] * 200
 
 
@@ -62,9 +63,11 @@ def test_a_person_without_a_direction_is_not_glanced_at() -> None:
     assert {pid for _t, pid, _r in seen} == {1}
 
 
-def test_the_gaze_is_shared_between_engaged_people_and_comes_back() -> None:
+@pytest.mark.parametrize("engagement, zone", [("ENGAGING", "PUBLIC"), ("NONE", "SOCIAL")])
+def test_the_gaze_is_shared_between_engaged_people_and_comes_back(engagement: str,
+                                                                  zone: str) -> None:
     att = Attention(random.Random(7))
-    both = [person(1), person(2, -20.0, 1.4, "RADAR", "ENGAGING")]
+    both = [person(1), person(2, -20.0, 1.4, "RADAR", engagement, zone)]
     run(att, [person(1)], 1, 0.0, 1.0)
     seen = run(att, both, 1, 1.0, 30.0)
     shares = [t for t, pid, reason in seen if reason == "share" and pid == 2]
@@ -205,7 +208,7 @@ def test_a_newcomer_gets_a_look_then_the_face_has_the_gaze_again() -> None:
     for _ in range(40):
         rig.step([person(1, 0.0, 1.2)], face)
     came = rig.t
-    newcomer = person(2, 35.0, 2.5, "RADAR", "NONE")
+    newcomer = person(2, 35.0, 4.0, "RADAR", "NONE", "PUBLIC")
     for _ in range(60):
         rig.step([person(1, 0.0, 1.2), newcomer], face)
     looks = [(t, c.gaze) for t, c in rig.log if isinstance(c, Look) and t > came]

@@ -8,16 +8,29 @@ its page without a browser.
 
 from __future__ import annotations
 
+import bisect
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
 
 from buddybot.camera.sim import compose, face_path
+from buddybot.contract import keys
+from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Process, free_port, retry_until, write_tone
+from buddybot.runtime.registry import available_services
+from buddybot.tools.testing import (
+    Process,
+    buddybot_argv,
+    free_port,
+    retry_until,
+    write_tone,
+)
 from tests.sim import SCENARIOS
 
 Spawn = Callable[..., Process]
@@ -114,3 +127,58 @@ def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",
     """The bridge with its simulated LD2410 seeing `scenario`, started now."""
     return spawn("radar-bridge", "--sim", "--scenario", scenario_arg(scenario),
                  "--sim-speed", str(speed), robot=robot)
+
+
+@contextmanager
+def robot_on(tmp_path: Path, scenario: str, config_text: str = "") -> Iterator[Node]:
+    """`buddybot up --sim --scenario` on private ports; a probe on its router."""
+    config = tmp_path / "robot.toml"
+    config.write_text('[audio_player]\nbackend = "null"\n' + config_text)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--scenario", scenario,
+                               "--listen", endpoint, "--config", str(config),
+                               "--eye-port", str(free_port()), "--dashboard-port",
+                               str(free_port()), "--status-period", "1"),
+                 "up", tmp_path / "logs")
+    probe: Node | None = None
+    try:
+        n = len([e for e in available_services() if not e.on_request])
+        up.wait_for_output(f"nodes {n}/{n}", 180)
+        probe = Node("probe", robot="buddy", connect=[endpoint], probe=True)
+        yield probe
+    finally:
+        if probe is not None:
+            probe.close()
+        status = up.stop(30)
+        print(up.output()[-6000:])
+        assert status == 0
+
+
+def sounds(states: list[m.ControllerState]) -> list[str]:
+    """Each sound of ours, once, in the order it started."""
+    out: list[str] = []
+    for prev, cur in zip([None, *states], states, strict=False):
+        if cur.sound and (prev is None or prev.sound != cur.sound):
+            out.append(cur.sound)
+    return out
+
+
+class Arrivals:
+    """Every message of one topic with when it arrived (monotonic s): what was in
+    effect at an instant, whatever the publishers' stamps say."""
+
+    def __init__(self, node: Node, topic: keys.Topic) -> None:
+        self.at: list[float] = []
+        self.messages: list[Any] = []
+        self._lock = threading.Lock()
+        node.subscribe(topic, self._on)
+
+    def _on(self, msg: Any, _key: str) -> None:
+        with self._lock:
+            self.at.append(time.monotonic())
+            self.messages.append(msg)
+
+    def in_effect(self, t: float) -> Any | None:
+        with self._lock:
+            i = bisect.bisect_right(self.at, t)
+            return self.messages[i - 1] if i else None

@@ -9,13 +9,8 @@ what really happened, so each check is against the truth, not a script.
 
 from __future__ import annotations
 
-import bisect
-import threading
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -23,65 +18,11 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.runtime.registry import available_services
-from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
+from buddybot.tools.testing import Collector, retry_until
 from tests.sim import SCENARIOS
+from tests.system.robot import Arrivals, robot_on, sounds
 
 pytestmark = pytest.mark.integration
-
-
-@contextmanager
-def robot_on(tmp_path: Path, scenario: str, config_text: str = "") -> Iterator[Node]:
-    """`buddybot up --sim --scenario` on private ports; a probe on its router."""
-    config = tmp_path / "robot.toml"
-    config.write_text('[audio_player]\nbackend = "null"\n' + config_text)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--scenario", scenario,
-                               "--listen", endpoint, "--config", str(config),
-                               "--eye-port", str(free_port()), "--dashboard-port",
-                               str(free_port()), "--status-period", "1"),
-                 "up", tmp_path / "logs")
-    probe: Node | None = None
-    try:
-        n = len([e for e in available_services() if not e.on_request])
-        up.wait_for_output(f"nodes {n}/{n}", 180)
-        probe = Node("probe", robot="buddy", connect=[endpoint], probe=True)
-        yield probe
-    finally:
-        if probe is not None:
-            probe.close()
-        status = up.stop(30)
-        print(up.output()[-6000:])
-        assert status == 0
-
-
-def sounds(states: list[m.ControllerState]) -> list[str]:
-    """Each sound of ours, once, in the order it started."""
-    out: list[str] = []
-    for prev, cur in zip([None, *states], states, strict=False):
-        if cur.sound and (prev is None or prev.sound != cur.sound):
-            out.append(cur.sound)
-    return out
-
-
-class Arrivals:
-    """Every message of one topic with when it arrived (monotonic s): what was in
-    effect at an instant, whatever the publishers' stamps say."""
-
-    def __init__(self, node: Node, topic: keys.Topic) -> None:
-        self.at: list[float] = []
-        self.messages: list[Any] = []
-        self._lock = threading.Lock()
-        node.subscribe(topic, self._on)
-
-    def _on(self, msg: Any, _key: str) -> None:
-        with self._lock:
-            self.at.append(time.monotonic())
-            self.messages.append(msg)
-
-    def in_effect(self, t: float) -> Any | None:
-        with self._lock:
-            i = bisect.bisect_right(self.at, t)
-            return self.messages[i - 1] if i else None
 
 
 NEAR: frozenset[m.Zone] = frozenset({"INTIMATE", "PERSONAL", "SOCIAL"})
@@ -104,7 +45,7 @@ def one_truth_problems(people: Arrivals, state: Arrivals, events: list[m.PersonE
       `FACE_GAP_S` (a detector starved by a busy machine misses a standing face,
       and the people service rightly sees them look away);
     - a greeting not within a person's visit in `people/events`, a farewell not
-      within `hop_s` of a person's LEFT."""
+      within a visit that ended (as they walked away) or `hop_s` after its LEFT."""
     problems: list[str] = []
     for at, msg in zip(list(people.at), list(people.messages), strict=True):
         if not since_ns <= msg.stamp_ns <= until_ns:
@@ -146,8 +87,11 @@ def one_truth_problems(people: Arrivals, state: Arrivals, events: list[m.PersonE
     for t in sorted({s.last_farewell_ns for s in finals if s.last_farewell_ns}):
         if t < since_ns:
             continue
-        if not any(gone <= t <= gone + hop_s * 1e9 for gone in left):
-            problems.append(f"farewell at {t} not just after a LEFT {left}")
+        # As they walk away (before their LEFT) or just after it.
+        if not any(came <= t <= gone + hop_s * 1e9 for came, gone in visits.values()
+                   if gone < 2**63):
+            problems.append(f"farewell at {t} not during or just after a visit that "
+                            f"ended {left}")
     return problems
 
 
