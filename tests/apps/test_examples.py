@@ -19,7 +19,8 @@ from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.node import Node
 from buddybot.runtime.registry import available_services
-from buddybot.tools.testing import Collector, Process, buddybot_argv, free_port, retry_until
+from buddybot.tools.testing import Collector, Process, buddybot_argv, retry_until
+from tests.system import robot
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples" / "apps"
 A = m.ExpressionAction
@@ -71,31 +72,14 @@ RADAR_ONLY = ("radar-bridge", "radar-presence", "people", "controller", "eyes", 
 @contextmanager
 def up_sim(tmp_path: Path, apps: list[Path], only: tuple[str, ...] = (),
            extra_config: str = "") -> Iterator[tuple[Process, Node, str]]:
-    """`buddybot up --sim` on private ports with `apps` in `[apps]` (and `--only` these
-    services when given); a probe on its router."""
-    config = tmp_path / "robot.toml"
+    """`buddybot up --sim` with `apps` in `[apps]` (and `--only` these services when
+    given): `robot.up_sim`, waiting for those services and the apps."""
     listed = ", ".join(f'"{a}"' for a in apps)
-    config.write_text(f'[audio_player]\nbackend = "null"\n[apps]\nrun = [{listed}]\n'
-                      + extra_config)
-    endpoint = f"tcp/127.0.0.1:{free_port()}"
-    selected = [arg for name in only for arg in ("--only", name)]
-    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", endpoint,
-                               "--config", str(config), "--eye-port", str(free_port()),
-                               "--dashboard-port", str(free_port()), "--status-period", "1",
-                               *selected), "up", tmp_path / "logs")
-    probe: Node | None = None
-    try:
-        services = len(only) or len([e for e in available_services() if not e.on_request])
-        expected = services + len(apps)
-        up.wait_for_output(f"nodes {expected}/{expected}", 120)
-        probe = Node("probe", robot="buddy", connect=[endpoint], probe=True)
-        yield up, probe, endpoint
-    finally:
-        if probe is not None:
-            probe.close()
-        status = up.stop(30)
-        print(up.output()[-6000:])
-        assert status == 0
+    selected = tuple(arg for name in only for arg in ("--only", name))
+    services = len(only) or len([e for e in available_services() if not e.on_request])
+    with robot.up_sim(tmp_path, f"[apps]\nrun = [{listed}]\n" + extra_config, selected,
+                      services + len(apps)) as running:
+        yield running
 
 
 @pytest.mark.integration

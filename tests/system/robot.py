@@ -130,28 +130,38 @@ def start_radar(spawn: Spawn, scenario: str, robot: str = "buddy",
 
 
 @contextmanager
-def robot_on(tmp_path: Path, scenario: str, config_text: str = "") -> Iterator[Node]:
-    """`buddybot up --sim --scenario` on private ports; a probe on its router."""
+def up_sim(tmp_path: Path, config_text: str = "", args: tuple[str, ...] = (),
+           nodes: int | None = None) -> Iterator[tuple[Process, Node, str]]:
+    """`buddybot up --sim` on private ports (sound on the null device, `config_text`
+    after it, `args` added), waited for until its `nodes` (default: every service
+    `up` starts) are up; the process, a probe on its router and its endpoint."""
     config = tmp_path / "robot.toml"
     config.write_text('[audio_player]\nbackend = "null"\n' + config_text)
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--scenario", scenario,
-                               "--listen", endpoint, "--config", str(config),
-                               "--eye-port", str(free_port()), "--dashboard-port",
-                               str(free_port()), "--status-period", "1"),
-                 "up", tmp_path / "logs")
+    up = Process(buddybot_argv("up", "--sim", "--no-browser", "--listen", endpoint,
+                               "--config", str(config), "--eye-port", str(free_port()),
+                               "--dashboard-port", str(free_port()), "--status-period", "1",
+                               *args), "up", tmp_path / "logs")
     probe: Node | None = None
     try:
-        n = len([e for e in available_services() if not e.on_request])
+        n = nodes if nodes is not None else len(
+            [e for e in available_services() if not e.on_request])
         up.wait_for_output(f"nodes {n}/{n}", 180)
         probe = Node("probe", robot="buddy", connect=[endpoint], probe=True)
-        yield probe
+        yield up, probe, endpoint
     finally:
         if probe is not None:
             probe.close()
         status = up.stop(30)
         print(up.output()[-6000:])
         assert status == 0
+
+
+@contextmanager
+def robot_on(tmp_path: Path, scenario: str, config_text: str = "") -> Iterator[Node]:
+    """`buddybot up --sim --scenario` (`up_sim`); a probe on its router."""
+    with up_sim(tmp_path, config_text, ("--scenario", scenario)) as (_up, probe, _endpoint):
+        yield probe
 
 
 def sounds(states: list[m.ControllerState]) -> list[str]:
