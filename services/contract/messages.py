@@ -449,7 +449,7 @@ class Bool(Message):
 
 Resource = Literal["expression", "gaze", "audio"]
 """What a lease holds: the eyes' expression, their gaze, the speaker."""
-EngagementPhase = Literal["idle", "noticed", "engaged", "leaving", "drowsy"]
+EngagementPhase = Literal["idle", "noticed", "engaged", "leaving", "alone", "drowsy"]
 Waiting = Literal["nothing", "face", "dwell", "cooldown", "sound_busy", "device_busy",
                   "recovery", "greeted", "yielded"]
 

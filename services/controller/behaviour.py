@@ -73,6 +73,7 @@ class Phase(enum.Enum):
     NOTICED = "noticed"
     ENGAGED = "engaged"
     LEAVING = "leaving"
+    ALONE = "alone"
     DROWSY = "drowsy"
 
 
@@ -254,9 +255,7 @@ class Behaviour:
             if self._in_range:
                 return Phase.ENGAGED if self._face_visible(now) else Phase.NOTICED
             return Phase.LEAVING
-        if self._drowsy(now):
-            return Phase.DROWSY
-        return Phase.IDLE
+        return self._after_departure(now)
 
     def snapshot(self, now: float) -> Snapshot:
         return Snapshot(
@@ -483,13 +482,20 @@ class Behaviour:
                 and moving.distance_m - moving.nearest_m >= self.s.leave_distance_m)
 
 
-    def _drowsy(self, now: float) -> bool:
-        if self.s.sleepy_s <= 0 or self._departed_at is None:
-            return False
-        if now - self._departed_at < self.s.sleepy_s:
-            return True
-        farewell = self._goal is not None and self._goal.kind is SoundKind.FAREWELL
-        return farewell or self._farewell_since is not None
+    def _after_departure(self, now: float) -> Phase:
+        """Nobody present: awake and alone for `alone_s` after the last one left,
+        then drowsy for `sleepy_s`, then asleep; the farewell, while owed or
+        playing, holds the phase it started in."""
+        if self._departed_at is None:
+            return Phase.IDLE
+        since = now - self._departed_at
+        farewell = ((self._goal is not None and self._goal.kind is SoundKind.FAREWELL)
+                    or self._farewell_since is not None)
+        if self.s.alone_s > 0 and (since < self.s.alone_s or farewell):
+            return Phase.ALONE
+        if self.s.sleepy_s > 0 and (since < self.s.alone_s + self.s.sleepy_s or farewell):
+            return Phase.DROWSY
+        return Phase.IDLE
 
     def _recover_status(self, now: float, goal_id: str, state: str, age_s: float | None) -> None:
         if state not in TERMINAL_GOAL_STATES:
@@ -656,6 +662,11 @@ class Behaviour:
             return ExpressionAction.EYE_SLEEP
         if phase is Phase.DROWSY:
             return ExpressionAction.EYE_SLEEPY
+        if phase is Phase.ALONE:  # looks around once the goodbye is said
+            busy = self._farewell_since is not None or self._goal is not None
+            if busy or not self.s.look_around:
+                return ExpressionAction.EYE_AWAKE
+            return ExpressionAction.EYE_LOOK_RANDOM
         if phase is Phase.LEAVING:
             return None  # keep whatever is shown: flicker must not flap the eyes
         goal = self._goal

@@ -69,8 +69,13 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
       is the same visit (no second greeting, no second farewell), and two
       greetings are never closer than this. Kept below the simulated
       radar's ~10 s between visits, so the demo greets every visitor.
+    * `alone_s` 8.0: after the last person left, awake and alone this long
+      (and while the farewell plays), looking around (EYE_LOOK_RANDOM),
+      before drowsy: a robot that drops asleep the moment you turn reads as
+      switched off.
     * `sleepy_s` 2.0: EYE_SLEEPY shown this long (and while the farewell
-      plays) before EYE_SLEEP.
+      plays, without `alone_s`) before EYE_SLEEP: asleep `alone_s` +
+      `sleepy_s` after the last departure.
     * `farewell_max_delay_s` 5.0: a farewell that could not start within
       this time after the departure (device busy, cancel unconfirmed) is
       dropped: a goodbye to an empty room helps nobody.
@@ -118,6 +123,8 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     greet_dwell_s: Annotated[float, _s("in range with a face this long before the "
                                        "greeting (no passer-by greeted)")] = 1.0
     regreet_cooldown_s: Annotated[float, _s("coming back within this is the same visit")] = 6.0
+    alone_s: Annotated[float, _s("awake and alone, looking around, this long after the "
+                                 "last person left, before drowsy")] = 8.0
     sleepy_s: Annotated[float, _s("EYE_SLEEPY shown this long before EYE_SLEEP")] = 2.0
     farewell_max_delay_s: Annotated[float, _s("a farewell not started within this after the "
                                               "departure is dropped")] = 5.0

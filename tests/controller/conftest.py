@@ -27,6 +27,7 @@ gaze_hold_s = 0.6
 look_around_after_s = 1.5
 greet_dwell_s = 0.5
 regreet_cooldown_s = 30.0
+alone_s = 0.0
 sleepy_s = 0.5
 farewell_max_delay_s = 10.0
 recover_s = 0.3

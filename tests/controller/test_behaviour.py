@@ -31,7 +31,8 @@ class Rig:
     """A behaviour, a fake clock and the commands it gave, for readable tests."""
 
     def __init__(self, face_timeout_s: float = FACE_TIMEOUT_S, **overrides: object) -> None:
-        params: dict[str, object] = {"recover_s": 0.0}
+        # Straight to drowsy after a departure (the alone phase has tests of its own).
+        params: dict[str, object] = {"recover_s": 0.0, "alone_s": 0.0}
         params.update(overrides)
         self.s = msgspec.convert(params, ControllerSettings)
         self.t = 1000.0
@@ -251,6 +252,39 @@ def test_leave_after_greeting_plays_farewell_then_sleepy_then_sleep() -> None:
     assert r.expressions() == [X.EYE_AWAKE, X.EYE_GRIN, X.EYE_AWAKE, X.EYE_SLEEPY, X.EYE_SLEEP]
 
 
+def test_alone_after_the_visit_awake_then_looking_around_then_drowsy_then_asleep() -> None:
+    """Nobody left: awake while the goodbye plays, then looking around until
+    `alone_s` after the departure, drowsy for `sleepy_s`, asleep."""
+    r = Rig(greet_dwell_s=0.5, alone_s=4.0, sleepy_s=2.0)
+    r.presence(True)
+    r.faces(1.0)
+    r.status(r.accept(r.last(PlaySound)), "SUCCEEDED")  # type: ignore[arg-type]
+    r.presence(False)
+    r.at(0.1)
+    left = r.t
+    assert r.b.phase(r.t) is Phase.ALONE and r.sounds() == ["greeting", "farewell"]
+    fid = r.accept(r.last(PlaySound))  # type: ignore[arg-type]
+    r.at(1.0)
+    assert r.expressions()[-1] == X.EYE_AWAKE  # saying goodbye
+    r.status(fid, "SUCCEEDED")
+    r.at(0.1)
+    assert r.expressions()[-1] == X.EYE_LOOK_RANDOM
+    r.at(left + 4.0 - r.t + 0.05)
+    assert r.b.phase(r.t) is Phase.DROWSY and r.expressions()[-1] == X.EYE_SLEEPY
+    r.at(2.0)
+    assert r.b.phase(r.t) is Phase.IDLE
+    assert r.expressions()[-3:] == [X.EYE_LOOK_RANDOM, X.EYE_SLEEPY, X.EYE_SLEEP]
+    assert r.b.state(r.t).phase is Phase.IDLE
+    # Someone arriving while it is alone wakes it at once.
+    r2 = Rig(greet_dwell_s=0.5, alone_s=4.0)
+    r2.presence(True)
+    r2.presence(False)
+    r2.at(1.0)
+    assert r2.b.phase(r2.t) is Phase.ALONE
+    r2.presence(True)
+    assert r2.b.phase(r2.t) is Phase.NOTICED
+
+
 def test_no_farewell_without_greeting() -> None:
     r = Rig(greet_dwell_s=10.0)
     r.presence(True)
@@ -467,7 +501,7 @@ def test_lost_sound_is_forgotten_after_timeout() -> None:
 def test_seed_mode_all_timings_zero() -> None:
     zero = {k: 0.0 for k in ("farewell_delay_s", "gaze_hold_s",
                              "look_around_after_s", "greet_dwell_s", "regreet_cooldown_s",
-                             "sleepy_s")}
+                             "alone_s", "sleepy_s")}
     r = Rig(look_around=False, **zero)
     r.presence(True)
     assert r.expressions() == [X.EYE_AWAKE]
