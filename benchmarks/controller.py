@@ -7,7 +7,9 @@ probe -> router -> controller -> router -> probe, i.e. the controller's
 work plus two router crossings; a loopback baseline (probe -> router ->
 probe on a scratch key) is printed next to it so the controller's own
 share can be read off. Also prints the pure per-face cost of the
-transform + behaviour step without any I/O.
+transform + behaviour step without any I/O, and the behaviour's decision
+time per event (a people state with 1, 2 and 5 persons: attention and
+motion; a face while two people are there; a tick), in this process.
 
     .venv/bin/python benchmarks/controller.py [--count N] [--rate HZ]
 """
@@ -15,6 +17,8 @@ transform + behaviour step without any I/O.
 from __future__ import annotations
 
 import argparse
+import math
+import random
 import statistics
 import threading
 import time
@@ -23,14 +27,15 @@ import timeit
 import msgspec
 import results
 import zenoh
-from common import summary
+from common import percentile, summary
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.controller.behaviour import Behaviour
 from buddybot.controller.settings import ControllerSettings
-from buddybot.controller.transform import RigidTransform, face_gaze
+from buddybot.controller.transform import Gaze, RigidTransform, face_gaze
 from buddybot.runtime.node import Node
+from buddybot.sdk.persons import Person
 from buddybot.tools.testing import Router, retry_until, run_service
 
 
@@ -128,6 +133,39 @@ def pure_cost_us() -> float:
     return timeit.timeit(step, number=n) / n * 1e6
 
 
+def decision_costs(n: int = 3000) -> list[str]:
+    """Median and p99 of one decision per event kind (us), on a visit in progress."""
+    settings = msgspec.convert({"recover_s": 0.0}, ControllerSettings)
+    lines = []
+    for crowd in (1, 2, 5):
+        behaviour = Behaviour(settings, 0.0, random.Random(1))
+        costs: dict[str, list[float]] = {"people": [], "face": [], "tick": []}
+        t = 0.0
+        behaviour.presence(t, True, 1, face=True)
+        for i in range(n):
+            t += 0.033
+            people = [Person(id=k + 1, zone="PERSONAL", engagement="ENGAGED",
+                             distance_m=1.0 + 0.2 * k + 0.01 * math.sin(i / 10),
+                             seen_by="BOTH" if k == 0 else "RADAR",
+                             yaw_rad=0.3 * k - 0.3) for k in range(crowd)]
+            gazes = {p.id: Gaze(p.yaw_rad or 0.0, 0.0, 100.0) for p in people}
+            start = time.perf_counter_ns()
+            behaviour.people(t, people, gazes, 1)
+            middle = time.perf_counter_ns()
+            behaviour.face(t, Gaze(-0.3, 0.0, 100.0), 1)
+            after_face = time.perf_counter_ns()
+            behaviour.tick(t)
+            end = time.perf_counter_ns()
+            costs["people"].append((middle - start) / 1e3)
+            costs["face"].append((after_face - middle) / 1e3)
+            costs["tick"].append((end - after_face) / 1e3)
+        for kind, values in costs.items():
+            lines.append(f"decision per {kind} event, {crowd} person(s): median "
+                         f"{statistics.median(values):.1f} us, p99 "
+                         f"{percentile(values, 0.99):.1f} us")
+    return lines
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=1000)
@@ -135,6 +173,8 @@ def main() -> int:
                         help="faces per second (a camera gives 10-30)")
     args = parser.parse_args()
     print(f"pure transform + behaviour step per face: {pure_cost_us():.1f} us")
+    for line in decision_costs():
+        print(line)
     router = Router()
     controller = run_service("controller", router.endpoint)
     try:
