@@ -288,6 +288,8 @@ class ExpressionAction(enum.IntEnum):
     EYE_LOOK_RANDOM = 5
     ANIMATE_LOVE = 6
     ANIMATE_STAR = 7
+    EYE_ALERT = 8
+    """Wide open: someone appeared or came fast (the radar's anticipation)."""
 
 
 class ScreenExpression(Message):

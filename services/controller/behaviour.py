@@ -28,7 +28,7 @@ from buddybot.contract.messages import (
     spoken_text,
 )
 from buddybot.controller.attention import Attention, Focus
-from buddybot.controller.kinematics import Kinematics, Moving, Person
+from buddybot.controller.kinematics import Kinematics, Moving, Person, direction
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
 
@@ -217,6 +217,10 @@ class Behaviour:
         """The last face's gaze and stamp (aversions re-aim at it between faces)."""
         self._aimed: tuple[int | None, Gaze] | None = None
         """(person, gaze) last sent for a glance or an aversion."""
+        self._alert_until = -math.inf
+        """EYE_ALERT until then (someone noticed nowhere to look at, or rushing in)."""
+        self._alerted_visit_at: float | None = None
+        """The notice (`_noticed_at`) whose alert was given: once per arrival."""
         self._still_since: float | None = -math.inf
         """Since when the visit's person has not been walking (None: walking now;
         -inf: never seen walking)."""
@@ -470,6 +474,23 @@ class Behaviour:
         face = next((p.id for p in self._crowd if p.seen_by in ("CAMERA", "BOTH")), None)
         return focus.person_id != face
 
+    def _anticipate(self, now: float) -> None:
+        """EYE_ALERT for the visit's person just noticed whom no sensor gives a
+        direction (the eyes cannot turn to them, so the face reacts), and for
+        one rushing in; a slow approach changes nothing (EYE_AWAKE)."""
+        if self.s.alert_s <= 0 or not self._present:
+            return
+        moving = self._moving.get(self._person_id) if self._person_id is not None else None
+        if moving is not None and -moving.radial_mps >= self.s.rush_speed_mps:
+            self._alert_until = now + self.s.alert_s
+            return
+        person = next((p for p in self._crowd if p.id == self._person_id), None)
+        fresh = now - self._noticed_at < 1.0 and self._alerted_visit_at != self._noticed_at
+        if person is not None and fresh and direction(person) is None \
+                and person.seen_by not in ("CAMERA", "BOTH"):
+            self._alerted_visit_at = self._noticed_at
+            self._alert_until = now + self.s.alert_s
+
     def _walking_away(self, moving: Moving) -> bool:
         """The greeted visitor, alone, moves away: their goodbye is due now, not only
         once the people service lets them go (the whole hold later)."""
@@ -531,6 +552,7 @@ class Behaviour:
         self._watchdog(now)
         self._farewell(now, out)
         self._greeting(now, out)
+        self._anticipate(now)
         main = self._person_id if self._present else None
         self._focus = self._attention.update(self.s, now, self._crowd, main)
         self._gaze(now, out)
@@ -672,6 +694,8 @@ class Behaviour:
         goal = self._goal
         if goal is not None and goal.kind is SoundKind.GREETING and not goal.cancel_sent:
             return ExpressionAction.EYE_GRIN
+        if now < self._alert_until:
+            return ExpressionAction.EYE_ALERT
         if phase is Phase.ENGAGED or not self.s.look_around or self._radar_gaze is not None:
             return ExpressionAction.EYE_AWAKE
         last_seen = max(self._noticed_at, self._last_face or self._noticed_at)

@@ -209,17 +209,16 @@ class Controller:
                 except ValueError:  # cannot happen with a valid message; never NaN gaze
                     gaze = None
             radar = RadarGaze(gaze, now.stamp_ns if gaze is not None else None)
+            # The crowd first: a new presence is then decided knowing who it is.
+            for pending in [e for e in self._inbox if isinstance(e, Crowd)]:
+                self._inbox.remove(pending)  # only the newest matters
+            self._inbox.append(Crowd(now.people, self._gazes(now.people), now.stamp_ns))
             if change != self._last_people:
                 self._last_people = change
                 self._inbox.append(change)
             if radar.gaze != (None if self._last_radar is None else self._last_radar.gaze):
                 self._last_radar = radar
                 self._inbox.append(radar)
-            crowd = Crowd(now.people, self._gazes(now.people), now.stamp_ns)
-            if self._inbox and isinstance(self._inbox[-1], Crowd):
-                self._inbox[-1] = crowd  # only the newest matters
-            else:
-                self._inbox.append(crowd)
             self._cond.notify()
 
     def _gazes(self, people: tuple[Person, ...]) -> dict[int, Gaze]:

@@ -93,7 +93,10 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
     `aversion_every_s`; walking faster than `linger_speed_mps` is passing
     (the greeting's dwell waits for them to slow down); a greeted visitor
     moving away at `leave_speed_mps`, `leave_distance_m` beyond the nearest
-    they came, gets the farewell as they go.
+    they came, gets the farewell as they go. Anticipation: EYE_ALERT for
+    `alert_s` when someone is noticed whose direction nobody knows (an
+    LD2410 alone: nowhere to look, so the face reacts) or when the visit's
+    person comes at `rush_speed_mps` or faster.
     """
 
     camera: Annotated[str, msgspec.Meta(
@@ -155,5 +158,11 @@ class ControllerSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=Tru
         ge=0.0, le=10.0, extra=LIVE,
         description="metres: a visitor moving away is leaving once this far beyond "
                     "the nearest they came")] = 0.3
+    alert_s: Annotated[float, _s("EYE_ALERT this long for someone noticed without a "
+                                 "direction or coming fast (0: never)")] = 1.5
+    rush_speed_mps: Annotated[float, msgspec.Meta(
+        gt=0.0, le=10.0, extra=LIVE,
+        description="m/s: the visit's person coming nearer this fast is rushing in "
+                    "(EYE_ALERT); slower is drifting near (EYE_AWAKE)")] = 1.0
     call_timeout_s: Annotated[float, _s("a service call (e.g. cancel) taking longer fails",
                                         positive=True, live=False)] = 3.0

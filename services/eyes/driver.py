@@ -147,6 +147,7 @@ DEFAULT_LIDS: Mapping[m.ExpressionAction, EyePair] = {
     A.EYE_LOOK_RANDOM: EyePair.same(4.0, 0.0),  # open, a little curious
     A.ANIMATE_LOVE: EyePair.same(6.0, 10.0),    # soft, relaxed around the hearts
     A.ANIMATE_STAR: EyePair.same(0.0, 0.0),     # wide open, star-struck
+    A.EYE_ALERT: EyePair.same(0.0, 0.0),        # wide open: someone is coming
 }
 """Every expression's lids. Designed symmetric so one `eye_id` BOTH message
 carries them, which the latched key's one-sample cache replays whole to a

@@ -17,7 +17,7 @@ A pose lists only what differs: a style's `base` fills every field a pose
 leaves out, and `extends` (or, for a user style named like a built-in one,
 that built-in style itself) fills whatever the style leaves out, field by
 field and pose by pose. After that every style must be complete: a kind,
-every style field and every pose field, for all eight expressions.
+every style field and every pose field, for all nine expressions.
 
 Every value is checked (type, range, unknown keys); a bad one is a
 `ConfigError` (exit status 2) naming the file and the key path, e.g.
@@ -45,7 +45,8 @@ MAX_STYLES = 256
 """Styles one file may define."""
 MAX_EXTENDS = 16
 """Styles one `extends` chain may pass through."""
-EXPRESSIONS = ("AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR")
+EXPRESSIONS = ("AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR",
+               "ALERT")
 """Pose names, in `ExpressionAction` order (contract/messages.py without the EYE_/ANIMATE_
 prefixes, as the page's EXPR table names them)."""
 

@@ -39,6 +39,7 @@ ALIASES: dict[str, m.ExpressionAction] = {
     "look_random": m.ExpressionAction.EYE_LOOK_RANDOM,
     "love": m.ExpressionAction.ANIMATE_LOVE,
     "star": m.ExpressionAction.ANIMATE_STAR,
+    "alert": m.ExpressionAction.EYE_ALERT,
 }
 """Friendly lowercase names of the expressions."""
 MAX_DISTANCE_CM = 100000.0

@@ -132,7 +132,7 @@ def test_round_trip(msg: m.Message, codec: keys.Codec) -> None:
                                "distance_m": 1}, "presence_state"),
         (m.PresenceDetection, {"stamp_ns": 1, "target_state": 0, "presence_state": 1,
                                "distance_m": -1}, "distance_m"),
-        (m.ScreenExpression, {"stamp_ns": 1, "action": 8}, "action"),
+        (m.ScreenExpression, {"stamp_ns": 1, "action": 99}, "action"),
         (m.Image, {"stamp_ns": 1, "frame_id": "f", "width": 1, "height": 1,
                    "encoding": "rgb8", "data": ""}, "encoding"),
         (m.FacePosition, {"stamp_ns": 1, "frame_id": "f", "point": {"x": 0, "y": 0, "z": 0},
@@ -158,8 +158,11 @@ def test_contract_field_names() -> None:
     assert m.PupilControl.__struct_fields__ == ("stamp_ns", "dilation_percentage")
     assert m.EyeLidControl.__struct_fields__ == (
         "stamp_ns", "eye_id", "top_lid_position", "bottom_lid_position")
-    assert [e.value for e in m.ExpressionAction] == list(range(8))
+    # The original design's eight, then ours appended (an old sender's numbers keep
+    # their meaning).
+    assert [e.value for e in m.ExpressionAction] == list(range(9))
     assert m.ExpressionAction(6).name == "ANIMATE_LOVE"
+    assert m.ExpressionAction(8).name == "EYE_ALERT"
 
 
 def test_images_are_msgpack_and_control_is_json() -> None:

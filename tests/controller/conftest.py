@@ -20,6 +20,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime.node import Node, new_goal_id
 from buddybot.tools.testing import visitor
 
+# The alone phase and the alert have tests of their own (test_behaviour, test_attention).
 FAST_CONFIG = """
 [controller]
 farewell_delay_s = 0.8
@@ -28,6 +29,7 @@ look_around_after_s = 1.5
 greet_dwell_s = 0.5
 regreet_cooldown_s = 30.0
 alone_s = 0.0
+alert_s = 0.0
 sleepy_s = 0.5
 farewell_max_delay_s = 10.0
 recover_s = 0.3

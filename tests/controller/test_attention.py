@@ -1,6 +1,7 @@
 """The attention rule, motion and their use by the behaviour, on a fake clock: a glance
 at a newcomer, the gaze shared between engaged people, gaze aversion, a passer-by
-not greeted, a visitor walking away said goodbye to as they go."""
+not greeted, a visitor walking away said goodbye to as they go, the alert face for
+someone noticed with nowhere to look and for someone rushing in."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ from collections.abc import Sequence
 import msgspec
 import pytest
 
+from buddybot.contract.messages import ExpressionAction as X
 from buddybot.controller.attention import NEWCOMER_S, Attention
-from buddybot.controller.behaviour import Behaviour, Command, Look, PlaySound
+from buddybot.controller.behaviour import Behaviour, Command, Look, PlaySound, SetExpression
 from buddybot.controller.kinematics import MIN_SPAN_S, Kinematics
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
@@ -139,20 +141,24 @@ class Crowded:
         self.log: list[tuple[float, Command]] = []
 
     def step(self, people: Sequence[Person], face: Gaze | None = None) -> None:
+        """One `people/state` as the service hands it over: the crowd, then presence."""
         self.t += 0.05
         main = people[0].id if people else None
         shown = any(p.seen_by != "NONE" for p in people)
-        cmds = self.b.presence(self.t, shown, main, face=bool(
-            people and people[0].seen_by in ("CAMERA", "BOTH")))
         gazes = {p.id: Gaze(p.yaw_rad or 0.0, 0.0, 100 * (p.distance_m or 1.0))
                  for p in people if p.yaw_rad is not None}
-        cmds += self.b.people(self.t, people, gazes, 1)
+        cmds = self.b.people(self.t, people, gazes, 1)
+        cmds += self.b.presence(self.t, shown, main, face=bool(
+            people and people[0].seen_by in ("CAMERA", "BOTH")))
         if face is not None:
             cmds += self.b.face(self.t, face, 2)
         self.log += [(self.t, c) for c in cmds]
 
     def sounds(self) -> list[str]:
         return [c.sound for _t, c in self.log if isinstance(c, PlaySound)]
+
+    def expressions(self) -> list[tuple[float, X]]:
+        return [(t, c.action) for t, c in self.log if isinstance(c, SetExpression)]
 
 
 def test_someone_walking_past_with_their_face_in_view_is_not_greeted() -> None:
@@ -216,3 +222,40 @@ def test_a_newcomer_gets_a_look_then_the_face_has_the_gaze_again() -> None:
         math.radians(35.0))]
     assert at_newcomer and at_newcomer[0] - came < 1.0
     assert looks[-1][1] is not None and abs(looks[-1][1].yaw) < math.radians(10)
+
+
+def test_someone_noticed_with_nowhere_to_look_gets_an_alert_face() -> None:
+    """An LD2410 alone gives a distance, no direction: the face reacts instead."""
+    rig = Crowded()
+    rig.step([])
+    rig.step([person(1, None, 4.0, "RADAR", "NONE", "PUBLIC")])
+    came = rig.t
+    for _ in range(60):
+        rig.step([person(1, None, 4.0, "RADAR", "NONE", "PUBLIC")])
+    shown = rig.expressions()
+    assert (came, X.EYE_ALERT) in shown
+    back = [t for t, x in shown if t > came and x is not X.EYE_ALERT]
+    assert back and back[0] - came == pytest.approx(rig.s.alert_s, abs=0.06)
+
+
+def test_with_a_direction_the_face_stays_calm() -> None:
+    rig = Crowded()
+    rig.step([])
+    for _ in range(40):
+        rig.step([person(1, 40.0, 4.0, "RADAR", "NONE", "PUBLIC")])
+    # (the eyes turn to the bearing: test_look_before_see.py)
+    assert [x for _t, x in rig.expressions()] == [X.EYE_SLEEP, X.EYE_AWAKE]
+
+
+@pytest.mark.parametrize("speed, alert", [(1.5, True), (0.5, False)])
+def test_rushing_in_alerts_drifting_near_does_not(speed: float, alert: bool) -> None:
+    rig = Crowded()
+    d = 4.0
+    for _ in range(60):  # 3 s: the arrival's own alert (if any) is long over
+        rig.step([person(1, 0.0, d, "RADAR", "NONE", "PUBLIC")])
+    before = len(rig.expressions())
+    while d > 1.0:
+        d -= speed * 0.05
+        rig.step([person(1, 0.0, d, "RADAR", "NONE", "SOCIAL")])
+    later = [x for _t, x in rig.expressions()[before:]]
+    assert (X.EYE_ALERT in later) is alert, later

@@ -77,7 +77,7 @@ def test_malformed_input_is_survived(spawn: Callable[..., Process], probe: Node)
                 b'"target_distance_cm": 1}', b'[1, 2]', b'{"stamp_ns": 1, "yaw": "left", '
                 b'"pitch": 0, "target_distance_cm": 1}', b"\xff\xfe" * 100):
         control.put_bytes(bad)
-    for bad in (b'{"stamp_ns": 1, "action": 8}', b'{"stamp_ns": 1}', b"\x00"):
+    for bad in (b'{"stamp_ns": 1, "action": 99}', b'{"stamp_ns": 1}', b"\x00"):
         expression.put_bytes(bad)
     after = m.EyeControl(stamp_ns=m.now_ns(), yaw=-0.1, pitch=0.0, target_distance_cm=100)
     control.put(after)

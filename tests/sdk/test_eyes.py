@@ -32,8 +32,8 @@ def test_an_expression_is_named_by_its_action_its_name_or_an_alias() -> None:
     assert expression_of("ANIMATE_LOVE") is X.ANIMATE_LOVE
     assert expression_of("love") is X.ANIMATE_LOVE
     assert expression_of("look_random") is X.EYE_LOOK_RANDOM
-    assert sorted(ALIASES) == ["awake", "grin", "look_random", "love", "sad", "sleep",
-                               "sleepy", "star"]
+    assert sorted(ALIASES) == ["alert", "awake", "grin", "look_random", "love", "sad",
+                               "sleep", "sleepy", "star"]
     assert {ALIASES[a] for a in ALIASES} == set(X)
 
 

@@ -32,7 +32,9 @@
   const autoBlink = params.get("blink") !== "0";
   const autoSaccade = params.get("saccade") !== "0";
 
-  const EXPR = { AWAKE: 0, SLEEP: 1, SLEEPY: 2, GRIN: 3, SAD: 4, LOOK_RANDOM: 5, LOVE: 6, STAR: 7 };
+  const EXPR = { AWAKE: 0, SLEEP: 1, SLEEPY: 2, GRIN: 3, SAD: 4, LOOK_RANDOM: 5, LOVE: 6, STAR: 7,
+    ALERT: 8 };
+  const EXPRESSIONS = Object.keys(EXPR).length;
   const { EyePose, EyeDraw } = window;
 
   const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30, style: EyePose.FALLBACK };
@@ -123,7 +125,7 @@
         setLids(msg.eye_id, msg.top_lid_position, msg.bottom_lid_position);
         return true;
       case "expression":
-        if (!Number.isInteger(msg.action) || msg.action < 0 || msg.action > 7) return false;
+        if (!Number.isInteger(msg.action) || msg.action < 0 || msg.action >= EXPRESSIONS) return false;
         target.expression = msg.action;
         return true;
       case "status":

@@ -10,7 +10,8 @@
 
 window.EyePose = (() => {
   // ExpressionAction order (contract/messages.py), as the style's poses name them.
-  const NAMES = ["AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR"];
+  const NAMES = ["AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR",
+    "ALERT"];
   const NUM = ["width", "height", "roundness", "top_lid", "top_lid_angle", "bottom_lid",
     "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "beat", "spin"];
   const STYLE_NUM = ["lid_follow", "curiosity", "vergence", "squash", "stretch", "reach",
