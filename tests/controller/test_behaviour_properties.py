@@ -11,6 +11,10 @@ commanded:
   restart, in the restated form of `farewell_only_after_a_greeting`;
 * never a sound started while another one plays (ours or someone else's);
 * never the same expression twice in a row (within one controller process).
+
+The person in range may also walk (toward, away, fast or slow, with a
+second person standing by): the farewell as they walk away and the
+greeting held back while they pass must keep every invariant above.
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from buddybot.controller.behaviour import (
 )
 from buddybot.controller.settings import ControllerSettings
 from buddybot.controller.transform import Gaze
+from buddybot.sdk.persons import Person
 from tests.properties import examples
 
 COOLDOWN = 4.0
@@ -64,6 +69,7 @@ class World(RuleBasedStateMachine):
         self.restarted = False
         self.dead = False  # between a controller's death and its restart
         self.in_range = False
+        self.distance = 1.5
         self.last_face: float | None = None
         self.face_shown = False  # what the world's people service says of the face
         self.playing: Playing | None = None
@@ -150,7 +156,8 @@ class World(RuleBasedStateMachine):
     @rule(in_range=st.booleans())
     def presence(self, in_range: bool) -> None:
         self.in_range = in_range
-        self.apply(self.b.presence(self.t, in_range, face=self.face_shown))
+        self.apply(self.b.presence(self.t, in_range, 1 if in_range else None,
+                                   face=self.face_shown))
 
     def see_face(self, yaw: float) -> None:
         """A face reaches the controller, then the people service's state saying so."""
@@ -165,7 +172,36 @@ class World(RuleBasedStateMachine):
         if shown != self.face_shown:
             self.face_shown = shown
             if not self.dead:
-                self.apply(self.b.presence(self.t, self.in_range, face=shown))
+                self.apply(self.b.presence(self.t, self.in_range,
+                                           1 if self.in_range else None, face=shown))
+
+    @rule(speed=st.sampled_from([-1.5, -0.5, 0.0, 0.5, 1.2]),
+          seconds=st.sampled_from([0.3, 1.0, 2.0]), second=st.booleans(),
+          bearing=st.booleans())
+    def walk(self, speed: float, seconds: float, second: bool, bearing: bool) -> None:
+        """The person in range moves radially at `speed` (m/s, + away), a people
+        state every 50 ms; `second`: someone else stands near; `bearing`: an angle
+        radar gives their direction."""
+        if self.dead or not self.in_range:
+            return
+        end = self.t + seconds
+        while self.t < end:
+            self.t = min(end, self.t + 0.05)
+            self.distance = min(8.0, max(0.3, self.distance + speed * 0.05))
+            people = [Person(id=1, zone="PERSONAL", engagement="ENGAGED",
+                             distance_m=self.distance,
+                             seen_by="BOTH" if self.face_shown else "RADAR",
+                             bearing_rad=0.1 if bearing else None)]
+            if second:
+                people.append(Person(id=2, zone="SOCIAL", engagement="NONE", distance_m=2.0,
+                                     seen_by="RADAR", bearing_rad=-0.4))
+            gazes = {p.id: Gaze(p.bearing_rad, 0.0, 100.0) for p in people
+                     if p.bearing_rad is not None}
+            self.apply(self.b.people(self.t, people, gazes, 1))
+            self.people_face()
+            self.apply(self.b.tick(self.t))
+        if self.b.counters["farewells_early"]:
+            event("a farewell as they walked away")
 
     @rule(yaw=st.floats(-1.0, 1.0))
     def face(self, yaw: float) -> None:
