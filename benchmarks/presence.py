@@ -1,20 +1,21 @@
-"""Benchmark: radar presence -> the controller's EYE_AWAKE, through a real router.
+"""Benchmark: radar presence -> the eyes waking, through a real router.
 
 Starts `buddybot router`, `buddybot run people`, `buddybot run
 controller` and `buddybot run eyes` on loopback (the controller reads the
 person from `people/state` and wishes its expression, which the eyes
 driver's arbiter shows, so an arrival crosses radar/presence -> people ->
 controller -> eyes -> eyes/expression), then a probe node publishes IN_RANGE on
-`radar/presence` and times it until `eyes/expression` EYE_AWAKE comes
-back; OUT_OF_RANGE and EYE_SLEEP in between reset the robot. The holds
-are 0 (the people service's `absence_hold_s`, the controller's
-`farewell_delay_s` and `sleepy_s`) so the cycle is quick; entering
+`radar/presence` and times it until `eyes/expression` comes back awake
+(EYE_ALERT: an LD2410 gives no direction, so the face reacts; EYE_AWAKE
+with `--calm`, the alert off); OUT_OF_RANGE and EYE_SLEEP in between reset
+the robot. The holds are 0 (the people service's `absence_hold_s`, the
+controller's `farewell_delay_s`, `alone_s` and `sleepy_s`) so the cycle is quick; entering
 needs no hold, so the figure is the pipeline's own latency: the people
 service's step, the controller's decision thread, the arbiter and five
 router crossings. A loopback baseline (probe -> router -> probe) is
 printed next to it.
 
-    .venv/bin/python benchmarks/presence.py [--count N]
+    .venv/bin/python benchmarks/presence.py [--count N] [--calm]
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ CONFIG = """
 absence_hold_s = 0.0
 [controller]
 farewell_delay_s = 0.0
+alone_s = 0.0
 sleepy_s = 0.0
 recover_s = 0.2
 """
@@ -49,8 +51,8 @@ def presence(in_range: bool) -> m.PresenceDetection:
                                presence_state=state, distance_m=1.2)
 
 
-def run_visits(node: Node, count: int) -> list[float]:
-    """`count` arrivals: each one's time from the put to EYE_AWAKE arriving here."""
+def run_visits(node: Node, count: int, awake: X = X.EYE_ALERT) -> list[float]:
+    """`count` arrivals: each one's time from the put to `awake` arriving here."""
     shown: list[X] = []
     arrived = threading.Condition()
 
@@ -71,7 +73,7 @@ def run_visits(node: Node, count: int) -> list[float]:
     for i in range(count + 5):  # the first five warm up
         start = time.perf_counter_ns()
         pub.put(presence(True))
-        wait(X.EYE_AWAKE)
+        wait(awake)
         if i >= 5:
             latencies.append((time.perf_counter_ns() - start) / 1e6)
         pub.put(presence(False))
@@ -103,16 +105,20 @@ def run_loopback(sender: Node, receiver: Node, count: int) -> list[float]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--count", type=int, default=50)
+    parser.add_argument("--calm", action="store_true",
+                        help="no alert face: time the arrival to EYE_AWAKE")
     args = parser.parse_args()
-    with services_up(("people", "controller", "eyes"), CONFIG,
+    config = CONFIG + ("alert_s = 0.0\n" if args.calm else "")
+    awake = X.EYE_AWAKE if args.calm else X.EYE_ALERT
+    with services_up(("people", "controller", "eyes"), config,
                      "buddybot-bench-presence-") as endpoint:
         with Node("bench", connect=[endpoint]) as node:
             Collector(node, keys.PEOPLE_STATE).wait_for(timeout=30, what="people up")
-            lat = run_visits(node, args.count)
+            lat = run_visits(node, args.count, awake)
         with (Node("bench-a", connect=[endpoint]) as a,
               Node("bench-b", connect=[endpoint]) as b):
             base = run_loopback(a, b, args.count)
-    print(summary("radar/presence -> people -> controller -> eyes -> EYE_AWAKE", lat))
+    print(summary(f"radar/presence -> people -> controller -> eyes -> {awake.name}", lat))
     print(summary("loopback probe -> router -> probe", base))
     return 0
 

@@ -5,7 +5,8 @@ with the same command lines: simulated camera at 30 frames/s, simulated radar
 with a visitor who comes and goes) as separate processes, then measures for
 `--seconds` the gaze latency (capture -> `eyes/direction`, split by hop), the
 presence latency (the sensor data that brought someone after nobody, as
-`people/state` stamps it -> EYE_AWAKE, by sensor: a radar frame, or a
+`people/state` stamps it -> the eyes awake (the first expression after it
+other than EYE_SLEEP/EYE_SLEEPY), by sensor: a radar frame, or a
 camera capture when the face came first) and the CPU
 and memory of each process. `--dashboard remote|browser` also asks whether
 an open dashboard page slows the robot, in alternating windows with the
@@ -56,6 +57,7 @@ from buddybot.tools.testing import (
 
 SETTLE_S = 2.0
 """Left out at the start of each window: the page connecting or going away."""
+ASLEEP = frozenset({m.ExpressionAction.EYE_SLEEP, m.ExpressionAction.EYE_SLEEPY})
 
 
 class BrowserPage:
@@ -187,7 +189,7 @@ def main() -> None:
                     "all nodes up")
         gaze_ms: list[float] = []
         awake_ms: dict[str, list[float]] = {"RADAR": [], "CAMERA": []}
-        """Arrival -> EYE_AWAKE, by the sensor that showed the person first."""
+        """Arrival -> the eyes awake, by the sensor that showed the person first."""
         hops: dict[str, list[float]] = {"camera/front/face": [], "eyes/control": []}
 
         def on_direction(msg: m.EyesDirection, _key: str) -> None:
@@ -219,7 +221,7 @@ def main() -> None:
 
         def on_expression(msg: m.ScreenExpression, _key: str) -> None:
             first = arrived[0]
-            if msg.action == m.ExpressionAction.EYE_AWAKE and first is not None:
+            if msg.action not in ASLEEP and first is not None:
                 awake_ms[first[1]].append((time.time_ns() - first[0]) / 1e6)
                 arrived[0] = None
 
@@ -324,7 +326,7 @@ def main() -> None:
                   f"median {statistics.median(got):.1f} ms, max {max(got):.1f} ms, "
                   f"n={len(got)}")
     if not any(awake_ms.values()):
-        print("presence latency: no EYE_AWAKE seen (run longer)")
+        print("presence latency: the eyes never woke for an arrival (run longer)")
     print(f"{'process':<16}{'CPU % of a core':>16}{'RSS MB (max)':>14}{'RSS growth kB':>15}")
     for name in ps:
         print(f"{name:<16}{cpu[name]:>16.1f}{max(rss[name] or [0]):>14.1f}"
