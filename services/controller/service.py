@@ -68,6 +68,9 @@ from buddybot.sdk.speaker import GoalStatus
 
 log = logging.getLogger("buddybot.controller")
 
+CROWD_PERIOD_NS = 90_000_000
+"""The whole crowd goes to the behaviour at most every ~0.1 s (and at once when who
+is there, or who shows them, changed)."""
 SoundCommand = PlaySound | CancelSound
 """The commands the sound thread carries out (blocking audio calls)."""
 
@@ -112,6 +115,9 @@ class Controller:
         """The last presence posted (under `_cond`): the next is posted only if it differs."""
         self._last_radar: RadarGaze | None = None
         """The last radar direction posted (under `_cond`), likewise."""
+        self._crowd_who: tuple[tuple[int, str | None], ...] | None = None
+        self._crowd_stamp = 0
+        """Who the last crowd posted listed (id, seen by) and its stamp (under `_cond`)."""
         self._cond = threading.Condition()
         self._lock = threading.Lock()
         """Guards `behaviour` and the publishers' order: the decision thread and the
@@ -210,9 +216,14 @@ class Controller:
                     gaze = None
             radar = RadarGaze(gaze, now.stamp_ns if gaze is not None else None)
             # The crowd first: a new presence is then decided knowing who it is.
-            for pending in [e for e in self._inbox if isinstance(e, Crowd)]:
-                self._inbox.remove(pending)  # only the newest matters
-            self._inbox.append(Crowd(now.people, self._gazes(now.people), now.stamp_ns))
+            # Motion and attention need ~10 states/s, not every camera frame.
+            who = tuple((p.id, p.seen_by) for p in now.people)
+            if who != self._crowd_who or not (
+                    0 <= now.stamp_ns - self._crowd_stamp < CROWD_PERIOD_NS):
+                self._crowd_who, self._crowd_stamp = who, now.stamp_ns
+                for pending in [e for e in self._inbox if isinstance(e, Crowd)]:
+                    self._inbox.remove(pending)  # only the newest matters
+                self._inbox.append(Crowd(now.people, self._gazes(now.people), now.stamp_ns))
             if change != self._last_people:
                 self._last_people = change
                 self._inbox.append(change)

@@ -74,10 +74,23 @@ def test_callbacks_post_typed_events(rig: tuple[Controller, FakeBot, Clock]) -> 
 def test_only_the_newest_crowd_waits_in_the_inbox(
         rig: tuple[Controller, FakeBot, Clock]) -> None:
     controller, _node, _clock = rig
-    for distance in (2.0, 1.9, 1.8):
-        controller._on_people(people_now(visitor(True, person_id=4, distance_m=distance)))
+    for i, distance in enumerate((2.0, 1.9, 1.8)):
+        controller._on_people(people_now(visitor(True, person_id=4, distance_m=distance,
+                                                 stamp_ns=10**9 + i * 10**8)))
     crowds = [e for e in controller._inbox if isinstance(e, Crowd)]
     assert [c.people[0].distance_m for c in crowds] == [1.8]
+
+
+def test_the_crowd_comes_every_tenth_of_a_second_or_when_who_is_there_changes(
+        rig: tuple[Controller, FakeBot, Clock]) -> None:
+    controller, _node, _clock = rig
+    posted = []
+    for ms, face in ((0, False), (30, False), (60, False), (70, True), (100, True),
+                     (200, True)):
+        controller._on_people(people_now(visitor(True, person_id=4, face=face,
+                                                 stamp_ns=10**9 + ms * 10**6)))
+        posted += [ms for e in drain(controller) if isinstance(e, Crowd)]
+    assert posted == [0, 70, 200]  # a camera frame's state in between: nothing new
 
 
 def test_every_event_reaches_the_behaviour(rig: tuple[Controller, FakeBot, Clock]) -> None:
