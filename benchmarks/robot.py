@@ -207,12 +207,15 @@ def main() -> None:
         """The stamp of the people/state that brought someone in range and the sensor
         that showed them, until the eyes wake."""
         present = [False]
+        shown = [m.ExpressionAction.EYE_SLEEP]
+        """The expression on the eyes now."""
 
         def on_people(msg: m.PeopleState, _key: str) -> None:
             change = people_changed([person_from(p) for p in msg.people])  # the controller's
-            # An arrival after nobody was there (a person held and shown again is
-            # no arrival: the eyes never slept).
-            if change.in_range and not present[0]:
+            # An arrival after nobody was there, to sleeping eyes (a person held and
+            # shown again is no arrival; one who comes while the robot is still awake
+            # and alone after the last visit finds the eyes open).
+            if change.in_range and not present[0] and shown[0] in ASLEEP:
                 who = next(p for p in msg.people if p.id == change.person_id)
                 arrived[0] = (msg.stamp_ns, "CAMERA" if who.seen_by == "CAMERA" else "RADAR")
             elif not (change.in_range or change.held):
@@ -220,6 +223,7 @@ def main() -> None:
             present[0] = change.in_range or change.held
 
         def on_expression(msg: m.ScreenExpression, _key: str) -> None:
+            shown[0] = msg.action
             first = arrived[0]
             if msg.action not in ASLEEP and first is not None:
                 awake_ms[first[1]].append((time.time_ns() - first[0]) / 1e6)

@@ -171,6 +171,10 @@ def _aside(gaze: Gaze, offset: tuple[float, float]) -> Gaze:
     return Gaze(gaze.yaw + offset[0], gaze.pitch + offset[1], gaze.distance_cm)
 
 
+RUSH_CLOSER_M = 0.4
+"""Rushing in also means this much nearer within the motion window (noise never is)."""
+
+
 # --- the machine -----------------------------------------------------------------------
 
 
@@ -481,7 +485,8 @@ class Behaviour:
         if self.s.alert_s <= 0 or not self._present:
             return
         moving = self._moving.get(self._person_id) if self._person_id is not None else None
-        if moving is not None and -moving.radial_mps >= self.s.rush_speed_mps:
+        if moving is not None and -moving.radial_mps >= self.s.rush_speed_mps \
+                and moving.closer_m >= RUSH_CLOSER_M:
             self._alert_until = now + self.s.alert_s
             return
         person = next((p for p in self._crowd if p.id == self._person_id), None)

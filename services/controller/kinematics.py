@@ -7,7 +7,9 @@ keeps growing is leaving. The people service gives distance and, when a
 face or an angle radar shows it, a direction; with a distance alone (an
 LD2410) only the radial part is known, and the planar speed is taken as
 its size. Speeds are averages over `WINDOW_S`, so one noisy distance
-does not make a person run.
+does not make a person run; a person's history restarts when the sensors
+that show them change (a face's distance and a radar's differ by tens of
+centimetres, which would read as a leap).
 """
 
 from __future__ import annotations
@@ -54,6 +56,8 @@ class Moving:
     distance_m: float
     nearest_m: float
     """The nearest they came since they arrived."""
+    closer_m: float
+    """How much nearer they came over the window (negative: further)."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +65,7 @@ class _Sample:
     t: float
     distance: float
     xy: tuple[float, float] | None
+    seen_by: str | None
 
 
 @dataclass
@@ -80,7 +85,9 @@ class Kinematics:
             if p.distance_m is None:
                 continue
             seen = self._seen.setdefault(p.id, deque())
-            seen.append(_Sample(now, p.distance_m, _xy(p)))
+            if seen and seen[-1].seen_by != p.seen_by:
+                seen.clear()
+            seen.append(_Sample(now, p.distance_m, _xy(p), p.seen_by))
             while len(seen) > 2 and now - seen[1].t >= WINDOW_S:
                 seen.popleft()
             nearest = min(self._nearest.get(p.id, math.inf), p.distance_m)
@@ -94,7 +101,8 @@ class Kinematics:
                 speed = math.dist(first.xy, last.xy) / span
             else:
                 speed = abs(radial)
-            out[p.id] = Moving(radial, speed, last.distance, nearest)
+            out[p.id] = Moving(radial, speed, last.distance, nearest,
+                               first.distance - last.distance)
         return out
 
 

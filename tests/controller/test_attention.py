@@ -259,3 +259,16 @@ def test_rushing_in_alerts_drifting_near_does_not(speed: float, alert: bool) -> 
         rig.step([person(1, 0.0, d, "RADAR", "NONE", "SOCIAL")])
     later = [x for _t, x in rig.expressions()[before:]]
     assert (X.EYE_ALERT in later) is alert, later
+
+
+def test_a_change_of_sensor_is_no_leap() -> None:
+    """The face's distance and the radar's differ: when the sensors showing a person
+    change, their motion starts again instead of reading the difference as a run."""
+    k = Kinematics()
+    for i in range(6):
+        k.update(i * 0.1, [person(1, None, 2.0, "CAMERA")])
+    moving = k.update(0.6, [person(1, None, 1.4, "BOTH")])  # the radar's shorter reading
+    assert 1 not in moving  # too little history since the change to say
+    for i in range(7, 12):
+        moving = k.update(i * 0.1, [person(1, None, 1.4, "BOTH")])
+    assert moving[1].radial_mps == pytest.approx(0.0) and moving[1].closer_m == 0.0
