@@ -20,10 +20,8 @@ Writes, into --out-dir (docs/images):
 from __future__ import annotations
 
 import argparse
-import json
 import shutil
 import sys
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,9 +30,9 @@ import cv2
 import numpy as np
 
 from buddybot.contract import messages as m
-from buddybot.eyes import driver, styles
+from buddybot.eyes import driver, styles, wire
 from buddybot.eyes.settings import EyesSettings
-from buddybot.tools.testing import Router, free_port, run_service, wait_port
+from buddybot.tools.testing import Router, free_port, paused_eye_page, run_service, wait_port
 
 CHROMIUM_ARGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update"]
@@ -88,26 +86,26 @@ BLENDS: dict[str, tuple[A, list[Step]]] = {
 at 300 cm; asleep-breath sends nothing and shows half a breath (out, then in)."""
 
 
-def receive(page: Any, topic: str, msg: dict[str, Any]) -> None:
-    page.evaluate("(t) => window.eyes.receive(t)", json.dumps({"topic": topic, "msg": msg}))
+def send(page: Any, *msgs: m.Message) -> None:
+    """Messages into the page as the renderer forwards them."""
+    for msg in msgs:
+        page.evaluate("(t) => window.eyes.receive(t)",
+                      wire.encode(wire.TOPIC_NAMES[type(msg)], msg))
 
 
 def feed_expression(page: Any, action: A) -> None:
-    """What the renderer would forward for `action`: the driver's lids, then the expression."""
-    for lids in driver.lids_for_expression(m.ScreenExpression(stamp_ns=1, action=action)):
-        receive(page, "lids", {"eye_id": int(lids.eye_id),
-                               "top_lid_position": lids.top_lid_position,
-                               "bottom_lid_position": lids.bottom_lid_position})
-    receive(page, "expression", {"action": int(action)})
+    """What the renderer forwards for `action`: the driver's lids, then the expression."""
+    expression = m.ScreenExpression(stamp_ns=1, action=action)
+    send(page, *driver.lids_for_expression(expression), expression)
 
 
 def feed_distance(page: Any, cm: float) -> None:
-    """What the driver sends for a person at `cm`: the direction with the distance and
-    the pupil's dilation from the default curve."""
+    """What the eyes driver makes of a person straight ahead at `cm`: the direction
+    with the distance and the pupil's dilation from the default curve."""
+    control = m.EyeControl(stamp_ns=1, yaw=0.0, pitch=0.0, target_distance_cm=cm)
     curve = driver.PupilCurve.from_points(EyesSettings().pupil_curve)
-    receive(page, "direction", {"stamp_ns": 1, "yaw": 0.0, "pitch": 0.0,
-                                "target_distance_cm": cm})
-    receive(page, "pupil", {"dilation_percentage": curve(cm)})
+    send(page, driver.direction_from_control(control),
+         driver.pupil_from_control(control, curve, EyesSettings().unknown_distance_percent))
 
 
 def settle(page: Any, ms: float = 2500) -> None:
@@ -118,19 +116,9 @@ def settle(page: Any, ms: float = 2500) -> None:
     page.clock.run_for(int(BREATH_MS - phase) % BREATH_MS)
 
 
-def open_page(browser: Any, port: int, screen: Screen) -> Any:
-    page = browser.new_page(viewport={"width": screen.width, "height": screen.height})
-    page.clock.install()
-    page.goto(f"http://127.0.0.1:{port}/eyes?eye={screen.eye}&blink=0&saccade=0")
-    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
-                           timeout=30_000)
-    page.clock.pause_at(int(time.time() * 1000) + 1000)
-    return page
-
-
 def shoot_style(browser: Any, port: int, screen: Screen) -> dict[str, bytes]:
     """Screenshots (PNG) of every expression, by name, from the renderer on `port`."""
-    page = open_page(browser, port, screen)
+    page = paused_eye_page(browser, port, screen.width, screen.height, screen.eye)
     shots = {}
     for action, name in zip(A, styles.EXPRESSIONS, strict=True):
         feed_expression(page, action)
@@ -149,7 +137,7 @@ def shoot_blend(browser: Any, port: int, style: styles.Style, start: A,
                 steps: list[Step]) -> list[tuple[str, bytes]]:
     """(label, PNG) of each frame of a blend: the first as the step is sent, the
     others evenly over it."""
-    page = open_page(browser, port, STRIP)
+    page = paused_eye_page(browser, port, STRIP.width, STRIP.height, STRIP.eye)
     feed_expression(page, start)
     if any(step.distance_cm is not None for step in steps):
         feed_distance(page, 300)
