@@ -76,7 +76,7 @@ class Step:
 
 BLENDS: dict[str, tuple[A, list[Step]]] = {
     "awake-grin": (A.EYE_AWAKE, [Step(A.EYE_GRIN)]),
-    "falling-asleep": (A.EYE_AWAKE, [Step(A.EYE_SLEEPY, frames=4), Step(A.EYE_SLEEP, frames=4)]),
+    "falling-asleep": (A.EYE_AWAKE, [Step(A.EYE_SLEEPY, frames=4), Step(A.EYE_SLEEP, frames=5)]),
     "awake-love": (A.EYE_AWAKE, [Step(A.ANIMATE_LOVE)]),
     "love-awake": (A.ANIMATE_LOVE, [Step(A.EYE_AWAKE)]),
     "pupil-near": (A.EYE_AWAKE, [Step(distance_cm=30, frames=5, ms=800)]),
@@ -135,8 +135,8 @@ def blend_ms(style: styles.Style, action: A) -> float:
 
 def shoot_blend(browser: Any, port: int, style: styles.Style, start: A,
                 steps: list[Step]) -> list[tuple[str, bytes]]:
-    """(label, PNG) of each frame of a blend: the first as the step is sent, the
-    others evenly over it."""
+    """(label, PNG) of each frame of a blend: the first as a step is sent, the others
+    evenly over it (a step after another one starts where that one's last frame is)."""
     page = paused_eye_page(browser, port, STRIP.width, STRIP.height, STRIP.eye)
     feed_expression(page, start)
     if any(step.distance_cm is not None for step in steps):
@@ -154,12 +154,15 @@ def shoot_blend(browser: Any, port: int, style: styles.Style, start: A,
             f"{step.distance_cm:.0f} cm" if step.distance_cm is not None else "")
         page.clock.run_for(FRAME_MS)    # the frame that starts the blend
         taken = 0.0
-        for i in range(step.frames):
+        sent = f" {what} sent" if what else ""
+        if frames:                      # that moment is the last frame of the step before
+            frames[-1] = (frames[-1][0] + sent, frames[-1][1])
+        for i in range(0 if not frames else 1, step.frames):
             at = ms * i / (step.frames - 1)
             page.clock.run_for(max(0, round(at - taken)))
             taken = at
-            label = f"+{elapsed + at:.0f} ms" + (f" {what} sent" if i == 0 and what else "")
-            frames.append((label, page.screenshot()))
+            frames.append((f"+{elapsed + at:.0f} ms" + (sent if i == 0 else ""),
+                           page.screenshot()))
         elapsed += ms
     page.close()
     return frames

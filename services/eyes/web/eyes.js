@@ -437,7 +437,7 @@
     resize();
     EyeDraw.draw(ctx, canvas.width, canvas.height, {
       which, style: cfg.style, pose: cur.pose, lids: cur.lids, calm: cur.calm, blink,
-      // Asleep nothing moves but the breathing glow: the eyes rest in the middle.
+      // Asleep nothing moves but the breath: the eyes rest in the middle.
       yawN: clamp(cur.yaw / cfg.maxYaw, -1, 1) * (1 - cur.rest),
       pitchN: clamp(cur.pitch / cfg.maxPitch, -1, 1) * (1 - cur.rest),
       verg: cur.verg * (1 - cur.rest), dilation: cur.dilation, spinAngle: cur.spinAngle,
