@@ -16,6 +16,7 @@ from collections.abc import Callable
 from typing import Any
 
 import cv2
+import msgspec
 import numpy as np
 import pytest
 
@@ -119,8 +120,9 @@ def cut(largest: float, whole: float, rest: float) -> bool:
 def test_every_change_of_expression_blends(browser: Any, spawn: Callable[..., Process],
                                            style: str) -> None:
     """Every ordered pair of expressions (to and from the heart, the star and sleep
-    included): no frame draws more than a fraction of the change. The same page
-    with a style whose changes take no time is caught cutting (the check can fail)."""
+    included), and a live restyle to the other kind of drawing: no frame draws more
+    than a fraction of the change. The same page with a style whose changes take no
+    time is caught cutting (the check can fail)."""
     page = paused_eye_page(browser, start(spawn, style), 240, 120)
     spec = page.evaluate("window.eyes.cfg.style")
     assert spec["name"] == style
@@ -133,6 +135,18 @@ def test_every_change_of_expression_blends(browser: Any, spawn: Callable[..., Pr
                 if cut(largest, whole, rest):
                     cuts.append(f"{before.name} -> {after.name}: {largest:.1f} of {whole:.1f}")
     assert not cuts, f"{style}: jump cuts:\n" + "\n".join(cuts)
+
+    # A live restyle to the other kind of drawing blends too.
+    other = msgspec.to_builtins(styles.load().get(STYLES[1 - STYLES.index(style)]))
+    express(page, A.EYE_AWAKE)
+    page.clock.run_for(1000)
+    page.evaluate(DIFF, True)
+    rest = max(step for step, _ in frames(page, 6))
+    receive(page, "hello", {"style": other})
+    steps = frames(page, math.ceil(other["transition_ms"] / FRAME_MS) + 4)
+    largest, whole = max(step for step, _ in steps), steps[-1][1]
+    assert whole > 3.0 and not cut(largest, whole, rest), (largest, whole, rest)
+    receive(page, "hello", {"style": spec})
 
     instant = {**spec, "transition_ms": 0,
                "poses": {k: {**p, "transition_ms": 0} for k, p in spec["poses"].items()}}

@@ -433,8 +433,21 @@
   }
 
   // --- drawing (draw.js) ---------------------------------------------------------------
+  // A live restyle to another kind of drawing or background cannot be eased number
+  // by number: the last frame of the old look fades out over the new one.
+  const fade = { canvas: document.createElement("canvas"), look: "", t0: -1, ms: 0 };
+
   function draw(t, blink) {
     resize();
+    const look = `${cfg.style.kind}|${cfg.style.background}`;
+    if (fade.look && look !== fade.look) {
+      fade.canvas.width = canvas.width;
+      fade.canvas.height = canvas.height;
+      fade.canvas.getContext("2d").drawImage(canvas, 0, 0);
+      fade.t0 = t;
+      fade.ms = cfg.style.transition_ms;
+    }
+    fade.look = look;
     EyeDraw.draw(ctx, canvas.width, canvas.height, {
       which, style: cfg.style, pose: cur.pose, lids: cur.lids, calm: cur.calm, blink,
       // Asleep nothing moves but the breath: the eyes rest in the middle.
@@ -444,6 +457,15 @@
       // Breath and heartbeat on the server clock: two screens breathe together.
       t: serverTime(t),
     });
+    if (fade.t0 >= 0) {
+      const k = fade.ms > 0 ? (t - fade.t0) / fade.ms : 1;
+      if (k >= 1) fade.t0 = -1;
+      else {
+        ctx.globalAlpha = 1 - EyePose.ease(k);
+        ctx.drawImage(fade.canvas, 0, 0);
+        ctx.globalAlpha = 1;
+      }
+    }
   }
 
   // --- helpers -----------------------------------------------------------------------
