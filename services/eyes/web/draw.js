@@ -286,7 +286,9 @@ window.EyeDraw = (() => {
       spin: s.spinAngle });
     c.fill();
     if (pupils && plain > 0.01) {
-      c.clip();                    // the pupil stays inside the eye
+      // The pupil stays inside the eye by itself (its room is the eye's), and
+      // within a morph's outline by this clip (only then: a clip costs a fill).
+      if (plain < 0.999) c.clip();
       // It fades as the eye shuts (asleep: a line with no pupil) and with the
       // plain eye (a heart or a star has none).
       const seen = clamp(((yB - yT) / Math.max(1, eh0) - 0.12) / 0.25, 0, 1);
@@ -309,7 +311,8 @@ window.EyeDraw = (() => {
     const roomX = Math.max(0, E.w / 2 - irisR);
     const roomY = Math.max(0, E.h0 / 2 - irisR);
     const x = E.cx + (s.yawN * PUPIL_REACH + nose * s.verg * PUPIL_TURN_IN) * roomX;
-    const y = E.cy - s.pitchN * PUPIL_REACH * roomY;
+    const flat = clamp(E.h / Math.max(1, E.h0), 0, 1);      // a blink flattens it too
+    const y = E.cy - s.pitchN * PUPIL_REACH * roomY * flat;
     const k = (P.brightness / 100) * breath(s);
     const [br, bg, bb] = window.EyePose.rgb(s.style.background);
     const core = { r: lighten(P.r, 0.55), g: lighten(P.g, 0.55), b: lighten(P.b, 0.55) };
@@ -317,7 +320,7 @@ window.EyeDraw = (() => {
     c.save();
     c.globalAlpha = alpha;
     c.translate(x, y);
-    c.scale(1, clamp(E.h / Math.max(1, E.h0), 0, 1));
+    c.scale(1, flat);
     const grad = c.createRadialGradient(0, 0, 0, 0, 0, irisR);
     const edge = pupilR / irisR;
     grad.addColorStop(0, colourOf(dark, 1));

@@ -17,7 +17,6 @@ window.EyePose = (() => {
     "ALERT"];
   const NUM = ["width", "height", "roundness", "top_lid", "top_lid_angle", "bottom_lid",
     "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "sway", "beat", "spin"];
-  const LIDS = ["lid_lt", "lid_lb", "lid_rt", "lid_rb"];   // commanded: left top/bottom, right
   const STYLE_NUM = ["lid_follow", "curiosity", "vergence", "squash", "stretch", "reach",
     "transition_ms"];
 
@@ -120,5 +119,5 @@ window.EyePose = (() => {
   // Slow in, slow out (cubic): a pose change starts and lands softly.
   function ease(k) { return k < 0.5 ? 4 * k * k * k : 1 - Math.pow(-2 * k + 2, 3) / 2; }
 
-  return { NAMES, NUM, LIDS, FALLBACK, isStyle, target, duration, lerp, ease, rgb };
+  return { NAMES, NUM, FALLBACK, isStyle, target, duration, lerp, ease, rgb };
 })();
