@@ -235,7 +235,7 @@ def render(style_names: list[str], style_file: str | None, out_dir: Path,
                                     (shots_dir / f"{name}_{expr}{screen.name}.png").write_bytes(
                                         png)
                         write_png(out_dir / f"eyes-contact-sheet{screen.name}.png",
-                                  grid(tiles, 4))
+                                  grid(tiles, 3))
                 if only in ("", "blends"):
                     for blend, (start, steps) in BLENDS.items():
                         rows = []
