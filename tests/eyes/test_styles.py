@@ -65,7 +65,8 @@ def settled(page: Any) -> None:
     page.wait_for_function(
         """() => {
           const e = window.eyes, c = e.cur, t = e.target, near = (a, b) => Math.abs(a - b) < 0.05;
-          return c.poseT >= 1 && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
+          return c.poseT >= 1 && c.poseTo === t.expression
+            && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
             && Math.abs(c.verg - e.vergenceGoal()) < 0.003
             && Math.abs(c.rest - (t.expression === 1 ? 1 : 0)) < 0.003
             && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top)

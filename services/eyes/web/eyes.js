@@ -69,6 +69,7 @@
     rest: 0,                     // asleep: 1 = the eyes rest in the middle, whatever the gaze
     pose: EyePose.target(EyePose.FALLBACK, EXPR.AWAKE, "#2f7fd0"),   // the eased pose drawn
     poseT: 1,                    // progress of the pose change under way (1: arrived)
+    poseTo: EXPR.AWAKE,          // ... and the expression it goes to
     spinAngle: 0,                // radians a spinning shape (a star) has turned
   };
 
@@ -371,6 +372,7 @@
       poseMove.to = EyePose.target(cfg.style, target.expression, cfg.iris, L);
       poseMove.t0 = t;
       poseMove.ms = EyePose.duration(cfg.style, target.expression);
+      cur.poseTo = target.expression;
     }
     const k = poseMove.ms > 0 ? clamp((t - poseMove.t0) / poseMove.ms, 0, 1) : 1;
     const P = cur.pose = k >= 1 ? poseMove.to
@@ -434,12 +436,14 @@
 
   // --- drawing (draw.js) ---------------------------------------------------------------
   // A live restyle to another kind of drawing or background cannot be eased number
-  // by number: the last frame of the old look fades out over the new one.
+  // by number: the last frame of the old look fades out over the new one (not the
+  // first style a page gets: the look it had until then was only a stand-in).
   const fade = { canvas: document.createElement("canvas"), look: "", t0: -1, ms: 0 };
 
   function draw(t, blink) {
     resize();
-    const look = `${cfg.style.kind}|${cfg.style.background}`;
+    const look = cfg.style === EyePose.FALLBACK ? ""
+      : `${cfg.style.kind}|${cfg.style.background}`;
     if (fade.look && look !== fade.look) {
       fade.canvas.width = canvas.width;
       fade.canvas.height = canvas.height;
