@@ -101,6 +101,12 @@ def look(page: Any, yaw: float, pitch: float, distance_cm: float | None = None) 
     settled(page)
 
 
+def at_breath_top(page: Any) -> None:
+    """Until the slow breath (4 s, on the server clock the page has learnt) is at its
+    top, where a drowsy top lid is highest: shots taken there differ by the gaze alone."""
+    page.wait_for_function("window.eyes.serverTime() % 4000 < 100", timeout=10_000)
+
+
 def eye_mask(img: np.ndarray, style: str) -> np.ndarray:
     """What moves with the gaze: the glowing shape, or the eyeball's black pupil."""
     if style == "glow":
@@ -168,8 +174,10 @@ def test_gaze_moves_the_eyes_and_lids_follow(browser: Any, spawn: Callable[..., 
     # Drowsy lids follow the gaze: looking up shows more eye than looking down.
     express(probe, page, A.EYE_SLEEPY, 1)
     look(page, 0, 25)
+    at_breath_top(page)
     up = visible_height(shot(page, f"{style}_sleepy_up"), style)
     look(page, 0, -25)
+    at_breath_top(page)
     down = visible_height(shot(page, f"{style}_sleepy_down"), style)
     assert up > down + 4, (up, down)
     page.close()
