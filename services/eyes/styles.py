@@ -79,13 +79,17 @@ class Pose(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     bottom_lid_curve: Percent
     """0: a straight bottom lid; 100: it arches up into a happy crescent."""
     iris: Percent
-    """Iris diameter, % of the eye's width (eyeball styles; 0: none)."""
+    """Iris diameter, % of the eye's width (glow: the bright core around the pupil;
+    0: none, and no pupil)."""
     pupil: Percent
     """Pupil size, % of what the commanded dilation asks for."""
     glow: Percent
     brightness: Percent
     breathe: Percent
-    """Brightness swing of a slow (~0.25 Hz) breath, % (asleep)."""
+    """Brightness swing of a slow (~0.25 Hz) breath, % (asleep, drowsy)."""
+    sway: Percent = 0.0
+    """How far the top lid sinks with each slow breath and lifts again, % of the
+    eye's height (drowsy)."""
     beat: Percent
     """Size swing of a heartbeat, % (love)."""
     spin: Spin
@@ -93,6 +97,14 @@ class Pose(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     color: PoseColour
     """The eye's (glow) or iris's (eyeball) colour; empty: the style's colour."""
     shape: Shape
+    transition_ms: Annotated[float, msgspec.Meta(ge=0.0, le=5000.0)] = 0.0
+    """How long a change into this pose takes (falling asleep is slow); 0: the
+    style's `transition_ms`."""
+
+
+POSE_REQUIRED = tuple(f.name for f in msgspec.structs.fields(Pose) if f.required)
+"""Pose fields a complete style must give (the others have defaults, so a style
+file written before they existed still loads)."""
 
 
 class PoseSpec(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, omit_defaults=True):
@@ -110,10 +122,12 @@ class PoseSpec(msgspec.Struct, forbid_unknown_fields=True, kw_only=True, omit_de
     glow: Percent | None = None
     brightness: Percent | None = None
     breathe: Percent | None = None
+    sway: Percent | None = None
     beat: Percent | None = None
     spin: Spin | None = None
     color: PoseColour | None = None
     shape: Shape | None = None
+    transition_ms: Annotated[float, msgspec.Meta(ge=0.0, le=5000.0)] | None = None
 
 
 class Style(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
@@ -325,7 +339,7 @@ def resolve(specs: Mapping[str, Mapping[str, Any]], source: str,
         poses = {}
         for expr in EXPRESSIONS:
             pose = {**fields["base"], **fields["poses"].get(expr, {})}
-            missing = [f for f in Pose.__struct_fields__ if f not in pose]
+            missing = [f for f in POSE_REQUIRED if f not in pose]
             if missing:
                 raise ConfigError(f"{source}: styles.{name}.poses.{expr}: missing "
                                   f"{', '.join(missing)} (give them in its base)")

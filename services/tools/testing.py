@@ -267,6 +267,20 @@ def stuck_websocket(port: int, path: str = "/ws?eye=both", timeout: float = 20.0
     return sock, head
 
 
+def paused_eye_page(browser: Any, port: int, width: int, height: int, eye: str = "both") -> Any:
+    """The eye page of the renderer on `port` in a Playwright `browser`, with no blinks
+    or saccades of its own, once it is ready, with its clock paused:
+    `page.clock.run_for(ms)` steps it, so each frame is taken at an exact moment of an
+    animation however busy the machine is."""
+    page = browser.new_page(viewport={"width": width, "height": height})
+    page.clock.install()
+    page.goto(f"http://{LOOPBACK}:{port}/eyes?eye={eye}&blink=0&saccade=0")
+    page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
+                           timeout=30_000)
+    page.clock.pause_at(int(time.time() * 1000) + 1000)
+    return page
+
+
 def buddybot_argv(*args: str) -> list[str]:
     return [sys.executable, "-m", "buddybot", *args]
 

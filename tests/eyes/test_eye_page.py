@@ -71,7 +71,7 @@ def settled(page: Any, timeout_ms: int = 15_000) -> None:
                                         && near(c.lids[s].bottom, t.lids[s].bottom, 0.1))
             && near(c.sad, x === 4 ? 1 : 0, 0.01) && near(c.grin, x === 3 ? 1 : 0, 0.01)
             && near(c.love, x === 6 ? 1 : 0, 0.01) && near(c.star, x === 7 ? 1 : 0, 0.01)
-            && c.poseT >= 1 && (t.distance !== null || c.verg < 0.01);
+            && c.poseT >= 1 && c.poseTo === x && (t.distance !== null || c.verg < 0.01);
         }""", timeout=timeout_ms)
 
 

@@ -65,7 +65,8 @@ def settled(page: Any) -> None:
     page.wait_for_function(
         """() => {
           const e = window.eyes, c = e.cur, t = e.target, near = (a, b) => Math.abs(a - b) < 0.05;
-          return c.poseT >= 1 && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
+          return c.poseT >= 1 && c.poseTo === t.expression
+            && near(c.yaw, t.yaw) && near(c.pitch, t.pitch)
             && Math.abs(c.verg - e.vergenceGoal()) < 0.003
             && Math.abs(c.rest - (t.expression === 1 ? 1 : 0)) < 0.003
             && ["left", "right"].every(s => near(c.lids[s].top, t.lids[s].top)
@@ -98,6 +99,12 @@ def look(page: Any, yaw: float, pitch: float, distance_cm: float | None = None) 
         msg["target_distance_cm"] = distance_cm
     page.evaluate("(t) => window.eyes.receive(t)", json.dumps({"topic": "direction", "msg": msg}))
     settled(page)
+
+
+def at_breath_top(page: Any) -> None:
+    """Until the slow breath (4 s, on the server clock the page has learnt) is at its
+    top, where a drowsy top lid is highest: shots taken there differ by the gaze alone."""
+    page.wait_for_function("window.eyes.serverTime() % 4000 < 100", timeout=10_000)
 
 
 def eye_mask(img: np.ndarray, style: str) -> np.ndarray:
@@ -167,8 +174,10 @@ def test_gaze_moves_the_eyes_and_lids_follow(browser: Any, spawn: Callable[..., 
     # Drowsy lids follow the gaze: looking up shows more eye than looking down.
     express(probe, page, A.EYE_SLEEPY, 1)
     look(page, 0, 25)
+    at_breath_top(page)
     up = visible_height(shot(page, f"{style}_sleepy_up"), style)
     look(page, 0, -25)
+    at_breath_top(page)
     down = visible_height(shot(page, f"{style}_sleepy_down"), style)
     assert up > down + 4, (up, down)
     page.close()

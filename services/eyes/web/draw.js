@@ -2,18 +2,16 @@
 //
 // Two kinds of style (services/eyes/styles.py): "glow", a rounded glowing
 // shape per eye that moves as a whole and whose lids cut it (a closed eye
-// is a thin glowing line), and "eyeball", a white ball whose iris moves and
-// whose lids are background-coloured caps. Both read the same pose numbers.
+// is a thin glowing line), with a dark pupil in a bright core; and
+// "eyeball", a white ball whose iris moves and whose lids are
+// background-coloured caps. Both read the same pose numbers, and both
+// pupils are the commanded dilation (eyes/pupil: a near person widens them).
 //
-// Shared "alive" cues (eyes.js eases their inputs):
-// * lids follow the gaze up and down (looking up raises the top lid);
-// * vergence: each eye moves toward the nose as the person comes closer;
-// * curiosity: the eye on the side looked at grows, the other shrinks a bit;
-// * squash and stretch: a blinking glow eye gets flatter and wider.
-//
-// The glow is cheap on purpose: the shapes are drawn again on a canvas a
-// quarter of the size, blurred there (shadowBlur on ~1/16 of the pixels)
-// and added onto the frame scaled up, instead of blurring the full frame.
+// Shared "alive" cues (eyes.js eases their inputs): lids follow the gaze;
+// vergence (the eyes turn in for a near person); curiosity (the eye on the
+// side looked at grows); squash and stretch (a blinking glow eye gets
+// flatter and wider); a slow breath (the glow dims, a drowsy lid sinks).
+// The glow's halo is drawn on a canvas 1/8 the size and laid on scaled up.
 "use strict";
 
 window.EyeDraw = (() => {
@@ -22,10 +20,15 @@ window.EyeDraw = (() => {
   const SCLERA = "#f2f4f8";
   const PUPIL = "#000000";
   const LASH = "#3c4966";                      // lash line of a closed eyeball
+  const LASH_LIFT = 0.08;                      // ... lifting this much (of the eye) per breath
   const GLOW_SCALE = 0.125;                    // the glow layer's size, of the canvas
   const GLOW_BLUR = 0.12;                      // halo blur, of the eye's cell
   const GLOW_GAIN = 1.6;                       // halo strength at glow 100
-  const BREATH_HZ = 0.25;                      // asleep: one slow breath every 4 s
+  const BREATH_HZ = 0.25;                      // asleep, drowsy: one slow breath every 4 s
+  const LINE_SWELL = 0.8;                      // a shut glow eye's line is this much thicker
+                                               // at the top of a full (100 %) breath
+  const PUPIL_REACH = 0.6;                     // the glow pupil moves this much of its room
+  const PUPIL_TURN_IN = 0.35;                  // ... and this much toward the nose (near)
   const CLOSED_LINE = 0.028;                   // a shut glow eye: a line this thick (of cell)
   const near = document.createElement("canvas");   // glow layer: the shapes, small
   const nearCtx = near.getContext("2d");
@@ -40,8 +43,9 @@ window.EyeDraw = (() => {
   function lidsOf(s, side, uncut = 0) {
     const P = s.pose;
     const L = s.lids[side];
-    // The commanded lids (eyes/lids), at least what the pose asks for.
-    let top = Math.max(L.top, P.top_lid) * (1 - uncut);
+    // The commanded lids (eyes/lids), at least what the pose asks for; a
+    // drowsy top lid sinks with each breath.
+    let top = (Math.max(L.top, P.top_lid) + P.sway * exhale(s)) * (1 - uncut);
     let bottom = Math.max(L.bottom, P.bottom_lid) * (1 - uncut);
     // Connecting: at least half closed (a closed eye stays closed).
     top += (Math.max(top, REST_LIDS.top) - top) * s.calm;
@@ -85,12 +89,94 @@ window.EyeDraw = (() => {
     return `rgb(${Math.round(P.r * k)},${Math.round(P.g * k)},${Math.round(P.b * k)})`;
   }
 
-  function breath(s) {
-    const wave = 0.5 - 0.5 * Math.cos(2 * Math.PI * BREATH_HZ * s.t / 1000);
-    return 1 - (s.pose.breathe / 100) * wave;
+  // 0 .. 1 .. 0 over one slow breath, 1 its bottom: dimmest, a drowsy lid lowest
+  // (s.t is the server clock: two screens breathe together).
+  function exhale(s) { return 0.5 - 0.5 * Math.cos(2 * Math.PI * BREATH_HZ * s.t / 1000); }
+
+  // The brightness a breath leaves (1: none).
+  function breath(s) { return 1 - (s.pose.breathe / 100) * exhale(s); }
+
+  // --- shapes ------------------------------------------------------------------------
+  // Every shape here is seen whole from its centre (a ray from the centre crosses its
+  // outline once), so each is one radius per direction, and a change of shape is a
+  // morph: the outline at each of OUTLINE_N directions moves from one shape's to the
+  // other's (a rounded eye bends into a heart), never two shapes laid over each other.
+
+  const OUTLINE_N = 120;                       // directions: every 3 degrees
+  const COS = Float64Array.from({ length: OUTLINE_N }, (_, k) => Math.cos(dirOf(k)));
+  const SIN = Float64Array.from({ length: OUTLINE_N }, (_, k) => Math.sin(dirOf(k)));
+  // A heart filling the unit box -0.5..0.5: four cubic curves, end to end.
+  const HEART = polarTable(curvePoints([[0, 0.46], [-0.3, 0.24], [-0.52, 0.02], [-0.5, -0.2],
+    [-0.48, -0.44], [-0.14, -0.52], [0, -0.26], [0.14, -0.52], [0.48, -0.44], [0.5, -0.2],
+    [0.52, 0.02], [0.3, 0.24], [0, 0.46]]));
+  // A five-pointed star in the unit box, a point up.
+  const STAR = polarTable(starPoints(0.5, 0.22));
+
+  function dirOf(k) { return -Math.PI + (2 * Math.PI * k) / OUTLINE_N; }
+
+  function curvePoints(p) {
+    const out = [];
+    for (let i = 0; i + 3 < p.length; i += 3) {
+      for (let j = 0; j < 200; j++) {
+        const t = j / 200;
+        const u = 1 - t;
+        const w = [u * u * u, 3 * u * u * t, 3 * u * t * t, t * t * t];
+        out.push([0, 1].map((d) => w.reduce((acc, wk, n) => acc + wk * p[i + n][d], 0)));
+      }
+    }
+    return out;
   }
 
-  // --- shapes (paths only) -----------------------------------------------------------
+  function starPoints(outer, inner) {
+    const corner = (i) => {
+      const r = i % 2 === 0 ? outer : inner;
+      const a = -Math.PI / 2 + (i * Math.PI) / 5;
+      return [r * Math.cos(a), r * Math.sin(a)];
+    };
+    const out = [];
+    for (let i = 0; i < 10; i++) {
+      const [a, b] = [corner(i), corner(i + 1)];
+      for (let j = 0; j < 100; j++) {
+        const t = j / 100;
+        out.push([a[0] + (b[0] - a[0]) * t, a[1] + (b[1] - a[1]) * t]);
+      }
+    }
+    return out;
+  }
+
+  // A dense outline around (0, 0) -> its radius in each of the OUTLINE_N directions.
+  function polarTable(points) {
+    const byDir = points.map(([x, y]) => [Math.atan2(y, x), Math.hypot(x, y)])
+      .sort((a, b) => a[0] - b[0]);
+    const first = byDir[0];
+    const last = byDir[byDir.length - 1];
+    const table = new Float64Array(OUTLINE_N);
+    let j = 0;
+    for (let k = 0; k < OUTLINE_N; k++) {
+      const a = dirOf(k);
+      while (j < byDir.length && byDir[j][0] < a) j++;
+      const lo = j > 0 ? byDir[j - 1] : [last[0] - 2 * Math.PI, last[1]];
+      const hi = j < byDir.length ? byDir[j] : [first[0] + 2 * Math.PI, first[1]];
+      table[k] = lo[1] + (hi[1] - lo[1]) * ((a - lo[0]) / Math.max(1e-9, hi[0] - lo[0]));
+    }
+    return table;
+  }
+
+  // Where the ray from the centre along (dx, dy) leaves a rounded rectangle of half
+  // sizes a, b and corner radius r.
+  function rectPoint(a, b, r, dx, dy) {
+    const n = Math.hypot(dx, dy) || 1;
+    dx /= n;
+    dy /= n;
+    let t = Math.min(a / Math.max(1e-9, Math.abs(dx)), b / Math.max(1e-9, Math.abs(dy)));
+    if (Math.abs(t * dx) > a - r && Math.abs(t * dy) > b - r) {       // a corner's arc
+      const ox = Math.sign(dx) * (a - r);
+      const oy = Math.sign(dy) * (b - r);
+      const along = dx * ox + dy * oy;
+      t = along + Math.sqrt(Math.max(0, along * along - ox * ox - oy * oy + r * r));
+    }
+    return [t * dx, t * dy];
+  }
 
   function roundRect(c, x, y, w, h, r) {
     r = clamp(r, 0, Math.min(w, h) / 2);
@@ -102,50 +188,58 @@ window.EyeDraw = (() => {
     c.closePath();
   }
 
-  // A heart filling the unit box -0.5..0.5 (scaled by the caller's transform).
-  function heartPath(c) {
-    c.moveTo(0, 0.46);
-    c.bezierCurveTo(-0.3, 0.24, -0.52, 0.02, -0.5, -0.2);
-    c.bezierCurveTo(-0.48, -0.44, -0.14, -0.52, 0, -0.26);
-    c.bezierCurveTo(0.14, -0.52, 0.48, -0.44, 0.5, -0.2);
-    c.bezierCurveTo(0.52, 0.02, 0.3, 0.24, 0, 0.46);
-    c.closePath();
-  }
-
-  // A five-pointed star with rounded-off tips, in the unit box.
-  function starPath(c, angle) {
-    const outer = 0.5;
-    const inner = 0.22;
-    for (let i = 0; i < 10; i++) {
-      const r = i % 2 === 0 ? outer : inner;
-      const a = angle - Math.PI / 2 + (i * Math.PI) / 5;
-      if (i === 0) c.moveTo(r * Math.cos(a), r * Math.sin(a));
-      else c.lineTo(r * Math.cos(a), r * Math.sin(a));
+  // The outline of a mix of shapes around (cx, cy), as a path: weight `plain` of a
+  // rounded rectangle w x h with corner radius r, `heart` of a heart filling
+  // hw x hh, `star` of a star filling sw x sh and turned by `spin` radians (the
+  // weights add up to 1). Only the plain shape: its exact arcs.
+  function shapePath(c, cx, cy, m) {
+    const r = clamp(m.r, 0, Math.min(m.w, m.h) / 2);
+    c.beginPath();
+    if (m.heart + m.star < 0.001) {
+      roundRect(c, cx - m.w / 2, cy - m.h / 2, m.w, m.h, r);
+      return;
+    }
+    // The star's own directions turn with it, so its points stay sharp as it spins.
+    const sc = Math.cos(m.spin);
+    const ss = Math.sin(m.spin);
+    for (let k = 0; k < OUTLINE_N; k++) {
+      let x = 0;
+      let y = 0;
+      if (m.plain > 0) {
+        const [px, py] = rectPoint(m.w / 2, m.h / 2, r, m.w * COS[k], m.h * SIN[k]);
+        x += m.plain * px;
+        y += m.plain * py;
+      }
+      if (m.heart > 0) {
+        x += m.heart * HEART[k] * COS[k] * m.hw;
+        y += m.heart * HEART[k] * SIN[k] * m.hh;
+      }
+      if (m.star > 0) {
+        const ux = STAR[k] * COS[k];
+        const uy = STAR[k] * SIN[k];
+        x += m.star * (ux * sc - uy * ss) * m.sw;
+        y += m.star * (ux * ss + uy * sc) * m.sh;
+      }
+      if (k === 0) c.moveTo(cx + x, cy + y);
+      else c.lineTo(cx + x, cy + y);
     }
     c.closePath();
   }
 
-  function fillUnit(c, cx, cy, sx, sy, path) {
-    c.save();
-    c.translate(cx, cy);
-    c.scale(sx, sy);
-    c.beginPath();
-    path(c);
-    c.fill();
-    c.restore();
-  }
-
   // --- glow --------------------------------------------------------------------------
 
-  // One glow eye on context `c`: the shape, cut by the lids.
-  function glowEye(c, s, side, L, fill) {
+  // One glow eye on context `c`: the shape, cut by the lids, and (`pupils`) its
+  // pupil.
+  function glowEye(c, s, side, L, fill, pupils) {
     const P = s.pose;
     const st = s.style;
     const lids = lidsOf(s, side, clamp(P.heart + P.star, 0, 1));
     const squash = s.blink * (st.squash / 100);
     const ew = (L.S * P.width / 100) * L.grow * (1 + s.blink * (st.stretch / 100));
-    const line = CLOSED_LINE * L.S;
-    const eh = Math.max(line, (L.S * P.height / 100) * L.grow * (1 - squash));
+    // Asleep the line swells a little as the glow brightens with each breath.
+    const line = CLOSED_LINE * L.S * (1 + LINE_SWELL * (P.breathe / 100) * (1 - exhale(s)));
+    const eh0 = (L.S * P.height / 100) * L.grow;
+    const eh = Math.max(line, eh0 * (1 - squash));
     const cx = L.cx + L.gx;
     const cy = L.cy + L.gy;
     let yT = cy - eh / 2 + (lids.top / 100) * eh;
@@ -184,22 +278,60 @@ window.EyeDraw = (() => {
       grad.addColorStop(1, fill[1]);
       c.fillStyle = grad;
     }
+    // The eye, a heart or a star, or a morph between them (shapePath).
     const plain = clamp(1 - P.heart - P.star, 0, 1);
-    if (plain > 0.01) {
-      c.globalAlpha = plain;
-      c.beginPath();
-      roundRect(c, cx - ew / 2, cy - eh / 2, ew, eh, (P.roundness / 100) * Math.min(ew, eh) / 2);
-      c.fill();
-    }
     const beat = 1 + (P.beat / 100) * Math.max(0, Math.sin(s.t / 1000 * 2 * Math.PI * 1.2)) ** 4;
-    if (P.heart > 0.01) {
-      c.globalAlpha = P.heart;
-      fillUnit(c, cx, cy, ew * beat, eh * beat, heartPath);
+    shapePath(c, cx, cy, { plain, w: ew, h: eh, r: (P.roundness / 100) * Math.min(ew, eh) / 2,
+      heart: P.heart, hw: ew * beat, hh: eh * beat, star: P.star, sw: ew, sh: eh,
+      spin: s.spinAngle });
+    c.fill();
+    if (pupils && plain > 0.01) {
+      // The pupil stays inside the eye by itself (its room is the eye's), and
+      // within a morph's outline by this clip (only then: a clip costs a fill).
+      if (plain < 0.999) c.clip();
+      // It fades as the eye shuts (asleep: a line with no pupil) and with the
+      // plain eye (a heart or a star has none).
+      const seen = clamp(((yB - yT) / Math.max(1, eh0) - 0.12) / 0.25, 0, 1);
+      glowPupil(c, s, side, { cx, cy, w: ew, h: eh, h0: eh0 }, plain * seen);
     }
-    if (P.star > 0.01) {
-      c.globalAlpha = P.star;
-      fillUnit(c, cx, cy, ew, eh, (cc) => starPath(cc, s.spinAngle));
-    }
+    c.restore();
+  }
+
+  // The glow eye's pupil: a dark disc in a bright core (the iris, `iris` % of
+  // the eye's width), the commanded dilation of it, kept within 12..92 % so it
+  // never vanishes and a ring of core always shows. It moves inside the eye
+  // with the gaze (the eye itself moves too) and toward the nose for a near
+  // person, and flattens with a blink as the eye does.
+  function glowPupil(c, s, side, E, alpha) {
+    const P = s.pose;
+    const irisR = Math.min((P.iris / 200) * E.w, E.h0 / 2);
+    if (irisR < 0.5 || alpha < 0.01) return;
+    const pupilR = irisR * clamp((s.dilation / 100) * (P.pupil / 100), 0.12, 0.92);
+    const nose = side === "left" ? -1 : 1;
+    const roomX = Math.max(0, E.w / 2 - irisR);
+    const roomY = Math.max(0, E.h0 / 2 - irisR);
+    const x = E.cx + (s.yawN * PUPIL_REACH + nose * s.verg * PUPIL_TURN_IN) * roomX;
+    const flat = clamp(E.h / Math.max(1, E.h0), 0, 1);      // a blink flattens it too
+    const y = E.cy - s.pitchN * PUPIL_REACH * roomY * flat;
+    const k = (P.brightness / 100) * breath(s);
+    const [br, bg, bb] = window.EyePose.rgb(s.style.background);
+    const core = { r: lighten(P.r, 0.55), g: lighten(P.g, 0.55), b: lighten(P.b, 0.55) };
+    const dark = { r: P.r * 0.14 + br * 0.86, g: P.g * 0.14 + bg * 0.86, b: P.b * 0.14 + bb * 0.86 };
+    c.save();
+    c.globalAlpha = alpha;
+    c.translate(x, y);
+    c.scale(1, flat);
+    const grad = c.createRadialGradient(0, 0, 0, 0, 0, irisR);
+    const edge = pupilR / irisR;
+    grad.addColorStop(0, colourOf(dark, 1));
+    grad.addColorStop(edge * 0.82, colourOf(dark, 1));
+    grad.addColorStop(edge, colourOf(core, k));
+    grad.addColorStop(edge + (1 - edge) * 0.35, colourOf(core, k));
+    grad.addColorStop(1, `rgba(${Math.round(P.r * k)},${Math.round(P.g * k)},${Math.round(P.b * k)},0)`);
+    c.fillStyle = grad;
+    c.beginPath();
+    c.arc(0, 0, irisR, 0, 2 * Math.PI);
+    c.fill();
     c.restore();
   }
 
@@ -207,7 +339,7 @@ window.EyeDraw = (() => {
     const P = s.pose;
     const k = (P.brightness / 100) * breath(s);
     const fill = colourOf(P, k);
-    const shaded = [colourOf({ r: lighten(P.r), g: lighten(P.g), b: lighten(P.b) }, k),
+    const shaded = [colourOf({ r: lighten(P.r, 0.2), g: lighten(P.g, 0.2), b: lighten(P.b, 0.2) }, k),
       colourOf(P, k * 0.8)];
     const strength = (P.glow / 100) * k * GLOW_GAIN;
     if (strength > 0.01) {
@@ -220,7 +352,7 @@ window.EyeDraw = (() => {
       nearCtx.setTransform(1, 0, 0, 1, 0, 0);
       nearCtx.clearRect(0, 0, w, h);
       nearCtx.setTransform(GLOW_SCALE, 0, 0, GLOW_SCALE, 0, 0);
-      for (const [side, L] of cells) glowEye(nearCtx, s, side, L, fill);
+      for (const [side, L] of cells) glowEye(nearCtx, s, side, L, fill, false);
       haloCtx.clearRect(0, 0, w, h);
       haloCtx.shadowColor = colourOf(P, 1);
       haloCtx.shadowBlur = GLOW_BLUR * cells[0][1].S * GLOW_SCALE;
@@ -254,7 +386,7 @@ window.EyeDraw = (() => {
         }
       }
     }
-    for (const [side, L] of cells) glowEye(ctx, s, side, L, shaded);
+    for (const [side, L] of cells) glowEye(ctx, s, side, L, shaded, true);
   }
 
   // Half-sizes (px) of the box an eye's halo can reach from its centre.
@@ -265,7 +397,7 @@ window.EyeDraw = (() => {
     return { x: (L.S * P.width / 200) * big + margin, y: (L.S * P.height / 200) * big + margin };
   }
 
-  function lighten(v) { return v + (255 - v) * 0.2; }
+  function lighten(v, by) { return v + (255 - v) * by; }
 
   // --- eyeball -----------------------------------------------------------------------
 
@@ -282,13 +414,20 @@ window.EyeDraw = (() => {
     ctx.fillStyle = SCLERA;
     ctx.fill();
     ctx.clip();
+    // The iris, a heart or a star, or a morph between them (shapePath); the
+    // iris's rim and pupil fade as it turns into another shape.
     const plain = clamp(1 - P.heart - P.star, 0, 1);
-    if (plain > 0.01 && irisR > 0) {
-      ctx.globalAlpha = plain;
-      ctx.beginPath();
-      ctx.arc(gx, gy, irisR, 0, 2 * Math.PI);
+    const size = Math.max(irisR, R * 0.46) * 2.3;
+    const beat = 1 + (P.beat / 100) * Math.sin(s.t / 1000 * 2 * Math.PI * 1.3);
+    if (irisR > 0 || plain < 0.99) {
+      shapePath(ctx, gx, gy, { plain, w: 2 * irisR, h: 2 * irisR, r: irisR,
+        heart: P.heart, hw: size * beat, hh: size * beat, star: P.star, sw: size, sh: size,
+        spin: s.spinAngle });
       ctx.fillStyle = colourOf(P, 1);
       ctx.fill();
+    }
+    if (plain > 0.01 && irisR > 0) {
+      ctx.globalAlpha = plain;
       ctx.lineWidth = irisR * 0.08;
       ctx.strokeStyle = "rgba(0,0,0,0.25)";
       ctx.stroke();
@@ -296,23 +435,11 @@ window.EyeDraw = (() => {
       // pupil never vanishes and a ring of iris always shows.
       const pupilR = irisR * clamp((s.dilation / 100) * (P.pupil / 100), 0.12, 0.92);
       ctx.beginPath();
-      ctx.arc(gx, gy, pupilR, 0, 2 * Math.PI);
+      ctx.arc(gx, gy, pupilR * plain, 0, 2 * Math.PI);
       ctx.fillStyle = PUPIL;
       ctx.fill();
       ctx.globalAlpha = 1;
     }
-    ctx.fillStyle = colourOf(P, 1);
-    const size = Math.max(irisR, R * 0.46) * 2.3;
-    if (P.heart > 0.01) {
-      ctx.globalAlpha = P.heart;
-      const beat = 1 + (P.beat / 100) * Math.sin(s.t / 1000 * 2 * Math.PI * 1.3);
-      fillUnit(ctx, gx, gy, size * beat, size * beat, heartPath);
-    }
-    if (P.star > 0.01) {
-      ctx.globalAlpha = P.star;
-      fillUnit(ctx, gx, gy, size, size, (c) => starPath(c, s.spinAngle));
-    }
-    ctx.globalAlpha = 1;
     // Catch-light: makes the eye look wet and alive.
     const ir = Math.max(irisR, R * 0.3);
     ctx.beginPath();
@@ -359,13 +486,16 @@ window.EyeDraw = (() => {
     ctx.closePath();
     ctx.fill();
     // Closed (asleep, or mid-blink): a soft lash line so the eye reads as shut,
-    // not as a screen that went off; asleep it breathes.
+    // not as a screen that went off; asleep it breathes: it lifts a little and
+    // brightens with each breath in.
     const shut = clamp(((top + bottom) / 100 - 0.9) / 0.1, 0, 1);
     if (shut > 0) {
-      ctx.globalAlpha = shut * breath(s);
+      const inhale = (P.breathe / 100) * (1 - exhale(s));
+      const y = cy - R * LASH_LIFT * inhale;
+      ctx.globalAlpha = shut * (1 - 0.5 * (P.breathe / 100) * exhale(s));
       ctx.beginPath();
-      ctx.moveTo(cx - R * 0.85, cy);
-      ctx.quadraticCurveTo(cx, cy + R * 0.28, cx + R * 0.85, cy);
+      ctx.moveTo(cx - R * 0.85, y);
+      ctx.quadraticCurveTo(cx, y + R * (0.28 - LASH_LIFT * inhale), cx + R * 0.85, y);
       ctx.lineWidth = Math.max(2, R * 0.06);
       ctx.lineCap = "round";
       ctx.strokeStyle = LASH;

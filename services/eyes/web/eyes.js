@@ -9,7 +9,8 @@
 // motion {kind, start_ms, duration_ms, params} and pong {t0, server_ms}.
 //
 // Every value eases toward its target once per animation frame (exponential
-// approach, frame-rate independent), so a new target never makes a jump.
+// approach, frame-rate independent; an expression and its lids as one pose
+// change, pose.js), so a new target never makes a jump.
 // One face, many screens: the page decides no blink or saccade itself. The
 // renderer decides them once for every page (motion events, start times on
 // the server clock); the page learns the server clock (ping/pong, NTP-style,
@@ -40,7 +41,7 @@
   const cfg = { iris: "#2f7fd0", maxYaw: 40, maxPitch: 30, style: EyePose.FALLBACK };
 
   // Time constants (s) of the exponential approach toward targets.
-  const TAU = { gaze: 0.045, pupil: 0.25, lids: 0.07, shape: 0.15, calm: 0.3, verge: 0.25 };
+  const TAU = { gaze: 0.045, pupil: 0.25, shape: 0.15, calm: 0.3, verge: 0.25 };
   // Vergence: none beyond this distance, the most at NEAR_CM and closer.
   const VERGE_FAR_CM = 150;
   const VERGE_NEAR_CM = 30;
@@ -68,6 +69,7 @@
     rest: 0,                     // asleep: 1 = the eyes rest in the middle, whatever the gaze
     pose: EyePose.target(EyePose.FALLBACK, EXPR.AWAKE, "#2f7fd0"),   // the eased pose drawn
     poseT: 1,                    // progress of the pose change under way (1: arrived)
+    poseTo: EXPR.AWAKE,          // ... and the expression it goes to
     spinAngle: 0,                // radians a spinning shape (a star) has turned
   };
 
@@ -353,23 +355,34 @@
     return value + (goal - value) * (1 - Math.exp(-dt / tau));
   }
 
-  // A new expression, style or iris colour: ease every pose number from
-  // where it is now to the new pose over the style's transition time.
+  // A new expression, its lids, style or iris colour: ease every pose number
+  // from where it is now to the new pose over the pose's transition time. The
+  // driver sends the lids and the expression as two messages a moment apart:
+  // the second restarts the move from where the first has got (nearly nowhere,
+  // the ease starts slowly), so they move as one.
   const poseMove = { key: "", from: cur.pose, to: cur.pose, t0: 0, ms: 0 };
   function updatePose(t, dt) {
-    const key = `${cfg.style.name}|${target.expression}|${cfg.iris}`;
+    const L = target.lids;
+    const key = `${cfg.style.name}|${target.expression}|${cfg.iris}|${L.left.top}|`
+      + `${L.left.bottom}|${L.right.top}|${L.right.bottom}`;
     if (key !== poseMove.key || cfg.style !== poseMove.style) {
       poseMove.key = key;
       poseMove.style = cfg.style;
       poseMove.from = cur.pose;
-      poseMove.to = EyePose.target(cfg.style, target.expression, cfg.iris);
+      poseMove.to = EyePose.target(cfg.style, target.expression, cfg.iris, L);
       poseMove.t0 = t;
-      poseMove.ms = cfg.style.transition_ms;
+      poseMove.ms = EyePose.duration(cfg.style, target.expression);
+      cur.poseTo = target.expression;
     }
     const k = poseMove.ms > 0 ? clamp((t - poseMove.t0) / poseMove.ms, 0, 1) : 1;
-    cur.pose = k >= 1 ? poseMove.to : EyePose.lerp(poseMove.from, poseMove.to, EyePose.ease(k));
+    const P = cur.pose = k >= 1 ? poseMove.to
+      : EyePose.lerp(poseMove.from, poseMove.to, EyePose.ease(k));
     cur.poseT = k;
-    cur.spinAngle = (cur.spinAngle + (cur.pose.spin * Math.PI / 180) * dt) % (2 * Math.PI);
+    cur.lids.left.top = P.lid_lt;
+    cur.lids.left.bottom = P.lid_lb;
+    cur.lids.right.top = P.lid_rt;
+    cur.lids.right.bottom = P.lid_rb;
+    cur.spinAngle = (cur.spinAngle + (P.spin * Math.PI / 180) * dt) % (2 * Math.PI);
   }
 
   // 0 beyond VERGE_FAR_CM or with no distance, 1 at VERGE_NEAR_CM and nearer.
@@ -399,11 +412,6 @@
     cur.yaw = base.yaw + offset.yaw * (1 - cur.calm);
     cur.pitch = base.pitch + offset.pitch * (1 - cur.calm);
     cur.dilation = approach(cur.dilation, target.dilation, TAU.pupil, dt);
-    for (const side of ["left", "right"]) {
-      cur.lids[side].top = approach(cur.lids[side].top, target.lids[side].top, TAU.lids, dt);
-      cur.lids[side].bottom = approach(cur.lids[side].bottom, target.lids[side].bottom,
-        TAU.lids, dt);
-    }
     const ex = target.expression;
     updatePose(t, dt);
     cur.verg = approach(cur.verg, vergenceGoal(), TAU.verge, dt);
@@ -427,15 +435,41 @@
   }
 
   // --- drawing (draw.js) ---------------------------------------------------------------
+  // A live restyle to another kind of drawing or background cannot be eased number
+  // by number: the last frame of the old look fades out over the new one (not the
+  // first style a page gets: the look it had until then was only a stand-in).
+  const fade = { canvas: document.createElement("canvas"), look: "", t0: -1, ms: 0 };
+
   function draw(t, blink) {
     resize();
+    const look = cfg.style === EyePose.FALLBACK ? ""
+      : `${cfg.style.kind}|${cfg.style.background}`;
+    if (fade.look && look !== fade.look) {
+      fade.canvas.width = canvas.width;
+      fade.canvas.height = canvas.height;
+      fade.canvas.getContext("2d").drawImage(canvas, 0, 0);
+      fade.t0 = t;
+      fade.ms = cfg.style.transition_ms;
+    }
+    fade.look = look;
     EyeDraw.draw(ctx, canvas.width, canvas.height, {
       which, style: cfg.style, pose: cur.pose, lids: cur.lids, calm: cur.calm, blink,
-      // Asleep nothing moves but the breathing glow: the eyes rest in the middle.
+      // Asleep nothing moves but the breath: the eyes rest in the middle.
       yawN: clamp(cur.yaw / cfg.maxYaw, -1, 1) * (1 - cur.rest),
       pitchN: clamp(cur.pitch / cfg.maxPitch, -1, 1) * (1 - cur.rest),
-      verg: cur.verg * (1 - cur.rest), dilation: cur.dilation, spinAngle: cur.spinAngle, t,
+      verg: cur.verg * (1 - cur.rest), dilation: cur.dilation, spinAngle: cur.spinAngle,
+      // Breath and heartbeat on the server clock: two screens breathe together.
+      t: serverTime(t),
     });
+    if (fade.t0 >= 0) {
+      const k = fade.ms > 0 ? (t - fade.t0) / fade.ms : 1;
+      if (k >= 1) fade.t0 = -1;
+      else {
+        ctx.globalAlpha = 1 - EyePose.ease(k);
+        ctx.drawImage(fade.canvas, 0, 0);
+        ctx.globalAlpha = 1;
+      }
+    }
   }
 
   // --- helpers -----------------------------------------------------------------------

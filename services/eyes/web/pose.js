@@ -5,7 +5,10 @@
 // shape. The page never jumps from one pose to the next: on a change it
 // eases every number from where it is to the new pose (ease in and out over
 // the style's transition_ms), the colour channel by channel, and the shape
-// as weights (a heart fades in while the plain eye fades out).
+// as weights (a heart grows in while the plain eye shrinks away). The
+// commanded lids (eyes/lids, which come with every expression) are part of
+// the pose, so they close and open with it, not on a clock of their own; a
+// pose may take its own time (falling asleep is slow).
 "use strict";
 
 window.EyePose = (() => {
@@ -13,7 +16,7 @@ window.EyePose = (() => {
   const NAMES = ["AWAKE", "SLEEP", "SLEEPY", "GRIN", "SAD", "LOOK_RANDOM", "LOVE", "STAR",
     "ALERT"];
   const NUM = ["width", "height", "roundness", "top_lid", "top_lid_angle", "bottom_lid",
-    "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "beat", "spin"];
+    "bottom_lid_curve", "iris", "pupil", "glow", "brightness", "breathe", "sway", "beat", "spin"];
   const STYLE_NUM = ["lid_follow", "curiosity", "vergence", "squash", "stretch", "reach",
     "transition_ms"];
 
@@ -21,8 +24,8 @@ window.EyePose = (() => {
   // only while it cannot be reached): a plain glow eye for every expression.
   const BASE = {
     width: 50, height: 56, roundness: 45, top_lid: 0, top_lid_angle: 0, bottom_lid: 0,
-    bottom_lid_curve: 0, iris: 0, pupil: 0, glow: 70, brightness: 100, breathe: 0, beat: 0,
-    spin: 0, color: "", shape: "eye",
+    bottom_lid_curve: 0, iris: 70, pupil: 100, glow: 70, brightness: 100, breathe: 0, sway: 0,
+    beat: 0, spin: 0, color: "", shape: "eye", transition_ms: 0,
   };
   const FALLBACK = {
     name: "fallback", kind: "glow", description: "", background: "#03050a", color: "#3ce6ff",
@@ -42,6 +45,7 @@ window.EyePose = (() => {
     return NAMES.every((n) => {
       const p = st.poses[n];
       return p && typeof p === "object" && NUM.every((k) => isNum(p[k]))
+        && isNum(p.transition_ms) && p.transition_ms >= 0
         && (p.color === "" || isColour(p.color)) && ["eye", "heart", "star"].includes(p.shape);
     });
   }
@@ -51,17 +55,28 @@ window.EyePose = (() => {
     return [(v >> 16) & 255, (v >> 8) & 255, v & 255];
   }
 
-  // The flat pose the page eases toward: numbers, r/g/b and shape weights.
+  // The flat pose the page eases toward: numbers, r/g/b, shape weights and the
+  // commanded lids ({left: {top, bottom}, right: ...}, % closed; none: open).
   // An empty pose colour is the style's (eyeball: the iris_color setting).
-  function target(style, expression, irisColour) {
-    const p = style.poses[NAMES[expression]] || style.poses.AWAKE;
+  function target(style, expression, irisColour, lids) {
+    const p = poseOf(style, expression);
     const out = {};
     for (const k of NUM) out[k] = p[k];
+    const L = lids || { left: { top: 0, bottom: 0 }, right: { top: 0, bottom: 0 } };
+    [out.lid_lt, out.lid_lb, out.lid_rt, out.lid_rb] = [L.left.top, L.left.bottom, L.right.top,
+      L.right.bottom];
     const colour = p.color || (style.kind === "eyeball" ? irisColour : style.color);
     [out.r, out.g, out.b] = rgb(isColour(colour) ? colour : style.color);
     out.heart = p.shape === "heart" ? 1 : 0;
     out.star = p.shape === "star" ? 1 : 0;
     return out;
+  }
+
+  function poseOf(style, expression) { return style.poses[NAMES[expression]] || style.poses.AWAKE; }
+
+  // How long the change into `expression`'s pose takes, ms: its own time, else the style's.
+  function duration(style, expression) {
+    return poseOf(style, expression).transition_ms || style.transition_ms;
   }
 
   // Colours ease through hue (the short way round), not through RGB, which
@@ -104,5 +119,5 @@ window.EyePose = (() => {
   // Slow in, slow out (cubic): a pose change starts and lands softly.
   function ease(k) { return k < 0.5 ? 4 * k * k * k : 1 - Math.pow(-2 * k + 2, 3) / 2; }
 
-  return { NAMES, NUM, FALLBACK, isStyle, target, lerp, ease, rgb };
+  return { NAMES, NUM, FALLBACK, isStyle, target, duration, lerp, ease, rgb };
 })();
