@@ -7,7 +7,7 @@ keeps growing is leaving. The people service gives distance and, when a
 face or an angle radar shows it, a direction; with a distance alone (an
 LD2410) only the radial part is known, and the planar speed is taken as
 its size. Speeds are averages over `WINDOW_S`, so one noisy distance
-does not make a person run; a person's history restarts when the sensors
+does not make a person run; a person's samples start again when the sensors
 that show them change (a face's distance and a radar's differ by tens of
 centimetres, which would read as a leap).
 """

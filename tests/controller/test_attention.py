@@ -268,7 +268,7 @@ def test_a_change_of_sensor_is_no_leap() -> None:
     for i in range(6):
         k.update(i * 0.1, [person(1, None, 2.0, "CAMERA")])
     moving = k.update(0.6, [person(1, None, 1.4, "BOTH")])  # the radar's shorter reading
-    assert 1 not in moving  # too little history since the change to say
+    assert 1 not in moving  # the new sensor's samples are too few to say
     for i in range(7, 12):
         moving = k.update(i * 0.1, [person(1, None, 1.4, "BOTH")])
     assert moving[1].radial_mps == pytest.approx(0.0) and moving[1].closer_m == 0.0

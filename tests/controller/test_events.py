@@ -85,9 +85,9 @@ def test_the_crowd_comes_every_tenth_of_a_second_or_when_who_is_there_changes(
         rig: tuple[Controller, FakeBot, Clock]) -> None:
     controller, _node, _clock = rig
     posted = []
-    for ms, face in ((0, False), (30, False), (60, False), (70, True), (100, True),
-                     (200, True)):
-        controller._on_people(people_now(visitor(True, person_id=4, face=face,
+    for ms, shown in ((0, False), (30, False), (60, False), (70, True), (100, True),
+                      (200, True)):
+        controller._on_people(people_now(visitor(True, person_id=4, face=shown,
                                                  stamp_ns=10**9 + ms * 10**6)))
         posted += [ms for e in drain(controller) if isinstance(e, Crowd)]
     assert posted == [0, 70, 200]  # a camera frame's state in between: nothing new
