@@ -125,9 +125,16 @@ class HriPlanner:
     present: tuple[str, ...] = ()
     frames_at: int = -TF_PERIOD_NS_MAX
     """The stamp of the frames last sent (ns)."""
+    shown: tuple[tuple[Any, ...], ...] | None = None
+    """What the last state planned in full showed, but for where the people are:
+    a state showing the same while no frame is due has nothing to send."""
 
     def step(self, state: m.PeopleState) -> Plan:
         stamp = state.stamp_ns
+        shown = tuple((p.id, p.engagement, p.name, confidence(p)) for p in state.people)
+        due = stamp - self.frames_at >= TF_PERIOD_NS or stamp < self.frames_at
+        if shown == self.shown and not (due and any(s[3] for s in shown)):
+            return NOTHING  # most states: only a distance or an angle moved
         ids = tuple(person_id(p) for p in state.people)
         opened = tuple(i for i in ids if i not in self.present)
         closed = tuple(i for i in self.present if i not in ids)
@@ -149,13 +156,14 @@ class HriPlanner:
             send(person_topic(pid, "anonymous"), types.BOOL, p.name is None, boolean)
             if p.name is not None:
                 send(person_topic(pid, "alias"), types.STRING, identity_id(p.name), string)
-        frames = [(f"person_{person_id(p)}", where) for p in state.people
-                  if (where := position(p)) is not None]
-        due = opened or stamp - self.frames_at >= TF_PERIOD_NS or stamp < self.frames_at
-        if frames and due:
-            self.frames_at = stamp
-            samples.append(Sample(TF, types.TF_MESSAGE,
-                                  tf_message(stamp, self.robot_frame, frames)))
+        if due or opened:  # where they are is worked out only when it is sent
+            frames = [(f"person_{person_id(p)}", where) for p in state.people
+                      if (where := position(p)) is not None]
+            if frames:
+                self.frames_at = stamp
+                samples.append(Sample(TF, types.TF_MESSAGE,
+                                      tf_message(stamp, self.robot_frame, frames)))
+        self.shown = shown
         return Plan(opened, tuple(samples), closed)
 
     def _changed(self, out: list[Sample], name: str, ros_type: str, value: Any,
@@ -168,6 +176,7 @@ class HriPlanner:
 
 
 _UNSET = object()
+NOTHING = Plan((), (), ())
 
 
 # --- encoding (rosbags' CDR of the standard and hri_msgs types) ---------------------

@@ -110,6 +110,49 @@ def test_frames_come_at_most_every_tenth_of_a_second_and_at_once_for_a_newcomer(
     assert sent == [True, False, False, False, True, False, False, False, True, False, False]
 
 
+def test_a_state_that_only_moves_someone_sends_nothing_until_a_frame_is_due() -> None:
+    planner = hri.HriPlanner()
+    ada = person(1, yaw_rad=0.1, seen_by="BOTH", engagement="ENGAGING")
+    t0 = 1_700_000_000_000_000_000
+    assert "tf" in by_name(planner.step(state(ada, stamp_ns=t0)))
+    closer = msgspec.structs.replace(ada, distance_m=1.5)
+    assert planner.step(state(closer, stamp_ns=t0 + 40_000_000)).samples == ()
+    engaged = msgspec.structs.replace(closer, engagement="ENGAGED")
+    at_once = planner.step(state(engaged, stamp_ns=t0 + 80_000_000))
+    assert [s.name for s in at_once.samples] == ["humans/persons/p1/engagement_status"]
+    unseen = msgspec.structs.replace(engaged, yaw_rad=None)  # a distance only now
+    lost = by_name(planner.step(state(unseen, stamp_ns=t0 + 90_000_000)))
+    assert list(lost) == ["humans/persons/p1/location_confidence"]
+    back = planner.step(state(engaged, stamp_ns=t0 + 95_000_000))
+    assert [s.name for s in back.samples] == ["humans/persons/p1/location_confidence"]
+    due = by_name(planner.step(state(engaged, stamp_ns=t0 + 100_000_000)))
+    assert list(due) == ["tf"]  # the period passed: where they are now
+    assert due["tf"].transforms[0].transform.translation.x == pytest.approx(1.5 * math.cos(0.1))
+    assert planner.step(state(engaged, stamp_ns=t0 + 150_000_000)).samples == ()
+
+
+PEOPLE = st.builds(
+    person, st.integers(1, 3), engagement=st.sampled_from([*hri.LEVELS, "GONE"]),
+    seen_by=st.sampled_from(["NONE", "RADAR", "CAMERA", "BOTH"]),
+    yaw_rad=st.none() | st.floats(-1.0, 1.0), bearing_rad=st.none() | st.floats(-1.0, 1.0),
+    distance_m=st.floats(0.3, 5.0), name=st.none() | st.sampled_from(["Ada", "Bob"]))
+STATES = st.lists(st.tuples(st.integers(-50_000_000, 150_000_000),
+                            st.lists(PEOPLE, max_size=3, unique_by=lambda p: p.id)),
+                  max_size=30)
+
+
+@given(STATES)
+def test_a_skipped_state_is_one_that_had_nothing_to_send(steps: list[tuple[int, list[m.Person]]]
+                                                         ) -> None:
+    quick, full = hri.HriPlanner(), hri.HriPlanner()
+    stamp = 1_700_000_000_000_000_000
+    for dt, people in steps:
+        stamp += dt  # now and then the clock goes back
+        full.shown = None  # this one plans every state in full
+        assert quick.step(state(*people, stamp_ns=stamp)) == full.step(
+            state(*people, stamp_ns=stamp))
+
+
 def test_a_person_without_a_direction_has_no_frame_and_no_confidence() -> None:
     planner = hri.HriPlanner()
     plan = by_name(planner.step(state(person(2, engagement="NONE"))))  # an LD2410's distance
