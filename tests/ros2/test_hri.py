@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, hri, hri_msgs, types, wire
+from buddybot.ros2 import bridge, hri, hri_msgs, service, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until, visitor
@@ -206,6 +206,43 @@ def publishers(peer: zenoh.Session) -> set[str]:
             if token.kind == "MP" and token.name:
                 names.add(token.name)
     return names
+
+
+@pytest.mark.integration
+def test_while_a_persons_topics_open_only_the_newest_state_waits(
+        probe: Node, monkeypatch: pytest.MonkeyPatch) -> None:
+    ros = service.Ros2Bridge(probe, SETTINGS)
+    for name, ros_type in hri.STATIC_TOPICS.items():
+        ros._hri_topic(name, ros_type)
+    declaring, go_on = threading.Event(), threading.Event()
+    declare = ros._hri_topic
+
+    def slow(name: str, ros_type: str) -> None:
+        declaring.set()
+        go_on.wait(30)
+        declare(name, ros_type)
+
+    monkeypatch.setattr(ros, "_hri_topic", slow)
+    ada, bob = person(1, yaw_rad=0.1, seen_by="BOTH"), person(2, yaw_rad=0.2, seen_by="BOTH")
+    t0 = m.now_ns()
+    try:
+        ros.on_people(state(ada, stamp_ns=t0), "people/state")  # opens p1: on the worker
+        assert declaring.wait(30)
+        ros.on_people(state(ada, bob, stamp_ns=t0 + 10_000_000), "people/state")
+        ros.on_people(state(ada, stamp_ns=t0 + 20_000_000), "people/state")  # bob left
+        assert ros.sent == {}  # nothing overtakes the plan being declared
+        go_on.set()
+        retry_until(lambda: not ros._people_busy, 30, 0.05, "the worker done")
+        assert ros.sent == {name: 1 for name in (
+            hri.TRACKED, hri.KNOWN, hri.TF, *(f"humans/persons/p1/{topic}" for topic in
+                                              ("engagement_status", "location_confidence",
+                                               "anonymous")))}  # bob never came
+        assert not any(name.startswith("humans/persons/p2/") for name in ros._hri)
+        ros.on_people(state(ada, stamp_ns=t0 + 150_000_000), "people/state")
+        assert ros.sent[hri.TF] == 2  # a frame due: sent in this thread, at once
+    finally:
+        go_on.set()
+        ros.close()
 
 
 @pytest.mark.integration
