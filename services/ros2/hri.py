@@ -16,8 +16,9 @@ One ROS4HRI person per visit of the people service, id `p<person id>`:
 `HriPlanner.step` turns one `people/state` into the samples to send and the
 persons whose topics open or close; a value is re-sent only when it
 changed (the latched topics keep it for late joiners), the frames at most
-every 0.1 s. The mapping, and what a ROS user adds: docs/ros2.md,
-'People as ROS4HRI'.
+every 0.1 s. The state changes with every camera frame, mostly only where
+someone is: such a state costs a comparison and, when due, the frames. The
+mapping, and what a ROS user adds: docs/ros2.md, 'People as ROS4HRI'.
 """
 
 from __future__ import annotations
@@ -125,9 +126,16 @@ class HriPlanner:
     present: tuple[str, ...] = ()
     frames_at: int = -TF_PERIOD_NS_MAX
     """The stamp of the frames last sent (ns)."""
+    shown: tuple[tuple[Any, ...], ...] | None = None
+    """What the last state planned in full showed, but for where the people are:
+    a state showing the same sends its frames when they are due, else nothing."""
 
     def step(self, state: m.PeopleState) -> Plan:
         stamp = state.stamp_ns
+        shown = tuple((p.id, p.engagement, p.name, confidence(p)) for p in state.people)
+        due = stamp - self.frames_at >= TF_PERIOD_NS or stamp < self.frames_at
+        if shown == self.shown:  # most states: only a distance or an angle moved
+            return Plan((), self._frames(state), ()) if due else NOTHING
         ids = tuple(person_id(p) for p in state.people)
         opened = tuple(i for i in ids if i not in self.present)
         closed = tuple(i for i in self.present if i not in ids)
@@ -149,14 +157,20 @@ class HriPlanner:
             send(person_topic(pid, "anonymous"), types.BOOL, p.name is None, boolean)
             if p.name is not None:
                 send(person_topic(pid, "alias"), types.STRING, identity_id(p.name), string)
+        frames = self._frames(state) if due or opened else ()
+        self.shown = shown
+        return Plan(opened, (*samples, *frames), closed)
+
+    def _frames(self, state: m.PeopleState) -> tuple[Sample, ...]:
+        """The frames of those whose direction is known (where they are is worked
+        out only when it is sent), if any."""
         frames = [(f"person_{person_id(p)}", where) for p in state.people
                   if (where := position(p)) is not None]
-        due = opened or stamp - self.frames_at >= TF_PERIOD_NS or stamp < self.frames_at
-        if frames and due:
-            self.frames_at = stamp
-            samples.append(Sample(TF, types.TF_MESSAGE,
-                                  tf_message(stamp, self.robot_frame, frames)))
-        return Plan(opened, tuple(samples), closed)
+        if not frames:
+            return ()
+        self.frames_at = state.stamp_ns
+        return (Sample(TF, types.TF_MESSAGE,
+                       tf_message(state.stamp_ns, self.robot_frame, frames)),)
 
     def _changed(self, out: list[Sample], name: str, ros_type: str, value: Any,
                  encode: Callable[[Any], bytes]) -> None:
@@ -168,6 +182,7 @@ class HriPlanner:
 
 
 _UNSET = object()
+NOTHING = Plan((), (), ())
 
 
 # --- encoding (rosbags' CDR of the standard and hri_msgs types) ---------------------

@@ -192,6 +192,13 @@ class Ros2Bridge:
         self.servers = servers.Servers(node, settings, self._token, self._publisher)
         """The ROS 2 services and the `/play_sound` action (servers.py)."""
         self._planner = hri.HriPlanner(settings.robot_frame)
+        self._people_lock = threading.Lock()
+        self._people_busy = False
+        """The worker is opening or closing a person's topics."""
+        self._people_next: m.PeopleState | None = None
+        """The newest state that came meanwhile, planned once the worker is done."""
+        self._people_worker = Worker("ros2-people-topics", self._people_topics, latest=True,
+                                     maxlen=1, on_error=self._on_error)
         self._hri: dict[str, tuple[RosPublisher, Token]] = {}
         """The ROS4HRI publishers by topic name (relative): static ones and each
         present person's."""
@@ -256,7 +263,7 @@ class Ros2Bridge:
         self.servers.start()
 
     def _subscribe_people(self) -> Subscription:
-        return self.node.subscribe(keys.PEOPLE_STATE, self.on_people, delivery="latest")
+        return self.node.subscribe(keys.PEOPLE_STATE, self.on_people)
 
     def _hri_topic(self, name: str, ros_type: str) -> None:
         """Declare one ROS4HRI publisher (and its graph token) under `name`."""
@@ -267,9 +274,45 @@ class Ros2Bridge:
         self._hri[name] = (publisher, self._token("MP", route, qos))
 
     def on_people(self, state: m.PeopleState, _key: str) -> None:
-        """The people model as ROS4HRI: a person's topics open when they arrive
-        and close when they leave (`hri.HriPlanner` decides what is sent)."""
-        plan = self._planner.step(state)
+        """In Zenoh's callback thread: the people model as ROS4HRI (`hri.HriPlanner`
+        decides what is sent; most states send nothing). Samples go out at once,
+        as every robot topic's do: a handoff to a thread per state cost more than
+        all the rest. A plan that opens or closes a person's topics goes to the
+        worker (declarations never run in Zenoh's thread), and while it works
+        only the newest state waits for it."""
+        with self._people_lock:
+            if self._people_busy:
+                self._people_next = state
+                return
+            plan = self._planner.step(state)
+            if not plan.opened and not plan.closed:
+                self._apply(plan)
+                return
+            self._people_busy = True
+        self._people_worker.submit(plan)
+
+    def _people_topics(self, plan: hri.Plan) -> None:
+        """On the worker: `plan`, then the state that came meanwhile, if any."""
+        try:
+            while True:
+                self._apply(plan)
+                with self._people_lock:
+                    state, self._people_next = self._people_next, None
+                    if state is None:
+                        self._people_busy = False
+                        return
+                    plan = self._planner.step(state)
+                    if not plan.opened and not plan.closed:
+                        self._apply(plan)
+                        self._people_busy = False
+                        return
+        except BaseException:
+            with self._people_lock:
+                self._people_busy = False
+            raise
+
+    def _apply(self, plan: hri.Plan) -> None:
+        """A person's topics open when they arrive and close when they leave."""
         for pid in plan.opened:
             for name, ros_type in hri.PERSON_TOPICS.items():
                 self._hri_topic(hri.person_topic(pid, name), ros_type)
@@ -390,6 +433,7 @@ class Ros2Bridge:
             demand.close()
         for inbox in self._inboxes:
             inbox.worker.close(drop_pending=True)
+        self._people_worker.close(drop_pending=True)
         for lease in self.leases.values():
             try:
                 lease.release("ros2 bridge stopped")

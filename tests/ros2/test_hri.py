@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.ros2 import bridge, hri, hri_msgs, types, wire
+from buddybot.ros2 import bridge, hri, hri_msgs, service, types, wire
 from buddybot.ros2.settings import Ros2Settings
 from buddybot.runtime.node import Node, zenoh_config
 from buddybot.tools.testing import Collector, Process, retry_until, visitor
@@ -110,6 +110,49 @@ def test_frames_come_at_most_every_tenth_of_a_second_and_at_once_for_a_newcomer(
     assert sent == [True, False, False, False, True, False, False, False, True, False, False]
 
 
+def test_a_state_that_only_moves_someone_sends_nothing_until_a_frame_is_due() -> None:
+    planner = hri.HriPlanner()
+    ada = person(1, yaw_rad=0.1, seen_by="BOTH", engagement="ENGAGING")
+    t0 = 1_700_000_000_000_000_000
+    assert "tf" in by_name(planner.step(state(ada, stamp_ns=t0)))
+    closer = msgspec.structs.replace(ada, distance_m=1.5)
+    assert planner.step(state(closer, stamp_ns=t0 + 40_000_000)).samples == ()
+    engaged = msgspec.structs.replace(closer, engagement="ENGAGED")
+    at_once = planner.step(state(engaged, stamp_ns=t0 + 80_000_000))
+    assert [s.name for s in at_once.samples] == ["humans/persons/p1/engagement_status"]
+    unseen = msgspec.structs.replace(engaged, yaw_rad=None)  # a distance only now
+    lost = by_name(planner.step(state(unseen, stamp_ns=t0 + 90_000_000)))
+    assert list(lost) == ["humans/persons/p1/location_confidence"]
+    back = planner.step(state(engaged, stamp_ns=t0 + 95_000_000))
+    assert [s.name for s in back.samples] == ["humans/persons/p1/location_confidence"]
+    due = by_name(planner.step(state(engaged, stamp_ns=t0 + 100_000_000)))
+    assert list(due) == ["tf"]  # the period passed: where they are now
+    assert due["tf"].transforms[0].transform.translation.x == pytest.approx(1.5 * math.cos(0.1))
+    assert planner.step(state(engaged, stamp_ns=t0 + 150_000_000)).samples == ()
+
+
+PEOPLE = st.builds(
+    person, st.integers(1, 3), engagement=st.sampled_from([*hri.LEVELS, "GONE"]),
+    seen_by=st.sampled_from(["NONE", "RADAR", "CAMERA", "BOTH"]),
+    yaw_rad=st.none() | st.floats(-1.0, 1.0), bearing_rad=st.none() | st.floats(-1.0, 1.0),
+    distance_m=st.floats(0.3, 5.0), name=st.none() | st.sampled_from(["Ada", "Bob"]))
+STATES = st.lists(st.tuples(st.integers(-50_000_000, 150_000_000),
+                            st.lists(PEOPLE, max_size=3, unique_by=lambda p: p.id)),
+                  max_size=30)
+
+
+@given(STATES)
+def test_a_skipped_state_is_one_that_had_nothing_to_send(steps: list[tuple[int, list[m.Person]]]
+                                                         ) -> None:
+    quick, full = hri.HriPlanner(), hri.HriPlanner()
+    stamp = 1_700_000_000_000_000_000
+    for dt, people in steps:
+        stamp += dt  # now and then the clock goes back
+        full.shown = None  # this one plans every state in full
+        assert quick.step(state(*people, stamp_ns=stamp)) == full.step(
+            state(*people, stamp_ns=stamp))
+
+
 def test_a_person_without_a_direction_has_no_frame_and_no_confidence() -> None:
     planner = hri.HriPlanner()
     plan = by_name(planner.step(state(person(2, engagement="NONE"))))  # an LD2410's distance
@@ -163,6 +206,43 @@ def publishers(peer: zenoh.Session) -> set[str]:
             if token.kind == "MP" and token.name:
                 names.add(token.name)
     return names
+
+
+@pytest.mark.integration
+def test_while_a_persons_topics_open_only_the_newest_state_waits(
+        probe: Node, monkeypatch: pytest.MonkeyPatch) -> None:
+    ros = service.Ros2Bridge(probe, SETTINGS)
+    for name, ros_type in hri.STATIC_TOPICS.items():
+        ros._hri_topic(name, ros_type)
+    declaring, go_on = threading.Event(), threading.Event()
+    declare = ros._hri_topic
+
+    def slow(name: str, ros_type: str) -> None:
+        declaring.set()
+        go_on.wait(30)
+        declare(name, ros_type)
+
+    monkeypatch.setattr(ros, "_hri_topic", slow)
+    ada, bob = person(1, yaw_rad=0.1, seen_by="BOTH"), person(2, yaw_rad=0.2, seen_by="BOTH")
+    t0 = m.now_ns()
+    try:
+        ros.on_people(state(ada, stamp_ns=t0), "people/state")  # opens p1: on the worker
+        assert declaring.wait(30)
+        ros.on_people(state(ada, bob, stamp_ns=t0 + 10_000_000), "people/state")
+        ros.on_people(state(ada, stamp_ns=t0 + 20_000_000), "people/state")  # bob left
+        assert ros.sent == {}  # nothing overtakes the plan being declared
+        go_on.set()
+        retry_until(lambda: not ros._people_busy, 30, 0.05, "the worker done")
+        assert ros.sent == {name: 1 for name in (
+            hri.TRACKED, hri.KNOWN, hri.TF, *(f"humans/persons/p1/{topic}" for topic in
+                                              ("engagement_status", "location_confidence",
+                                               "anonymous")))}  # bob never came
+        assert not any(name.startswith("humans/persons/p2/") for name in ros._hri)
+        ros.on_people(state(ada, stamp_ns=t0 + 150_000_000), "people/state")
+        assert ros.sent[hri.TF] == 2  # a frame due: sent in this thread, at once
+    finally:
+        go_on.set()
+        ros.close()
 
 
 @pytest.mark.integration
