@@ -276,10 +276,10 @@ class Ros2Bridge:
     def on_people(self, state: m.PeopleState, _key: str) -> None:
         """In Zenoh's callback thread: the people model as ROS4HRI (`hri.HriPlanner`
         decides what is sent; most states send nothing). Samples go out at once,
-        as every robot topic's do: a handoff to a thread per state cost more than
-        all the rest. A plan that opens or closes a person's topics goes to the
-        worker (declarations never run in Zenoh's thread), and while it works
-        only the newest state waits for it."""
+        as every robot topic's do: handing each state to a thread costs more than
+        planning it (docs/ros2.md, Figures). A plan that opens or closes a person's
+        topics goes to the worker (declarations never run in Zenoh's thread), and
+        while it works only the newest state waits for it."""
         with self._people_lock:
             if self._people_busy:
                 self._people_next = state
