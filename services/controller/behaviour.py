@@ -532,6 +532,7 @@ class Behaviour:
 
     def _finish_recovery(self, now: float) -> None:
         self._recover_until = None
+        self._alerted_visit_at = self._noticed_at  # someone there at start is no arrival
         sound_at = self._recovered_sound_at
         if sound_at is not None:
             # A sound less than a cooldown ago: no greeting before the cooldown ends.

@@ -75,7 +75,10 @@ def write_config(folder: Path) -> Path:
     write_tone(folder / "hello.wav", GREETING_S, 660, rate=16000)
     write_tone(folder / "bye.wav", FAREWELL_S, 440, rate=16000)
     path = folder / "robot.toml"
-    path.write_text('[audio.sounds]\ngreeting = "hello.wav"\nfarewell = "bye.wav"\n')
+    # Without the alert face and the alone phase: these tests compare expression
+    # sequences across runs and restarts (test_alive.py has the defaults).
+    path.write_text('[audio.sounds]\ngreeting = "hello.wav"\nfarewell = "bye.wav"\n'
+                    '[controller]\nalert_s = 0.0\nalone_s = 0.0\n')
     return path
 
 

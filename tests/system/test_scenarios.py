@@ -162,7 +162,7 @@ def test_a_fan_is_clutter_the_robot_sleeps_and_still_greets_a_visitor(tmp_path: 
     (6 s here): the robot falls asleep beside it, wakes for a visitor's face, says
     goodbye when they leave and sleeps again, the fan still running."""
     with robot_on(tmp_path, str(SCENARIOS / "fan_then_visit.toml"),
-                  "[people]\nclutter_after_s = 6\n") as probe:
+                  "[people]\nclutter_after_s = 6\n[controller]\nalone_s = 0.0\n") as probe:
         watch = Watch(probe)
         truth, state = watch.truth, watch.state
         people = Arrivals(probe, keys.PEOPLE_STATE)
