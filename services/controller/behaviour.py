@@ -383,7 +383,10 @@ class Behaviour:
         as a gaze: whom to attend to, and how the visit's person moves (passing by,
         walking away)."""
         self._crowd, self._gazes, self._crowd_stamp = tuple(people), gazes, stamp_ns
-        self._moving = self._kinematics.update(now, people)
+        # Speeds on the people service's clock: states that queued up on a busy
+        # machine arrive bunched, which on our clock would read as leaps.
+        at = stamp_ns / 1e9 if stamp_ns is not None else now
+        self._moving = self._kinematics.update(at, people)
         moving = self._moving.get(self._person_id) if self._person_id is not None else None
         if moving is not None and moving.speed_mps >= self.s.linger_speed_mps:
             self._still_since = None

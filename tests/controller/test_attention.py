@@ -147,7 +147,7 @@ class Crowded:
         shown = any(p.seen_by != "NONE" for p in people)
         gazes = {p.id: Gaze(p.yaw_rad or 0.0, 0.0, 100 * (p.distance_m or 1.0))
                  for p in people if p.yaw_rad is not None}
-        cmds = self.b.people(self.t, people, gazes, 1)
+        cmds = self.b.people(self.t, people, gazes, round(self.t * 1e9))
         cmds += self.b.presence(self.t, shown, main, face=bool(
             people and people[0].seen_by in ("CAMERA", "BOTH")))
         if face is not None:

@@ -197,7 +197,7 @@ class World(RuleBasedStateMachine):
                                      seen_by="RADAR", bearing_rad=-0.4))
             gazes = {p.id: Gaze(p.bearing_rad, 0.0, 100.0) for p in people
                      if p.bearing_rad is not None}
-            self.apply(self.b.people(self.t, people, gazes, 1))
+            self.apply(self.b.people(self.t, people, gazes, round(self.t * 1e9)))
             self.people_face()
             self.apply(self.b.tick(self.t))
         if self.b.counters["farewells_early"]:
