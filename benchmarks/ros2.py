@@ -12,11 +12,14 @@
 2. CPU of `ros2-bridge` (utime + stime over the window, via psutil) with
    faces at `--fps` and 640x480 bgr8 frames on `camera/front/image` at
    `--fps`: first with no ROS 2 subscriber of `/raw_image` (the bridge does
-   not read the frames), then with `people/state` at `--fps` as well (one
-   visitor), without and with a ROS4HRI reader of /humans/persons/tracked
-   (the bridge reads the people only then), then with a subscriber of
-   `/raw_image` (an `MS` graph token and a subscriber on the key: every
-   frame encoded as sensor_msgs/msg/Image).
+   not read the frames), then with the real `people` service turning those
+   faces (one visitor, their distance wobbling by a few cm as a detector's
+   does) into `people/state` at the rate it paces it (`[people]
+   position_period_s`, `--people-period` sets it; 0 sends every change),
+   without and with a ROS4HRI reader of /humans/persons/tracked (the bridge
+   reads the people only then), then with a subscriber of `/raw_image` (an
+   `MS` graph token and a subscriber on the key: every frame encoded as
+   sensor_msgs/msg/Image).
 3. CDR encode and decode rates of every type of the bridge's tables, in
    this process (`convert`: rosbags' serializer, our own writer for the two image
    types; our bounds on the way in).
@@ -26,6 +29,7 @@ from __future__ import annotations
 
 import statistics
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
@@ -54,18 +58,11 @@ RAW_IMAGE = bridge.route(SETTINGS, "raw_image", types.IMAGE)
 TRACKED = bridge.route(SETTINGS, hri.TRACKED, hri_msgs.IDS_LIST)
 
 
-def visitor_state(stamp: int) -> m.PeopleState:
-    """One visitor in front of the camera, moving a little each frame (a new
-    frame on /tf every time, the rest on change)."""
-    person = m.Person(id=1, distance_m=1.2 + (stamp // 10**7 % 10) / 100, zone="PERSONAL",
-                      seen_by="BOTH", zone_since_ns=stamp, arrived_ns=stamp,
-                      engagement="ENGAGED", engagement_since_ns=stamp, yaw_rad=0.1,
-                      pitch_rad=0.0, name="Ada")
-    return m.PeopleState(stamp_ns=stamp, people=[person])
-
-
 def face(stamp: int) -> m.FacePosition:
-    return m.FacePosition(stamp_ns=stamp, frame_id="front", point=m.Point(x=1.5, y=0.1, z=0.05),
+    """One visitor 1.5 m ahead, their distance wobbling by up to 9 cm from frame to
+    frame, as a detector's does."""
+    x = 1.5 + (stamp // 10**7 % 10) / 100
+    return m.FacePosition(stamp_ns=stamp, frame_id="front", point=m.Point(x=x, y=0.1, z=0.05),
                           confidence=1.0)
 
 
@@ -169,7 +166,8 @@ def _cpu_s(proc: Process) -> float:
 
 
 def bench_cpu(proc: Process, probe: Node, peer: zenoh.Session, seconds: float,
-              fps: float) -> None:
+              fps: float, endpoint: str, people_period: float | None,
+              tmp: Path) -> None:
     faces = probe.publisher(keys.FACE, camera="front")
     camera = probe.publisher(keys.CAMERA_IMAGE, camera="front")
     diag = Collector[m.DiagnosticStatus](probe, keys.DIAGNOSTICS, node="ros2-bridge")
@@ -191,12 +189,29 @@ def bench_cpu(proc: Process, probe: Node, peer: zenoh.Session, seconds: float,
 
     try:
         window("no ROS 2 subscriber of /raw_image")
-        people = probe.publisher(keys.PEOPLE_STATE)
-        pacers.append(Paced(lambda s: people.put(visitor_state(s)), fps))
-        window("no ROS 2 subscriber of /raw_image, people/state as well, no ROS4HRI reader")
-        hri_reader = reader(peer, TRACKED)
-        window("no ROS 2 subscriber of /raw_image, people/state read as ROS4HRI")
-        hri_reader()
+        config = tmp / "people.toml"
+        config.write_text("" if people_period is None else
+                          f"[people]\nposition_period_s = {people_period}\n")
+        people = run_service("people", endpoint, "--config", str(config))
+        states = [0]
+
+        def on_state(_sample: zenoh.Sample) -> None:
+            states[0] += 1
+
+        counter = peer.declare_subscriber(probe.key(keys.PEOPLE_STATE), on_state)
+        try:
+            retry_until(lambda: states[0] > 1, 60, 0.2, "people/state from the people service")
+            before, t0 = states[0], time.monotonic()
+            window("no ROS 2 subscriber of /raw_image, the people service running, "
+                   "no ROS4HRI reader")
+            hri_reader = reader(peer, TRACKED)
+            window("no ROS 2 subscriber of /raw_image, people/state read as ROS4HRI")
+            hri_reader()
+            print(f"  people/state from the people service: "
+                  f"{(states[0] - before) / (time.monotonic() - t0):.1f}/s")
+        finally:
+            counter.undeclare()
+            people.stop()
         image_reader = reader(peer, RAW_IMAGE, on_image)
         retry_until(lambda: received[0] > 0, 30, 0.1, "the first /raw_image")
         window("one ROS 2 subscriber of /raw_image")
@@ -271,6 +286,9 @@ def main() -> int:
     parser.add_argument("--faces", type=int, default=300, help="faces timed")
     parser.add_argument("--cpu-seconds", type=float, default=15.0, help="each CPU window")
     parser.add_argument("--fps", type=float, default=30.0, help="faces and frames per second")
+    parser.add_argument("--people-period", type=float, default=None,
+                        help="[people] position_period_s for the people service (default: "
+                        "its own)")
     args = parser.parse_args()
     print(host())
     if "cdr" not in args.skip:
@@ -286,7 +304,9 @@ def main() -> int:
         if "latency" not in args.skip:
             bench_latency(router, probe, peer, args.faces)
         if "cpu" not in args.skip:
-            bench_cpu(proc, probe, peer, args.cpu_seconds, args.fps)
+            with tempfile.TemporaryDirectory() as tmp:
+                bench_cpu(proc, probe, peer, args.cpu_seconds, args.fps, router.endpoint,
+                          args.people_period, Path(tmp))
     finally:
         peer.close()
         probe.close()

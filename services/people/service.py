@@ -7,7 +7,8 @@ input with the message's own stamp, and runs a `Tick` every `tick_s` so
 holds and timeouts fire without input. Every event the model returns goes
 out on `people/events` at once, in order; the persons present go out on
 `people/state` (latched) whenever they differ from the last ones published
-(once at start, empty, so a reader learns that nobody is there).
+(once at start, empty, so a reader learns that nobody is there), a change
+only of where they are at most every `position_period_s` (`pacing.py`).
 
 Threads: the three subscriptions run inline in Zenoh's callback thread (a
 step takes microseconds and its puts do not block) and the ticks on the
@@ -28,6 +29,8 @@ import argparse
 import logging
 import math
 import threading
+import time
+from collections.abc import Callable
 from typing import assert_never
 
 from buddybot.contract import keys
@@ -50,6 +53,7 @@ from buddybot.people.model import (
     Tick,
     ZoneChanged,
 )
+from buddybot.people.pacing import StatePacer
 from buddybot.people.settings import PeopleSettings
 from buddybot.people.tracker import Target
 from buddybot.people.zones import Zone
@@ -193,15 +197,19 @@ def state_stamp(given: Input, events: list[PersonEvent]) -> int:
 class PeopleService:
     """Wires one Node to one PeopleModel; `start()` declares everything."""
 
-    def __init__(self, node: Node, settings: PeopleSettings) -> None:
+    def __init__(self, node: Node, settings: PeopleSettings,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        """`clock`: seconds, for the pacing of `people/state` only (the model runs
+        on the sensors' stamps)."""
         self.node = node
+        self._clock = clock
         self.settings = settings
         self.model = PeopleModel(settings)
         self._lock = threading.Lock()
         """Guards the model and the publishers' order."""
         self._events_pub = node.publisher(keys.PEOPLE_EVENTS)
         self._state_pub = node.publisher(keys.PEOPLE_STATE)
-        self._published: tuple[Person, ...] | None = None
+        self._pacer = StatePacer()
         self._events = 0
 
     def apply_settings(self, settings: PeopleSettings) -> None:
@@ -258,7 +266,7 @@ class PeopleService:
     def tick(self) -> None:
         self.step(Tick(m.now_ns()))
         values = self.node.diagnostics.values
-        values["people"] = len(self._published or ())
+        values["people"] = len(self._pacer.published or ())
         values["events"] = self._events
         values["tracks_refused"] = self.model.tracks_refused
         values["people_refused"] = self.model.refused
@@ -277,12 +285,13 @@ class PeopleService:
             self._publish_state(state_stamp(given, events))
 
     def _publish_state(self, stamp_ns: int) -> None:
-        """Put `people/state` if the persons changed; under the lock."""
+        """Put `people/state` if the persons changed and the pacer lets it go
+        now; under the lock."""
         people = self.model.state()
-        if people == self._published:
-            return
-        self._published = people
-        self._state_pub.put(state_message(people, stamp_ns))
+        stamp = self._pacer.offer(people, stamp_ns, self._clock(),
+                                  self.model.s.position_period_s)
+        if stamp is not None:
+            self._state_pub.put(state_message(people, stamp))
 
 
 def run(ctx: ServiceContext) -> int:

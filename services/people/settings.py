@@ -97,6 +97,12 @@ class PeopleSettings(msgspec.Struct, forbid_unknown_fields=True, kw_only=True):
     radar_timeout_s: Annotated[Timeout, msgspec.Meta(
         description="seconds: angle radars count as reporting this long after a report "
         "(then radar/presence makes the person again)")] = 1.0
+    # An LD2450 reports 10 times a second: as many positions keep a map or a radar-led
+    # gaze smooth and spare every reader the camera's 30 (news never waits).
+    position_period_s: Annotated[float, msgspec.Meta(
+        ge=0.0, le=1.0, description="seconds: a change only in where people are (distance, "
+        "direction) goes out on people/state at most this often (0: every change)",
+        extra={"live": True})] = 0.1
     # Timers fire within a tick of their deadline: 50 ms is below what a person notices.
     tick_s: Annotated[float, msgspec.Meta(
         ge=0.005, le=1.0, description="seconds: period of the timers (ticks)")] = 0.05

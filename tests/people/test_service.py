@@ -232,6 +232,26 @@ def test_events_go_out_in_order_and_the_state_only_on_change() -> None:
         (1, "PERSONAL", "ENGAGED", "BOTH")]
 
 
+def test_a_face_at_30_per_second_moves_the_state_10_times_a_second_and_news_is_not_held(
+) -> None:
+    clock = [0.0]
+    node = FakeNode()
+    service = PeopleService(node, PeopleSettings(engage_dwell_s=0.5),  # type: ignore[arg-type]
+                            clock=lambda: clock[0])
+    for frame in range(60):  # two seconds of a face coming nearer
+        clock[0] = frame / 30
+        stamp = T0 + frame * S // 30
+        service._on_face(_face(2.0 - frame / 100, 0.0, 0.0, stamp), "camera/front/face")
+        if frame % 2:  # the node's timer, every 50 ms or so
+            service.step(Tick(stamp))
+    states = [x for x in node.out if isinstance(x, m.PeopleState)]
+    assert 15 <= len(states) <= 21
+    engaged = next(s for s in states if s.people[0].engagement == "ENGAGED")
+    assert engaged.stamp_ns == T0 + 15 * S // 30  # the frame that made it ENGAGED
+    stamps = [s.stamp_ns for s in states]
+    assert stamps == sorted(stamps)
+
+
 def test_a_face_too_far_is_counted_and_dropped() -> None:
     service, node = _service()
     service._on_face(_face(900.0, 900.0, 0.0), "camera/front/face")
