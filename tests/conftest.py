@@ -30,7 +30,7 @@ from buddybot.tools.testing import (
     run_service,
     stop_and_report,
 )
-from tests import properties
+from tests import properties, robot_slots
 from tests.camera.networks import Networks
 
 properties.register()
@@ -91,6 +91,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if set(getattr(item, "fixturenames", ())) & MODEL_FIXTURES:
             item.add_marker(pytest.mark.model)
+    robot_slots.assign(items)
     phase = config.getoption("phase")
     if phase != "all":
         keep = [i for i in items if (i.get_closest_marker("quiet") is not None) == (
@@ -104,6 +105,18 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         return not (item.get_closest_marker("integration") or item.get_closest_marker("browser"))
 
     items.sort(key=pure)  # stable: each part keeps its collection order
+
+
+@pytest.hookimpl(hookwrapper=True, tryfirst=True)
+def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
+    """A `robot` test runs holding its machine-wide slot (`robot_slots`); taken
+    outside pytest-timeout's clock, so waiting for it is not the test's time."""
+    slot = robot_slots.slot_of(item)
+    if slot is None:
+        yield
+        return
+    with robot_slots.held(slot):
+        yield
 
 
 @pytest.hookimpl(tryfirst=True)

@@ -201,7 +201,7 @@ class Controller:
             self._cond.notify()
 
     def _on_people(self, now: PeopleNow) -> None:
-        # `people/state` changes with every face frame of a visitor. Presence and
+        # `people/state` changes as a visitor moves (up to 10 times a second). Presence and
         # the followed person's radar direction are posted on change; the whole
         # crowd (attention, motion) always, the newest replacing one not yet handled.
         with self._cond:

@@ -83,6 +83,7 @@ def up_sim(tmp_path: Path, apps: list[Path], only: tuple[str, ...] = (),
 
 
 @pytest.mark.integration
+@pytest.mark.robot
 def test_greeter_says_the_line_of_the_time_of_day_to_an_arrival(tmp_path: Path) -> None:
     greeter = example("greeter")
     with up_sim(tmp_path, [EXAMPLES / "greeter.py"]) as (up, _probe, _endpoint):
@@ -94,6 +95,7 @@ def test_greeter_says_the_line_of_the_time_of_day_to_an_arrival(tmp_path: Path) 
 
 
 @pytest.mark.integration
+@pytest.mark.robot
 def test_love_after_the_dwell_then_the_robots_own_eyes_when_the_visitor_left(
         tmp_path: Path) -> None:
     source = (EXAMPLES / "love_after_10s.py").read_text()

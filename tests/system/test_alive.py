@@ -23,7 +23,7 @@ from buddybot.tools.testing import Collector, retry_until
 from tests.sim import SCENARIOS
 from tests.system.robot import robot_on, sounds
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.robot]
 
 LD2450 = '[radar_bridge]\nsim_model = "LD2450"\n'
 """An angle radar instead of the LD2410: every person has a bearing."""

@@ -34,7 +34,7 @@ from buddybot.tools.testing import (
 from .robot import BASE_SERVICES, Spawn, start_robot, start_world, wait_nodes, write_config
 from .test_visit import sounds_played
 
-pytestmark = pytest.mark.integration  # two routers and the robot's processes
+pytestmark = [pytest.mark.integration, pytest.mark.robot]  # two routers and the robot's processes
 
 A = m.ExpressionAction
 SENSOR_KEYS = ("radar/*/frames", "camera/*/image")

@@ -22,7 +22,7 @@ from buddybot.tools.testing import Collector, retry_until
 from tests.sim import SCENARIOS
 from tests.system.robot import Arrivals, robot_on, sounds
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.robot]
 
 
 NEAR: frozenset[m.Zone] = frozenset({"INTIMATE", "PERSONAL", "SOCIAL"})

@@ -29,7 +29,7 @@ from .robot import (
     wait_nodes,
 )
 
-pytestmark = pytest.mark.integration  # a router and the robot's processes
+pytestmark = [pytest.mark.integration, pytest.mark.robot]  # a router and the robot's processes
 
 A = m.ExpressionAction
 
