@@ -109,13 +109,17 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 
 @pytest.hookimpl(hookwrapper=True, tryfirst=True)
 def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
-    """A `robot` test runs holding its machine-wide slot (`robot_slots`); taken
-    outside pytest-timeout's clock, so waiting for it is not the test's time."""
+    """A `robot` test runs holding its machine-wide slot, any other test with
+    processes or a browser one of the heavy slots (`robot_slots`); taken outside
+    pytest-timeout's clock, so waiting for one is not the test's time."""
     slot = robot_slots.slot_of(item)
-    if slot is None:
-        yield
-        return
-    with robot_slots.held(slot):
+    if slot is not None:
+        with robot_slots.held(slot):
+            yield
+    elif robot_slots.heavy(item):
+        with robot_slots.any_heavy():
+            yield
+    else:
         yield
 
 

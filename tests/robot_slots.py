@@ -1,4 +1,5 @@
-"""Whole-robot tests share the machine: at most `SLOTS` robots at once, whatever runs.
+"""Test runs share the machine: at most `SLOTS` robots and `HEAVY` tests with
+processes or a browser at once, however many runs of the suite are going.
 
 A test marked `robot` runs the robot's perception and behaviour in real time
 (a camera at 30 fps, face detection, a dozen processes: about half a core)
@@ -7,6 +8,11 @@ one run never has more than `SLOTS` robots going, and no worker waits; and
 each group holds its slot's lock file (in the system's temporary folder) while
 a test of it runs, so a second run of the suite on the machine takes turns
 with this one instead of starving both robots of the CPU their timing needs.
+
+Every other test with processes or a browser (marked `integration` or
+`browser`) holds one of `HEAVY` machine-wide slots while it runs: as many as
+one run has workers, so a run alone never waits, and two runs together load
+the machine as one does (their pure tests still run beside).
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ from __future__ import annotations
 import fcntl
 import os
 import tempfile
+import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -22,6 +29,10 @@ import pytest
 
 SLOTS = 2
 """Robots at once on the machine: about one core of a two-core machine."""
+HEAVY = 3 * (os.cpu_count() or 1)
+"""Heavy tests at once on the machine: scripts/test.sh's workers of one run."""
+WAIT_S = 3600.0
+"""How long a test waits for a heavy slot before it fails saying so."""
 FOLDER = Path(tempfile.gettempdir()) / "buddybot-robot-slots"
 
 
@@ -34,6 +45,10 @@ def assign(items: list[pytest.Item]) -> None:
 
 def group(slot: int) -> str:
     return f"robot-{slot}"
+
+
+def heavy(item: pytest.Item) -> bool:
+    return any(item.get_closest_marker(m) is not None for m in ("integration", "browser"))
 
 
 def slot_of(item: pytest.Item) -> int | None:
@@ -56,3 +71,27 @@ def held(slot: int) -> Iterator[None]:
         yield
     finally:
         os.close(fd)  # releases the lock
+
+
+@contextmanager
+def any_heavy(wait_s: float = WAIT_S) -> Iterator[None]:
+    """Hold one of the `HEAVY` slots, the first found free; poll (every 0.1 s)
+    until one is, for at most `wait_s`."""
+    FOLDER.mkdir(exist_ok=True)
+    end = time.monotonic() + wait_s
+    while True:
+        for n in range(HEAVY):
+            fd = os.open(FOLDER / f"heavy-{n}.lock", os.O_RDWR | os.O_CREAT, 0o666)
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                os.close(fd)
+                continue
+            try:
+                yield
+            finally:
+                os.close(fd)
+            return
+        if time.monotonic() > end:
+            raise TimeoutError(f"no heavy-test slot free in {FOLDER} for {wait_s:g} s")
+        time.sleep(0.1)  # a poll with a deadline: flock cannot wait for any of several

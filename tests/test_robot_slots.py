@@ -5,10 +5,18 @@ from __future__ import annotations
 
 import fcntl
 import os
+from contextlib import ExitStack
+from pathlib import Path
 
 import pytest
 
 from tests import robot_slots
+
+
+@pytest.fixture(autouse=True)
+def _own_folder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The slots of these tests are their own: a run of the suite beside holds the real ones."""
+    monkeypatch.setattr(robot_slots, "FOLDER", tmp_path)
 
 
 def _locked_elsewhere(slot: int) -> bool:
@@ -50,3 +58,20 @@ def test_a_held_slot_keeps_others_out_until_released() -> None:
         assert _locked_elsewhere(1)
         assert not _locked_elsewhere(0)
     assert not _locked_elsewhere(1)
+
+
+def test_heavy_slots_are_taken_one_each_and_a_full_machine_makes_the_next_wait() -> None:
+    with ExitStack() as stack:
+        for _ in range(robot_slots.HEAVY):
+            stack.enter_context(robot_slots.any_heavy(wait_s=0.0))
+        with pytest.raises(TimeoutError, match="no heavy-test slot"), \
+                robot_slots.any_heavy(wait_s=0.3):
+            pass
+    with robot_slots.any_heavy(wait_s=0.0):
+        pass  # freed again
+
+
+def test_only_tests_with_processes_or_a_browser_are_heavy() -> None:
+    assert robot_slots.heavy(Item(pytest.mark.integration))  # type: ignore[arg-type]
+    assert robot_slots.heavy(Item(pytest.mark.browser))  # type: ignore[arg-type]
+    assert not robot_slots.heavy(Item(pytest.mark.model))  # type: ignore[arg-type]
