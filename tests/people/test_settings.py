@@ -32,6 +32,9 @@ def test_zone_limits_must_grow(fields: dict[str, Any]) -> None:
     {"absence_hold_s": 3601.0},
     {"zone_margin_m": -0.01},
     {"intimate_limit_m": 0.0},
+    {"position_period_s": -0.1},
+    {"position_period_s": 1.5},
+    {"position_period_s": "fast"},
     {"walking_speed": 1.0},
 ])
 def test_out_of_range_and_unknown_fields_are_refused(fields: dict[str, Any]) -> None:
