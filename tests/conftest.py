@@ -30,7 +30,7 @@ from buddybot.tools.testing import (
     run_service,
     stop_and_report,
 )
-from tests import properties, robot_slots
+from tests import cpu_usage, properties, robot_slots
 from tests.camera.networks import Networks
 
 properties.register()
@@ -58,6 +58,10 @@ together): even one other busy worker on a two-core machine delays Chromium's
 frames by tens of ms. `scripts/test.sh` runs them alone (`--phase quiet`, one
 process), before everything else runs in parallel (`--phase rest`)."""
 TESTS = Path(__file__).resolve().parent
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    config.pluginmanager.register(cpu_usage, "buddybot-cpu-usage")  # BUDDYBOT_TEST_CPU=FILE
 
 
 def pytest_addoption(parser: pytest.Parser) -> None:
