@@ -5,8 +5,9 @@ On a two-core machine a full run is bound by CPU, not by waiting, so the tests
 worth making cheaper are those that burn the most, not the longest. Set
 `BUDDYBOT_TEST_CPU=FILE` and every worker appends one JSON line per test to
 FILE; `python -m tests.cpu_usage FILE` sums them by file and lists the
-heaviest tests. A worker's own threads (an in-process router, a browser
-driver) count towards the test that runs while they work.
+heaviest tests. A worker's own threads (an in-process router) count towards
+the test that runs while they work; so does every process below the worker
+that lives on between tests (a browser, its page processes), read from /proc.
 """
 
 from __future__ import annotations
@@ -30,20 +31,58 @@ def _cpu(who: int) -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+TICK_S = 1 / os.sysconf("SC_CLK_TCK")
+
+
+def _descendants_cpu(root: int) -> float:
+    """CPU seconds of the live processes below `root` and of the children they
+    reaped (a browser's page processes come and go below it)."""
+    parent: dict[int, int] = {}
+    spent: dict[int, float] = {}
+    for entry in os.scandir("/proc"):
+        if not entry.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{entry.name}/stat", "rb") as f:
+                fields = f.read().rsplit(b")", 1)[1].split()
+        except OSError:  # gone meanwhile
+            continue
+        pid = int(entry.name)
+        parent[pid] = int(fields[1])
+        spent[pid] = sum(int(x) for x in fields[11:15]) * TICK_S  # utime stime cutime cstime
+    below, total = {root}, 0.0
+    changed = True
+    while changed:
+        changed = False
+        for pid, ppid in parent.items():
+            if ppid in below and pid not in below:
+                below.add(pid)
+                total += spent[pid]
+                changed = True
+    return total
+
+
 @pytest.hookimpl(hookwrapper=True)
 def pytest_runtest_protocol(item: pytest.Item) -> Iterator[None]:
     target = os.environ.get(ENV)
     if not target:
         yield
         return
+    # Scanning /proc costs a few ms: only tests that start processes or a browser.
+    tree = bool(item.get_closest_marker("integration") or item.get_closest_marker("browser"))
+    me = os.getpid()
     wall, own, children = (time.monotonic(), _cpu(resource.RUSAGE_SELF),
                            _cpu(resource.RUSAGE_CHILDREN))
+    live = _descendants_cpu(me) if tree else 0.0
     yield
+    children = _cpu(resource.RUSAGE_CHILDREN) - children
+    if tree:  # a child alive before and reaped since: its earlier part leaves `live` again
+        children = max(0.0, children + _descendants_cpu(me) - live)
     line = json.dumps({
         "test": item.nodeid,
         "wall_s": round(time.monotonic() - wall, 3),
         "cpu_s": round(_cpu(resource.RUSAGE_SELF) - own, 3),
-        "children_cpu_s": round(_cpu(resource.RUSAGE_CHILDREN) - children, 3),
+        "children_cpu_s": round(children, 3),
     })
     # One short write per line in append mode: lines of several workers do not mix.
     with open(target, "a", encoding="utf-8") as out:

@@ -35,13 +35,41 @@ def test_top_limits_each_table() -> None:
     assert len(lines) == 1 + 1 + 1 + 1 + 1 + 1  # header, file, all, blank, header, test
 
 
+BURN_TESTS = """
+import subprocess, sys
+import pytest
+
+BURN = "import time\\nt = time.process_time()\\nwhile time.process_time() - t < {}: pass\\n"
+KEEP = []
+
+
+def test_child():
+    subprocess.run([sys.executable, "-c", BURN.format(0.05)])
+
+
+@pytest.mark.integration
+def test_lives_on():  # a process that outlives the test (a browser): not reaped
+    code = BURN.format(0.3) + "print('burnt', flush=True)\\ntime.sleep(60)"
+    KEEP.append(subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE))
+    assert KEEP[-1].stdout.readline() == b"burnt\\n"
+
+
+def test_burn():
+    sum(range(3_000_000))
+
+
+def teardown_module():  # in the last test's protocol: the lived-on one is reaped after it
+    for proc in KEEP:
+        proc.kill()
+        proc.wait()
+"""
+
+
 @pytest.mark.integration  # a pytest run in a child process
 def test_a_run_with_the_variable_set_writes_a_line_per_test(tmp_path: Path) -> None:
     out = tmp_path / "cpu.jsonl"
     test = tmp_path / "test_burn.py"
-    test.write_text("def test_burn():\n    sum(range(3_000_000))\n\n"
-                    "def test_child():\n    import subprocess, sys\n"
-                    "    subprocess.run([sys.executable, '-c', 'sum(range(3_000_000))'])\n")
+    test.write_text(BURN_TESTS)
     root = Path(__file__).resolve().parent.parent
     run = subprocess.run(
         [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-p", "tests.cpu_usage",
@@ -50,6 +78,7 @@ def test_a_run_with_the_variable_set_writes_a_line_per_test(tmp_path: Path) -> N
     assert run.returncode == 0, run.stdout + run.stderr
     lines = [json.loads(x) for x in out.read_text().splitlines()]
     by_name = {x["test"].split("::")[-1]: x for x in lines}
-    assert set(by_name) == {"test_burn", "test_child"}
+    assert set(by_name) == {"test_burn", "test_child", "test_lives_on"}
     assert by_name["test_burn"]["cpu_s"] > 0.01
     assert by_name["test_child"]["children_cpu_s"] > 0.01
+    assert by_name["test_lives_on"]["children_cpu_s"] >= 0.25  # read from /proc

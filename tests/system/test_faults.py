@@ -147,7 +147,9 @@ def check_service_answers_garbage(probe: Node, service: keys.Service,
         # One node's service ({node} keys such as params/{node} are served by every
         # node: ask the controller's).
         key = probe.key(service, **dict.fromkeys(service.params, "controller"))
-        replies = list(probe.query(key, payload, timeout=5))
+        # A deadline, not a wait: one replier ends the query as soon as it answers
+        # (an enrolment computes a face's embedding: seconds on a busy machine).
+        replies = list(probe.query(key, payload, timeout=30))
         what = f"{service.pattern} <- {payload[:40]!r} ({len(payload)} bytes)"
         assert len(replies) == 1, f"{what}: {len(replies)} replies"
         reply = replies[0]
