@@ -351,10 +351,16 @@ def raw_reply(reply: zenoh.Reply) -> RawReply:
                     key=None, replier=replier)
 
 
+ZENOH_TIMEOUT = b"Timeout"  # a router's reply for a queryable that did not answer in time
+
+
 def service_reply(replies: Iterator[RawReply], key: str, service: keys.Service,
-                   timeout: float) -> ServiceReply:
-    """The first reply decoded with the service's reply type, or the CallError."""
+                  timeout: float) -> ServiceReply:
+    """The first reply decoded with the service's reply type, or the CallError;
+    NoReplyError when nobody answered (a router's timeout reply included)."""
     for reply in replies:
+        if not reply.ok and reply.payload == ZENOH_TIMEOUT:
+            continue
         if not reply.ok:
             raise CallError(key, error_text(reply.payload))
         try:

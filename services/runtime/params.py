@@ -1,23 +1,15 @@
 """Live parameters: a service's settings struct, readable and settable while it runs.
 
-The settings struct stays the single source of truth. A field is *live*
-(a change applies at once) when its `msgspec.Meta` carries
-`extra={"live": True}`; every other field needs a restart. That marker sits
-on the field itself, next to its range and description, so there is no
-second list to keep in step.
+A field is *live* (a change applies at once) when its `msgspec.Meta` carries
+`extra={"live": True}`, beside its range and description: the settings struct
+stays the one source of truth, with no second list to keep in step.
 
-`LiveSettings` holds the current struct. A change is validated exactly
-like the config file (`msgspec.convert` against the settings type, so the
-range, the type and any `__post_init__` check apply), refused as a whole
-when one value is bad or names a restart-only field, and then handed to
-the service's `apply(new_settings)` callback, which swaps the struct its
-logic reads. A set of a restart-only field is refused, not kept as
-"pending": a pending value that nothing applies is invisible state, and
-the config file (`param dump` writes one) is where a restart-time value
-belongs.
-
-`serve(node)` answers `params/<node>` (`keys.PARAMS`) with it; every change
-is logged at INFO and counted on the node's diagnostics
+`LiveSettings` holds the current struct. A change is validated as the config
+file is (`msgspec.convert`: range, type, `__post_init__`), refused whole when a
+value is bad or names a restart-only field (never kept "pending", invisible
+state: the config file is where a restart-time value belongs), then handed to
+the service's `apply(new_settings)`. `serve(node)` answers `params/<node>`
+(`keys.PARAMS`); each change is logged at INFO and counted in diagnostics
 (`params_changed`, `last_param_change`).
 """
 
