@@ -93,11 +93,12 @@ def test_simulated_camera_to_face_position(probe: Node, spawn: Spawn) -> None:
     faces.wait_count(60, timeout=60)
     ys = [f.point.y for f in faces.messages]
     assert max(ys) - min(ys) > 0.05
-    # every face keeps its image's capture time (an image sample the probe
-    # itself missed under congestion is tolerated)
+    # every face keeps its image's capture time. The probe itself misses image
+    # samples under congestion (900 kB each, dropped, not queued): a fifth of them
+    # with a second test run going. A face stamped when detected matches none.
     stamps = {img.stamp_ns for img in images.messages}
     kept = sum(f.stamp_ns in stamps for f in faces.messages)
-    assert kept >= 0.9 * len(faces.messages)
+    assert kept >= 0.5 * len(faces.messages), (kept, len(faces.messages))
 
 
 def test_detector_on_published_frames_and_bad_input(probe: Node, spawn: Spawn) -> None:

@@ -248,7 +248,8 @@ def test_slow_headers_beyond_the_descriptor_limit_lock_nobody_out(
     assert status == 200 and ws_status == 101
     assert held <= 64   # the per-address cap; the rest were cut to make room
     counters = health(port)
-    assert counters["connections_evicted"] >= FLOOD - 64
+    # Cut to make room, or by the header timeout when opening the flood took longer.
+    assert counters["connections_evicted"] + counters["slow_headers_cut"] >= FLOOD - 64, counters
     assert proc.alive()
     output = proc.output()
     assert output.count("Traceback") == 0, output[-3000:]

@@ -387,7 +387,7 @@ def test_camera_host_services_work_through_the_profile(
     assert 0.0 < got.confidence <= 1.0
     watcher = host_node("operator", "watcher")
     debug = Collector[m.Image](watcher, keys.DEBUG_IMAGE, camera="front")
-    debug.wait_for(timeout=60, what="the debug image, once watched")
+    debug.wait_for(timeout=180, what="the debug image, once watched")  # as long as faces
     alive = retry_until(lambda: {n for n in ("camera", "face-detector") if watcher.live_instances(
         f"{NODES_PREFIX}/{n}/*", timeout=1.0)} == {"camera", "face-detector"},
         30, 0.5, what="camera and face-detector tokens at the operator")
