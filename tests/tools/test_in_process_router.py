@@ -46,5 +46,8 @@ def test_stopped_its_port_is_closed_and_free() -> None:
     router.stop()
     assert not endpoints.accepting(router.endpoint)
     with socket.socket() as sock:
+        # As a server binds (Zenoh's listener too): a connection of the check above
+        # may linger in TIME_WAIT on the port; a listener still there fails the bind.
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         sock.bind((LOOPBACK, router.port))  # nothing holds it any more
         sock.listen()
