@@ -41,7 +41,8 @@ import pytest
 from buddybot.tools.testing import LOOPBACK, free_port
 from tests.deploy.test_esphome import FOLDER, esphome_command, offline_prefix
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration,  # one worker: the second test finds the
+              pytest.mark.xdist_group("esphome_host")]  # first one's objects
 
 FLAGS = ["-std=gnu++20", "-DUSE_HOST", "-DESPHOME_LOG_LEVEL=ESPHOME_LOG_LEVEL_DEBUG",
          "-Wno-sign-compare", "-Wno-unused-but-set-variable", "-Wno-unused-variable",
