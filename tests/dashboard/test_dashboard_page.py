@@ -334,7 +334,7 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
     eye_port, dash_port, router_port = free_port(), free_port(), free_port()
     config = tmp_path / "robot.toml"
     config.write_text(f"[eye_renderer]\nport = {eye_port}\n\n[dashboard]\nport = {dash_port}\n"
-                      "\n[audio_player]\nbackend = \"null\"\n")
+                      "\n[audio_player]\nbackend = \"null\"\n\n[camera]\nfps = 15\n")
     up = Process(buddybot_argv("up", "--sim", "--no-browser", "--config", str(config),
                                "--listen", f"tcp/127.0.0.1:{router_port}",
                                "--status-period", "0"), "up", tmp_path)
@@ -342,14 +342,14 @@ def test_the_whole_simulated_robot_on_one_laptop_screen(browser: Any, tmp_path: 
         wait_port(dash_port, 60)
         wait_port(eye_port, 60)
         page = open_page(browser, dash_port)
-        # Live content everywhere: a face on the image, radar lines, presence rules,
-        # the controller's state, gaze, every node alive.
+        # Live content everywhere: a face on the image, 10 s of radar lines, presence
+        # rules, the controller's state, gaze, every node alive.
         page.wait_for_function("""() => {
             const d = window.dash;
             const nodes = d.nodes || [];
             return d.image && d.faces && d.faces.faces.length > 0
                 && Object.values(d.sensors).some((s) => s.points.length > 50
-                    && s.points[s.points.length - 1][0] - s.points[0][0] > 25)
+                    && s.points[s.points.length - 1][0] - s.points[0][0] > 10)
                 && d.rules && d.controller && d.presence
                 && document.getElementById('gaze').textContent !== '–'
                 && nodes.length >= 9 && nodes.every((n) => n.alive);
