@@ -2,7 +2,7 @@
 processes or a browser at once, however many runs of the suite are going.
 
 A test marked `robot` runs the robot's perception and behaviour in real time
-(a camera at 30 fps, face detection, a dozen processes: about half a core)
+(a camera at 15 fps, face detection, a dozen processes: about a third of a core)
 and judges what it decided. Under pytest-xdist they go to `SLOTS` groups, so
 one run never has more than `SLOTS` robots going, and no worker waits; and
 each group holds its slot's lock file (in the system's temporary folder) while

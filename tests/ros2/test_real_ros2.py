@@ -49,7 +49,7 @@ from mcap.reader import make_reader
 from buddybot import cli
 from buddybot.contract import channels
 from buddybot.contract import messages as m
-from buddybot.ros2 import action, bridge, convert, rosbag, services, types
+from buddybot.ros2 import action, bridge, convert, hri, rosbag, services, types
 from buddybot.runtime.config import default_config
 from tests.cache import cache_root
 from tests.contract.test_messages import sample_messages
@@ -236,7 +236,22 @@ def published() -> list[Item]:
          action.encode_send_goal_reply(True, 1_700_000_000_000_000_007), None),
         ("/play_sound get_result response", f"{action.GET_RESULT}_Response",
          action.encode_result(4, "SUCCEEDED", "done"), None)]
+    out += [(f"/{x.name} {x.ros_type}", x.ros_type, x.payload, None) for x in hri_samples()]
     return out
+
+
+def hri_samples() -> list[hri.Sample]:
+    """What the ROS4HRI topics carry for a named, engaged person whose direction is
+    known: every one of them (the lists, the person's four topics, /tf)."""
+    t = 1_700_000_000_000_000_000
+    ada = m.Person(id=3, distance_m=1.2, zone="PERSONAL", seen_by="BOTH", zone_since_ns=t,
+                   arrived_ns=t, engagement="ENGAGED", engagement_since_ns=t, yaw_rad=0.2,
+                   pitch_rad=-0.05, name="Ada Lovelace")
+    plan = hri.HriPlanner("camera_front").step(m.PeopleState(stamp_ns=t + 5, people=[ada]))
+    assert {x.name.rsplit("/", 1)[-1] for x in plan.samples} == {
+        "tracked", "known", "engagement_status", "location_confidence", "anonymous", "alias",
+        "tf"}, plan.samples
+    return list(plan.samples)
 
 
 def rclpy_cdr(python: str, folder: Path, items: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -313,7 +328,9 @@ def test_rclpy_reads_and_writes_every_message_we_publish_as_we_do(
     installed = set(real_hashes["packages"])
     problems, checked = cdr_problems(python, tmp_path, items, installed)
     assert problems == []
-    assert checked >= 10  # the 5 topics of standard types, 3 Trigger replies, 2 of the action
+    # the 5 topics of standard types, 3 Trigger replies, 2 of the action, and ROS4HRI's
+    # location_confidence, anonymous and alias (hri_msgs and tf2_msgs have no wheel)
+    assert checked >= 13
     # the check can fail: one byte of a value changed (the high byte of the point's z)
     what, ros_type, payload, meant = items[0]
     assert ros_type == types.POINT_STAMPED
