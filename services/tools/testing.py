@@ -271,14 +271,29 @@ def paused_eye_page(browser: Any, port: int, width: int, height: int, eye: str =
     """The eye page of the renderer on `port` in a Playwright `browser`, with no blinks
     or saccades of its own, once it is ready, with its clock paused:
     `page.clock.run_for(ms)` steps it, so each frame is taken at an exact moment of an
-    animation however busy the machine is."""
+    animation however busy the machine is.
+
+    The page stops asking the server's time then: a pong read on a paused clock has
+    a round trip of about 0 ms, so it would win, and the server clock estimate would
+    jump by however far real time has run ahead, and the breath (on that clock) with
+    it, in one frame."""
     page = browser.new_page(viewport={"width": width, "height": height})
     page.clock.install()
     page.goto(f"http://{LOOPBACK}:{port}/eyes?eye={eye}&blink=0&saccade=0")
     page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
                            timeout=30_000)
+    page.evaluate(NO_PINGS)
     page.clock.pause_at(int(time.time() * 1000) + 1000)
     return page
+
+
+NO_PINGS = """() => {
+  const send = WebSocket.prototype.send;
+  WebSocket.prototype.send = function (data) {
+    if (typeof data === "string" && data.startsWith('{"topic":"ping"')) return;
+    return send.call(this, data);
+  };
+}"""
 
 
 def buddybot_argv(*args: str) -> list[str]:
