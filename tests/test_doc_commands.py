@@ -435,8 +435,10 @@ def test_the_tutorial_runs(tmp_path: Path) -> None:
                 assert up is not None, "the page echoes before it starts the robot"
                 echo = testing.Process(testing.buddybot_argv(*bb, "--connect", endpoint),
                                        "echo", logs)
-                echo.wait_for_output('"state":"SUCCEEDED"', 120)
-                echo.stop()
+                try:
+                    echo.wait_for_output('"state":"SUCCEEDED"', 120)
+                finally:
+                    echo.stop()
                 assert "play_sound 'greeting'" in up.output()
                 assert list((tts / "buddybot-tts").glob("*.wav")), "nothing was spoken"
             elif bb is not None and bb[:2] == ["app", "new"]:
@@ -446,8 +448,11 @@ def test_the_tutorial_runs(tmp_path: Path) -> None:
             elif bb is not None and bb[:2] == ["app", "run"]:
                 app = testing.Process(testing.buddybot_argv(*local(bb), "--connect", endpoint),
                                       "hello", logs)
-                app.wait_for_output("hello: watching robot buddy; present now:", 60)
-                assert app.stop() == 0
+                try:
+                    app.wait_for_output("hello: watching robot buddy; present now:", 60)
+                finally:
+                    status = app.stop()
+                assert status == 0
             else:
                 pytest.fail(f"docs/tutorial.md: this test does not run `{command.text}`")
     finally:
