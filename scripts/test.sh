@@ -21,6 +21,12 @@ if [ "${1:-}" = --quick ]; then
     shift
 fi
 
+# The suite starts hundreds of Python processes (pytest's workers, services,
+# CLIs). With PYTHONDONTWRITEBYTECODE set, as some machines do, no compiled
+# module is ever kept, so each of them compiles again what it imports:
+# collecting the tests alone costs 11 CPU-s a worker instead of 3.5.
+unset PYTHONDONTWRITEBYTECODE
+
 phases=()
 now() { echo "${EPOCHREALTIME/./}"; }  # microseconds
 started=$(now)
