@@ -223,11 +223,13 @@ def test_page_blinks_and_saccades_on_its_own(
 ) -> None:
     _proc, port = start_renderer(spawn)
     page = open_page(browser, port, "both", extra="")
-    page.wait_for_function("window.eyes.stats.blinks >= 3", timeout=40_000)
+    # Two blinks (one gap) at the default interval: this test runs alone, and each
+    # more blink would add 4.5 s on average to that phase.
+    page.wait_for_function("window.eyes.stats.blinks >= 2", timeout=40_000)
     log = page.evaluate("window.eyes.blinkLog")
     # Closing ~60 ms, reopening slower; measured at frame granularity (a frame
     # delayed by a busy machine can only make a phase look longer), so the
-    # fastest blink is the one that shows the design.
+    # faster blink is the one that shows the design.
     close_ms = min(b["close_ms"] for b in log if b["close_ms"] > 0)
     open_ms = min(b["open_ms"] for b in log if b["open_ms"] > 0)
     assert 50 <= close_ms <= 90, log
