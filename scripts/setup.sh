@@ -90,7 +90,7 @@ fi
 # every run). Hard links cost no space and outlive the cache: clearing
 # ~/.cache leaves every .venv whole. Made under a lock, `.complete` last, so
 # two clones set up at once make it once and a half-made one is made again.
-cache=${BUDDYBOT_CACHE:-$HOME/.cache/buddybot}
+cache=${BUDDYBOT_CACHE:-${HOME:-/nonexistent}/.cache/buddybot}
 template="$cache/venv-$profile-$("$PY" -c 'import platform; print(platform.python_version())')-$want"
 make_template() {
     [ -f "$template/.complete" ] && return 0
@@ -103,7 +103,6 @@ make_template() {
 }
 # from_template: .venv as a copy of the template, its own paths written in.
 from_template() {
-    mkdir -p "$cache"
     exec 9>"$cache/venv.lock"
     flock 9
     make_template
@@ -140,7 +139,9 @@ if runtime_ok && { [ "$profile" = runtime ] || current test; }; then
 fi
 start=$SECONDS
 rm -f .venv/.buddybot-installed  # the single stamp of older versions of this script
-if [ ! -x .venv/bin/python ] && command -v flock >/dev/null; then
+# (No flock, or a cache that cannot be written: .venv is installed directly.)
+if [ ! -x .venv/bin/python ] && command -v flock >/dev/null &&
+    mkdir -p "$cache" 2>/dev/null && [ -w "$cache" ]; then
     say "setting up .venv from the cached template"
     from_template
     install_self

@@ -44,6 +44,8 @@ INTEGRATION_FIXTURES = frozenset({
     "tls_router", "host_node", "host_process", "started",  # tests/deploy/conftest.py
 })
 BROWSER_FIXTURES = frozenset({"browser"})  # tests/eyes/conftest.py
+"""A module's tests that use these run on one xdist worker (a group of their own):
+the fixture launches Chromium once per module and worker, about 1.7 CPU-s."""
 MODEL_FIXTURES = frozenset({"networks", "embedder"})  # this file, tests/identity/conftest.py
 """Fixtures that load a real neural network: tests using them are marked `model`
 (automatically, from the fixture closure) and run in the full suite only."""
@@ -107,6 +109,10 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         if set(getattr(item, "fixturenames", ())) & MODEL_FIXTURES:
             item.add_marker(pytest.mark.model)
     robot_slots.assign(items)
+    for item in items:  # one Chromium per module (`browser`), not one per worker
+        if (BROWSER_FIXTURES & set(getattr(item, "fixturenames", ()))
+                and item.get_closest_marker("xdist_group") is None):
+            item.add_marker(pytest.mark.xdist_group(f"browser-{item.path.stem}"))
     phase = config.getoption("phase")
     if phase != "all":
         keep = [i for i in items if (i.get_closest_marker("quiet") is not None) == (

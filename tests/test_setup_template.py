@@ -116,3 +116,21 @@ def test_a_half_made_template_is_made_again(project: Path, tmp_path: Path) -> No
     assert not (half / "leftover").exists()
     assert not (half / ".complete").exists()
     assert not (project / ".venv").exists()
+
+
+def test_without_a_cache_to_write_the_venv_is_installed_directly(project: Path,
+                                                                tmp_path: Path) -> None:
+    """A cache that cannot be made (a read-only home, a service user's): no template,
+    the packages go straight into .venv (here they cannot: no index, so it stops)."""
+    blocked = tmp_path / "a-file"
+    blocked.write_text("")
+    done = subprocess.run(
+        ["scripts/setup.sh", "runtime"], cwd=project, capture_output=True, text=True,
+        timeout=600,
+        env={**{k: v for k, v in os.environ.items() if not k.startswith("VIRTUAL_ENV")},
+             "BUDDYBOT_CACHE": str(blocked / "cache"), "PYTHON": BASE_PYTHON,
+             "PIP_NO_INDEX": "1", "PIP_FIND_LINKS": str(project / "no-packages")})
+    assert "setting up .venv (first run" in done.stderr, done.stderr
+    assert "template" not in done.stderr and "mkdir" not in done.stderr, done.stderr
+    assert (project / ".venv" / "bin" / "python").exists()
+    assert done.returncode != 0  # no packages to install, and it says so
