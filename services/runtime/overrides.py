@@ -114,6 +114,21 @@ def _struct_info(struct: type[msgspec.Struct]) -> mi.StructType:
     return info
 
 
+def struct_fields(struct: type[msgspec.Struct]) -> tuple[mi.Field, ...]:
+    """The inspected fields of a settings struct (worked out once, `_struct_info`)."""
+    return _struct_info(struct).fields
+
+
+@functools.cache
+def _annotations(struct: type[msgspec.Struct]) -> dict[str, Any]:
+    return {f.name: f.type for f in msgspec.structs.fields(struct)}
+
+
+def annotation(struct: type[msgspec.Struct], field: str) -> Any:
+    """The field's annotation, as `msgspec.convert` takes it (worked out once)."""
+    return _annotations(struct)[field]
+
+
 def field_info(struct: type[msgspec.Struct], field: str) -> mi.Field:
     """The inspected field (KeyError naming it when the struct has no such field)."""
     for f in _struct_info(struct).fields:
@@ -263,10 +278,6 @@ def given(args: argparse.Namespace, struct: type[msgspec.Struct], field: str) ->
     return field in overrides(args, struct)
 
 
-def _annotation(struct: type[msgspec.Struct], field: str) -> Any:
-    return next(f.type for f in msgspec.structs.fields(struct) if f.name == field)
-
-
 def _allowed(t: mi.Type) -> str:
     """What a field accepts, for an error: its own bounds, else its items' bounds."""
     bounds = describe_range(t)
@@ -288,7 +299,7 @@ def merge(settings: S, args: argparse.Namespace) -> S:
     changes: dict[str, Any] = {}
     for field, (binding, value) in overrides(args, struct).items():
         try:
-            changes[field] = msgspec.convert(value, _annotation(struct, field))
+            changes[field] = msgspec.convert(value, annotation(struct, field))
         except msgspec.ValidationError as exc:
             bounds = _allowed(field_info(struct, field).type)
             allowed = f"allowed {bounds}" if bounds else str(exc)

@@ -26,7 +26,7 @@ import msgspec.inspect as mi
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime.limits import clip
-from buddybot.runtime.overrides import describe_range, table_of
+from buddybot.runtime.overrides import annotation, describe_range, struct_fields, table_of
 
 S = TypeVar("S", bound=msgspec.Struct)
 
@@ -49,12 +49,6 @@ class ParamRefused(ValueError):
 # --- what the struct says about a field -------------------------------------------
 
 
-def _fields(struct: type[msgspec.Struct]) -> tuple[mi.Field, ...]:
-    info = mi.type_info(struct)
-    assert isinstance(info, mi.StructType)
-    return info.fields
-
-
 def _metadata(t: mi.Type) -> list[mi.Metadata]:
     """Every Meta wrapper of a field's type, also inside `X | None`."""
     found: list[mi.Metadata] = []
@@ -69,14 +63,14 @@ def _metadata(t: mi.Type) -> list[mi.Metadata]:
 
 def is_live(struct: type[msgspec.Struct], field: str) -> bool:
     """Whether `struct.field` is marked live (`msgspec.Meta(extra={"live": True})`)."""
-    for f in _fields(struct):
+    for f in struct_fields(struct):
         if f.name == field:
             return any(bool((meta.extra or {}).get(LIVE)) for meta in _metadata(f.type))
     raise KeyError(f"{struct.__name__} has no field {field!r}")
 
 
 def live_fields(struct: type[msgspec.Struct]) -> list[str]:
-    return [f.name for f in _fields(struct) if is_live(struct, f.name)]
+    return [f.name for f in struct_fields(struct) if is_live(struct, f.name)]
 
 
 def _description(t: mi.Type) -> str:
@@ -87,18 +81,14 @@ def _description(t: mi.Type) -> str:
     return ""
 
 
-def _type_name(annotation: Any) -> str:
+def _type_name(hint: Any) -> str:
     """`float`, `str | None`, `list[str]`: the annotation without its Meta."""
-    text = repr(annotation)
-    if hasattr(annotation, "__metadata__"):  # Annotated[X, Meta]
-        return _type_name(annotation.__origin__)
-    if isinstance(annotation, type):
-        return annotation.__name__
+    text = repr(hint)
+    if hasattr(hint, "__metadata__"):  # Annotated[X, Meta]
+        return _type_name(hint.__origin__)
+    if isinstance(hint, type):
+        return hint.__name__
     return text.replace("typing.", "")
-
-
-def _annotation(struct: type[msgspec.Struct], field: str) -> Any:
-    return next(f.type for f in msgspec.structs.fields(struct) if f.name == field)
 
 
 def describe(settings: msgspec.Struct) -> list[m.ParamInfo]:
@@ -107,11 +97,11 @@ def describe(settings: msgspec.Struct) -> list[m.ParamInfo]:
     values = msgspec.to_builtins(settings)
     return [
         m.ParamInfo(
-            name=f.name, value=values.get(f.name), type=_type_name(_annotation(struct, f.name)),
+            name=f.name, value=values.get(f.name), type=_type_name(annotation(struct, f.name)),
             range=describe_range(f.type), live=is_live(struct, f.name),
             description=_description(f.type),
         )
-        for f in _fields(struct)
+        for f in struct_fields(struct)
     ]
 
 
@@ -120,7 +110,7 @@ def validate(current: S, values: dict[str, Any]) -> tuple[S, list[str]]:
     fields that actually change. Raises ParamRefused naming the field and what
     it allows; a restart-only field may only be "set" to the value it has."""
     struct = type(current)
-    names = {f.name: f for f in _fields(struct)}
+    names = {f.name: f for f in struct_fields(struct)}
     table = table_of(struct)
     for name in values:
         if name not in names:
@@ -131,7 +121,7 @@ def validate(current: S, values: dict[str, Any]) -> tuple[S, list[str]]:
     typed_values: dict[str, Any] = {}
     for name, value in values.items():
         try:
-            typed = msgspec.convert(value, _annotation(struct, name))
+            typed = msgspec.convert(value, annotation(struct, name))
         except msgspec.ValidationError as exc:
             bounds = describe_range(names[name].type)
             text = str(exc)
