@@ -406,10 +406,15 @@ def test_slow_headers_beyond_the_descriptor_limit_lock_nobody_out(
     try:
         status = http_status(port, "/eyes?eye=both", timeout=20.0)
         ws_status = http_status(port, "/ws?eye=both", websocket=True)
+        # Held connections still queued are accepted (and older ones evicted) after
+        # those two requests were served; on a busy machine, well after.
+        held = len(flood.socks)
+        retry_until(lambda: health(port)["connections_evicted"] >= held - 64, 60, 0.5,
+                    f"all but 64 of the {held} held connections evicted "
+                    f"({flood.failed} could not connect)")
     finally:
         flood.close()
     assert status == 200 and ws_status == 101
-    assert health(port)["connections_evicted"] >= 300 - 64
     assert proc.alive() and "Traceback" not in proc.output()
 
 

@@ -143,10 +143,14 @@ def check_service_answers_garbage(probe: Node, service: keys.Service,
     what is missing, in its own reply). Such a service must also refuse an
     unknown field and an oversized request."""
     oversized = b'{"pad": "' + b"x" * service.max_bytes + b'"}'
+    # One node's service ({node} keys such as params/{node} are served by every
+    # node: ask the controller's).
+    key = probe.key(service, **dict.fromkeys(service.params, "controller"))
+    # A node's token is up before it declares its services (identity loads its
+    # gallery in between): first, that this one answers at all.
+    retry_until(lambda: len(list(probe.query(key, b"[]", timeout=10))) == 1, 60, 0.2,
+                f"{service.pattern} served")
     for payload in [*garbage, b'{"unknown_field": 1}', oversized]:
-        # One node's service ({node} keys such as params/{node} are served by every
-        # node: ask the controller's).
-        key = probe.key(service, **dict.fromkeys(service.params, "controller"))
         # A deadline, not a wait: one replier ends the query as soon as it answers
         # (an enrolment computes a face's embedding: seconds on a busy machine).
         replies = list(probe.query(key, payload, timeout=30))
