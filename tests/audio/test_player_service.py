@@ -12,7 +12,7 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.tools.testing import buddybot_argv, retry_until
+from buddybot.tools.testing import Collector, buddybot_argv, retry_until
 
 from .conftest import RATE, beep_config, final, send_goal, tone, write_wav
 
@@ -83,3 +83,30 @@ def test_player_stop_pause_resume(audio, probe, tmp_path) -> None:
     assert len(produced) == at_stop < 2 * samples.shape[0]
     assert np.array_equal(produced[: samples.shape[0]], samples)  # first play, whole
     assert np.array_equal(produced[samples.shape[0]:], samples[: at_stop - samples.shape[0]])
+
+
+def test_a_sound_asked_for_while_the_player_starts_is_not_ended_by_its_first_free(
+        spawn, probe, tmp_path) -> None:
+    """The player's first `device_free` (true) goes out before it answers any play
+    request: sent after one, it says "free" while that sound plays, and the action
+    server ends the sound's goal as stopped outside the action. Asked for every
+    millisecond while the player starts, the first answered play lands as early as
+    it can."""
+    path = write_wav(tmp_path / "long.wav", tone(2.0))
+    config = tmp_path / "buddybot.toml"
+    config.write_text('[audio.sounds]\nlong = "long.wav"\n')  # allows tmp_path
+    free = Collector(probe, keys.DEVICE_FREE)
+    spawn("audio-player", "--config", str(config), "--backend", "null")
+    asked: list[int] = []
+
+    def play() -> m.TriggerReply:
+        asked.append(time.time_ns())
+        reply: m.TriggerReply = probe.call(keys.PLAY_FILE, m.PlayAudioFile(path=str(path)),
+                                           timeout=3)
+        return reply
+
+    assert retry_until(play, 60, 0.001, "a play request answered").success
+    end = free.wait_for(lambda b: b.data and b.stamp_ns > asked[-1], 30,
+                        "free after the sound")
+    assert (end.stamp_ns - asked[-1]) / 1e9 > 1.5, [
+        (round((b.stamp_ns - asked[-1]) / 1e9, 3), b.data) for b in free.messages]
