@@ -45,6 +45,8 @@ elapsed() {  # seconds since $1, one decimal
     echo "$((tenths / 10)).$((tenths % 10))"
 }
 report() {
+    # A lint or type error ends the run before the background collection is waited for.
+    [ -z "${warming:-}" ] || kill "$warming" 2>/dev/null || true
     echo "== wall time per phase ($($quick && echo quick || echo full) run) =="
     printf '%s\n' "${phases[@]}"
     printf '%-8s %7s s\n' total "$(elapsed "$started")"
@@ -76,6 +78,7 @@ checks() {
 }
 phase checks checks
 [ -z "$warming" ] || phase collect wait "$warming" || true
+warming=
 if $quick; then
     phase pytest "${pytest[@]}" -n "$(nproc)" --hypothesis-profile=quick \
         -m "not integration and not browser and not model" "$@"
