@@ -516,7 +516,11 @@ def make_app(hub: Hub, guard: Guard) -> web.Application:
             sender.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await sender
-            if client.unsent():   # e.g. no pong: never keep data for a page that is gone
+            # No pong in time: the page stopped reading, even when all that was
+            # sent fit in the kernel's buffers; never keep data for a page that is gone.
+            if isinstance(ws.exception(), TimeoutError):
+                hub.drop(client, "it stopped answering pings")
+            elif client.unsent():
                 hub.drop(client, "it stopped answering with data still unsent")
             log.info("page left (eye=%s, %d pages)", eye, len(hub.pages))
         return ws

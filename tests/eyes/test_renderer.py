@@ -464,6 +464,24 @@ def test_a_page_that_stops_reading_is_dropped(
 
 
 @pytest.mark.integration
+def test_a_page_that_never_answers_a_ping_is_dropped_with_nothing_left_to_send(
+    spawn: Callable[..., Process]
+) -> None:
+    """With no traffic, all that was sent fits in the kernel's buffers: the
+    heartbeat's missing pong is what shows the page stopped reading, and it
+    is counted and said as a drop like any other."""
+    proc, port = start_renderer(spawn, "--no-browser")
+    sock = stuck_page(port)
+    try:
+        retry_until(lambda: health(port)["dropped"] == 1, 60, 0.2, "the silent page dropped")
+        assert cut_off(sock)
+    finally:
+        sock.close()
+    proc.wait_for_output("page dropped (eye=both): it stopped answering pings", 30)
+    assert health(port)["clients"] == 0
+
+
+@pytest.mark.integration
 def test_flood_and_stuck_pages_leave_a_real_page_fresh(
     spawn: Callable[..., Process], probe: Node
 ) -> None:
