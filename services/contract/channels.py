@@ -29,7 +29,7 @@ import msgspec
 
 from buddybot.contract import jpeg, keys
 from buddybot.contract import messages as m
-from buddybot.contract.schemas import with_enum_names
+from buddybot.contract.schemas import json_schema
 
 SCHEMA_ENCODING = "jsonschema"
 MESSAGE_ENCODING = "json"
@@ -76,7 +76,7 @@ def channel(topic: keys.Topic) -> Channel:
 
 def message_schema(msg_type: type[m.Message]) -> dict[str, Any]:
     """The JSON Schema of a message type, self-contained (no `$ref`)."""
-    schema = with_enum_names(msgspec.json.schema(msg_type))
+    schema = json_schema(msg_type)
     defs = schema.pop("$defs", {})
     inlined = _inline(schema, defs, ())
     assert isinstance(inlined, dict)

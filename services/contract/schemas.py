@@ -8,6 +8,7 @@ regenerates them and fails when the committed copy has drifted.
 from __future__ import annotations
 
 import enum
+import inspect
 import json
 from pathlib import Path
 from typing import Any
@@ -22,10 +23,21 @@ def generate() -> dict[str, str]:
     """File name (relative to schemas/) -> content."""
     files: dict[str, str] = {}
     for msg_type in m.ALL_MESSAGES:
-        schema = with_enum_names(msgspec.json.schema(msg_type))
+        schema = json_schema(msg_type)
         files[f"messages/{msg_type.__name__}.json"] = json.dumps(schema, indent=2, sort_keys=True)
     files["keys.json"] = json.dumps(keys.key_table(), indent=2)
     return {name: text + "\n" for name, text in files.items()}
+
+
+def json_schema(msg_type: type[m.Message]) -> dict[str, Any]:
+    """msgspec's JSON Schema of `msg_type`, its descriptions dedented as `help()`
+    shows a docstring (msgspec releases differ in whether they do it, and the
+    committed files must not), with the enum members named."""
+    schema = msgspec.json.schema(msg_type)
+    for definition in [schema, *schema.get("$defs", {}).values()]:
+        if isinstance(definition.get("description"), str):
+            definition["description"] = inspect.cleandoc(definition["description"])
+    return with_enum_names(schema)
 
 
 def _int_enums() -> dict[str, type[enum.IntEnum]]:
