@@ -2,6 +2,6 @@
 
 from __future__ import annotations
 
-from ..eyes.conftest import browser
+from ..eyes.conftest import browser, chromium
 
-__all__ = ["browser"]
+__all__ = ["browser", "chromium"]

@@ -426,8 +426,9 @@ def camera_host_cut(started: Callable[..., Process], tmp_path: Path, host_addr: 
             "--config", str(config))), "camera")
         started(exec_argv(*buddybot_argv(
             "run", "face-detector", "--config", str(config))), "face-detector")
+        # Images first: a failure then says which side never started.
+        retry_until(lambda: images.first_after(0.0), 180, 0.2, what="images from the camera host")
         retry_until(lambda: faces.first_after(0.0), 180, 0.2, what="faces from the camera host")
-        retry_until(lambda: images.first_after(0.0), 30, 0.2, what="images from the camera host")
 
         set_link(False)
         t_cut = time.monotonic()

@@ -22,18 +22,28 @@ def chromium_path() -> str | None:
 
 
 @pytest.fixture(scope="module")
-def browser() -> Iterator[Any]:
+def chromium() -> Iterator[Any]:
     """A headless Chromium for this module's tests; skipped when chromium is absent."""
     path = chromium_path()
     if path is None:
         pytest.skip("Debian chromium not installed: run scripts/chromium.sh (CI installs it)")
     sync_api = pytest.importorskip("playwright.sync_api", reason="playwright not installed")
     with sync_api.sync_playwright() as pw:
-        chromium = pw.chromium.launch(executable_path=path, args=CHROMIUM_ARGS)
+        launched = pw.chromium.launch(executable_path=path, args=CHROMIUM_ARGS)
         try:
-            yield chromium
+            yield launched
         finally:
-            chromium.close()
+            launched.close()
+
+
+@pytest.fixture
+def browser(chromium: Any) -> Iterator[Any]:
+    """The module's Chromium; every page a test opened is closed after it, passed
+    or failed, so no page of an earlier test keeps running scripts (and
+    reconnecting to a server that is gone) beside the next test's."""
+    yield chromium
+    for context in list(chromium.contexts):
+        context.close()
 
 
 def screenshot(page: Any, directory: Path, name: str | None = None) -> np.ndarray:
