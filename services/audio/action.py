@@ -223,7 +223,7 @@ class ActionServer:
             return
         with self.lock:
             self.answering = None
-        asked_ns = m.now_ns()
+        asked_at, asked_ns = time.monotonic(), m.now_ns()
         try:
             reply, replier = self._ask_player(m.PlayAudioFile(path=sound), still_wanted)
         except ServiceError as exc:
@@ -237,7 +237,7 @@ class ActionServer:
                 self._publish(self.book.failed(goal_id, limits.clip(reply.message, TEXT_MAX)))
                 return
             statuses = self.book.started(goal_id, protocol.parse_duration(reply.message),
-                                         time.monotonic(), asked_ns)
+                                         asked_at, asked_ns)
             if statuses:
                 self.answering = replier
                 lost = replier is not None and replier not in self.instances

@@ -146,13 +146,16 @@ class GoalBook:
         return self.active is not None and self.active.goal_id == goal_id and (
             self.active.state == "ACCEPTED")
 
-    def started(self, goal_id: str, duration_s: float | None, now: float,
+    def started(self, goal_id: str, duration_s: float | None, asked_at: float,
                 asked_ns: int | None = None) -> list[m.PlaySoundStatus]:
-        """The player confirmed playback: ACCEPTED -> PLAYING."""
+        """The player confirmed playback: ACCEPTED -> PLAYING. The sound's time
+        counts from `asked_at`, when the player was asked (monotonic): it began
+        between that and the reply, and a reply slowed by a busy machine must
+        not make a sound that played through look cut short."""
         goal = self.active
         if goal is None or goal.goal_id != goal_id or goal.state != "ACCEPTED":
             return []
-        goal.state, goal.duration_s, goal.started_at = "PLAYING", duration_s, now
+        goal.state, goal.duration_s, goal.started_at = "PLAYING", duration_s, asked_at
         goal.asked_ns = asked_ns
         goal.message = "" if duration_s is None else f"{duration_s:.3f} s"
         return [goal.status()]

@@ -8,6 +8,7 @@ test can check the produced audio against the file it asked for.
 from __future__ import annotations
 
 import shutil
+import threading
 import time
 
 import numpy as np
@@ -180,3 +181,30 @@ def test_player_exit_aborts_the_playing_goal(audio, probe, tmp_path) -> None:
 def test_unanswered_call_is_a_service_error(probe) -> None:
     with pytest.raises(ServiceError, match="no reply"):
         probe.call(keys.PLAY_SOUND, m.PlaySound(sound="greeting"), timeout=0.5)
+
+
+def test_a_player_slow_to_answer_does_not_make_a_sound_played_through_look_cut(
+    audio, probe, node_factory, tmp_path
+) -> None:
+    """A busy machine delays the player's reply: the 0.6 s sound has nearly
+    played when the action server hears it started. Its end, 0.62 s after the
+    request, is the whole sound, not a stop from outside the action."""
+    config, _ = beep_config(tmp_path, 0.6)
+    player = node_factory("audio-player")  # a player whose reply is late
+    free = player.publisher(keys.DEVICE_FREE)
+    free.put(m.Bool(stamp_ns=m.now_ns(), data=True))
+
+    def play(req: m.PlayAudioFile) -> m.TriggerReply:
+        asked = time.monotonic()
+        free.put(m.Bool(stamp_ns=m.now_ns(), data=False))
+        time.sleep(0.45)  # the reply crossing a busy machine
+        threading.Timer(0.62 - (time.monotonic() - asked), lambda: free.put(
+            m.Bool(stamp_ns=m.now_ns(), data=True))).start()
+        return m.TriggerReply(success=True, message=f"playing {req.path} (0.600 s)")
+
+    player.serve(keys.PLAY_FILE, play)
+    a = audio(config, player=False)
+    reply = send_goal(probe, "beep")
+    assert reply.accepted, reply
+    end = final(a, reply.goal_id)
+    assert end.state == "SUCCEEDED", end

@@ -21,7 +21,7 @@ def test_goal_lifecycle_accepted_playing_succeeded() -> None:
     assert d.accepted and d.reply.goal_id == "g1"
     assert states(d.statuses) == [("g1", "ACCEPTED")]
     assert b.should_play("g1")
-    playing = b.started("g1", 2.0, now=10.0)
+    playing = b.started("g1", 2.0, asked_at=10.0)
     assert states(playing) == [("g1", "PLAYING")] and not b.should_play("g1")
     tick = b.tick(now=11.0)
     assert tick[0].state == "PLAYING" and tick[0].progress == pytest.approx(0.5)
@@ -69,7 +69,7 @@ def test_a_file_goal_is_left_to_the_players_sandbox_and_a_bad_path_refused_with_
 def test_preempt_cancels_the_running_goal_first() -> None:
     b = book("preempt")
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 2.0, now=0.0)
+    b.started("g1", 2.0, asked_at=0.0)
     d = b.request("g2", "farewell", player_present=True)
     assert d.accepted
     assert states(d.statuses) == [("g1", "CANCELED"), ("g2", "ACCEPTED")]
@@ -94,13 +94,13 @@ def test_failure_aborts_with_the_players_reason() -> None:
     b.request("g1", "greeting", player_present=True)
     out = b.failed("g1", "/x/greeting.wav: no such file")
     assert states(out) == [("g1", "ABORTED")] and "no such file" in out[0].message
-    assert b.failed("g1", "again") == [] and b.started("g1", 1.0, now=0.0) == []
+    assert b.failed("g1", "again") == [] and b.started("g1", 1.0, asked_at=0.0) == []
 
 
 def test_cancel_active_unknown_and_finished_goals() -> None:
     b = book()
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 2.0, now=0.0)
+    b.started("g1", 2.0, asked_at=0.0)
     res = b.cancel("g1")
     assert res.reply.success and res.stop_player
     assert states(res.statuses) == [("g1", "CANCELED")]
@@ -116,17 +116,17 @@ def test_cancel_before_the_player_started_it_skips_playback() -> None:
     b.request("g1", "greeting", player_present=True)
     b.cancel("g1")
     assert not b.should_play("g1")
-    assert b.started("g1", 1.0, now=0.0) == []
+    assert b.started("g1", 1.0, asked_at=0.0) == []
 
 
 def test_device_free_long_before_the_end_means_stopped_from_outside() -> None:
     b = book()
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 3.0, now=100.0)
+    b.started("g1", 3.0, asked_at=100.0)
     out = b.device_free(now=100.5)
     assert states(out) == [("g1", "CANCELED")] and "outside" in out[0].message
     b.request("g2", "greeting", player_present=True)
-    b.started("g2", 3.0, now=200.0)
+    b.started("g2", 3.0, asked_at=200.0)
     assert states(b.device_free(now=203.0 - END_TOLERANCE_S / 2)) == [("g2", "SUCCEEDED")]
 
 
@@ -134,7 +134,7 @@ def test_a_free_stamped_before_the_player_was_asked_is_not_the_goals_end() -> No
     """A player that just started sends its latched "free" late, after the reply."""
     b = book()
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 3.0, now=100.0, asked_ns=5_000)
+    b.started("g1", 3.0, asked_at=100.0, asked_ns=5_000)
     assert b.device_free(now=100.1, stamp_ns=4_999) == []
     assert b.active is not None and b.active.state == "PLAYING"
     out = b.device_free(now=100.2, stamp_ns=5_001)
@@ -144,7 +144,7 @@ def test_a_free_stamped_before_the_player_was_asked_is_not_the_goals_end() -> No
 def test_free_sample_that_raced_ahead_of_the_reply_still_ends_the_goal() -> None:
     b = book()
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 1.0, now=0.0)
+    b.started("g1", 1.0, asked_at=0.0)
     assert b.tick(now=1.0 + LATE_GRACE_S / 2, device_free=True)[0].state == "PLAYING"
     assert b.tick(now=1.0 + LATE_GRACE_S * 2, device_free=True)[0].state == "SUCCEEDED"
 
@@ -153,7 +153,7 @@ def test_player_lost_aborts_and_unknown_duration_keeps_progress_zero() -> None:
     b = book()
     assert b.player_lost() == []
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", None, now=0.0)
+    b.started("g1", None, asked_at=0.0)
     assert b.tick(now=5.0)[0].progress == 0.0
     assert states(b.player_lost()) == [("g1", "ABORTED")]
 
@@ -189,7 +189,7 @@ def test_a_huge_sound_name_is_clipped_in_the_refusal() -> None:
 def test_player_lost_aborts_the_active_goal_with_the_reason() -> None:
     b = book()
     b.request("g1", "greeting", player_present=True)
-    b.started("g1", 2.0, now=1.0)
+    b.started("g1", 2.0, asked_at=1.0)
     lost = b.player_lost("the audio player that was playing it (abc) stopped running")
     assert states(lost) == [("g1", "ABORTED")] and "(abc)" in lost[0].message
     assert b.player_lost() == []
