@@ -108,17 +108,28 @@ def frames(page: Any, count: int) -> list[tuple[float, float]]:
     return [(a, b) for a, b in steps]
 
 
+SETTLE_MS = 1000
+"""Past its transition, how long an expression is left to come to rest before a
+change from it is measured."""
+
+
+def transition_ms(style: dict[str, Any], action: A) -> float:
+    """How long the change to `action` takes in `style` (its pose's own, else the style's)."""
+    ms: float = (style["poses"][styles.EXPRESSIONS[int(action)]]["transition_ms"]
+                 or style["transition_ms"])
+    return ms
+
+
 def blend(page: Any, style: dict[str, Any], before: A, after: A) -> tuple[float, float, float]:
     """(the largest change one frame drew, the whole change, the change a frame draws
     at rest at either end: a beating heart, a turning star, a breath) of
     `before` -> `after`."""
     express(page, before)
-    page.clock.run_for(2500)
+    page.clock.run_for(transition_ms(style, before) + SETTLE_MS)
     page.evaluate(DIFF, True)
     rest = max(step for step, _ in frames(page, 6))
     express(page, after)
-    ms = style["poses"][styles.EXPRESSIONS[int(after)]]["transition_ms"] or style["transition_ms"]
-    steps = frames(page, math.ceil(ms / FRAME_MS) + 4)
+    steps = frames(page, math.ceil(transition_ms(style, after) / FRAME_MS) + 4)
     after_rest = max(step for step, _ in frames(page, 6))
     whole = page.evaluate(DIFF, False)[1]
     return max(step for step, _ in steps), whole, max(rest, after_rest)
