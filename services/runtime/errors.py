@@ -45,6 +45,11 @@ class ServiceError(BuddyBotError):
     """A service call that failed: no answer, an error reply, or a bad reply."""
 
 
+BUSY_PREFIX = "busy: "
+"""How the error reply of a service whose request queue is full begins: the
+caller may ask again shortly (a flood passes), unlike any other error."""
+
+
 class CallError(ServiceError):
     """A failed call: `reason` is the text without the key (for messages that
     already say which service they called)."""

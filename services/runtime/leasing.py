@@ -30,7 +30,7 @@ from pathlib import Path
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
-from buddybot.runtime.errors import ServiceError
+from buddybot.runtime.errors import BUSY_PREFIX, CallError, ServiceError
 from buddybot.runtime.node import Node
 from buddybot.runtime.private_files import operator_secret
 
@@ -125,12 +125,23 @@ def ask(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S, *,
     its watch of liveliness tokens only, so a program that has just started
     may ask before its own token reached it: that refusal (HOLDER_NOT_ALIVE,
     for a request of this node itself, which is alive) is asked again, with
-    a growing pause, for at most NOT_ALIVE_WAIT_S; every other answer at once."""
+    a growing pause, for at most NOT_ALIVE_WAIT_S; every other answer at once.
+    An arbiter whose queue a flood of requests filled answers "busy": asked
+    again the same way for up to `timeout`, then the CallError is raised."""
     own = (req.holder, req.instance) == (node.name, node.instance)
-    deadline = clock() + min(NOT_ALIVE_WAIT_S, timeout)
+    began = clock()
+    deadline = began + min(NOT_ALIVE_WAIT_S, timeout)
     pause = 0.02
     while True:
-        reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
+        try:
+            reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
+        except CallError as exc:
+            busy_left = began + timeout - clock()
+            if not exc.reason.startswith(BUSY_PREFIX) or busy_left <= 0:
+                raise
+            sleep(min(pause, busy_left))
+            pause = min(pause * 2, 0.2)
+            continue
         left = deadline - clock()
         if (reply.granted or not own or left <= 0
                 or not reply.message.startswith(m.HOLDER_NOT_ALIVE)):

@@ -31,6 +31,7 @@ from buddybot.contract import messages as m
 from buddybot.runtime import limits
 from buddybot.runtime.diagnostics import Diagnostics, RateLimitedLog
 from buddybot.runtime.errors import (
+    BUSY_PREFIX,
     CallError,
     DuplicateNodeError,
     NoReplyError,
@@ -651,7 +652,7 @@ class Node:
                 with query:
                     query.reply_err(error_payload(
                         "service closing" if not gate.open else
-                        f"busy: {queue_size} requests already waiting on {service.pattern}"))
+                        f"{BUSY_PREFIX}{queue_size} requests already waiting on {service.pattern}"))
 
         try:
             queryable = self._session.declare_queryable(key, on_query)
@@ -698,7 +699,7 @@ class Node:
                 self._warn.warning(f"busy:{key_expr}", "refused a query on %s: busy",
                                    key_expr)
                 raw.reply_err("service closing" if not gate.open else
-                              f"busy: {queue_size} requests already waiting")
+                              f"{BUSY_PREFIX}{queue_size} requests already waiting")
                 raw.finish()
 
         try:

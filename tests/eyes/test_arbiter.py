@@ -498,7 +498,8 @@ def test_a_flood_of_invented_holders_does_not_delay_a_real_one(
         sender.start()
         flood.wait("a tenth of the flood sent", lambda: flood.sent >= FLOOD // 10)
         # Programs that start during the flood, each asking at once: every one
-        # is granted (not refused "busy", not kept waiting behind the flood).
+        # is granted, not kept waiting behind the flood (a queue the flood filled
+        # on a busy machine answers "busy", which a program asks again).
         took: list[float] = []
         while flood.sent < FLOOD or not took:
             real = node_factory(f"app-real{len(took)}")

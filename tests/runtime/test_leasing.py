@@ -12,7 +12,7 @@ import pytest
 from buddybot.contract import keys
 from buddybot.contract import messages as m
 from buddybot.runtime import leasing
-from buddybot.runtime.errors import NoReplyError, ServiceError
+from buddybot.runtime.errors import BUSY_PREFIX, CallError, NoReplyError, ServiceError
 from buddybot.runtime.node import Node
 
 # --- the request and the state (pure) ------------------------------------------------------
@@ -242,6 +242,26 @@ def test_not_alive_is_asked_again_for_a_bounded_time_only() -> None:
     assert not reply.granted and reply.message.startswith(m.HOLDER_NOT_ALIVE)
     assert ctl.now == pytest.approx(leasing.NOT_ALIVE_WAIT_S)
     assert max(ctl.pauses) == 0.2 and ctl.asked < 20
+
+
+class Flooded(Unseen):
+    """An arbiter whose queue is full for the first `refusals` requests."""
+
+    def call(self, service: keys.Service, request: Any, *, timeout: float) -> Any:
+        self.asked += 1
+        if self.asked <= self.refusals:
+            raise CallError(service.pattern, f"{BUSY_PREFIX}256 requests already waiting")
+        return m.LeaseReply(granted=True, lease_id="L1-x")
+
+
+def test_a_flooded_arbiter_is_asked_again_within_the_timeout_only() -> None:
+    passing = Flooded(refusals=3)
+    assert passing.ask().granted
+    assert passing.asked == 4 and passing.pauses == [0.02, 0.04, 0.08]
+    lasting = Flooded(refusals=10**6)
+    with pytest.raises(CallError, match="busy"):
+        lasting.ask()
+    assert lasting.now == pytest.approx(leasing.CALL_TIMEOUT_S) and lasting.asked < 30
 
 
 def test_other_refusals_and_other_holders_are_answered_at_once() -> None:
