@@ -1,23 +1,12 @@
 """A node's lease on the robot's eyes and speaker, from the holder's side.
 
-The eyes driver arbitrates (`leases/acquire`, `leases/release`, `eyes/command`,
-docs/design.md section 4.8); a lease holder is a node with a liveliness
-token, so the eyes driver can end the lease when the holder's process goes
-away. This module is the holder's wire side, once for every holder (the
-dashboard, Foxglove, the SDK, `buddybot lease`): the request checked before
-it leaves (`request`), asking (`ask`, `acquire`), driving the eyes (`eyes_command`),
-giving back (`release`), and reading from `leases/state` whether a lease
-has ended and why (`ending`). `LeaseHolder` is the one-lease holder of the
-processes that drive the eyes for a person (the dashboard's operator switch,
-Foxglove's expression service).
-
-Every call is bounded by a timeout and raises `ServiceError` (a
-`NoReplyError` when no eyes driver answers, a `CallError` for a bad reply)
-or `LeaseRefused` (the eyes driver said no, with its reason): never a hang.
-A lease is a capability: the grant returns the holder's handle
-(`<public id>.<secret>`), which commands and releases need; `leases/state`
-shows public ids only. An operator (the robot's operator secret, read by
-`operator_credential`) may ask priority `operator` and break any lease.
+The eyes driver arbitrates (docs/design.md section 4.8). This is the
+holder's wire side, written once for every holder (the dashboard, Foxglove,
+the SDK, `buddybot lease`): the request checked before it leaves, asking,
+driving the eyes, giving back, and reading from `leases/state` whether a
+lease has ended and why; `LeaseHolder` keeps one lease for a process that
+drives the eyes for a person. Every call is bounded by a timeout and raises
+`ServiceError` or `LeaseRefused` (with the arbiter's reason): never a hang.
 """
 
 from __future__ import annotations
@@ -125,27 +114,22 @@ def ask(node: Node, req: m.LeaseRequest, timeout: float = CALL_TIMEOUT_S, *,
     its watch of liveliness tokens only, so a program that has just started
     may ask before its own token reached it: that refusal (HOLDER_NOT_ALIVE,
     for a request of this node itself, which is alive) is asked again, with
-    a growing pause, for at most NOT_ALIVE_WAIT_S; every other answer at once.
-    An arbiter whose queue a flood of requests filled answers "busy": asked
-    again the same way for up to `timeout`, then the CallError is raised."""
+    a growing pause, for at most NOT_ALIVE_WAIT_S, and a "busy" arbiter (a
+    flood filled its queue) within `timeout`; every other answer at once."""
     own = (req.holder, req.instance) == (node.name, node.instance)
-    began = clock()
-    deadline = began + min(NOT_ALIVE_WAIT_S, timeout)
-    pause = 0.02
+    began, pause = clock(), 0.02
     while True:
         try:
             reply: m.LeaseReply = node.call(keys.LEASE_ACQUIRE, req, timeout=timeout)
         except CallError as exc:
-            busy_left = began + timeout - clock()
-            if not exc.reason.startswith(BUSY_PREFIX) or busy_left <= 0:
+            left = began + timeout - clock()
+            if not exc.reason.startswith(BUSY_PREFIX) or left <= 0:
                 raise
-            sleep(min(pause, busy_left))
-            pause = min(pause * 2, 0.2)
-            continue
-        left = deadline - clock()
-        if (reply.granted or not own or left <= 0
-                or not reply.message.startswith(m.HOLDER_NOT_ALIVE)):
-            return reply
+        else:
+            left = began + min(NOT_ALIVE_WAIT_S, timeout) - clock()
+            if (reply.granted or not own or left <= 0
+                    or not reply.message.startswith(m.HOLDER_NOT_ALIVE)):
+                return reply
         sleep(min(pause, left))
         pause = min(pause * 2, 0.2)
 
