@@ -175,6 +175,12 @@ class PageProbe:
         return retry_until(look, timeout, 0.05, what=f"{topic} on the eye page")
 
 
+def longest_gap(times: list[float], t0: float, t1: float) -> float:
+    """Longest stretch of [t0, t1] without one of `times` (the ends count as times)."""
+    points = [t0, *sorted(t for t in times if t0 <= t <= t1), t1]
+    return max(b - a for a, b in itertools.pairwise(points))
+
+
 @dataclass
 class Arrivals:
     """Arrival times (monotonic) and stamps of one topic at a node, and how long
@@ -202,9 +208,7 @@ class Arrivals:
     def longest_gap(self, t0: float, t1: float) -> float:
         """Longest time without an arrival in [t0, t1] (the ends count as arrivals)."""
         with self.lock:
-            inside = sorted(a for a, _ in self.times if t0 <= a <= t1)
-        points = [t0, *inside, t1]
-        return max(b - a for a, b in itertools.pairwise(points))
+            return longest_gap([a for a, _ in self.times], t0, t1)
 
     def between(self, t0: float, t1: float) -> int:
         with self.lock:
@@ -232,9 +236,7 @@ class Ticker:
 
     def longest_gap(self, t0_ns: int, t1_ns: int) -> float:
         """Longest time (s) without a send stamped in [t0_ns, t1_ns] (the ends count)."""
-        inside = sorted(s for _, s in list(self.sent) if t0_ns <= s <= t1_ns)
-        points = [t0_ns, *inside, t1_ns]
-        return max(b - a for a, b in itertools.pairwise(points)) / 1e9
+        return longest_gap([float(s) for _, s in list(self.sent)], t0_ns, t1_ns) / 1e9
 
     def stop(self) -> None:
         self._stop.set()
