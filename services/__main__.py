@@ -1,7 +1,5 @@
 """`python -m buddybot` is the `buddybot` command."""
 
-import sys
+from buddybot.cli import run_and_exit
 
-from buddybot.cli import main
-
-sys.exit(main())
+run_and_exit()

@@ -36,12 +36,14 @@ from __future__ import annotations
 # `buddybot router` build that one verb's parser, so a service starts without
 # loading every verb (the bag's MCAP reader, the sdk, the web login, ...).
 import argparse
+import contextlib
 import importlib
+import logging
 import os
 import sys
 from collections.abc import Collection, Sequence
 from types import ModuleType
-from typing import Any
+from typing import Any, NoReturn
 
 from buddybot import __version__
 from buddybot.runtime import registry
@@ -179,5 +181,27 @@ def main(argv: Sequence[str] | None = None) -> int:
                     uses_config=getattr(module, "USES_CONFIG", True))
 
 
+def run_and_exit() -> NoReturn:
+    """The `buddybot` program: `main`, then out without interpreter finalization.
+
+    Zenoh's native threads can still call into Python after the last session
+    closed; finalization ends such a thread inside native code and glibc
+    aborts the process ("exception not rethrown"). By the time `main` returns
+    every node and file is closed, so logs and streams are flushed and the
+    process exits at once with main's status.
+    """
+    try:
+        status = main()
+    except SystemExit as stop:  # argparse's --help and usage errors
+        if isinstance(stop.code, str):
+            print(stop.code, file=sys.stderr)
+        status = stop.code if isinstance(stop.code, int) else int(stop.code is not None)
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(status)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    run_and_exit()

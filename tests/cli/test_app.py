@@ -7,15 +7,18 @@ from __future__ import annotations
 import json
 import signal
 import textwrap
+import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from buddybot import cli
 from buddybot.cli.app import running_apps
 from buddybot.runtime.node import Node
+from buddybot.runtime.session import zenoh_config
 from buddybot.tools.testing import Process, buddybot_argv
 from tests.cli.process import bb
 from tests.people.test_service import Visitor
@@ -116,6 +119,59 @@ def test_an_app_that_ignores_the_stop_is_ended_after_the_grace_time(
         assert "did not return within 1 s of the stop" in app.output()
     finally:
         app.stop()
+
+
+@pytest.mark.integration
+def test_an_app_whose_threads_wait_inside_zenoh_at_its_stop_exits_cleanly(
+        endpoint: str, log_dir: Path, tmp_path: Path) -> None:
+    """Daemon threads blocked in a native Zenoh receive while samples pour in: at the
+    end of an ordinary interpreter shutdown they are ended inside native code and
+    glibc aborts the process (SIGABRT, "exception not rethrown"). The program exits
+    without that shutdown, so the stop is a clean 0 every time."""
+    path = app_file(tmp_path, "blocked.py", f"""
+        import threading
+        from buddybot.runtime.session import zenoh_config
+        import zenoh
+        class Blocked:
+            def run(self, bot, stop_event):
+                session = zenoh.open(zenoh_config(connect=[{endpoint!r}]))
+                samples = session.declare_subscriber("flood/**")
+                def read():
+                    while True:
+                        try:
+                            samples.recv()
+                        except Exception:
+                            pass
+                for _ in range(4):
+                    threading.Thread(target=read, daemon=True).start()
+                print("blocked: reading", flush=True)
+                stop_event.wait()
+                session.close()
+        """)
+    flooding = threading.Event()
+    session = zenoh.open(zenoh_config(connect=[endpoint]))
+
+    def flood() -> None:
+        publisher = session.declare_publisher("flood/x")
+        while not flooding.is_set():
+            publisher.put(b"x" * 100)
+
+    flooder = threading.Thread(target=flood, daemon=True)
+    flooder.start()
+    statuses = []
+    try:
+        for run in range(3):
+            app = run_app(endpoint, log_dir, str(path), "--name", f"blocked{run}")
+            try:
+                app.wait_for_output("blocked: reading", 30)
+                statuses.append(app.stop(timeout=15))
+            finally:
+                app.stop()
+    finally:
+        flooding.set()
+        flooder.join(10)
+        session.close()
+    assert statuses == [0, 0, 0], statuses
 
 
 @pytest.mark.integration
