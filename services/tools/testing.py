@@ -23,6 +23,7 @@ import threading
 import time
 import wave
 from collections.abc import Callable, Iterator, Sequence
+from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
 from typing import Any, Generic, Protocol, TypeVar
@@ -283,8 +284,14 @@ def paused_eye_page(browser: Any, port: int, width: int, height: int, eye: str =
     page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
                            timeout=30_000)
     page.evaluate(NO_PINGS)
-    page.clock.pause_at(int(time.time() * 1000) + 1000)
+    page.clock.pause_at(clock_time(time.time() * 1000 + 1000))
     return page
+
+
+def clock_time(epoch_ms: float) -> datetime:
+    """A moment for Playwright's page clock. A datetime, which every Playwright release
+    reads the same way: a bare number is milliseconds to some and seconds to others."""
+    return datetime.fromtimestamp(epoch_ms / 1000, tz=UTC)
 
 
 NO_PINGS = """() => {

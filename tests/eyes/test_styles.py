@@ -29,7 +29,15 @@ from buddybot.eyes import driver, styles, wire
 from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.errors import ConfigError
 from buddybot.runtime.node import Node
-from buddybot.tools.testing import Process, buddybot_argv, free_port, retry_until, wait_port
+from buddybot.tools.testing import (
+    NO_PINGS,
+    Process,
+    buddybot_argv,
+    clock_time,
+    free_port,
+    retry_until,
+    wait_port,
+)
 
 from ..conftest import ARTIFACTS, QUIET
 from .conftest import screenshot
@@ -53,7 +61,10 @@ def start(spawn: Callable[..., Process], style: str) -> int:
 
 
 def open_page(browser: Any, port: int, eye: str = "both") -> Any:
+    """The page with no blinks or saccades of its own, on Playwright's clock (running
+    as the real one until `at_breath_top` stops it)."""
     page = browser.new_page(viewport={"width": W, "height": H})
+    page.clock.install()
     page.goto(f"http://127.0.0.1:{port}/eyes?eye={eye}&blink=0&saccade=0")
     page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
                            timeout=20_000)
@@ -102,9 +113,21 @@ def look(page: Any, yaw: float, pitch: float, distance_cm: float | None = None) 
 
 
 def at_breath_top(page: Any) -> None:
-    """Until the slow breath (4 s, on the server clock the page has learnt) is at its
-    top, where a drowsy top lid is highest: shots taken there differ by the gaze alone."""
-    page.wait_for_function("window.eyes.serverTime() % 4000 < 100", timeout=10_000)
+    """Stop the page's clock at the next top of the slow breath (4 s, on the server
+    clock the page has learnt), where a drowsy top lid is highest, and draw that
+    frame: shots taken there differ by the gaze alone, however long a shot takes on
+    a busy machine. `page.clock.resume()` lets the page run on.
+
+    The page stops asking the server's time first: a pong read on a stopped clock
+    would move its server clock estimate, and the breath with it."""
+    page.evaluate(NO_PINGS)
+    top = page.evaluate("""() => {
+      let wait = (4000 - window.eyes.serverTime() % 4000) % 4000;
+      if (wait < 1000) wait += 4000;
+      return Date.now() + wait;
+    }""")
+    page.clock.pause_at(clock_time(top))
+    page.clock.run_for(16)
 
 
 def eye_mask(img: np.ndarray, style: str) -> np.ndarray:
@@ -176,6 +199,7 @@ def test_gaze_moves_the_eyes_and_lids_follow(browser: Any, spawn: Callable[..., 
     look(page, 0, 25)
     at_breath_top(page)
     up = visible_height(shot(page, f"{style}_sleepy_up"), style)
+    page.clock.resume()
     look(page, 0, -25)
     at_breath_top(page)
     down = visible_height(shot(page, f"{style}_sleepy_down"), style)
