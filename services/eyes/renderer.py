@@ -333,9 +333,15 @@ class Hub:
                 "motion_events": self.motion_events, "pongs": self.pongs}
 
 
+_EPOCH_AT_ZERO_NS = time.time_ns() - time.monotonic_ns()
+
+
 def now_ms() -> float:
-    """The server clock every motion event and pong is on: ms since the epoch."""
-    return time.time_ns() / 1e6
+    """The server clock every motion event and pong is on: ms since the epoch as read
+    when the renderer started, advanced by the monotonic clock. A wall clock stepped
+    later (NTP on a computer with no real-time clock) never moves a blink, and pages
+    on this computer, whose clocks are monotonic, do not drift from it between pings."""
+    return (_EPOCH_AT_ZERO_NS + time.monotonic_ns()) / 1e6
 
 
 def motion_config(s: EyeRendererSettings) -> motion.MotionConfig:

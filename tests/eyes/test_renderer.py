@@ -30,6 +30,7 @@ import pytest
 
 from buddybot.contract import keys
 from buddybot.contract import messages as m
+from buddybot.eyes import renderer
 from buddybot.eyes.renderer import Inbox
 from buddybot.eyes.settings import EyeRendererSettings
 from buddybot.runtime.node import Node
@@ -78,6 +79,19 @@ async def ws_collect(port: int, until: Callable[[list[dict[str, Any]]], bool],
                 assert msg.type == aiohttp.WSMsgType.TEXT, msg
                 got.append(json.loads(msg.data))
     return got
+
+
+def test_the_server_clock_is_not_moved_by_a_step_of_the_wall_clock(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """NTP setting the clock of a computer with no real-time clock (or a virtual
+    machine correcting its own in steps) moves the wall clock by seconds to hours;
+    blinks and saccades are scheduled on the server clock, which goes on evenly."""
+    start = renderer.now_ms()
+    stepped = time.time_ns() + 3600 * 10**9
+    monkeypatch.setattr(renderer.time, "time_ns", lambda: stepped)
+    later = renderer.now_ms()
+    assert 0.0 <= later - start < 1000.0, later - start
+    assert abs(start - time.time() * 1000) < 60_000   # still ms since the epoch
 
 
 @pytest.mark.integration
