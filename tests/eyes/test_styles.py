@@ -60,11 +60,12 @@ def start(spawn: Callable[..., Process], style: str) -> int:
     return port
 
 
-def open_page(browser: Any, port: int, eye: str = "both") -> Any:
-    """The page with no blinks or saccades of its own, on Playwright's clock (running
-    as the real one until `at_breath_top` stops it)."""
+def open_page(browser: Any, port: int, eye: str = "both", clock: bool = False) -> Any:
+    """The page with no blinks or saccades of its own; with `clock`, on Playwright's
+    clock (running as the real one until `at_breath_top` stops it)."""
     page = browser.new_page(viewport={"width": W, "height": H})
-    page.clock.install()
+    if clock:
+        page.clock.install()
     page.goto(f"http://127.0.0.1:{port}/eyes?eye={eye}&blink=0&saccade=0")
     page.wait_for_function("window.eyes && window.eyes.ready && window.eyes.cur.calm < 0.002",
                            timeout=20_000)
@@ -180,7 +181,7 @@ def test_every_expression_looks_different(browser: Any, spawn: Callable[..., Pro
 def test_gaze_moves_the_eyes_and_lids_follow(browser: Any, spawn: Callable[..., Process],
                                              probe: Node, style: str) -> None:
     spawn("eyes")
-    page = open_page(browser, start(spawn, style))
+    page = open_page(browser, start(spawn, style), clock=True)
     look(page, 0, 0)
     x0 = centroid_x(eye_mask(shot(page), style))
     look(page, 30, 0)
