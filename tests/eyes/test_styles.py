@@ -290,7 +290,19 @@ def test_a_live_style_change_restyles_the_page(browser: Any, spawn: Callable[...
     retry_until(changed, 30, 0.5, "eye-renderer params")
     page.wait_for_function("window.eyes.cfg.style.kind === 'eyeball'", timeout=20_000)
     settled(page)
-    assert int((shot(page, "live_restyled_eyeball").min(axis=2) > 225).sum()) > 0.1 * W * H
+    # `settled` does not wait for a restyle's cross-fade (the old look fading out over
+    # the new one): a shot in its last frames shows the white dimmed under 225. Shots
+    # are taken until the fade is over, the eyeball showing within 10 s.
+    blank = []
+
+    def eyeball_shown() -> bool:
+        white = int((shot(page, "live_restyled_eyeball").min(axis=2) > 225).sum())
+        if white <= 0.1 * W * H:
+            blank.append(white)
+        return white > 0.1 * W * H
+
+    retry_until(eyeball_shown, 10, 0.2, "the eyeball's white on the restyled page")
+    print(f"shots in the cross-fade: {len(blank)} (white pixels {blank})")
     assert page.evaluate("window.eyes.stats.connects") == 1      # restyled in place
 
     refused = param(endpoint, "set", "eye-renderer", "style", '"sparkly"')
