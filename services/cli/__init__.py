@@ -184,11 +184,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 def run_and_exit() -> NoReturn:
     """The `buddybot` program: `main`, then out without interpreter finalization.
 
-    Zenoh's native threads can still call into Python after the last session
-    closed; finalization ends such a thread inside native code and glibc
-    aborts the process ("exception not rethrown"). By the time `main` returns
-    every node and file is closed, so logs and streams are flushed and the
-    process exits at once with main's status.
+    A daemon thread still waiting inside Zenoh's native code (a receive, the
+    replies of a query) would be ended there by finalization, and glibc aborts
+    such a process ("exception not rethrown"). By the time `main` returns every
+    node and file is closed, so logs and streams are flushed and the process
+    exits at once with main's status.
     """
     try:
         status = main()
