@@ -209,6 +209,14 @@ def eyeball_pupil(eye: np.ndarray) -> tuple[int, float, float]:
     return len(dark[1]), float(dark[1].mean()) if len(dark[1]) else 0.0, centre
 
 
+def to_breath_top(page: Any) -> None:
+    """Run the paused page to the next top of its slow breath (every 4 s on the server
+    clock), where the sleeping glow's line is brightest: 1.4 s into the breath, parts
+    of it dim below `glow_pupil`'s threshold and read as a hole (a "pupil" of 19 px)."""
+    page.clock.run_for(math.ceil(page.evaluate(
+        "() => (4000 - window.eyes.serverTime() % 4000) % 4000")) + 1)
+
+
 def control(probe: Node, page: Any, stamp: int, yaw_deg: float, distance_cm: float) -> None:
     """Eye control through the eyes driver (as the built-in behaviour sends it) until
     the page has its gaze and the dilation the driver made of the distance; then
@@ -255,6 +263,7 @@ def test_the_pupils_show_the_distance_at_a_small_screens_size(
     for action in (A.EYE_SLEEP, A.ANIMATE_LOVE):
         express(page, action)
         page.clock.run_for(2500)
+        to_breath_top(page)
         img = screenshot(page, SHOTS, f"{style}_pupil_{action.name}")
         assert [measure(eye)[0] for eye in eye_halves(img)] == [0, 0], action.name
     page.close()
