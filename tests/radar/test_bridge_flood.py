@@ -71,9 +71,9 @@ class Flood:
             start = time.monotonic()
             while not self._stop.is_set():
                 batch += 1
-                due = start + self.bytes_sent / RATE_BPS
-                if due > time.monotonic():
-                    time.sleep(due - time.monotonic())  # the pace (not a synchronisation)
+                # The pace (not a synchronisation). Read the clock once: read again for
+                # the sleep, a preempted thread got a negative length and died.
+                self._stop.wait(max(0.0, start + self.bytes_sent / RATE_BPS - time.monotonic()))
                 frame = p2.encode_report(p2.Report((p2.Target(
                     batch % 4000, 1000 + batch // 4000, 0, 360), None, None)))
                 try:
